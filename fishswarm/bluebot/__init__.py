@@ -1,0 +1,1 @@
+"""The BlueBot: dynamics, vision, controllers (pure numpy) and hardware drivers."""

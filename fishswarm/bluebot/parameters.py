@@ -1,0 +1,105 @@
+"""The BlueBot's and the tank's constants, with the values of SPEC.md §1.
+
+One place for every robot number. Derived quantities (areas, inertia) are properties so
+that changing a dimension keeps them consistent.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+BODY_LENGTH = 0.13
+"""Body length used by behaviours and the homing controller, m (SPEC §1.3)."""
+
+
+@dataclass(frozen=True)
+class BlueBot:
+    """Physical parameters of one BlueBot (SPEC.md §1.1).
+
+    Attributes are SI: forces in N, lengths in m, density in kg/m³, mass in kg, angles in rad.
+    """
+
+    caudal_force: float = 0.020
+    dorsal_force: float = 0.020
+    pectoral_force: float = 0.006
+    pectoral_angle: float = math.pi / 6
+    pectoral_arm: float = 0.055
+    buoyancy: float = 0.010
+    water_density: float = 998.0
+    length: float = 0.150
+    width: float = 0.050
+    height: float = 0.080
+    mass: float = 0.5
+    drag_x: float = 0.5
+    drag_y: float = 2.1
+    drag_z: float = 0.7
+    drag_yaw: float = 1.0
+    euler_step: float = 0.01
+
+    @property
+    def area_x(self) -> float:
+        """Frontal area A_x = π/4·h·w, m²."""
+        return math.pi / 4 * self.height * self.width
+
+    @property
+    def area_y(self) -> float:
+        """Lateral area A_y = π/4·l·h + 2·0.00075 (pectoral fins), m²."""
+        return math.pi / 4 * self.length * self.height + 2 * 0.00075
+
+    @property
+    def area_z(self) -> float:
+        """Top area A_z = π/4·l·w, m²."""
+        return math.pi / 4 * self.length * self.width
+
+    @property
+    def area_yaw(self) -> float:
+        """Area for yaw drag, A_φ = A_y, m²."""
+        return self.area_y
+
+    @property
+    def inertia(self) -> float:
+        """Yaw moment of inertia I = m/5·(l² + h²)/4, kg·m²."""
+        return self.mass / 5 * (self.length**2 + self.height**2) / 4
+
+    def terminal_speed(self) -> float:
+        """Forward speed at full caudal where thrust equals drag, m/s (≈ 0.16)."""
+        return math.sqrt(
+            self.caudal_force / (0.5 * self.water_density * self.drag_x * self.area_x)
+        )
+
+
+@dataclass(frozen=True)
+class Tank:
+    """The tank: a box with its origin at a corner, z down (SPEC.md preamble).
+
+    Attributes:
+        size: (x, y, z) extent, m.
+    """
+
+    size: tuple[float, float, float] = (1.78, 1.78, 1.17)
+
+    def __post_init__(self) -> None:
+        if len(self.size) != 3 or not all(s > 0 and math.isfinite(s) for s in self.size):
+            raise ValueError(f"tank size must be three positive lengths, got {self.size}")
+
+    @property
+    def center(self) -> NDArray[np.float64]:
+        """Centre of the tank, m."""
+        return np.asarray(self.size, dtype=np.float64) / 2
+
+    @property
+    def diagonal(self) -> float:
+        """Horizontal diagonal, m (2.517 for the study's tank)."""
+        return math.hypot(self.size[0], self.size[1])
+
+    @classmethod
+    def scaled_for(cls, fish: int, reference_fish: int = 25) -> Tank:
+        """A tank whose horizontal area grows with the swarm so that density stays as with
+        ``reference_fish`` fish in the study's tank."""
+        base = cls()
+        factor = math.sqrt(max(fish, reference_fish) / reference_fish)
+        return cls((base.size[0] * factor, base.size[1] * factor, base.size[2]))

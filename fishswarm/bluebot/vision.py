@@ -1,0 +1,227 @@
+"""What each BlueBot sees: range, blind spot and occlusion, for a whole swarm at once.
+
+SPEC.md §1.2. Given the positions and yaws of N fish, :func:`visible` decides which of the
+others each fish sees, and :func:`perceive` returns those neighbours as body-frame positions
+padded into a (N, K, 3) array with a (N, K) mask. Cosines are clamped into [−1, 1] and
+coincident fish are handled: nothing divides by a zero distance.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class Vision:
+    """Parameters of the vision model.
+
+    Attributes:
+        visual_range: neighbours farther than this are not seen, m (default 3).
+        blind_width: width of the blind strip behind the body, m (0.05 for a BlueBot; 0 sees
+            everything; ≥ the tank diagonal leaves a 180° forward field of view).
+        sphere_radius: radius of the blocking sphere of every robot, m (0.065 for a BlueBot;
+            0 means no occlusion).
+        noise: standard deviation of the position noise per metre of distance (0 = none).
+    """
+
+    visual_range: float = 3.0
+    blind_width: float = 0.05
+    sphere_radius: float = 0.065
+    noise: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("visual_range", "blind_width", "sphere_radius", "noise"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"vision {name} must be a finite non-negative number, got {value}")
+
+
+def to_body(vectors: FloatArray, yaw: FloatArray) -> FloatArray:
+    """Rotate tank-frame vectors into each fish's body frame.
+
+    Args:
+        vectors: (B, ..., 3) tank-frame vectors, one group per fish.
+        yaw: (B,) yaw of each fish, rad.
+
+    Returns:
+        (B, ..., 3) the same vectors in the body frames (x forward, y right, z down).
+    """
+    extra = (1,) * (vectors.ndim - 2)
+    cos = np.cos(yaw).reshape((-1, *extra))
+    sin = np.sin(yaw).reshape((-1, *extra))
+    out = np.empty_like(vectors)
+    out[..., 0] = cos * vectors[..., 0] + sin * vectors[..., 1]
+    out[..., 1] = -sin * vectors[..., 0] + cos * vectors[..., 1]
+    out[..., 2] = vectors[..., 2]
+    return out
+
+
+def in_blind_spot(relative: FloatArray, yaw: FloatArray, *, blind_width: float) -> BoolArray:
+    """Whether each relative position lies in the blind strip behind its fish.
+
+    Args:
+        relative: (B, K, 3) tank-frame positions of others relative to each fish, m.
+        yaw: (B,) yaw of each fish, rad.
+        blind_width: width w of the strip, m.
+
+    Returns:
+        (B, K) True where the other lies behind (angle to the heading > π/2 in the horizontal
+        plane) and less than w/2 from the heading line.
+    """
+    heading_x = np.cos(yaw)[:, None]
+    heading_y = np.sin(yaw)[:, None]
+    along = heading_x * relative[..., 0] + heading_y * relative[..., 1]
+    lateral = heading_x * relative[..., 1] - heading_y * relative[..., 0]
+    hidden: BoolArray = (along < 0.0) & (np.abs(lateral) < blind_width / 2)
+    return hidden
+
+
+def _occlusion(
+    directions: FloatArray, distance: FloatArray, candidate: BoolArray, *, sphere_radius: float
+) -> BoolArray:
+    """Walk candidates from near to far; hide one behind a nearer visible blocking sphere.
+
+    Args:
+        directions: (B, K, 3) unit vectors to the candidates (zero for coincident ones),
+            sorted by distance along K.
+        distance: (B, K) distances, ascending along K.
+        candidate: (B, K) which entries are real candidates.
+        sphere_radius: blocking sphere radius r, m.
+
+    Returns:
+        (B, K) which candidates are visible.
+    """
+    visible = candidate.copy()
+    if sphere_radius <= 0 or candidate.shape[1] < 2:
+        return visible
+    cosine = np.clip(np.einsum("bkd,bmd->bkm", directions, directions), -1.0, 1.0)
+    angle = np.arccos(cosine)
+    # A blocker at distance a hides whatever lies within atan(r/a) of its direction; a blocker
+    # at distance 0 would be the observer itself, whose direction is undefined: it hides nothing.
+    with np.errstate(divide="ignore"):
+        half_angle = np.where(distance > 0, np.arctan(sphere_radius / distance), 0.0)
+    for k in range(1, candidate.shape[1]):
+        blocked = visible[:, :k] & (angle[:, k, :k] < half_angle[:, :k])
+        visible[:, k] &= ~blocked.any(axis=1)
+    return visible
+
+
+@dataclass(frozen=True)
+class Perceived:
+    """Neighbours seen by each of B fish, padded to K.
+
+    Attributes:
+        neighbors: (B, K, 3) body-frame positions, m; rows beyond a fish's count are zero.
+        mask: (B, K) which rows are real.
+        index: (B, K) index of the seen fish in the input arrays (−1 in padding); known to the
+            simulator only, never sent to a fish.
+    """
+
+    neighbors: FloatArray
+    mask: BoolArray
+    index: NDArray[np.intp]
+
+    @property
+    def counts(self) -> NDArray[np.int64]:
+        """(B,) how many neighbours each fish sees."""
+        return self.mask.sum(axis=1).astype(np.int64)
+
+    def of(self, fish: int) -> FloatArray:
+        """(k, 3) the neighbours fish ``fish`` (a batch index) sees."""
+        return self.neighbors[fish, self.mask[fish]]
+
+
+def perceive(
+    position: FloatArray,
+    yaw: FloatArray,
+    *,
+    vision: Vision,
+    rngs: Sequence[np.random.Generator] | None = None,
+) -> Perceived:
+    """Compute what every fish sees of the others.
+
+    Args:
+        position: (N, 3) tank-frame positions, m.
+        yaw: (N,) yaws, rad.
+        vision: the vision parameters.
+        rngs: one generator per fish for the position noise (needed when ``vision.noise``
+            > 0; fish i's noise comes from ``rngs[i]`` only, so results do not depend on the
+            other fish's draws).
+
+    Returns:
+        The visible neighbours of each fish, nearest first, in its body frame.
+    """
+    count = position.shape[0]
+    relative = position[None, :, :] - position[:, None, :]
+    distance = np.sqrt(np.einsum("ijd,ijd->ij", relative, relative))
+    candidate = distance <= vision.visual_range
+    np.fill_diagonal(candidate, False)
+    if vision.blind_width > 0:
+        candidate &= ~in_blind_spot(relative, yaw, blind_width=vision.blind_width)
+    width = int(candidate.sum(axis=1).max(initial=0))
+    sort_key = np.where(candidate, distance, np.inf)
+    order = np.argsort(sort_key, axis=1, kind="stable")[:, :width]
+    sorted_candidate = np.take_along_axis(candidate, order, axis=1)
+    sorted_distance = np.take_along_axis(distance, order, axis=1)
+    sorted_relative = np.take_along_axis(relative, order[..., None], axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        directions = np.where(
+            sorted_distance[..., None] > 0, sorted_relative / sorted_distance[..., None], 0.0
+        )
+    seen = _occlusion(
+        directions, sorted_distance, sorted_candidate, sphere_radius=vision.sphere_radius
+    )
+    # Compact the visible ones to the front, keeping near-to-far order.
+    compact = np.argsort(~seen, axis=1, kind="stable")
+    seen = np.take_along_axis(seen, compact, axis=1)
+    keep = int(seen.sum(axis=1).max(initial=0))
+    seen = seen[:, :keep]
+    chosen = np.take_along_axis(order, compact, axis=1)[:, :keep]
+    relative_seen = np.take_along_axis(relative, chosen[..., None], axis=1)
+    if vision.noise > 0:
+        if rngs is None or len(rngs) != count:
+            raise ValueError("vision noise needs one random generator per fish")
+        distance_seen = np.take_along_axis(distance, chosen, axis=1)
+        for fish in range(count):
+            rows = int(seen[fish].sum())
+            scale = vision.noise * distance_seen[fish, :rows, None]
+            relative_seen[fish, :rows] += rngs[fish].normal(0.0, 1.0, (rows, 3)) * scale
+    body = to_body(relative_seen, yaw)
+    body[~seen] = 0.0
+    index = np.where(seen, chosen, -1)
+    return Perceived(body, seen, index)
+
+
+def perceive_landmarks(
+    position: FloatArray, yaw: FloatArray, landmarks: FloatArray, *, vision: Vision
+) -> Perceived:
+    """Which fixed landmarks (e.g. an orbit centre) each fish sees, in its body frame.
+
+    Landmarks are seen within range and outside the blind spot; they do not occlude and are
+    not occluded (they are posts that stick out above the school).
+
+    Args:
+        position: (N, 3) fish positions, m.
+        yaw: (N,) fish yaws, rad.
+        landmarks: (L, 3) landmark positions in the tank frame, m.
+        vision: the vision parameters.
+    """
+    count = position.shape[0]
+    relative = np.broadcast_to(landmarks[None, :, :], (count, *landmarks.shape)) - position[
+        :, None, :
+    ]
+    distance = np.linalg.norm(relative, axis=2)
+    seen = distance <= vision.visual_range
+    if vision.blind_width > 0:
+        seen &= ~in_blind_spot(relative, yaw, blind_width=vision.blind_width)
+    body = to_body(np.ascontiguousarray(relative), yaw)
+    body[~seen] = 0.0
+    index = np.where(seen, np.arange(landmarks.shape[0])[None, :], -1)
+    return Perceived(body, seen, index)

@@ -1,0 +1,348 @@
+"""Message types of the fishswarm wire, validated on construction.
+
+Every message is a frozen dataclass whose ``__post_init__`` checks types, shapes, finite
+numbers and sizes, so that a bad message cannot be built: the codec decodes by constructing,
+and turns any complaint into :class:`~fishswarm.protocols.codec.MessageError`.
+
+Frames and units follow SPEC.md: SI units, body frame x forward, y right, z down; the tank
+frame has its origin at a corner with z down (z is depth).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+SCHEMA_VERSION = 1
+MAX_ROWS = 100_000
+MAX_TEXT = 64
+MAX_TICK = 2**62
+
+FIN_NAMES = ("caudal", "dorsal", "pectoral_left", "pectoral_right")
+"""Order of the fin gains in :attr:`Command.fins` and everywhere else."""
+
+CONTROL_ACTIONS = ("status", "pause", "resume", "stop")
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+def _set(obj: object, name: str, value: object) -> None:
+    object.__setattr__(obj, name, value)
+
+
+def _check_int(name: str, value: object, low: int = 0, high: int = MAX_TICK) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
+    if not low <= int(value) <= high:
+        raise ValueError(f"{name} must be in [{low}, {high}], got {value}")
+
+
+def _check_float(name: str, value: object, low: float = -math.inf, high: float = math.inf) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
+        raise TypeError(f"{name} must be a number, got {type(value).__name__}")
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value}")
+    if not low <= value <= high:
+        raise ValueError(f"{name} must be in [{low}, {high}], got {value}")
+
+
+def _check_text(name: str, value: object) -> None:
+    if not isinstance(value, str):
+        raise TypeError(f"{name} must be a string, got {type(value).__name__}")
+    if not 0 < len(value) <= MAX_TEXT:
+        raise ValueError(f"{name} must have 1 to {MAX_TEXT} characters, got {len(value)}")
+
+
+def _array(
+    obj: object, name: str, dtype: type[np.generic], columns: int | None, rows: int | None = None
+) -> None:
+    """Replace field ``name`` by a read-only array of ``dtype`` after checking its shape.
+
+    ``columns`` None means a 1-D array; otherwise 2-D with that many columns. ``rows`` fixes
+    the length when given; any length up to MAX_ROWS otherwise.
+    """
+    value = getattr(obj, name)
+    array = np.asarray(value)
+    if array.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must be a numeric array, got dtype {array.dtype}")
+    if dtype is np.int64 and array.dtype.kind == "f":
+        raise TypeError(f"{name} must be an integer array, got dtype {array.dtype}")
+    expected_ndim = 1 if columns is None else 2
+    if array.ndim != expected_ndim or (columns is not None and array.shape[1] != columns):
+        want = "(n,)" if columns is None else f"(n, {columns})"
+        raise ValueError(f"{name} must have shape {want}, got {array.shape}")
+    if rows is not None and array.shape[0] != rows:
+        raise ValueError(f"{name} must have {rows} rows, got {array.shape[0]}")
+    if array.shape[0] > MAX_ROWS:
+        raise ValueError(f"{name} has {array.shape[0]} rows, more than the limit {MAX_ROWS}")
+    converted = np.array(array, dtype=dtype, copy=True)
+    if dtype is np.float64 and not np.all(np.isfinite(converted)):
+        raise ValueError(f"{name} must hold finite numbers only")
+    converted.setflags(write=False)
+    _set(obj, name, converted)
+
+
+class Message:
+    """Base of all messages: field-wise equality (arrays compared by value) and a wire name."""
+
+    type_name: ClassVar[str]
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        for field in dataclasses.fields(self):  # type: ignore[arg-type]
+            mine, theirs = getattr(self, field.name), getattr(other, field.name)
+            if isinstance(mine, np.ndarray):
+                if not np.array_equal(mine, theirs):
+                    return False
+            elif mine != theirs:
+                return False
+        return True
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True, eq=False)
+class Perception(Message):
+    """What one fish perceives at a tick: world (simulation) or driver (robot) → fish.
+
+    Attributes:
+        fish_id: the receiving fish.
+        tick: control tick this perception belongs to.
+        time: simulated (or robot) time of the tick, s.
+        depth: the fish's own depth from its pressure sensor, m (z down).
+        neighbors: (K, 3) body-frame positions of the visible neighbours, m. No ids: a camera
+            cannot read them.
+        landmarks: (L, 3) body-frame positions of visible landmarks (e.g. an orbit centre), m.
+        inbox_count: how many inbox deliveries belong to this tick; the fish waits for them.
+    """
+
+    type_name: ClassVar[str] = "perception"
+    fish_id: int
+    tick: int
+    time: float
+    depth: float
+    neighbors: FloatArray
+    landmarks: FloatArray
+    inbox_count: int = 0
+
+    def __post_init__(self) -> None:
+        _check_int("fish_id", self.fish_id)
+        _check_int("tick", self.tick)
+        _check_float("time", self.time, low=0.0)
+        _check_float("depth", self.depth)
+        _array(self, "neighbors", np.float64, 3)
+        _array(self, "landmarks", np.float64, 3)
+        _check_int("inbox_count", self.inbox_count, high=MAX_ROWS)
+
+
+@dataclass(frozen=True, eq=False)
+class Command(Message):
+    """What one fish orders for a tick: fish → world or driver.
+
+    Attributes:
+        fish_id: the sending fish.
+        tick: the perception tick this command answers.
+        fins: (4,) fin gains in [0, 1], in the order of :data:`FIN_NAMES`.
+        led: whether the LEDs are on.
+        broadcasts: how many outbox messages the fish sent for this tick (the channel and the
+            world wait for exactly that many).
+    """
+
+    type_name: ClassVar[str] = "command"
+    fish_id: int
+    tick: int
+    fins: FloatArray
+    led: bool = True
+    broadcasts: int = 0
+
+    def __post_init__(self) -> None:
+        _check_int("fish_id", self.fish_id)
+        _check_int("tick", self.tick)
+        _array(self, "fins", np.float64, None, rows=len(FIN_NAMES))
+        if np.any(self.fins < 0.0) or np.any(self.fins > 1.0):
+            raise ValueError(f"fins must be gains in [0, 1], got {self.fins.tolist()}")
+        if not isinstance(self.led, bool):
+            raise TypeError(f"led must be a bool, got {type(self.led).__name__}")
+        _check_int("broadcasts", self.broadcasts, high=MAX_ROWS)
+
+
+@dataclass(frozen=True, eq=False)
+class Broadcast(Message):
+    """A broadcast a fish sends to whoever can receive it: fish → channel.
+
+    Attributes:
+        sender_id: the sending fish.
+        tick: the tick it was sent at.
+        kind: what it says, e.g. ``"formation"`` for a formation flag.
+        value: the content, e.g. the sender's role in its shape.
+    """
+
+    type_name: ClassVar[str] = "broadcast"
+    sender_id: int
+    tick: int
+    kind: str
+    value: int = 0
+
+    def __post_init__(self) -> None:
+        _check_int("sender_id", self.sender_id)
+        _check_int("tick", self.tick)
+        _check_text("kind", self.kind)
+        _check_int("value", self.value, low=-MAX_TICK)
+
+
+@dataclass(frozen=True, eq=False)
+class Delivery(Message):
+    """A broadcast as one receiver gets it: channel → fish.
+
+    Attributes:
+        receiver_id: the receiving fish.
+        tick: the tick at which the receiver acts on it.
+        kind: as in :class:`Broadcast`.
+        value: as in :class:`Broadcast`.
+        sender_position: (3,) where the sender is, in the receiver's body frame, m (situated,
+            like an LED signal: there is no sender id).
+    """
+
+    type_name: ClassVar[str] = "delivery"
+    receiver_id: int
+    tick: int
+    kind: str
+    value: int
+    sender_position: FloatArray
+
+    def __post_init__(self) -> None:
+        _check_int("receiver_id", self.receiver_id)
+        _check_int("tick", self.tick)
+        _check_text("kind", self.kind)
+        _check_int("value", self.value, low=-MAX_TICK)
+        _array(self, "sender_position", np.float64, None, rows=3)
+
+
+@dataclass(frozen=True, eq=False)
+class Snapshot(Message):
+    """Every live fish's state at a tick: world → channel and observers.
+
+    Attributes:
+        tick: the tick.
+        time: simulated time, s.
+        ids: (N,) fish ids, ascending.
+        position: (N, 3) positions in the tank frame, m.
+        velocity: (N, 3) velocities in the tank frame, m/s.
+        yaw: (N,) yaw angles, rad.
+        neighbors_seen: (N,) how many neighbours each fish saw at this tick.
+        broadcasts: (N,) how many broadcasts each fish sent at the previous tick.
+    """
+
+    type_name: ClassVar[str] = "snapshot"
+    tick: int
+    time: float
+    ids: IntArray
+    position: FloatArray
+    velocity: FloatArray
+    yaw: FloatArray
+    neighbors_seen: IntArray
+    broadcasts: IntArray
+
+    def __post_init__(self) -> None:
+        _check_int("tick", self.tick)
+        _check_float("time", self.time, low=0.0)
+        _array(self, "ids", np.int64, None)
+        count = self.ids.shape[0]
+        _array(self, "position", np.float64, 3, rows=count)
+        _array(self, "velocity", np.float64, 3, rows=count)
+        _array(self, "yaw", np.float64, None, rows=count)
+        _array(self, "neighbors_seen", np.int64, None, rows=count)
+        _array(self, "broadcasts", np.int64, None, rows=count)
+        if count > 1 and np.any(np.diff(self.ids) <= 0):
+            raise ValueError("ids must be strictly ascending")
+        if np.any(self.ids < 0):
+            raise ValueError("ids must be non-negative")
+
+
+@dataclass(frozen=True, eq=False)
+class ChannelReport(Message):
+    """How many deliveries each fish gets at a tick: channel → world.
+
+    Attributes:
+        tick: the tick at which the fish act on the deliveries.
+        ids: (N,) fish ids, ascending.
+        inbox_counts: (N,) deliveries per fish.
+    """
+
+    type_name: ClassVar[str] = "channel_report"
+    tick: int
+    ids: IntArray
+    inbox_counts: IntArray
+
+    def __post_init__(self) -> None:
+        _check_int("tick", self.tick)
+        _array(self, "ids", np.int64, None)
+        _array(self, "inbox_counts", np.int64, None, rows=self.ids.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class ControlRequest(Message):
+    """A request to the world's control queryable.
+
+    Attributes:
+        action: one of :data:`CONTROL_ACTIONS`.
+    """
+
+    type_name: ClassVar[str] = "control_request"
+    action: str
+
+    def __post_init__(self) -> None:
+        _check_text("action", self.action)
+        if self.action not in CONTROL_ACTIONS:
+            raise ValueError(f"action must be one of {CONTROL_ACTIONS}, got {self.action!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class ControlReply(Message):
+    """The world's answer to a :class:`ControlRequest`.
+
+    Attributes:
+        state: waiting, running, paused, finished or stopped.
+        tick: the current tick.
+        time: the current simulated time, s.
+        live_fish: how many fish are live.
+    """
+
+    type_name: ClassVar[str] = "control_reply"
+    state: str
+    tick: int
+    time: float
+    live_fish: int
+
+    def __post_init__(self) -> None:
+        _check_text("state", self.state)
+        _check_int("tick", self.tick)
+        _check_float("time", self.time, low=0.0)
+        _check_int("live_fish", self.live_fish, high=MAX_ROWS)
+
+
+MESSAGE_TYPES: dict[str, type[Message]] = {
+    cls.type_name: cls
+    for cls in (
+        Perception,
+        Command,
+        Broadcast,
+        Delivery,
+        Snapshot,
+        ChannelReport,
+        ControlRequest,
+        ControlReply,
+    )
+}
+
+
+def fields_of(message: Message) -> dict[str, Any]:
+    """The message's fields as a dict (arrays not copied)."""
+    return {f.name: getattr(message, f.name) for f in dataclasses.fields(message)}  # type: ignore[arg-type]

@@ -1,0 +1,63 @@
+"""Controllers: homing reproduces the research code's rules; pid steers the right way."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fishswarm.bluebot.control import PidState, homing, pid
+
+
+def _homing(target: list[float], dorsal: bool = False) -> tuple[list[float], bool]:
+    fins, state = homing(np.array([target]), dorsal_on=np.array([dorsal]))
+    return fins[0].tolist(), bool(state[0])
+
+
+def test_homing_straight_ahead_runs_caudal_by_distance() -> None:
+    # 0.52 m ahead: caudal = 0.1 + 0.52/(8·0.13) = 0.6; no pectorals.
+    fins, _ = _homing([0.52, 0.0, 0.0])
+    assert fins == pytest.approx([0.6, 0.0, 0.0, 0.0])
+    fins, _ = _homing([5.0, 0.0, 0.0])
+    assert fins[0] == 1.0
+
+
+def test_homing_target_right_drives_left_pectoral() -> None:
+    # Bearing 45° right: left pectoral at 0.6 + 45/180 = 0.85, caudal off (|h| ≥ 20°).
+    fins, _ = _homing([1.0, 1.0, 0.0])
+    assert fins == pytest.approx([0.0, 0.0, 0.85, 0.0])
+    fins, _ = _homing([1.0, -1.0, 0.0])
+    assert fins == pytest.approx([0.0, 0.0, 0.0, 0.85])
+    fins, _ = _homing([-1.0, 0.01, 0.0])
+    assert fins[2] == 1.0
+
+
+def test_homing_depth_bang_bang_with_band() -> None:
+    below = math.tan(math.radians(2.0))
+    within = math.tan(math.radians(0.5))
+    assert _homing([1.0, 0.0, below])[1] is True
+    assert _homing([1.0, 0.0, -below], dorsal=True)[1] is False
+    assert _homing([1.0, 0.0, within], dorsal=True)[1] is True
+    assert _homing([1.0, 0.0, within], dorsal=False)[1] is False
+
+
+def test_pid_turns_towards_the_target_and_holds_depth_against_buoyancy() -> None:
+    fins, state = pid(np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]),
+                      state=PidState.zeros(2), period=1.0)
+    assert fins[0, 2] > 0 and fins[0, 3] == 0
+    assert fins[1, 0] > 0 and fins[1, 2] == 0 and fins[1, 3] == 0
+    assert fins[1, 1] == pytest.approx(0.5)
+    assert np.all((fins >= 0) & (fins <= 1))
+    assert state.integral.shape == (2, 3)
+
+
+def test_batch_equals_loop_for_homing() -> None:
+    rng = np.random.default_rng(5)
+    targets = rng.normal(0, 1, (9, 3))
+    dorsal = rng.uniform(size=9) > 0.5
+    fins, new = homing(targets, dorsal_on=dorsal)
+    for i in range(9):
+        one, state = homing(targets[i : i + 1], dorsal_on=dorsal[i : i + 1])
+        np.testing.assert_array_equal(one[0], fins[i])
+        assert state[0] == new[i]

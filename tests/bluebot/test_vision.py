@@ -1,0 +1,142 @@
+"""Vision: range, blind spot and occlusion cases drawn on paper."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from fishswarm.bluebot.vision import Vision, in_blind_spot, perceive, perceive_landmarks, to_body
+
+NO_OCCLUSION = Vision(blind_width=0.0, sphere_radius=0.0)
+
+
+def _seen(positions: list[list[float]], yaw: list[float], vision: Vision) -> list[set[int]]:
+    result = perceive(np.array(positions, dtype=float), np.array(yaw, dtype=float), vision=vision)
+    return [set(int(j) for j in row[row >= 0]) for row in result.index]
+
+
+def test_body_frame_rotation() -> None:
+    # A fish facing +y (yaw π/2) sees a neighbour at +y straight ahead, one at −x to its right.
+    body = to_body(np.array([[[0.0, 1.0, 0.2], [-1.0, 0.0, 0.0]]]), np.array([math.pi / 2]))
+    np.testing.assert_allclose(body[0], [[1.0, 0.0, 0.2], [0.0, 1.0, 0.0]], atol=1e-12)
+
+
+def test_range_limits_what_is_seen() -> None:
+    seen = _seen([[0, 0, 0], [2.9, 0, 0], [3.1, 0, 0]], [0, 0, 0], Vision(3.0, 0.0, 0.0))
+    assert seen[0] == {1}
+
+
+def test_blind_spot_hides_a_fish_directly_behind() -> None:
+    # Observer at origin facing +x. Behind at (−1, 0.01): lateral 0.01 < w/2 = 0.025 → hidden.
+    # Behind at (−1, 0.03): lateral 0.03 > 0.025 → seen. In front at (1, 0): seen.
+    positions = [[1, 1, 0], [0, 1.01, 0], [0, 1.03, 0], [2, 1, 0]]
+    seen = _seen(positions, [0, 0, 0, 0], Vision(blind_width=0.05, sphere_radius=0.0))
+    assert seen[0] == {2, 3}
+
+
+def test_blind_strip_is_unbounded_in_depth() -> None:
+    hidden = in_blind_spot(np.array([[[-1.0, 0.0, 5.0]]]), np.array([0.0]), blind_width=0.05)
+    assert hidden[0, 0]
+
+
+def test_blind_width_zero_sees_all_and_diagonal_gives_half_field() -> None:
+    relative = np.array([[[-1.0, 0.5, 0.0], [-0.1, -2.0, 0.0], [0.1, 2.0, 0.0]]])
+    assert not in_blind_spot(relative, np.array([0.0]), blind_width=0.0).any()
+    hidden = in_blind_spot(relative, np.array([0.0]), blind_width=2.517)
+    # Behind within 1.26 m of the heading line: the first (lateral 0.5); the second is behind
+    # but 2 m to the side; the third is in front.
+    assert hidden.tolist() == [[True, False, False]]
+
+
+def test_collinear_fish_are_occluded_by_the_nearer() -> None:
+    positions = [[0, 0, 0], [1, 0, 0], [2, 0, 0]]
+    assert _seen(positions, [0, 0, 0], Vision(blind_width=0, sphere_radius=0.065))[0] == {1}
+    assert _seen(positions, [0, 0, 0], NO_OCCLUSION)[0] == {1, 2}
+
+
+def test_occlusion_angle_threshold() -> None:
+    # Blocker at (1, 0): hides directions within atan(0.065/1) = 3.72° of it.
+    # Target at (2, 2·tan 3°) → angle 3° → hidden; at (2, 2·tan 5°) → 5° → seen.
+    vision = Vision(blind_width=0, sphere_radius=0.065)
+    hidden = _seen([[0, 0, 0], [1, 0, 0], [2, 2 * math.tan(math.radians(3)), 0]], [0] * 3, vision)
+    shown = _seen([[0, 0, 0], [1, 0, 0], [2, 2 * math.tan(math.radians(5)), 0]], [0] * 3, vision)
+    assert hidden[0] == {1}
+    assert shown[0] == {1, 2}
+
+
+def test_only_visible_fish_occlude() -> None:
+    # Observer at (1, 1) facing +x. Fish 1 straight behind at 0.5 m is in the blind strip;
+    # fish 2 behind at (0, 1.04) lies 0.04 m off the heading line (outside the strip) and
+    # within atan(0.065/0.5) = 7.4° of fish 1's direction (2.3°).
+    positions = [[1, 1, 0], [0.5, 1, 0], [0, 1.04, 0]]
+    # Fish 1 is unseen, so it cannot hide fish 2.
+    assert _seen(positions, [0] * 3, Vision(blind_width=0.05, sphere_radius=0.065))[0] == {2}
+    # Without a blind spot, fish 1 is seen and hides fish 2.
+    assert _seen(positions, [0] * 3, Vision(blind_width=0.0, sphere_radius=0.065))[0] == {1}
+
+
+def test_coincident_fish_do_not_crash() -> None:
+    positions = [[1, 1, 1], [1, 1, 1], [1, 1, 1], [2, 1, 1]]
+    result = perceive(np.array(positions, float), np.zeros(4), vision=Vision())
+    assert np.all(np.isfinite(result.neighbors))
+    assert result.counts[0] == 3
+    np.testing.assert_allclose(result.of(0)[0], [0, 0, 0])
+
+
+def test_neighbours_come_nearest_first_in_body_frame() -> None:
+    result = perceive(
+        np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5], [0.5, 0.8, 0.5]]),
+        np.array([0.0, math.pi, 0.0]),
+        vision=NO_OCCLUSION,
+    )
+    np.testing.assert_allclose(result.of(0), [[0.0, 0.3, 0.0], [1.0, 0.0, 0.0]], atol=1e-12)
+    np.testing.assert_allclose(result.of(1)[0], [1.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_noise_is_per_fish_and_proportional_to_distance() -> None:
+    positions = np.array([[0.0, 0, 0], [1.0, 0, 0], [0.0, 2.0, 0]])
+    vision = Vision(blind_width=0, sphere_radius=0, noise=0.1)
+    first = perceive(positions, np.zeros(3),
+                     vision=vision, rngs=[np.random.default_rng(i) for i in range(3)])
+    second = perceive(positions, np.zeros(3),
+                      vision=vision, rngs=[np.random.default_rng(i) for i in range(3)])
+    np.testing.assert_array_equal(first.neighbors, second.neighbors)
+    clean = perceive(positions, np.zeros(3), vision=NO_OCCLUSION)
+    assert not np.array_equal(first.neighbors, clean.neighbors)
+    with pytest.raises(ValueError, match="one random generator per fish"):
+        perceive(positions, np.zeros(3), vision=vision)
+
+
+def test_landmark_in_blind_spot_is_hidden() -> None:
+    result = perceive_landmarks(
+        np.array([[1.0, 1.0, 0.5], [0.0, 1.0, 0.5]]),
+        np.array([0.0, 0.0]),
+        np.array([[0.5, 1.0, 0.5]]),
+        vision=Vision(),
+    )
+    assert result.mask.tolist() == [[False], [True]]
+    np.testing.assert_allclose(result.of(1), [[0.5, 0.0, 0.0]])
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    positions=hnp.arrays(
+        np.float64, st.tuples(st.integers(1, 12), st.just(3)),
+        elements=st.sampled_from([0.0, 0.5, 1.0, 1.5]),
+    ),
+    yaw=st.floats(-math.pi, math.pi),
+)
+def test_vision_is_finite_and_sane_for_any_arrangement(positions: np.ndarray, yaw: float) -> None:
+    count = positions.shape[0]
+    result = perceive(positions, np.full(count, yaw), vision=Vision(sphere_radius=0.2))
+    assert np.all(np.isfinite(result.neighbors))
+    assert np.all(result.counts <= count - 1)
+    for fish in range(count):
+        assert fish not in set(result.index[fish].tolist())
+        # the nearest non-blind neighbour is always visible
+    assert result.mask.shape == result.index.shape

@@ -1,0 +1,169 @@
+"""Round trips and rejection of malformed input for every message type."""
+
+from __future__ import annotations
+
+import math
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from fishswarm.protocols import MessageError, decode, encode
+from fishswarm.protocols.messages import (
+    MAX_ROWS,
+    Broadcast,
+    ChannelReport,
+    Command,
+    ControlReply,
+    ControlRequest,
+    Delivery,
+    Message,
+    Perception,
+    Snapshot,
+)
+
+EXAMPLES: list[Message] = [
+    Perception(3, 7, 7.0, 0.5, np.array([[0.1, 0.2, 0.3], [1.0, -1.0, 0.0]]), np.zeros((0, 3)), 2),
+    Command(3, 7, np.array([1.0, 0.0, 0.6, 0.0]), led=True, broadcasts=1),
+    Broadcast(3, 7, "formation", 2),
+    Delivery(4, 8, "formation", 2, np.array([0.3, -0.1, 0.0])),
+    Snapshot(
+        5,
+        5.0,
+        np.array([0, 1, 4]),
+        np.ones((3, 3)),
+        np.zeros((3, 3)),
+        np.array([0.0, 1.0, -1.0]),
+        np.array([2, 2, 1]),
+        np.zeros(3, dtype=np.int64),
+    ),
+    ChannelReport(8, np.array([0, 1]), np.array([1, 0])),
+    ControlRequest("status"),
+    ControlReply("running", 4, 4.0, 25),
+]
+
+
+@pytest.mark.parametrize("message", EXAMPLES, ids=lambda m: m.type_name)
+def test_round_trip(message: Message) -> None:
+    assert decode(encode(message), type(message)) == message
+
+
+def test_decoded_arrays_are_read_only() -> None:
+    message = decode(encode(EXAMPLES[0]), Perception)
+    with pytest.raises(ValueError, match="read-only"):
+        message.neighbors[0, 0] = 1.0
+
+
+floats = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@given(
+    neighbors=hnp.arrays(np.float64, st.tuples(st.integers(0, 40), st.just(3)), elements=floats),
+    tick=st.integers(0, 2**40),
+    depth=floats,
+)
+def test_perception_round_trip_property(neighbors: np.ndarray, tick: int, depth: float) -> None:
+    message = Perception(1, tick, 1.5, depth, neighbors, np.zeros((1, 3)), 0)
+    decoded = decode(encode(message), Perception)
+    assert decoded == message
+    assert decoded.neighbors.dtype == np.float64
+
+
+@given(data=st.binary(max_size=200))
+def test_garbage_never_escapes_as_another_error(data: bytes) -> None:
+    try:
+        decode(data)
+    except MessageError:
+        pass
+
+
+def _raw(type_name: str, fields: dict[str, object], version: int = 1) -> bytes:
+    def default(value: object) -> object:
+        assert isinstance(value, np.ndarray)
+        header = msgpack.packb([value.dtype.str, list(value.shape)])
+        return msgpack.ExtType(1, header + value.tobytes())
+
+    packed: bytes = msgpack.packb({"v": version, "t": type_name, "f": fields}, default=default)
+    return packed
+
+
+def _command_fields(**overrides: object) -> dict[str, object]:
+    fields: dict[str, object] = {
+        "fish_id": 1,
+        "tick": 2,
+        "fins": np.zeros(4),
+        "led": True,
+        "broadcasts": 0,
+    }
+    fields.update(overrides)
+    return fields
+
+
+@pytest.mark.parametrize(
+    ("payload", "reason"),
+    [
+        (b"\xc1garbage", "not msgpack"),
+        (b"", "not msgpack"),
+        (msgpack.packb([1, 2, 3]), "expected a map"),
+        (_raw("command", _command_fields(), version=99), "schema version 99"),
+        (_raw("spaceship", {}), "unknown message type"),
+        (_raw("command", _command_fields(tick="seven")), "tick must be an integer"),
+        (_raw("command", _command_fields(tick=True)), "tick must be an integer"),
+        (_raw("command", _command_fields(tick=-1)), "tick must be in"),
+        (_raw("command", _command_fields(fins=np.array([math.nan, 0, 0, 0]))), "finite"),
+        (_raw("command", _command_fields(fins=np.zeros(3))), "4 rows"),
+        (_raw("command", _command_fields(fins=np.array([2.0, 0, 0, 0]))), r"gains in \[0, 1\]"),
+        (_raw("command", _command_fields(fins=np.zeros(4, dtype=np.float32))), "dtype"),
+        (_raw("command", _command_fields(led="yes")), "led must be a bool"),
+        (_raw("command", _command_fields(extra=1)), "unexpected keyword"),
+        (_raw("command", {"fish_id": 1}), "missing"),
+        (
+            _raw("perception", {
+                "fish_id": 1, "tick": 0, "time": math.inf, "depth": 0.0,
+                "neighbors": np.zeros((0, 3)), "landmarks": np.zeros((0, 3)),
+            }),
+            "time must be finite",
+        ),
+        (
+            _raw("perception", {
+                "fish_id": 1, "tick": 0, "time": 0.0, "depth": 0.0,
+                "neighbors": np.zeros((2, 2)), "landmarks": np.zeros((0, 3)),
+            }),
+            r"shape \(n, 3\)",
+        ),
+        (
+            _raw("perception", {
+                "fish_id": 1, "tick": 0, "time": 0.0, "depth": 0.0,
+                "neighbors": np.zeros((MAX_ROWS + 1, 3)), "landmarks": np.zeros((0, 3)),
+            }),
+            "array shape",
+        ),
+    ],
+)
+def test_malformed_input_is_rejected_with_reason(payload: bytes, reason: str) -> None:
+    with pytest.raises(MessageError, match=reason):
+        decode(payload, Command if b"perception" not in payload else Perception)
+
+
+def test_truncated_array_is_rejected() -> None:
+    good = encode(EXAMPLES[1])
+    with pytest.raises(MessageError):
+        decode(good[:-5], Command)
+
+
+def test_wrong_type_for_key_is_rejected() -> None:
+    with pytest.raises(MessageError, match="expected a command message, got broadcast"):
+        decode(encode(Broadcast(1, 1, "formation")), Command)
+
+
+def test_bad_messages_cannot_be_built() -> None:
+    with pytest.raises(ValueError, match="ascending"):
+        Snapshot(0, 0.0, np.array([2, 1]), np.zeros((2, 3)), np.zeros((2, 3)), np.zeros(2),
+                 np.zeros(2, dtype=np.int64), np.zeros(2, dtype=np.int64))
+    with pytest.raises(ValueError, match="action must be one of"):
+        ControlRequest("explode")
+    with pytest.raises(TypeError, match="integer array"):
+        ChannelReport(0, np.array([0.5]), np.array([1]))
