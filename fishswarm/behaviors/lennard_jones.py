@@ -81,6 +81,10 @@ def lennard_jones(
     # Repulsion (positive) points away from the neighbour: −magnitude along its direction.
     contribution = -magnitude[..., None] * direction * mask[..., None]
     count = mask.sum(axis=1)
-    total = contribution.sum(axis=1)
+    # Summed in neighbour order so that padding (zeros at the end) never changes a result:
+    # a fish alone (batch of one) and the same fish in a padded swarm batch agree exactly.
+    total = np.zeros((neighbors.shape[0], 3))
+    for k in range(neighbors.shape[1]):
+        total += contribution[:, k]
     result: FloatArray = np.where(count[:, None] > 0, total / np.maximum(count, 1)[:, None], 0.0)
     return result

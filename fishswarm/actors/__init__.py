@@ -1,0 +1,1 @@
+"""The async actors (fish, world, channel, observer) and their Zenoh/trio plumbing."""

@@ -1,0 +1,140 @@
+"""The channel actor (simulation only): delivers broadcasts to the fish that can receive them.
+
+After the world's snapshot of tick k+1 (which says how many broadcasts each fish sent at
+tick k), the channel waits for exactly those outbox messages, works out the receptions with
+the positions of tick k+1, publishes the deliveries for tick k+1, and then a report telling
+the world how many deliveries each fish gets, so that each fish can wait for all of them:
+deterministic, and nothing lost.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import defaultdict
+
+import numpy as np
+import trio
+import zenoh
+
+from fishswarm.actors.bridge import Inbox, Put, open_subscriber, open_token, publisher
+from fishswarm.actors.intake import Intake
+from fishswarm.medium import receptions
+from fishswarm.protocols.codec import encode
+from fishswarm.protocols.messages import Broadcast, ChannelReport, Delivery, Snapshot
+from fishswarm.scenario import Scenario
+from fishswarm.simulation import Stream, stream
+
+log = logging.getLogger(__name__)
+
+
+class Channel:
+    """The simulated broadcast medium. ``await channel.run(session)`` serves until cancelled.
+
+    Args:
+        scenario: range, loss and seed of the medium.
+        outbox_timeout: longest wait for the broadcasts a snapshot announces, s.
+    """
+
+    def __init__(self, scenario: Scenario, *, outbox_timeout: float = 5.0) -> None:
+        self.scenario = scenario
+        self.keys = scenario.keys
+        self.outbox_timeout = outbox_timeout
+        self._intake = Intake("channel")
+        self._events: Inbox[tuple[str, str, bytes]] = Inbox()
+        self._outbox: dict[int, list[Broadcast]] = defaultdict(list)
+        self._rngs: dict[int, np.random.Generator] = {}
+        self._delivered = 0
+        self._missing = 0
+
+    def statistics(self) -> dict[str, int]:
+        """Counters: deliveries made, broadcasts that never arrived, rejected messages."""
+        return {
+            "delivered": self._delivered,
+            "missing_broadcasts": self._missing,
+            "rejected": self._intake.rejected_total,
+        }
+
+    async def run(
+        self, session: zenoh.Session, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
+    ) -> None:
+        """Deliver broadcasts until cancelled."""
+        events, keys = self._events, self.keys
+        put = publisher(session)
+        async with (
+            open_subscriber(session, keys.snapshot, lambda k, p: events.push(("snapshot", k, p))),
+            open_subscriber(session, keys.fish_outboxes(), lambda k, p: events.push(("outbox", k, p))),
+            open_token(session, keys.alive("channel", 0)),
+        ):
+            task_status.started()
+            while True:
+                snapshot = await self._next_snapshot()
+                if snapshot.tick == 0 or int(snapshot.broadcasts.sum()) == 0:
+                    continue
+                broadcasts = await self._gather(snapshot)
+                self._deliver(put, snapshot, broadcasts)
+
+    async def _next_snapshot(self) -> Snapshot:
+        while True:
+            kind, key, payload = await self._events.receive()
+            if kind == "snapshot":
+                snapshot = self._intake.decode(key, payload, Snapshot)
+                if snapshot is not None:
+                    return snapshot
+            else:
+                self._take_outbox(key, payload)
+
+    def _take_outbox(self, key: str, payload: bytes) -> None:
+        broadcast = self._intake.decode(key, payload, Broadcast)
+        if broadcast is None:
+            return
+        sender, _ = self.keys.member_of(key)
+        if sender != str(broadcast.sender_id):
+            self._intake.reject(key, "misaddressed", f"broadcast of fish {broadcast.sender_id}")
+            return
+        self._outbox[broadcast.tick].append(broadcast)
+
+    async def _gather(self, snapshot: Snapshot) -> list[Broadcast]:
+        sent_tick = snapshot.tick - 1
+        wanted = int(snapshot.broadcasts.sum())
+        with trio.move_on_after(self.outbox_timeout):
+            while len(self._outbox[sent_tick]) < wanted:
+                kind, key, payload = await self._events.receive()
+                if kind == "outbox":
+                    self._take_outbox(key, payload)
+        for old in [t for t in self._outbox if t < sent_tick]:
+            del self._outbox[old]
+        got = self._outbox.pop(sent_tick, [])
+        if len(got) < wanted:
+            self._missing += wanted - len(got)
+            log.warning("channel: %d of %d broadcasts of tick %d never arrived",
+                        wanted - len(got), wanted, sent_tick)
+        return sorted(got, key=lambda b: b.sender_id)
+
+    def _deliver(self, put: Put, snapshot: Snapshot, broadcasts: list[Broadcast]) -> None:
+        index_of = {int(i): n for n, i in enumerate(snapshot.ids.tolist())}
+        present = [b for b in broadcasts if b.sender_id in index_of]
+        rngs = [self._rng(int(i)) for i in snapshot.ids.tolist()]
+        found = receptions(
+            snapshot.position,
+            snapshot.yaw,
+            [index_of[b.sender_id] for b in present],
+            channel_range=self.scenario.channel_range,
+            loss=self.scenario.channel_loss,
+            rngs=rngs,
+        )
+        counts = np.zeros(snapshot.ids.size, dtype=np.int64)
+        for reception in found:
+            broadcast = present[reception.broadcast]
+            receiver_id = int(snapshot.ids[reception.receiver])
+            delivery = Delivery(
+                receiver_id, snapshot.tick, broadcast.kind, broadcast.value, reception.sender_position
+            )
+            put(self.keys.inbox(receiver_id), encode(delivery))
+            counts[reception.receiver] += 1
+        self._delivered += len(found)
+        put(self.keys.channel_report, encode(ChannelReport(snapshot.tick, snapshot.ids, counts)))
+
+    def _rng(self, fish_id: int) -> np.random.Generator:
+        if fish_id not in self._rngs:
+            self._rngs[fish_id] = stream(self.scenario.seed, Stream.CHANNEL, fish_id)
+        return self._rngs[fish_id]

@@ -1,0 +1,223 @@
+"""What each ``fishswarm`` command does: the actors run from the command line."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable
+from typing import Any
+
+import trio
+
+from fishswarm.actors.bridge import ConnectError, SessionSettings, check_endpoint, open_session
+from fishswarm.actors.channel import Channel
+from fishswarm.actors.fish import Fish, FishSettings
+from fishswarm.actors.launcher import EXIT_WORKER_DIED, LaunchSettings, run_swarm
+from fishswarm.actors.observer import Observer, Progress
+from fishswarm.actors.world import StartTimeout, World, WorldSettings
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.recording import RecordingError, export_csv, export_npz, open_recorder, read_recording
+from fishswarm.scenario import ConfigError, Scenario
+from fishswarm.simulation import policy_of
+
+
+class UserError(RuntimeError):
+    """Something the user can fix: the message says what."""
+
+
+def _endpoint(value: str, flag: str) -> str:
+    try:
+        return check_endpoint(value)
+    except ValueError as error:
+        raise ConfigError(f"{flag}: {error}") from None
+
+
+def _client(args: argparse.Namespace) -> SessionSettings:
+    return SessionSettings(
+        mode="client",
+        connect=[_endpoint(args.connect, "--connect")],
+        connect_timeout=args.connect_timeout,
+    )
+
+
+def _run_trio(main: Callable[[], Any]) -> Any:
+    try:
+        return trio.run(main)
+    except (ConnectError, StartTimeout, RecordingError) as error:
+        raise UserError(str(error)) from None
+
+
+def progress_printer(ticks: int, stream: Any = sys.stderr) -> Callable[[Progress], None]:
+    """Print a progress line per snapshot (about 20 lines for long runs; one updating line on
+    a terminal)."""
+    every = max(1, ticks // 20)
+    tty = stream.isatty()
+
+    def show(progress: Progress) -> None:
+        if progress.tick % every and progress.tick != ticks:
+            return
+        m = progress.metrics
+        line = (
+            f"tick {progress.tick:>{len(str(ticks))}}/{ticks}  t={progress.time:7.1f} s  "
+            f"fish {progress.fish}  centroid {m['centroid_distance']:.3f} m  "
+            f"pairwise {m['pairwise_distance']:.3f} m  nearest {m['nearest_neighbor_distance']:.3f} m"
+            f"  seen {m['neighbors_seen']:.1f}"
+        )
+        if tty:
+            stream.write("\r" + line + ("\n" if progress.tick >= ticks else ""))
+        else:
+            stream.write(line + "\n")
+        stream.flush()
+
+    return show
+
+
+def run(args: argparse.Namespace, scenario: Scenario) -> int:
+    """``fishswarm run``."""
+    if args.procs < 1:
+        raise ConfigError(f"--procs must be at least 1, got {args.procs}")
+    settings = LaunchSettings(
+        scenario=scenario,
+        procs=args.procs,
+        listen=_endpoint(args.listen, "--listen"),
+        record=args.record,
+        summary=args.summary,
+        start_timeout=args.start_timeout,
+        log_level=args.log_level,
+    )
+    print(
+        f"fishswarm: {scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
+        f"{1 / scenario.control_period:g} Hz, seed {scenario.seed}, {args.procs} worker "
+        f"process(es), listening on {settings.listen}",
+        file=sys.stderr,
+    )
+    show = None if args.quiet else progress_printer(scenario.ticks)
+    result = _run_trio(lambda: run_swarm(settings, on_progress=show))
+    summary = result.summary
+    for line in summary["workers_died"]:
+        print(f"fishswarm run: error: {line}", file=sys.stderr)
+    print(_summary_text(summary), file=sys.stderr)
+    if result.exit_code == EXIT_WORKER_DIED:
+        print("fishswarm run: a worker process died; the run finished without its fish "
+              "(see 'lost' in the summary)", file=sys.stderr)
+    return result.exit_code
+
+
+def _summary_text(summary: dict[str, Any]) -> str:
+    lines = [f"status: {summary['status']}"]
+    for name, values in summary["metrics"].items():
+        change = values["change_percent"]
+        change_text = "" if change is None else f" ({change:+.1f} %)"
+        lines.append(f"  {name}: {values['initial']:.3f} → {values['final']:.3f}{change_text}")
+    counts = summary["counts"]
+    rejected = sum(counts["rejected"].values())
+    rtf = summary["real_time_factor"]
+    lines.append(
+        f"  ticks {counts['ticks']}, messages {counts['messages']}, rejected {rejected}, "
+        f"lost fish {counts['lost_fish']}, wall {summary['wall_time']:.2f} s"
+        + (f", {rtf:.0f}× real time" if rtf else "")
+    )
+    if summary.get("recording"):
+        lines.append(f"  recording: {summary['recording']}")
+    return "\n".join(lines)
+
+
+def fish(args: argparse.Namespace, scenario: Scenario) -> int:
+    """``fishswarm fish``: fish actors alone, connected to a router."""
+    policy = policy_of(scenario)
+    keys = scenario.keys
+
+    async def main() -> None:
+        async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
+            for fish_id in args.ids:
+                settings = FishSettings(fish_id, policy, keys,
+                                        perception_timeout=args.perception_timeout)
+                await nursery.start(Fish(settings).run, session)
+            print(f"fish {', '.join(map(str, args.ids))} up on {args.connect}", file=sys.stderr)
+
+    _run_trio(main)
+    return 0
+
+
+def world(args: argparse.Namespace, scenario: Scenario) -> int:
+    """``fishswarm world``: the world alone."""
+    actor = World(WorldSettings(scenario, tuple(range(scenario.fish)), args.start_timeout))
+    show = progress_printer(scenario.ticks)
+    observer = Observer(scenario.keys, on_progress=show, observer_id="world-cli")
+
+    async def main() -> None:
+        async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
+            await nursery.start(observer.run, session)
+            await actor.run(session)
+            nursery.cancel_scope.cancel()
+
+    _run_trio(main)
+    print(json.dumps(actor.statistics()), file=sys.stderr)
+    return 0
+
+
+def channel(args: argparse.Namespace, scenario: Scenario) -> int:
+    """``fishswarm channel``: the channel alone."""
+
+    async def main() -> None:
+        async with open_session(_client(args)) as session:
+            await Channel(scenario).run(session)
+
+    _run_trio(main)
+    return 0
+
+
+def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm observe``: watch a swarm from anywhere."""
+    keys = KeySpace(args.swarm)
+    ticks = args.ticks
+
+    async def main() -> None:
+        show = progress_printer(ticks or 0, sys.stderr)
+        recorder_context = open_recorder(args.record, {"observed": True}) if args.record else None
+        recorder = recorder_context.__enter__() if recorder_context else None
+        try:
+            observer = Observer(keys, recorder=recorder, on_progress=show, observer_id="cli")
+            async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
+                await nursery.start(observer.run, session)
+                print(f"observing swarm {args.swarm!r} on {args.connect}", file=sys.stderr)
+                if ticks is not None:
+                    await observer.wait_for_tick(ticks)
+                    nursery.cancel_scope.cancel()
+        finally:
+            if recorder_context is not None:
+                recorder_context.__exit__(None, None, None)
+
+    _run_trio(main)
+    return 0
+
+
+def router(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm router``: a Zenoh router for robots and observers."""
+    settings = SessionSettings(mode="router", listen=[_endpoint(args.listen, "--listen")])
+
+    async def main() -> None:
+        async with open_session(settings):
+            print(f"router listening on {args.listen}; Ctrl-C stops it", file=sys.stderr)
+            await trio.sleep_forever()
+
+    _run_trio(main)
+    return 0
+
+
+def export(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm export``."""
+    if args.npz is None and args.csv is None:
+        raise ConfigError("say what to write: --npz OUT.npz and/or --csv OUT.csv")
+    try:
+        recording = read_recording(args.recording)
+    except RecordingError as error:
+        raise UserError(str(error)) from None
+    if args.npz is not None:
+        export_npz(recording, args.npz)
+        print(f"wrote {args.npz}", file=sys.stderr)
+    if args.csv is not None:
+        export_csv(recording, args.csv)
+        print(f"wrote {args.csv}", file=sys.stderr)
+    return 0

@@ -1,0 +1,205 @@
+"""The launcher behind ``fishswarm run``: one command runs a whole simulated swarm.
+
+It opens the listening endpoint (a Zenoh router), starts the observer, the channel and the
+world in this process, spawns the fish over worker processes, runs the scenario, writes the
+recording and the summary, and tears everything down — on success, on Ctrl-C and when a
+worker dies (the run goes on without its fish, and ends with a clear message and a non-zero
+exit).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import trio
+
+from fishswarm.actors.bridge import SessionSettings, open_session
+from fishswarm.actors.channel import Channel
+from fishswarm.actors.observer import Observer, Progress
+from fishswarm.actors.workers import Worker, WorkerSpec, split_fish, start_worker, stop_worker
+from fishswarm.actors.world import World, WorldSettings
+from fishswarm.metrics import METRIC_NAMES
+from fishswarm.recording import open_recorder
+from fishswarm.scenario import Scenario
+from fishswarm.simulation import policy_of
+
+log = logging.getLogger(__name__)
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_WORKER_DIED = 3
+EXIT_INTERRUPTED = 130
+
+
+@dataclass(frozen=True)
+class LaunchSettings:
+    """How to launch a run.
+
+    Attributes:
+        scenario: what to run.
+        procs: number of fish worker processes.
+        listen: endpoint the router listens on (loopback by default; 0.0.0.0 lets observers
+            on other machines attach).
+        record: MCAP recording to write (None: none).
+        summary: JSON summary to write (None: none).
+        start_timeout: longest wait for every fish to come up, s.
+        command_timeout: a fish silent this long in a tick is marked lost, s.
+        log_level: logging level of the workers.
+    """
+
+    scenario: Scenario
+    procs: int = 1
+    listen: str = "tcp/127.0.0.1:7447"
+    record: Path | None = None
+    summary: Path | None = None
+    start_timeout: float = 60.0
+    command_timeout: float = 10.0
+    log_level: str = "WARNING"
+
+
+@dataclass
+class RunResult:
+    """The outcome of a run."""
+
+    exit_code: int
+    summary: dict[str, Any]
+    history: list[Progress] = field(default_factory=list)
+
+
+async def run_swarm(
+    settings: LaunchSettings, *, on_progress: Callable[[Progress], None] | None = None
+) -> RunResult:
+    """Run a whole swarm to the end of its scenario and return the summary."""
+    scenario = settings.scenario
+    started = time.perf_counter()
+    router = SessionSettings(mode="router", listen=[settings.listen])
+    workers: list[Worker] = []
+    died: list[str] = []
+    status = "failed"
+    world = World(WorldSettings(
+        scenario,
+        expected_fish=tuple(range(scenario.fish)),
+        start_timeout=settings.start_timeout,
+        command_timeout=settings.command_timeout,
+    ))
+    channel = Channel(scenario)
+    with contextlib.ExitStack() as files:
+        recorder = (
+            files.enter_context(open_recorder(settings.record, scenario.to_dict()))
+            if settings.record is not None
+            else None
+        )
+        observer = Observer(scenario.keys, recorder=recorder, on_progress=on_progress)
+        try:
+            async with open_session(router) as session, trio.open_nursery() as nursery:
+                await nursery.start(observer.run, session)
+                await nursery.start(channel.run, session)
+                policy = policy_of(scenario)
+                for index, ids in enumerate(split_fish(list(range(scenario.fish)), settings.procs)):
+                    spec = WorkerSpec(index, ids, policy, scenario.swarm, _connect_to(settings.listen),
+                                      log_level=settings.log_level)
+                    workers.append(start_worker(spec))
+                nursery.start_soon(_watch_workers, workers, died)
+                await world.run(session)
+                with trio.move_on_after(5.0):
+                    await observer.wait_for_tick(world.tick)
+                status = "stopped" if world.state_name == "stopped" else "finished"
+                nursery.cancel_scope.cancel()
+        except KeyboardInterrupt:
+            status = "interrupted"
+            raise
+        finally:
+            with trio.CancelScope(shield=True):
+                await _stop_all(workers)
+            summary = _summary(settings, status, world, channel, observer, workers, died,
+                               time.perf_counter() - started)
+            if settings.summary is not None:
+                settings.summary.parent.mkdir(parents=True, exist_ok=True)
+                settings.summary.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    exit_code = EXIT_WORKER_DIED if died else EXIT_OK
+    return RunResult(exit_code, summary, observer.history)
+
+
+def _connect_to(listen: str) -> str:
+    """Where local workers connect for a listening endpoint (0.0.0.0 → loopback)."""
+    return listen.replace("0.0.0.0", "127.0.0.1").replace("[::]", "[::1]")
+
+
+async def _watch_workers(workers: list[Worker], died: list[str]) -> None:
+    reported: set[int] = set()
+    while True:
+        for worker in workers:
+            if worker.stopping or worker.spec.index in reported:
+                continue
+            if worker.process.exitcode is not None:
+                reported.add(worker.spec.index)
+                message = f"{worker.spec.describe()} {worker.exit_description()}; its fish are lost"
+                died.append(message)
+                log.error(message)
+        await trio.sleep(0.05)
+
+
+async def _stop_all(workers: list[Worker]) -> None:
+    async with trio.open_nursery() as nursery:
+        for worker in workers:
+            nursery.start_soon(trio.to_thread.run_sync, stop_worker, worker)
+
+
+def _summary(
+    settings: LaunchSettings,
+    status: str,
+    world: World,
+    channel: Channel,
+    observer: Observer,
+    workers: list[Worker],
+    died: list[str],
+    wall_time: float,
+) -> dict[str, Any]:
+    history = observer.history
+    metrics: dict[str, Any] = {}
+    if history:
+        first, last = history[0].metrics, history[-1].metrics
+        for name in (*METRIC_NAMES, "neighbors_seen"):
+            change = 100.0 * (last[name] - first[name]) / first[name] if first[name] else None
+            metrics[name] = {"initial": first[name], "final": last[name], "change_percent": change}
+    fish_totals: dict[str, int] = {}
+    for worker in workers:
+        for name, value in (worker.statistics or {}).items():
+            fish_totals[name] = fish_totals.get(name, 0) + int(value)
+    world_stats = world.statistics()
+    simulated = world.tick * settings.scenario.control_period
+    return {
+        "status": status,
+        "scenario": settings.scenario.to_dict(),
+        "procs": len(workers),
+        "listen": settings.listen,
+        "metrics": metrics,
+        "counts": {
+            "ticks": world.tick,
+            "messages": int(world_stats["messages_in"]) + int(world_stats["messages_out"]),  # type: ignore[call-overload]
+            "rejected": {
+                "world": world_stats["rejected"],
+                "channel": channel.statistics()["rejected"],
+                "observer": observer.statistics()["rejected"],
+                "fish": fish_totals.get("rejected", 0),
+            },
+            "lost_fish": len(world.lost),
+            "joined_fish": len(world.joined),
+            "deliveries": channel.statistics()["delivered"],
+        },
+        "lost": [{"id": f.fish_id, "tick": f.tick, "reason": f.reason} for f in world.lost],
+        "workers_died": died,
+        "fish": fish_totals,
+        "simulated_time": simulated,
+        "wall_time": wall_time,
+        "loop_time": world.wall_time,
+        "real_time_factor": simulated / world.wall_time if world.wall_time > 0 else None,
+        "recording": str(settings.record) if settings.record else None,
+    }

@@ -1,0 +1,129 @@
+"""The observer actor: watches snapshots and liveliness, records, computes metrics, reports.
+
+Any number of observers can attach, locally or from another machine, and leave without
+disturbing the run: an observer only listens.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import trio
+import zenoh
+
+from fishswarm.actors.bridge import Inbox, open_alive_events, open_subscriber, open_token
+from fishswarm.actors.intake import Intake
+from fishswarm.metrics import swarm_metrics
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.messages import Snapshot
+from fishswarm.recording import Recorder
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Progress:
+    """What an observer knows after a snapshot."""
+
+    tick: int
+    time: float
+    fish: int
+    metrics: dict[str, float]
+
+
+class Observer:
+    """Watches a swarm. ``await observer.run(session)`` serves until cancelled.
+
+    Args:
+        keys: the swarm's key space.
+        recorder: where to record snapshots, metrics and events (optional).
+        on_progress: called after every snapshot.
+        observer_id: id of this observer's liveliness token.
+    """
+
+    def __init__(
+        self,
+        keys: KeySpace,
+        *,
+        recorder: Recorder | None = None,
+        on_progress: Callable[[Progress], None] | None = None,
+        observer_id: str = "0",
+    ) -> None:
+        self.keys = keys
+        self.recorder = recorder
+        self.on_progress = on_progress
+        self.observer_id = observer_id
+        self.history: list[Progress] = []
+        self.events: list[dict[str, Any]] = []
+        self._intake = Intake(f"observer {observer_id}")
+        self._inbox: Inbox[tuple[str, str, bytes | bool]] = Inbox()
+        self._last_tick = -1
+        self._tick_reached = trio.Event()
+        self._sim_time = 0.0
+
+    def statistics(self) -> dict[str, int]:
+        """Counters: snapshots accepted, rejected messages, events seen."""
+        return {
+            "snapshots": self._intake.accepted,
+            "rejected": self._intake.rejected_total,
+            "events": len(self.events),
+        }
+
+    async def run(
+        self, session: zenoh.Session, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
+    ) -> None:
+        """Observe until cancelled; readiness once subscribed."""
+        inbox = self._inbox
+        async with (
+            open_subscriber(session, self.keys.snapshot, lambda k, p: inbox.push(("snapshot", k, p))),
+            open_alive_events(session, self.keys.alive_all(), lambda k, a: inbox.push(("alive", k, a))),
+            open_token(session, self.keys.alive("observer", self.observer_id)),
+        ):
+            task_status.started()
+            async for kind, key, payload in inbox:
+                if kind == "alive":
+                    assert isinstance(payload, bool)
+                    self._on_alive(key, payload)
+                else:
+                    assert isinstance(payload, bytes)
+                    self._on_snapshot(key, payload)
+
+    async def wait_for_tick(self, tick: int) -> None:
+        """Wait until a snapshot of ``tick`` or later has been seen (bound it with a timeout)."""
+        while self._last_tick < tick:
+            self._tick_reached = trio.Event()
+            await self._tick_reached.wait()
+
+    def _on_alive(self, key: str, alive: bool) -> None:
+        try:
+            member, role = self.keys.member_of(key)
+        except ValueError:
+            return
+        event = {"event": "joined" if alive else "left", "role": role, "id": member,
+                 "time": self._sim_time}
+        self.events.append(event)
+        if self.recorder is not None:
+            self.recorder.event(self._sim_time, event)
+
+    def _on_snapshot(self, key: str, payload: bytes) -> None:
+        snapshot = self._intake.decode(key, payload, Snapshot)
+        if snapshot is None:
+            return
+        if snapshot.tick <= self._last_tick:
+            self._intake.reject(key, "stale", f"snapshot of tick {snapshot.tick} repeated")
+            return
+        metrics = swarm_metrics(snapshot.position, snapshot.neighbors_seen)
+        progress = Progress(snapshot.tick, snapshot.time, int(snapshot.ids.size), metrics)
+        self.history.append(progress)
+        self._sim_time = snapshot.time
+        if self.recorder is not None:
+            self.recorder.snapshot(snapshot.time, payload)
+            self.recorder.metrics(snapshot.time, {"tick": snapshot.tick, "time": snapshot.time,
+                                                  "fish": progress.fish, **metrics})
+        self._last_tick = snapshot.tick
+        self._tick_reached.set()
+        if self.on_progress is not None:
+            self.on_progress(progress)

@@ -1,0 +1,157 @@
+"""Fish worker processes: many fish actors per process, as trio tasks on one session.
+
+Workers are started with the ``spawn`` context (never fork after Zenoh is in use). A worker
+ignores Ctrl-C — its launcher decides when it stops — and stops when its launcher says so or
+disappears (the pipe closes), then reports its fish's counters through the pipe.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import signal
+from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from typing import Any
+
+import trio
+
+from fishswarm.actors.bridge import SessionSettings, open_session
+from fishswarm.actors.fish import Fish, FishSettings
+from fishswarm.behaviors.policy import Policy
+from fishswarm.protocols.keys import KeySpace
+
+
+@dataclass(frozen=True)
+class WorkerSpec:
+    """What one worker process runs.
+
+    Attributes:
+        index: the worker's number.
+        fish_ids: the fish it hosts.
+        policy: what its fish do.
+        swarm: swarm name.
+        connect: the router's endpoint.
+        perception_timeout: the fish's safety watchdog, s.
+        log_level: logging level name.
+    """
+
+    index: int
+    fish_ids: tuple[int, ...]
+    policy: Policy
+    swarm: str
+    connect: str
+    perception_timeout: float = 5.0
+    log_level: str = "WARNING"
+
+    def describe(self) -> str:
+        """``worker 1 (fish 13–24)``."""
+        ids = self.fish_ids
+        span = f"fish {ids[0]}" if len(ids) == 1 else f"fish {ids[0]}–{ids[-1]}"
+        return f"worker {self.index} ({span})"
+
+
+def split_fish(ids: list[int], procs: int) -> list[tuple[int, ...]]:
+    """Split fish ids into ``procs`` contiguous, nearly equal groups (no empty group)."""
+    procs = max(1, min(procs, len(ids)))
+    size, extra = divmod(len(ids), procs)
+    groups, start = [], 0
+    for n in range(procs):
+        end = start + size + (1 if n < extra else 0)
+        groups.append(tuple(ids[start:end]))
+        start = end
+    return groups
+
+
+def worker_main(spec: WorkerSpec, connection: Connection) -> None:
+    """Entry point of a worker process."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    logging.basicConfig(level=spec.log_level, format="%(levelname)s %(name)s: %(message)s")
+    statistics = trio.run(_serve, spec, connection)
+    try:
+        connection.send(("statistics", statistics))
+    except (BrokenPipeError, OSError):
+        pass
+
+
+async def _serve(spec: WorkerSpec, connection: Connection) -> dict[str, Any]:
+    keys = KeySpace(spec.swarm)
+    fishes = [
+        Fish(FishSettings(i, spec.policy, keys, perception_timeout=spec.perception_timeout))
+        for i in spec.fish_ids
+    ]
+    async with open_session(SessionSettings(mode="client", connect=[spec.connect])) as session:
+        async with trio.open_nursery() as nursery:
+            for fish in fishes:
+                await nursery.start(fish.run, session)
+            connection.send(("ready", spec.index))
+            await trio.to_thread.run_sync(_wait_for_stop, connection, abandon_on_cancel=True)
+            nursery.cancel_scope.cancel()
+    totals: dict[str, Any] = {}
+    for fish in fishes:
+        for name, value in fish.statistics().items():
+            totals[name] = totals.get(name, 0) + value
+    return totals
+
+
+def _wait_for_stop(connection: Connection) -> None:
+    # Readable means "stop" was sent or the launcher is gone (end of file): both end the worker.
+    connection.poll(None)
+
+
+@dataclass
+class Worker:
+    """A running worker process, as its launcher sees it."""
+
+    spec: WorkerSpec
+    process: multiprocessing.process.BaseProcess
+    connection: Connection
+    statistics: dict[str, Any] | None = None
+    stopping: bool = False
+
+    def exit_description(self) -> str:
+        """How the process ended, in words."""
+        code = self.process.exitcode
+        if code is None:
+            return "is still running"
+        if code < 0:
+            try:
+                return f"was killed by {signal.Signals(-code).name}"
+            except ValueError:
+                return f"was killed by signal {-code}"
+        return f"exited with code {code}"
+
+
+def start_worker(spec: WorkerSpec) -> Worker:
+    """Start a worker process (spawn context)."""
+    context = multiprocessing.get_context("spawn")
+    ours, theirs = context.Pipe(duplex=True)
+    process = context.Process(
+        target=worker_main, args=(spec, theirs), name=f"fishswarm-worker-{spec.index}", daemon=True
+    )
+    process.start()
+    theirs.close()
+    return Worker(spec, process, ours)
+
+
+def stop_worker(worker: Worker, *, timeout: float = 1.5) -> None:
+    """Ask a worker to stop, collect its counters, and make sure the process is gone.
+
+    Blocking; call it from a thread. Waits at most about ``timeout`` before killing.
+    """
+    worker.stopping = True
+    try:
+        worker.connection.send(("stop", None))
+        if worker.connection.poll(timeout):
+            kind, payload = worker.connection.recv()
+            while kind != "statistics" and worker.connection.poll(timeout):
+                kind, payload = worker.connection.recv()
+            if kind == "statistics":
+                worker.statistics = payload
+    except (BrokenPipeError, EOFError, OSError):
+        pass
+    worker.process.join(timeout)
+    if worker.process.is_alive():
+        worker.process.kill()
+        worker.process.join(1.0)
+    worker.connection.close()

@@ -1,0 +1,371 @@
+"""The world actor (simulation only): owns every fish's state, integrates, perceives.
+
+Lockstep mode (DESIGN.md §3): at tick k the world publishes the snapshot and every live
+fish's perception, waits until every live fish has answered tick k (a fish that disappears
+from liveliness or misses ``command_timeout`` is marked lost), integrates one control period
+and moves on, as fast as the machine allows. Everything order-dependent is done in fish-id
+order, so the same seed gives bit-identical trajectories however the fish are spread over
+processes.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import trio
+import zenoh
+
+from fishswarm.actors.bridge import (
+    Inbox,
+    Put,
+    open_alive_events,
+    open_queryable,
+    open_subscriber,
+    open_token,
+    publisher,
+    reply,
+)
+from fishswarm.actors.intake import Intake
+from fishswarm.bluebot.dynamics import State
+from fishswarm.bluebot.vision import Perceived
+from fishswarm.protocols.codec import MessageError, decode, encode
+from fishswarm.protocols.messages import (
+    ChannelReport,
+    Command,
+    ControlReply,
+    ControlRequest,
+    Perception,
+    Snapshot,
+)
+from fishswarm.scenario import Scenario
+from fishswarm.simulation import Stream, advance, observe, place, stream
+
+log = logging.getLogger(__name__)
+
+Event = tuple[str, str, bytes | bool]
+
+
+class StartTimeout(RuntimeError):
+    """The fish the world waits for did not all come up in time."""
+
+
+@dataclass(frozen=True)
+class WorldSettings:
+    """How the world runs.
+
+    Attributes:
+        scenario: what to simulate.
+        expected_fish: ids the world waits for before the first tick.
+        start_timeout: longest wait for them, s.
+        command_timeout: a fish that has not answered a tick within this is marked lost, s.
+        channel_timeout: longest wait for the channel's report on a tick, s.
+    """
+
+    scenario: Scenario
+    expected_fish: tuple[int, ...] = ()
+    start_timeout: float = 30.0
+    command_timeout: float = 10.0
+    channel_timeout: float = 5.0
+
+
+@dataclass
+class LostFish:
+    """A fish that left the run."""
+
+    fish_id: int
+    tick: int
+    reason: str
+
+
+@dataclass
+class _Tick:
+    commands: dict[int, Command] = field(default_factory=dict)
+    report: ChannelReport | None = None
+
+
+class World:
+    """The simulated world. ``await world.run(session)`` runs the scenario to its end."""
+
+    def __init__(self, settings: WorldSettings) -> None:
+        self.settings = settings
+        self.scenario = settings.scenario
+        self.keys = settings.scenario.keys
+        self.state_name = "waiting"
+        self.tick = 0
+        self.lost: list[LostFish] = []
+        self.joined: list[tuple[int, int]] = []
+        self.wall_time = 0.0
+        self._intake = Intake("world")
+        self._events: Inbox[Event] = Inbox()
+        self._alive_fish: set[int] = set()
+        self._channel_alive = 0
+        self._ids = np.zeros(0, dtype=np.int64)
+        self._state = place(self.scenario, self._ids)
+        self._broadcasts = np.zeros(0, dtype=np.int64)
+        self._vision_rngs: dict[int, np.random.Generator] = {}
+        self._departed: dict[int, State] = {}
+        self._resume = trio.Event()
+        self._resume.set()
+        self._stop_requested = False
+        self._messages_out = 0
+        self._current = _Tick()
+
+    @property
+    def time(self) -> float:
+        """Simulated time now, s."""
+        return self.tick * self.scenario.control_period
+
+    def statistics(self) -> dict[str, object]:
+        """Counters of the run so far."""
+        return {
+            "ticks": self.tick,
+            "messages_in": self._intake.accepted,
+            "messages_out": self._messages_out,
+            "rejected": self._intake.rejected_total,
+            "rejected_by_kind": dict(self._intake.rejected),
+            "lost_fish": len(self.lost),
+            "joined_fish": len(self.joined),
+            "live_fish": int(self._ids.size),
+        }
+
+    async def run(
+        self, session: zenoh.Session, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
+    ) -> None:
+        """Run the scenario to its end (or a stop request); readiness once subscribed."""
+        keys = self.keys
+        put = publisher(session)
+        events = self._events
+        async with (
+            open_subscriber(session, keys.fish_commands(), lambda k, p: events.push(("command", k, p))),
+            open_subscriber(session, keys.channel_report, lambda k, p: events.push(("report", k, p))),
+            open_alive_events(
+                session, keys.alive_all(), lambda k, alive: events.push(("alive", k, alive))
+            ),
+            open_queryable(session, keys.control) as queries,
+            open_token(session, keys.alive("world", 0)),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(self._serve_control, queries)
+            task_status.started()
+            await self._wait_for_fish()
+            started = time.perf_counter()
+            self.state_name = "running"
+            try:
+                await self._loop(put)
+            finally:
+                self.wall_time = time.perf_counter() - started
+            self.state_name = "stopped" if self._stop_requested else "finished"
+            nursery.cancel_scope.cancel()
+
+    async def _wait_for_fish(self) -> None:
+        expected = set(self.settings.expected_fish)
+        with trio.move_on_after(self.settings.start_timeout):
+            while not expected <= self._alive_fish:
+                self._handle(await self._events.receive())
+        missing = sorted(expected - self._alive_fish)
+        if missing:
+            raise StartTimeout(
+                f"{len(missing)} of {len(expected)} fish did not come up within "
+                f"{self.settings.start_timeout:g} s (missing ids: {_ids_text(missing)})"
+            )
+        self._admit_new_fish()
+
+    async def _loop(self, put: Put) -> None:
+        while True:
+            self._drain()
+            self._drop_lost()
+            self._admit_new_fish()
+            vision_rngs = [self._vision_rngs[int(i)] for i in self._ids]
+            perceived = observe(self.scenario, self._state, vision_rngs)
+            put(self.keys.snapshot, encode(self._snapshot(perceived)))
+            self._messages_out += 1
+            if self.tick >= self.scenario.ticks or self._stop_requested:
+                return
+            await self._resume.wait()
+            inbox_counts = await self._inbox_counts()
+            self._current = _Tick(report=self._current.report)
+            for index, fish_id in enumerate(self._ids.tolist()):
+                perception = Perception(
+                    fish_id,
+                    self.tick,
+                    self.time,
+                    float(self._state.position[index, 2]),
+                    perceived.of(index),
+                    np.zeros((0, 3)),
+                    int(inbox_counts[index]),
+                )
+                put(self.keys.perception(fish_id), encode(perception))
+            self._messages_out += self._ids.size
+            await self._collect_commands()
+            self._drop_lost()
+            fins = np.zeros((self._ids.size, 4))
+            broadcasts = np.zeros(self._ids.size, dtype=np.int64)
+            for index, fish_id in enumerate(self._ids.tolist()):
+                command = self._current.commands[fish_id]
+                fins[index] = command.fins
+                broadcasts[index] = command.broadcasts
+            self._state = advance(self.scenario, self._state, fins)
+            self._broadcasts = broadcasts
+            self.tick += 1
+
+    def _snapshot(self, perceived: Perceived) -> Snapshot:
+        return Snapshot(
+            self.tick,
+            self.time,
+            self._ids,
+            self._state.position,
+            self._state.tank_velocity(),
+            self._state.yaw,
+            perceived.counts,
+            self._broadcasts,
+        )
+
+    async def _inbox_counts(self) -> np.ndarray:
+        counts = np.zeros(self._ids.size, dtype=np.int64)
+        if self.tick == 0 or int(self._broadcasts.sum()) == 0:
+            return counts
+        if not self._channel_alive:
+            log.warning("broadcasts at tick %d but no channel is running: not delivered", self.tick)
+            return counts
+        with trio.move_on_after(self.settings.channel_timeout):
+            while self._current.report is None or self._current.report.tick != self.tick:
+                self._handle(await self._events.receive())
+        report = self._current.report
+        if report is None or report.tick != self.tick:
+            log.warning("no channel report for tick %d: deliveries not announced", self.tick)
+            return counts
+        by_id = dict(zip(report.ids.tolist(), report.inbox_counts.tolist(), strict=True))
+        return np.array([by_id.get(i, 0) for i in self._ids.tolist()], dtype=np.int64)
+
+    async def _collect_commands(self) -> None:
+        deadline = trio.current_time() + self.settings.command_timeout
+        with trio.move_on_at(deadline):
+            while self._waiting():
+                self._handle(await self._events.receive())
+        for fish_id in sorted(self._waiting()):
+            self._mark_lost(fish_id, f"no command within {self.settings.command_timeout:g} s")
+
+    def _waiting(self) -> set[int]:
+        lost = {f.fish_id for f in self.lost if f.tick == self.tick}
+        return set(self._ids.tolist()) - set(self._current.commands) - lost
+
+    def _drain(self) -> None:
+        while (event := self._events.receive_nowait()) is not None:
+            self._handle(event)
+
+    def _handle(self, event: Event) -> None:
+        kind, key, payload = event
+        if kind == "alive":
+            assert isinstance(payload, bool)
+            self._on_alive(key, payload)
+            return
+        assert isinstance(payload, bytes)
+        if kind == "report":
+            report = self._intake.decode(key, payload, ChannelReport)
+            if report is not None:
+                self._current.report = report
+            return
+        command = self._intake.decode(key, payload, Command)
+        if command is None:
+            return
+        sender, _ = self.keys.member_of(key)
+        if sender != str(command.fish_id):
+            self._intake.reject(key, "misaddressed", f"command of fish {command.fish_id}")
+        elif command.tick != self.tick or command.fish_id in self._current.commands:
+            self._intake.reject(key, "stale", f"command for tick {command.tick} at {self.tick}")
+        elif command.fish_id in self._ids:
+            self._current.commands[command.fish_id] = command
+
+    def _on_alive(self, key: str, alive: bool) -> None:
+        try:
+            member, role = self.keys.member_of(key)
+        except ValueError:
+            return
+        if role == "channel":
+            self._channel_alive += 1 if alive else -1
+            return
+        if role != "fish" or not member.isdigit():
+            return
+        fish_id = int(member)
+        if alive:
+            self._alive_fish.add(fish_id)
+        else:
+            self._alive_fish.discard(fish_id)
+            if fish_id in self._ids:
+                self._mark_lost(fish_id, "left (liveliness token gone)")
+
+    def _mark_lost(self, fish_id: int, reason: str) -> None:
+        if any(f.fish_id == fish_id and f.tick == self.tick for f in self.lost):
+            return
+        log.warning("fish %d lost at tick %d: %s", fish_id, self.tick, reason)
+        self.lost.append(LostFish(fish_id, self.tick, reason))
+        self._alive_fish.discard(fish_id)
+
+    def _drop_lost(self) -> None:
+        gone = {f.fish_id for f in self.lost if f.tick == self.tick}
+        if not gone.intersection(self._ids.tolist()):
+            return
+        keep = np.array([i not in gone for i in self._ids.tolist()], dtype=bool)
+        for index in np.flatnonzero(~keep):
+            self._departed[int(self._ids[index])] = self._state.take(np.array([index]))
+        self._ids = self._ids[keep]
+        self._state = self._state.take(np.flatnonzero(keep))
+        self._broadcasts = self._broadcasts[keep]
+
+    def _admit_new_fish(self) -> None:
+        new = sorted(self._alive_fish - set(self._ids.tolist()))
+        if not new:
+            return
+        for fish_id in new:
+            self._vision_rngs.setdefault(fish_id, stream(self.scenario.seed, Stream.VISION, fish_id))
+            if self.tick > 0:
+                self.joined.append((fish_id, self.tick))
+                log.info("fish %d joined at tick %d", fish_id, self.tick)
+        parts = [self._state]
+        for fish_id in new:
+            parts.append(
+                self._departed.pop(fish_id)
+                if fish_id in self._departed
+                else place(self.scenario, np.array([fish_id], dtype=np.int64))
+            )
+        ids = np.concatenate([self._ids, np.array(new, dtype=np.int64)])
+        order = np.argsort(ids, kind="stable")
+        merged = State(
+            np.concatenate([p.position for p in parts])[order],
+            np.concatenate([p.yaw for p in parts])[order],
+            np.concatenate([p.body_velocity for p in parts])[order],
+            np.concatenate([p.yaw_rate for p in parts])[order],
+        )
+        self._broadcasts = np.concatenate([self._broadcasts, np.zeros(len(new), np.int64)])[order]
+        self._ids, self._state = ids[order], merged
+
+    async def _serve_control(self, queries: Inbox[zenoh.Query]) -> None:
+        async for query in queries:
+            try:
+                payload = query.payload.to_bytes() if query.payload is not None else b""
+                request = decode(payload, ControlRequest)
+            except MessageError as error:
+                self._intake.reject(str(query.key_expr), "malformed", str(error))
+                query.drop()
+                continue
+            if request.action == "pause":
+                self._resume = trio.Event()
+                self.state_name = "paused"
+            elif request.action == "resume" and not self._resume.is_set():
+                self._resume.set()
+                self.state_name = "running"
+            elif request.action == "stop":
+                self._stop_requested = True
+                self._resume.set()
+            reply_message = ControlReply(
+                self.state_name, self.tick, self.time, len(self._alive_fish)
+            )
+            reply(query, encode(reply_message))
+
+
+def _ids_text(ids: list[int]) -> str:
+    return ", ".join(map(str, ids[:20])) + (" …" if len(ids) > 20 else "")
+

@@ -1,0 +1,206 @@
+"""A scenario: everything that defines a run, with defaults from SPEC.md and TOML loading.
+
+Settings come from defaults, then an optional TOML file, then command-line overrides. Every
+value is checked when the scenario is built; a bad one raises :class:`ConfigError` that says
+which setting is wrong and what would be right.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from fishswarm.behaviors.lennard_jones import AGGREGATION_DISTANCE
+from fishswarm.bluebot.control import CONTROLLERS
+from fishswarm.bluebot.parameters import BODY_LENGTH, Tank
+from fishswarm.bluebot.vision import Vision
+from fishswarm.protocols.keys import KeySpace
+
+BEHAVIORS = ("dispersion", "aggregation")
+
+
+class ConfigError(ValueError):
+    """A scenario setting is missing, unknown or out of range; the message says how to fix it."""
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """The settings of one run.
+
+    Attributes:
+        fish: number of fish.
+        behavior: ``dispersion`` or ``aggregation``.
+        duration: simulated time, s.
+        control_period: time between two decisions of a fish, s (1 Hz in the study).
+        seed: master seed; every random stream derives from (seed, role, id).
+        controller: ``homing`` (the research code's) or ``pid``.
+        caudal_cap: largest caudal gain the homing controller uses.
+        target_distance: Lennard-Jones r_t, m; default 0.26 for aggregation, the tank
+            diagonal for dispersion.
+        spawn_radius: fish start uniformly within this distance of the tank centre, m; default
+            2 body lengths for dispersion, 10 for aggregation (the study's set-ups).
+        tank: tank size (x, y, z), m.
+        visual_range, blind_width, sphere_radius, vision_noise: the vision model (SPEC §1.2).
+        channel_range: how far a broadcast carries, m.
+        channel_loss: probability that one delivery is lost, in [0, 1).
+        swarm: swarm name in the key space.
+    """
+
+    fish: int = 25
+    behavior: str = "dispersion"
+    duration: float = 15.0
+    control_period: float = 1.0
+    seed: int = 0
+    controller: str = "homing"
+    caudal_cap: float = 1.0
+    target_distance: float | None = None
+    spawn_radius: float | None = None
+    tank: tuple[float, float, float] = Tank().size
+    visual_range: float = 3.0
+    blind_width: float = 0.05
+    sphere_radius: float = 0.065
+    vision_noise: float = 0.0
+    channel_range: float = 3.0
+    channel_loss: float = 0.0
+    swarm: str = "default"
+
+    def __post_init__(self) -> None:
+        def need(ok: bool, message: str) -> None:
+            if not ok:
+                raise ConfigError(message)
+
+        need(
+            isinstance(self.fish, int) and 1 <= self.fish <= 100_000,
+            f"fish must be a whole number from 1 to 100000, got {self.fish!r}",
+        )
+        need(
+            self.behavior in BEHAVIORS,
+            f"behavior must be one of {', '.join(BEHAVIORS)}, got {self.behavior!r}",
+        )
+        need(
+            self.controller in CONTROLLERS,
+            f"controller must be one of {', '.join(CONTROLLERS)}, got {self.controller!r}",
+        )
+        for name in ("duration", "control_period"):
+            value = getattr(self, name)
+            need(_positive(value), f"{name} must be a positive number of seconds, got {value!r}")
+        need(
+            isinstance(self.seed, int) and self.seed >= 0,
+            f"seed must be a non-negative integer, got {self.seed!r}",
+        )
+        need(
+            _positive(self.caudal_cap) and self.caudal_cap <= 1,
+            f"caudal_cap must be in (0, 1], got {self.caudal_cap!r}",
+        )
+        for name in ("target_distance", "spawn_radius"):
+            value = getattr(self, name)
+            need(value is None or _positive(value), f"{name} must be positive metres, got {value!r}")
+        try:
+            Tank(tuple(self.tank))  # type: ignore[arg-type]
+            self.vision()
+            KeySpace(self.swarm)
+        except ValueError as error:
+            raise ConfigError(str(error)) from None
+        need(_positive(self.channel_range), "channel_range must be positive metres")
+        need(
+            isinstance(self.channel_loss, int | float) and 0 <= self.channel_loss < 1,
+            f"channel_loss must be a probability in [0, 1), got {self.channel_loss!r}",
+        )
+
+    @property
+    def ticks(self) -> int:
+        """Number of control periods in the run."""
+        return max(1, round(self.duration / self.control_period))
+
+    @property
+    def keys(self) -> KeySpace:
+        """The key space of this scenario's swarm."""
+        return KeySpace(self.swarm)
+
+    def the_tank(self) -> Tank:
+        """The tank as a :class:`Tank`."""
+        return Tank(tuple(self.tank))  # type: ignore[arg-type]
+
+    def vision(self) -> Vision:
+        """The vision model."""
+        return Vision(self.visual_range, self.blind_width, self.sphere_radius, self.vision_noise)
+
+    def resolved_target_distance(self) -> float:
+        """r_t after defaults: 0.26 m for aggregation, the tank diagonal for dispersion."""
+        if self.target_distance is not None:
+            return self.target_distance
+        return AGGREGATION_DISTANCE if self.behavior == "aggregation" else self.the_tank().diagonal
+
+    def resolved_spawn_radius(self) -> float:
+        """Spawn radius after defaults: 2 body lengths (dispersion) or 10 (aggregation)."""
+        if self.spawn_radius is not None:
+            return self.spawn_radius
+        return (10 if self.behavior == "aggregation" else 2) * BODY_LENGTH
+
+    def replace(self, **changes: Any) -> Scenario:
+        """A copy with some settings changed (``None`` values are ignored)."""
+        return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+    def to_dict(self) -> dict[str, Any]:
+        """The settings as plain data (for the summary and the recording)."""
+        data = dataclasses.asdict(self)
+        data["tank"] = list(self.tank)
+        data["target_distance"] = self.resolved_target_distance()
+        data["spawn_radius"] = self.resolved_spawn_radius()
+        return data
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, Any], *, source: str = "scenario") -> Scenario:
+        """Build from a mapping (a parsed TOML table), rejecting unknown keys."""
+        known = {f.name: f for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - set(known))
+        if unknown:
+            raise ConfigError(
+                f"{source}: unknown setting(s) {', '.join(unknown)}; known settings are "
+                f"{', '.join(sorted(known))}"
+            )
+        values = dict(data)
+        if "tank" in values:
+            tank = values["tank"]
+            if not isinstance(tank, list | tuple) or len(tank) != 3:
+                raise ConfigError(f"{source}: tank must be a list of three lengths, got {tank!r}")
+            values["tank"] = tuple(float(v) for v in tank)
+        for name in ("duration", "control_period", "caudal_cap", "target_distance",
+                     "spawn_radius", "visual_range", "blind_width", "sphere_radius",
+                     "vision_noise", "channel_range", "channel_loss"):
+            if isinstance(values.get(name), int) and not isinstance(values[name], bool):
+                values[name] = float(values[name])
+        try:
+            return cls(**values)
+        except ConfigError as error:
+            raise ConfigError(f"{source}: {error}") from None
+        except TypeError as error:
+            raise ConfigError(f"{source}: {error}") from None
+
+    @classmethod
+    def from_toml(cls, path: Path) -> Scenario:
+        """Load a scenario from a TOML file (keys as the attribute names; all optional)."""
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ConfigError(f"scenario file {path} does not exist") from None
+        except tomllib.TOMLDecodeError as error:
+            raise ConfigError(f"{path} is not valid TOML: {error}") from None
+        table = data.get("scenario", data)
+        if not isinstance(table, dict):
+            raise ConfigError(f"{path}: [scenario] must be a table")
+        return cls.from_mapping(table, source=str(path))
+
+
+def _positive(value: object) -> bool:
+    return (
+        isinstance(value, int | float)
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and value > 0
+    )
