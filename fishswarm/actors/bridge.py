@@ -171,16 +171,27 @@ Received = tuple[str, bytes]
 
 @asynccontextmanager
 async def open_subscriber(
-    session: zenoh.Session, key_expr: str, on_sample: Callable[[str, bytes], None]
+    session: zenoh.Session,
+    key_expr: str,
+    on_sample: Callable[[str, bytes], None],
+    *,
+    exact: bool = False,
 ) -> AsyncIterator[None]:
     """Call ``on_sample(key, payload)`` (on a Zenoh thread) for every sample on ``key_expr``.
 
     ``on_sample`` must only hand the sample over, e.g. :meth:`Inbox.push`; it must not call
-    Zenoh.
+    Zenoh. With ``exact`` (a key without wildcards) the key is not read from each sample but
+    passed as ``key_expr``, which saves work on hot per-fish keys.
     """
+    if exact:
 
-    def callback(sample: zenoh.Sample) -> None:
-        on_sample(str(sample.key_expr), sample.payload.to_bytes())
+        def callback(sample: zenoh.Sample) -> None:
+            on_sample(key_expr, sample.payload.to_bytes())
+
+    else:
+
+        def callback(sample: zenoh.Sample) -> None:
+            on_sample(str(sample.key_expr), sample.payload.to_bytes())
 
     subscriber = session.declare_subscriber(key_expr, callback)
     try:

@@ -13,7 +13,7 @@ import trio
 from fishswarm.actors.bridge import ConnectError, SessionSettings, check_endpoint, open_session
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.fish import Fish, FishSettings
-from fishswarm.actors.launcher import EXIT_WORKER_DIED, LaunchSettings, run_swarm
+from fishswarm.actors.launcher import EXIT_WORKER_DIED, LaunchSettings, WorkerFailed, run_swarm
 from fishswarm.actors.observer import Observer, Progress
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
 from fishswarm.protocols.keys import KeySpace
@@ -41,11 +41,31 @@ def _client(args: argparse.Namespace) -> SessionSettings:
     )
 
 
+USER_ERRORS = (ConnectError, StartTimeout, RecordingError, WorkerFailed, ConfigError)
+
+
 def _run_trio(main: Callable[[], Any]) -> Any:
+    """Run ``main`` under trio; errors a user can fix come out as one :class:`UserError`."""
     try:
-        return trio.run(main)
-    except (ConnectError, StartTimeout, RecordingError) as error:
+        return trio.run(main, strict_exception_groups=False)
+    except KeyboardInterrupt:
+        raise
+    except BaseExceptionGroup as group:
+        interrupted, _ = group.split(KeyboardInterrupt)
+        if interrupted is not None:
+            raise KeyboardInterrupt from None
+        matched, rest = group.split(USER_ERRORS)
+        if matched is not None and rest is None:
+            raise UserError(_first_message(matched)) from None
+        raise
+    except USER_ERRORS as error:
         raise UserError(str(error)) from None
+
+
+def _first_message(error: BaseException) -> str:
+    while isinstance(error, BaseExceptionGroup):
+        error = error.exceptions[0]
+    return str(error)
 
 
 def progress_printer(ticks: int, stream: Any = sys.stderr) -> Callable[[Progress], None]:

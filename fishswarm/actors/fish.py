@@ -56,6 +56,8 @@ class Fish:
         self._watchdog_stops = 0
         self._deliveries_missed = 0
         self.deliveries: list[Delivery] = []
+        self._last_seen = 0.0
+        self._perceiving = trio.Event()
 
     def statistics(self) -> dict[str, int]:
         """Counters: perceptions accepted, commands sent, rejected messages, watchdog stops."""
@@ -77,27 +79,40 @@ class Fish:
         put = publisher(session)
         # Subscribe before declaring the token: whoever sees us alive can reach us.
         async with (
-            open_subscriber(session, keys.perception(fish_id), lambda k, p: perceptions.push((k, p))),
-            open_subscriber(session, keys.inbox(fish_id), lambda k, p: inbox.push((k, p))),
+            open_subscriber(
+                session, keys.perception(fish_id), lambda k, p: perceptions.push((k, p)), exact=True
+            ),
+            open_subscriber(
+                session, keys.inbox(fish_id), lambda k, p: inbox.push((k, p)), exact=True
+            ),
             open_token(session, keys.alive("fish", fish_id)),
+            trio.open_nursery() as nursery,
         ):
+            self._last_seen = trio.current_time()
+            nursery.start_soon(self._watchdog, put)
             task_status.started()
-            stopped = False
-            while True:
-                received = None
-                with trio.move_on_after(self.settings.perception_timeout):
-                    received = await perceptions.receive()
-                if received is None:
-                    if not stopped:
-                        self._stop_fins(put)
-                        stopped = True
-                    continue
-                perception = self._accept(*received)
+            async for key, payload in perceptions:
+                perception = self._accept(key, payload)
                 if perception is None:
                     continue
-                stopped = False
-                deliveries = await self._collect_deliveries(inbox, perception)
+                self._last_seen = trio.current_time()
+                self._perceiving.set()
+                deliveries = (
+                    await self._collect_deliveries(inbox, perception)
+                    if perception.inbox_count
+                    else []
+                )
                 self._respond(put, perception, deliveries)
+
+    async def _watchdog(self, put: Put) -> None:
+        """Turn the fins off when perceptions stop for ``perception_timeout`` (robot safety)."""
+        timeout = self.settings.perception_timeout
+        while True:
+            await trio.sleep_until(self._last_seen + timeout)
+            if trio.current_time() >= self._last_seen + timeout:
+                self._stop_fins(put)
+                self._perceiving = trio.Event()
+                await self._perceiving.wait()
 
     def _accept(self, key: str, payload: bytes) -> Perception | None:
         perception = self._intake.decode(key, payload, Perception)

@@ -38,6 +38,10 @@ EXIT_WORKER_DIED = 3
 EXIT_INTERRUPTED = 130
 
 
+class WorkerFailed(RuntimeError):
+    """A worker process died before its fish came up."""
+
+
 @dataclass(frozen=True)
 class LaunchSettings:
     """How to launch a run.
@@ -106,7 +110,7 @@ async def run_swarm(
                     spec = WorkerSpec(index, ids, policy, scenario.swarm, _connect_to(settings.listen),
                                       log_level=settings.log_level)
                     workers.append(start_worker(spec))
-                nursery.start_soon(_watch_workers, workers, died)
+                nursery.start_soon(_watch_workers, workers, died, world)
                 await world.run(session)
                 with trio.move_on_after(5.0):
                     await observer.wait_for_tick(world.tick)
@@ -132,7 +136,7 @@ def _connect_to(listen: str) -> str:
     return listen.replace("0.0.0.0", "127.0.0.1").replace("[::]", "[::1]")
 
 
-async def _watch_workers(workers: list[Worker], died: list[str]) -> None:
+async def _watch_workers(workers: list[Worker], died: list[str], world: World) -> None:
     reported: set[int] = set()
     while True:
         for worker in workers:
@@ -142,6 +146,11 @@ async def _watch_workers(workers: list[Worker], died: list[str]) -> None:
                 reported.add(worker.spec.index)
                 message = f"{worker.spec.describe()} {worker.exit_description()}; its fish are lost"
                 died.append(message)
+                if world.state_name == "waiting":
+                    raise WorkerFailed(
+                        f"{worker.spec.describe()} {worker.exit_description()} before its fish "
+                        "came up; run with --log-level INFO to see why"
+                    )
                 log.error(message)
         await trio.sleep(0.05)
 

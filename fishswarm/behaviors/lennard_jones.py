@@ -5,9 +5,12 @@ Each visible neighbour contributes −dV/dr along its direction: away from it wh
 r_t, towards it beyond. Contributions are averaged. Distances are capped at r_t + 1 body
 length in the force, so that far fish do not dominate.
 
-With the default ε = r_t²/72 the force linearises to the spacing error near equilibrium
-(−dV/dr ≈ −(r − r_t)), so the result reads as a displacement in metres: how far and where a
-fish wants to move.
+The result is a target vector in the body frame that the controller reads as a
+displacement in metres (the homing controller's caudal gain grows with its length). With
+ε = 1 m² (the default) a fish swims briskly until it is close to the target distance; the
+smaller ε = r_t²/72, for which −dV/dr ≈ r_t − r near the minimum, leaves aggregating fish
+almost still (measured with the batch engine, 25 fish, 15 s, 3 seeds: mean pairwise distance
+−1 % with r_t²/72, −12 % with 100·r_t²/72, −42 % with ε = 1 m²; dispersion +212 % in all).
 """
 
 from __future__ import annotations
@@ -27,9 +30,8 @@ MIN_DISTANCE = 1e-3
 """Distances below this count as this in the force, m: coincident fish stay finite."""
 
 
-def default_epsilon(target_distance: float) -> float:
-    """ε = r_t²/72, which makes −dV/dr ≈ r_t − r near the minimum (units m²)."""
-    return target_distance**2 / 72.0
+DEFAULT_EPSILON = 1.0
+"""Depth of the potential ε, m²."""
 
 
 def lennard_jones_force(
@@ -55,7 +57,7 @@ def lennard_jones(
     mask: BoolArray,
     *,
     target_distance: float,
-    epsilon: float | None = None,
+    epsilon: float = DEFAULT_EPSILON,
     cap: float = BODY_LENGTH,
 ) -> FloatArray:
     """Desired motion of B fish from the neighbours they see.
@@ -64,7 +66,7 @@ def lennard_jones(
         neighbors: (B, K, 3) body-frame positions of the visible neighbours, m.
         mask: (B, K) which rows are real.
         target_distance: r_t, m: 0.26 (2 body lengths) aggregates, the tank diagonal disperses.
-        epsilon: ε in m²; defaults to :func:`default_epsilon`.
+        epsilon: ε, m².
         cap: distances are capped at r_t + cap in the force, m.
 
     Returns:
@@ -72,19 +74,19 @@ def lennard_jones(
     """
     if target_distance <= 0:
         raise ValueError(f"target_distance must be positive, got {target_distance}")
-    eps = default_epsilon(target_distance) if epsilon is None else epsilon
-    distance = np.linalg.norm(neighbors, axis=2)
-    capped = np.clip(distance, MIN_DISTANCE, target_distance + cap)
-    magnitude = lennard_jones_force(capped, target_distance=target_distance, epsilon=eps)
-    safe = np.where(distance > 0, distance, 1.0)
-    direction = np.where((distance > 0)[..., None], neighbors / safe[..., None], 0.0)
-    # Repulsion (positive) points away from the neighbour: −magnitude along its direction.
-    contribution = -magnitude[..., None] * direction * mask[..., None]
+    distance = np.sqrt(np.einsum("bkd,bkd->bk", neighbors, neighbors))
+    capped = np.minimum(np.maximum(distance, MIN_DISTANCE), target_distance + cap)
+    magnitude = lennard_jones_force(capped, target_distance=target_distance, epsilon=epsilon)
+    # Repulsion (positive) points away from the neighbour: −magnitude along its unit vector.
+    # A coincident neighbour (distance 0) has no direction and contributes nothing.
+    real = mask & (distance > 0)
+    scale = -magnitude / np.where(real, distance, 1.0) * real
+    contribution = neighbors * scale[..., None]
     count = mask.sum(axis=1)
-    # Summed in neighbour order so that padding (zeros at the end) never changes a result:
-    # a fish alone (batch of one) and the same fish in a padded swarm batch agree exactly.
-    total = np.zeros((neighbors.shape[0], 3))
-    for k in range(neighbors.shape[1]):
-        total += contribution[:, k]
-    result: FloatArray = np.where(count[:, None] > 0, total / np.maximum(count, 1)[:, None], 0.0)
+    # A running sum adds in neighbour order, so padding (zeros at the end) never changes a
+    # result: a fish alone (batch of one) and the same fish in a padded batch agree exactly.
+    if neighbors.shape[1] == 0:
+        return np.zeros((neighbors.shape[0], 3))
+    total = np.cumsum(contribution, axis=1)[:, -1]
+    result: FloatArray = total / np.maximum(count, 1)[:, None]
     return result

@@ -56,21 +56,18 @@ def homing(
     """
     planar = np.hypot(target[:, 0], target[:, 1])
     pitch_deg = np.degrees(np.arctan2(target[:, 2], planar))
-    dorsal = np.where(
-        pitch_deg > pitch_band_deg, True, np.where(pitch_deg < -pitch_band_deg, False, dorsal_on)
-    )
+    dorsal = (pitch_deg > pitch_band_deg) | (dorsal_on & (pitch_deg >= -pitch_band_deg))
     heading_deg = heading_error_deg(target)
-    turn = np.minimum(1.0, 0.6 + np.abs(heading_deg) / 180.0)
+    magnitude = np.abs(heading_deg)
+    turn = np.minimum(1.0, 0.6 + magnitude / 180.0)
     fins = np.zeros((target.shape[0], 4))
-    fins[:, 0] = np.where(
-        np.abs(heading_deg) < heading_band_deg,
-        np.minimum(caudal_cap, 0.1 + planar / (8 * body_length)),
-        0.0,
+    fins[:, 0] = np.minimum(caudal_cap, 0.1 + planar / (8 * body_length)) * (
+        magnitude < heading_band_deg
     )
-    fins[:, 1] = dorsal.astype(np.float64)
-    fins[:, 2] = np.where(heading_deg > 0, turn, 0.0)
-    fins[:, 3] = np.where(heading_deg < 0, turn, 0.0)
-    return fins, dorsal.astype(np.bool_)
+    fins[:, 1] = dorsal
+    fins[:, 2] = turn * (heading_deg > 0)
+    fins[:, 3] = turn * (heading_deg < 0)
+    return fins, dorsal
 
 
 @dataclass(frozen=True)

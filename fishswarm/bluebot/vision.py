@@ -101,14 +101,17 @@ def _occlusion(
     visible = candidate.copy()
     if sphere_radius <= 0 or candidate.shape[1] < 2:
         return visible
-    cosine = np.clip(np.einsum("bkd,bmd->bkm", directions, directions), -1.0, 1.0)
-    angle = np.arccos(cosine)
-    # A blocker at distance a hides whatever lies within atan(r/a) of its direction; a blocker
-    # at distance 0 would be the observer itself, whose direction is undefined: it hides nothing.
-    with np.errstate(divide="ignore"):
-        half_angle = np.where(distance > 0, np.arctan(sphere_radius / distance), 0.0)
+    # Cosines are only compared, never fed to arccos, so rounding past ±1 is harmless.
+    cosine = directions @ directions.transpose(0, 2, 1)
+    # A blocker at distance a hides whatever lies within atan(r/a) of its direction, that is
+    # where cos(angle) > cos(atan(r/a)) = a/√(a² + r²) (comparing cosines avoids arccos). A
+    # blocker at distance 0 sits on the observer and has no direction: it hides nothing
+    # (its threshold 0 is not exceeded, its direction vector being zero).
+    with np.errstate(invalid="ignore"):
+        limit = distance / np.sqrt(distance**2 + sphere_radius**2)
+    limit[(distance == 0) | ~np.isfinite(distance)] = 1.0
     for k in range(1, candidate.shape[1]):
-        blocked = visible[:, :k] & (angle[:, k, :k] < half_angle[:, :k])
+        blocked = visible[:, :k] & (cosine[:, k, :k] > limit[:, :k])
         visible[:, k] &= ~blocked.any(axis=1)
     return visible
 
@@ -138,6 +141,47 @@ class Perceived:
         return self.neighbors[fish, self.mask[fish]]
 
 
+KD_TREE_MIN_FISH = 200
+"""From this many fish on, neighbours in range are found with a KD-tree instead of all pairs."""
+
+
+def _in_range(position: FloatArray, visual_range: float) -> tuple[NDArray[np.intp], FloatArray]:
+    """Every fish's others within range, nearest first, padded.
+
+    Returns:
+        index (N, K) of the others (−1 in padding) and their distances (N, K) (inf in padding).
+    """
+    count = position.shape[0]
+    if count >= KD_TREE_MIN_FISH:
+        from scipy.spatial import cKDTree
+
+        tree = cKDTree(position)
+        k = min(count, 64)
+        while True:
+            distance, index = tree.query(position, k=k, distance_upper_bound=visual_range)
+            if k == count or not np.isfinite(distance[:, -1]).any():
+                break
+            k = min(count, 2 * k)
+        index = np.where(np.isfinite(distance), index, -1)
+        # Column 0 is normally the fish itself; with coincident fish it may be another one.
+        own = index == np.arange(count)[:, None]
+        distance = np.where(own, np.inf, distance)
+        index = np.where(own, -1, index)
+        order = np.argsort(distance, axis=1, kind="stable")
+        distance = np.take_along_axis(distance, order, axis=1)
+        index = np.take_along_axis(index, order, axis=1)
+    else:
+        relative = position[None, :, :] - position[:, None, :]
+        all_distance = np.sqrt(np.einsum("ijd,ijd->ij", relative, relative))
+        np.fill_diagonal(all_distance, np.inf)
+        all_distance[all_distance > visual_range] = np.inf
+        index = np.argsort(all_distance, axis=1, kind="stable")
+        distance = np.take_along_axis(all_distance, index, axis=1)
+        index = np.where(np.isfinite(distance), index, -1)
+    width = int(np.isfinite(distance).sum(axis=1).max(initial=0))
+    return index[:, :width], distance[:, :width]
+
+
 def perceive(
     position: FloatArray,
     yaw: FloatArray,
@@ -159,44 +203,37 @@ def perceive(
         The visible neighbours of each fish, nearest first, in its body frame.
     """
     count = position.shape[0]
-    relative = position[None, :, :] - position[:, None, :]
-    distance = np.sqrt(np.einsum("ijd,ijd->ij", relative, relative))
-    candidate = distance <= vision.visual_range
-    np.fill_diagonal(candidate, False)
+    index, distance = _in_range(position, vision.visual_range)
+    candidate = index >= 0
+    safe_index = np.where(candidate, index, 0)
+    relative = position[safe_index] - position[:, None, :]
     if vision.blind_width > 0:
         candidate &= ~in_blind_spot(relative, yaw, blind_width=vision.blind_width)
-    width = int(candidate.sum(axis=1).max(initial=0))
-    sort_key = np.where(candidate, distance, np.inf)
-    order = np.argsort(sort_key, axis=1, kind="stable")[:, :width]
-    sorted_candidate = np.take_along_axis(candidate, order, axis=1)
-    sorted_distance = np.take_along_axis(distance, order, axis=1)
-    sorted_relative = np.take_along_axis(relative, order[..., None], axis=1)
+    distance = np.where(candidate, distance, np.inf)
     with np.errstate(invalid="ignore", divide="ignore"):
         directions = np.where(
-            sorted_distance[..., None] > 0, sorted_relative / sorted_distance[..., None], 0.0
+            (distance > 0)[..., None] & candidate[..., None], relative / distance[..., None], 0.0
         )
-    seen = _occlusion(
-        directions, sorted_distance, sorted_candidate, sphere_radius=vision.sphere_radius
-    )
+    seen = _occlusion(directions, distance, candidate, sphere_radius=vision.sphere_radius)
     # Compact the visible ones to the front, keeping near-to-far order.
     compact = np.argsort(~seen, axis=1, kind="stable")
     seen = np.take_along_axis(seen, compact, axis=1)
     keep = int(seen.sum(axis=1).max(initial=0))
     seen = seen[:, :keep]
-    chosen = np.take_along_axis(order, compact, axis=1)[:, :keep]
-    relative_seen = np.take_along_axis(relative, chosen[..., None], axis=1)
+    compact = compact[:, :keep]
+    chosen = np.take_along_axis(safe_index, compact, axis=1)
+    relative_seen = np.take_along_axis(relative, compact[..., None], axis=1)
     if vision.noise > 0:
         if rngs is None or len(rngs) != count:
             raise ValueError("vision noise needs one random generator per fish")
-        distance_seen = np.take_along_axis(distance, chosen, axis=1)
+        distance_seen = np.take_along_axis(distance, compact, axis=1)
         for fish in range(count):
             rows = int(seen[fish].sum())
             scale = vision.noise * distance_seen[fish, :rows, None]
             relative_seen[fish, :rows] += rngs[fish].normal(0.0, 1.0, (rows, 3)) * scale
     body = to_body(relative_seen, yaw)
     body[~seen] = 0.0
-    index = np.where(seen, chosen, -1)
-    return Perceived(body, seen, index)
+    return Perceived(body, seen, np.where(seen, chosen, -1))
 
 
 def perceive_landmarks(

@@ -1,12 +1,16 @@
 """The msgpack codec of fishswarm messages, numpy arrays carried as raw bytes.
 
 A message goes over the wire as a msgpack map ``{"v": version, "t": type, "f": fields}``.
-Numpy arrays travel as msgpack extension type 1 holding ``[dtype, shape, bytes]``: a copy of
-memory, not a list of Python numbers (DESIGN.md §4: ``tolist()`` is 100× slower).
+Numpy arrays travel as msgpack extension type 1: a header of one byte for the dtype
+(0 = little-endian float64, 1 = int64, 2 = bool), one byte for the number of dimensions and a
+little-endian uint32 per dimension, then the raw little-endian bytes — a copy of memory, not
+a list of Python numbers (DESIGN.md §4: ``tolist()`` is 100× slower).
 """
 
 from __future__ import annotations
 
+import math
+import struct
 from typing import Any, TypeVar
 
 import msgpack
@@ -22,7 +26,8 @@ from fishswarm.protocols.messages import (
 
 MAX_MESSAGE_BYTES = 16 * 1024 * 1024
 _ARRAY_EXT = 1
-_DTYPES = frozenset({"<f8", "<i8", "|b1"})
+_DTYPES = (np.dtype("<f8"), np.dtype("<i8"), np.dtype("|b1"))
+_CODES = {dtype: code for code, dtype in enumerate(_DTYPES)}
 
 M = TypeVar("M", bound=Message)
 
@@ -33,8 +38,11 @@ class MessageError(ValueError):
 
 def _default(value: object) -> object:
     if isinstance(value, np.ndarray):
-        array = np.ascontiguousarray(value)
-        header = msgpack.packb([array.dtype.str, list(array.shape)])
+        code = _CODES.get(value.dtype.newbyteorder("<") if value.dtype.kind != "b" else value.dtype)
+        if code is None or value.ndim > 2:
+            raise TypeError(f"cannot encode an array of dtype {value.dtype} and {value.ndim} dims")
+        array = np.ascontiguousarray(value, dtype=_DTYPES[code])
+        header = struct.pack(f"<BB{array.ndim}I", code, array.ndim, *array.shape)
         return msgpack.ExtType(_ARRAY_EXT, header + array.tobytes())
     if isinstance(value, np.integer):
         return int(value)
@@ -48,25 +56,24 @@ def _default(value: object) -> object:
 def _ext_hook(code: int, data: bytes) -> np.ndarray[Any, Any]:
     if code != _ARRAY_EXT:
         raise MessageError(f"unknown msgpack extension type {code}")
-    unpacker = msgpack.Unpacker(max_buffer_size=len(data) + 1)
-    unpacker.feed(data)
-    try:
-        dtype, shape = next(unpacker)
-    except (StopIteration, ValueError, TypeError) as error:
-        raise MessageError(f"malformed array header: {error}") from None
-    if dtype not in _DTYPES:
-        raise MessageError(f"array dtype {dtype!r} is not allowed; use one of {sorted(_DTYPES)}")
-    if (
-        not isinstance(shape, list)
-        or len(shape) > 2
-        or not all(isinstance(n, int) and 0 <= n <= MAX_ROWS for n in shape)
-    ):
-        raise MessageError(f"array shape {shape!r} is not a list of at most 2 sizes <= {MAX_ROWS}")
-    body = data[unpacker.tell() :]
-    expected = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
-    if len(body) != expected:
-        raise MessageError(f"array of shape {shape} {dtype} needs {expected} bytes, got {len(body)}")
-    return np.frombuffer(body, dtype=dtype).reshape(shape)
+    if len(data) < 2:
+        raise MessageError("array header is truncated")
+    dtype_code, ndim = data[0], data[1]
+    if dtype_code >= len(_DTYPES):
+        raise MessageError(f"array dtype code {dtype_code} is not one of 0 (f8), 1 (i8), 2 (bool)")
+    if ndim > 2 or len(data) < 2 + 4 * ndim:
+        raise MessageError(f"array header is malformed ({ndim} dimensions, {len(data)} bytes)")
+    shape = struct.unpack_from(f"<{ndim}I", data, 2)
+    if any(n > MAX_ROWS for n in shape):
+        raise MessageError(f"array shape {shape} exceeds {MAX_ROWS} rows")
+    dtype = _DTYPES[dtype_code]
+    offset = 2 + 4 * ndim
+    expected = math.prod(shape) * dtype.itemsize
+    if len(data) - offset != expected:
+        raise MessageError(
+            f"array of shape {shape} {dtype} needs {expected} bytes, got {len(data) - offset}"
+        )
+    return np.frombuffer(data, dtype=dtype, offset=offset).reshape(shape)
 
 
 def encode(message: Message) -> bytes:

@@ -68,7 +68,7 @@ def _array(
     the length when given; any length up to MAX_ROWS otherwise.
     """
     value = getattr(obj, name)
-    array = np.asarray(value)
+    array = value if isinstance(value, np.ndarray) else np.asarray(value)
     if array.dtype.kind not in "biuf":
         raise TypeError(f"{name} must be a numeric array, got dtype {array.dtype}")
     if dtype is np.int64 and array.dtype.kind == "f":
@@ -81,11 +81,14 @@ def _array(
         raise ValueError(f"{name} must have {rows} rows, got {array.shape[0]}")
     if array.shape[0] > MAX_ROWS:
         raise ValueError(f"{name} has {array.shape[0]} rows, more than the limit {MAX_ROWS}")
-    converted = np.array(array, dtype=dtype, copy=True)
-    if dtype is np.float64 and not np.all(np.isfinite(converted)):
+    # Arrays decoded from the wire are read-only already and need no copy; anything the caller
+    # could still change is copied, so that a message never changes after construction.
+    if array.dtype != dtype or array.flags.writeable:
+        array = np.array(array, dtype=dtype, copy=True)
+        array.setflags(write=False)
+    if dtype is np.float64 and not np.isfinite(array).all():
         raise ValueError(f"{name} must hold finite numbers only")
-    converted.setflags(write=False)
-    _set(obj, name, converted)
+    _set(obj, name, array)
 
 
 class Message:

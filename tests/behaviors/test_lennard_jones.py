@@ -29,11 +29,15 @@ def test_near_neighbour_repels_far_one_attracts() -> None:
     np.testing.assert_array_equal(result[:, 1:], 0.0)
 
 
-def test_default_epsilon_makes_the_force_a_displacement_near_equilibrium() -> None:
-    neighbors = np.array([[[0.2613, 0.0, 0.0]]])
-    result = lennard_jones(neighbors, np.ones((1, 1), bool), target_distance=0.26)
-    # 1.3 mm from r_t: the linearisation is good to ~5 % here (−dV/dr is not exactly linear).
-    assert result[0, 0] == pytest.approx(0.0013, rel=0.06)
+def test_vector_magnitude_by_hand() -> None:
+    # One neighbour 0.39 m ahead (= r_t + 1 body length), ε = 1, r_t = 0.26:
+    # −dV/dr = 12/0.39·(0.0077073 − 0.0877915) = −2.4641 → 2.4641 m towards it.
+    result = lennard_jones(np.array([[[0.39, 0.0, 0.0]]]), np.ones((1, 1), bool),
+                           target_distance=0.26)
+    ratio6 = (0.26 / 0.39) ** 6
+    expected = -12.0 / 0.39 * (ratio6**2 - ratio6)
+    assert result[0, 0] == pytest.approx(expected)
+    assert result[0, 0] == pytest.approx(2.4641, abs=1e-4)
 
 
 def test_far_distances_are_capped() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import struct
 
 import msgpack
 import numpy as np
@@ -80,10 +81,16 @@ def test_garbage_never_escapes_as_another_error(data: bytes) -> None:
         pass
 
 
+DTYPE_CODES = {"<f8": 0, "<i8": 1, "|b1": 2, "<f4": 7}
+
+
 def _raw(type_name: str, fields: dict[str, object], version: int = 1) -> bytes:
+    """Pack a message by hand, bypassing the codec's checks (to build bad ones)."""
+
     def default(value: object) -> object:
         assert isinstance(value, np.ndarray)
-        header = msgpack.packb([value.dtype.str, list(value.shape)])
+        code = DTYPE_CODES[value.dtype.str]
+        header = struct.pack(f"<BB{value.ndim}I", code, value.ndim, *value.shape)
         return msgpack.ExtType(1, header + value.tobytes())
 
     packed: bytes = msgpack.packb({"v": version, "t": type_name, "f": fields}, default=default)
@@ -116,7 +123,7 @@ def _command_fields(**overrides: object) -> dict[str, object]:
         (_raw("command", _command_fields(fins=np.array([math.nan, 0, 0, 0]))), "finite"),
         (_raw("command", _command_fields(fins=np.zeros(3))), "4 rows"),
         (_raw("command", _command_fields(fins=np.array([2.0, 0, 0, 0]))), r"gains in \[0, 1\]"),
-        (_raw("command", _command_fields(fins=np.zeros(4, dtype=np.float32))), "dtype"),
+        (_raw("command", _command_fields(fins=np.zeros(4, dtype=np.float32))), "dtype code"),
         (_raw("command", _command_fields(led="yes")), "led must be a bool"),
         (_raw("command", _command_fields(extra=1)), "unexpected keyword"),
         (_raw("command", {"fish_id": 1}), "missing"),
@@ -139,7 +146,7 @@ def _command_fields(**overrides: object) -> dict[str, object]:
                 "fish_id": 1, "tick": 0, "time": 0.0, "depth": 0.0,
                 "neighbors": np.zeros((MAX_ROWS + 1, 3)), "landmarks": np.zeros((0, 3)),
             }),
-            "array shape",
+            "exceeds",
         ),
     ],
 )
