@@ -73,11 +73,19 @@ class WorldSettings:
 
 @dataclass
 class LostFish:
-    """A fish that left the run."""
+    """A fish that left the run.
+
+    Attributes:
+        fish_id: which fish.
+        tick: the tick at which it was marked lost.
+        reason: why.
+        noticed_at: ``time.monotonic()`` when the world noticed.
+    """
 
     fish_id: int
     tick: int
     reason: str
+    noticed_at: float = field(default_factory=time.monotonic)
 
 
 @dataclass

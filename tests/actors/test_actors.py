@@ -1,0 +1,163 @@
+"""Single actors over real Zenoh: the channel's deliveries, the fish's safety watchdog and the
+world's control queryable."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trio
+
+from fishswarm.actors.bridge import (
+    SessionSettings,
+    open_session,
+    open_subscription,
+    publisher,
+    query,
+)
+from fishswarm.actors.channel import Channel
+from fishswarm.actors.fish import Fish, FishSettings
+from fishswarm.actors.world import World, WorldSettings
+from fishswarm.protocols.codec import decode, encode
+from fishswarm.protocols.messages import (
+    Broadcast,
+    ChannelReport,
+    Command,
+    ControlReply,
+    ControlRequest,
+    Delivery,
+    Perception,
+    Snapshot,
+)
+from fishswarm.scenario import Scenario
+from fishswarm.simulation import policy_of
+from tests.conftest import run_trio
+
+pytestmark = pytest.mark.integration
+
+
+def _snapshot(tick: int, position: list[list[float]], yaw: list[float], sent: list[int]) -> Snapshot:
+    count = len(position)
+    return Snapshot(tick, float(tick), np.arange(count), np.array(position), np.zeros((count, 3)),
+                    np.array(yaw), np.zeros(count, dtype=np.int64), np.array(sent))
+
+
+def test_channel_delivers_in_range_with_sender_position_in_receiver_frame(endpoint: str) -> None:
+    scenario = Scenario(fish=4, channel_range=1.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[list[Delivery], ChannelReport]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        async with (
+            open_session(router) as session,
+            open_subscription(session, f"{keys.prefix}/fish/*/inbox") as inboxes,
+            open_subscription(session, keys.channel_report) as reports,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(Channel(scenario).run, session)
+            put = publisher(session)
+            # Fish 0 at (1, 1) sends at tick 0; fish 1 (0.5 m ahead of 0, facing +y) and fish 2
+            # (right behind 0) are in range; fish 3 is 1.5 m away.
+            put(keys.outbox(0), encode(Broadcast(0, 0, "formation", 7)))
+            snapshot = _snapshot(
+                1,
+                [[1.0, 1.0, 0.5], [1.5, 1.0, 0.5], [0.8, 1.0, 0.5], [2.5, 1.0, 0.5]],
+                [0.0, math.pi / 2, 0.0, 0.0],
+                [1, 0, 0, 0],
+            )
+            put(keys.snapshot, encode(snapshot))
+            report = decode((await reports.receive())[1], ChannelReport)
+            deliveries = [decode((await inboxes.receive())[1], Delivery) for _ in range(2)]
+            nursery.cancel_scope.cancel()
+        return deliveries, report
+
+    deliveries, report = run_trio(main)
+    assert report.tick == 1
+    assert report.inbox_counts.tolist() == [0, 1, 1, 0]
+    by_receiver = {d.receiver_id: d for d in deliveries}
+    assert set(by_receiver) == {1, 2}
+    assert by_receiver[1].kind == "formation" and by_receiver[1].value == 7
+    # Fish 1 faces +y; with z down its right side points to −x of the tank, where the sender
+    # is, 0.5 m away: body (0, +0.5, 0).
+    np.testing.assert_allclose(by_receiver[1].sender_position, [0.0, 0.5, 0.0], atol=1e-12)
+    np.testing.assert_allclose(by_receiver[2].sender_position, [0.2, 0.0, 0.0], atol=1e-12)
+
+
+def test_fish_turns_fins_off_when_perceptions_stop_and_resumes(endpoint: str) -> None:
+    scenario = Scenario()
+    keys = scenario.keys
+    settings = FishSettings(3, policy_of(scenario), keys, perception_timeout=0.3)
+
+    async def main() -> tuple[Command, Command, dict[str, int]]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        fish = Fish(settings)
+        async with (
+            open_session(router) as session,
+            open_subscription(session, keys.command(3)) as commands,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(fish.run, session)
+            with trio.fail_after(3):
+                stop = decode((await commands.receive())[1], Command)
+            perception = Perception(3, 1, 1.0, 0.5, np.array([[1.0, -0.1, 0.0]]),
+                                    np.zeros((0, 3)))
+            publisher(session)(keys.perception(3), encode(perception))
+            with trio.fail_after(3):
+                answer = decode((await commands.receive())[1], Command)
+            nursery.cancel_scope.cancel()
+        return stop, answer, fish.statistics()
+
+    stop, answer, statistics = run_trio(main)
+    assert stop.fins.tolist() == [0.0, 0.0, 0.0, 0.0] and stop.led is False
+    # Dispersing from a neighbour ahead and a little left: the target lies behind to the right
+    # (bearing ≈ 174°), so the left pectoral runs at min(1, 0.6 + 174/180) = 1, caudal off.
+    assert answer.tick == 1
+    assert answer.fins.tolist() == [0.0, 0.0, 1.0, 0.0]
+    assert statistics["watchdog_stops"] >= 1
+
+
+def test_world_answers_status_pause_resume_and_stop(endpoint: str) -> None:
+    scenario = Scenario(fish=2, duration=100_000.0)
+
+    async def ask(session: object, action: str) -> ControlReply:
+        replies = await query(session, scenario.keys.control,  # type: ignore[arg-type]
+                              encode(ControlRequest(action)), timeout=5.0)
+        assert len(replies) == 1
+        return decode(replies[0], ControlReply)
+
+    async def main() -> list[ControlReply]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        client = SessionSettings(mode="client", connect=[endpoint])
+        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
+        policy = policy_of(scenario)
+        answers = []
+        async with (
+            open_session(router) as hub,
+            open_session(client) as other,
+            trio.open_nursery() as nursery,
+        ):
+            for fish_id in (0, 1):
+                await nursery.start(Fish(FishSettings(fish_id, policy, scenario.keys)).run, other)
+            await nursery.start(world.run, hub)
+            with trio.fail_after(10):
+                while world.tick < 2:
+                    await trio.sleep(0.01)
+            answers.append(await ask(other, "pause"))
+            paused_tick = world.tick
+            await trio.sleep(0.3)
+            answers.append(await ask(other, "status"))
+            assert world.tick <= paused_tick + 1
+            answers.append(await ask(other, "resume"))
+            answers.append(await ask(other, "stop"))
+            with trio.fail_after(10):
+                while world.state_name != "stopped":
+                    await trio.sleep(0.01)
+            nursery.cancel_scope.cancel()
+        return answers
+
+    pause, status, resume, stop = run_trio(main)
+    assert pause.state == "paused" and status.state == "paused"
+    assert status.live_fish == 2
+    assert resume.state == "running"
+    assert stop.tick >= status.tick

@@ -1,0 +1,204 @@
+"""Whole swarms over real Zenoh on 127.0.0.1: outcomes, determinism, bad traffic, faults."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trio
+
+from fishswarm.actors.bridge import SessionSettings, open_session, publisher, query
+from fishswarm.actors.launcher import EXIT_WORKER_DIED, LaunchSettings, RunResult, run_swarm
+from fishswarm.actors.observer import Progress
+from fishswarm.recording import read_recording
+from fishswarm.scenario import Scenario
+from fishswarm.simulation import run_batch
+from tests.conftest import run_trio
+
+pytestmark = pytest.mark.integration
+
+
+def _launch(scenario: Scenario, endpoint: str, path: Path, procs: int = 1) -> RunResult:
+    settings = LaunchSettings(
+        scenario, procs=procs, listen=endpoint, record=path, summary=path.with_suffix(".json")
+    )
+    return run_trio(lambda: run_swarm(settings), timeout=120)
+
+
+@pytest.mark.parametrize(("behavior", "sign"), [("dispersion", 1), ("aggregation", -1)])
+def test_25_fish_run_moves_the_mean_distance_the_right_way(
+    behavior: str, sign: int, endpoint: str, tmp_path: Path
+) -> None:
+    scenario = Scenario(behavior=behavior, duration=15.0, seed=3)
+    result = _launch(scenario, endpoint, tmp_path / "run.mcap")
+    summary = result.summary
+    assert result.exit_code == 0
+    assert summary["status"] == "finished"
+    assert summary["counts"]["ticks"] == 15
+    assert summary["counts"]["lost_fish"] == 0
+    for name in ("centroid_distance", "pairwise_distance"):
+        change = summary["metrics"][name]["change_percent"]
+        assert sign * change > 10, (name, change)
+    assert (tmp_path / "run.json").exists()
+
+
+def test_same_seed_same_trajectory_across_processes_and_batch_engine(
+    endpoint: str, tmp_path: Path
+) -> None:
+    scenario = Scenario(fish=12, duration=8.0, seed=11, vision_noise=0.05)
+    reference = run_batch(scenario)
+    for procs in (1, 2):
+        path = tmp_path / f"procs{procs}.mcap"
+        result = _launch(scenario, endpoint, path, procs=procs)
+        assert result.exit_code == 0
+        arrays = read_recording(path).arrays()
+        np.testing.assert_array_equal(arrays["pos"], reference.position)
+        np.testing.assert_array_equal(arrays["yaw"], reference.yaw)
+        np.testing.assert_array_equal(arrays["ids"], reference.ids)
+
+
+def test_garbage_on_every_key_is_rejected_and_changes_nothing(
+    endpoint: str, tmp_path: Path
+) -> None:
+    scenario = Scenario(fish=6, duration=10.0, seed=5)
+    keys = scenario.keys
+    garbage = [b"", b"\xc1\xc1", b"\x93\x01\x02\x03", b"\x83\xa1v\x01\xa1t\xa7command\xa1f\x80"]
+    targets = [keys.snapshot, keys.control, keys.channel_report]
+    for fish_id in range(scenario.fish):
+        targets += [keys.perception(fish_id), keys.command(fish_id), keys.outbox(fish_id),
+                    keys.inbox(fish_id)]
+
+    async def main() -> RunResult:
+        settings = LaunchSettings(scenario, listen=endpoint, record=tmp_path / "bad.mcap")
+        async with trio.open_nursery() as nursery:
+
+            async def vandal() -> None:
+                client = SessionSettings(mode="client", connect=[endpoint], connect_timeout=10)
+                async with open_session(client) as session:
+                    put = publisher(session)
+                    await query(session, keys.control, b"\xc1 not a request", timeout=1.0)
+                    while True:
+                        for key in targets:
+                            for payload in garbage:
+                                put(key, payload)
+                        await trio.sleep(0.001)
+
+            nursery.start_soon(vandal)
+            result = await run_swarm(settings)
+            nursery.cancel_scope.cancel()
+            return result
+
+    result = run_trio(main, timeout=120)
+    rejected = result.summary["counts"]["rejected"]
+    assert result.summary["status"] == "finished"
+    assert rejected["world"] > 0
+    assert rejected["observer"] > 0
+    assert rejected["fish"] > 0
+    assert rejected["channel"] > 0
+    arrays = read_recording(tmp_path / "bad.mcap").arrays()
+    np.testing.assert_array_equal(arrays["pos"], run_batch(scenario).position)
+
+
+def test_killed_worker_loses_its_fish_and_the_run_completes(endpoint: str, tmp_path: Path) -> None:
+    scenario = Scenario(fish=8, duration=400.0, seed=2)
+    killed: dict[str, float | int] = {}
+
+    def kill_at_tick_5(progress: Progress) -> None:
+        if progress.tick == 5 and not killed:
+            worker = next(
+                p for p in multiprocessing.active_children() if p.name == "fishswarm-worker-1"
+            )
+            assert worker.pid is not None
+            os.kill(worker.pid, signal.SIGKILL)
+            killed["at"] = time.monotonic()
+            killed["tick"] = progress.tick
+
+    settings = LaunchSettings(scenario, procs=2, listen=endpoint,
+                              summary=tmp_path / "summary.json")
+    result = run_trio(lambda: run_swarm(settings, on_progress=kill_at_tick_5), timeout=120)
+    summary = result.summary
+    assert result.exit_code == EXIT_WORKER_DIED
+    assert summary["status"] == "finished"
+    assert summary["counts"]["ticks"] == 400
+    assert sorted(lost["id"] for lost in summary["lost"]) == [4, 5, 6, 7]
+    assert "SIGKILL" in summary["workers_died"][0]
+    assert result.history[-1].fish == 4
+    assert summary["counts"]["lost_fish"] == 4
+
+
+def test_lost_fish_are_noticed_within_a_second(endpoint: str) -> None:
+    from fishswarm.actors.world import World, WorldSettings
+
+    scenario = Scenario(fish=4, duration=100_000.0, seed=1)
+
+    async def main() -> float:
+        from fishswarm.actors.workers import WorkerSpec, start_worker, stop_worker
+        from fishswarm.simulation import policy_of
+
+        router = SessionSettings(mode="router", listen=[endpoint])
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2, 3)))
+        spec = WorkerSpec(0, (0, 1, 2, 3), policy_of(scenario), scenario.swarm, endpoint)
+        worker = start_worker(spec)
+        try:
+            async with open_session(router) as session, trio.open_nursery() as nursery:
+                nursery.start_soon(world.run, session)
+                with trio.fail_after(60):
+                    while world.tick < 3:
+                        await trio.sleep(0.01)
+                assert worker.process.pid is not None
+                os.kill(worker.process.pid, signal.SIGKILL)
+                killed_at = time.monotonic()
+                with trio.fail_after(5):
+                    while len(world.lost) < 4:
+                        await trio.sleep(0.01)
+                nursery.cancel_scope.cancel()
+                return max(lost.noticed_at for lost in world.lost) - killed_at
+        finally:
+            await trio.to_thread.run_sync(stop_worker, worker)
+
+    assert run_trio(main) < 1.0
+
+
+def test_late_fish_is_included_from_a_later_tick(endpoint: str) -> None:
+    from fishswarm.actors.fish import Fish, FishSettings
+    from fishswarm.actors.observer import Observer
+    from fishswarm.actors.world import World, WorldSettings
+    from fishswarm.simulation import policy_of
+
+    scenario = Scenario(fish=3, duration=100_000.0, seed=4)
+    policy = policy_of(scenario)
+
+    async def main() -> tuple[list[tuple[int, int]], list[list[int]]]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        client = SessionSettings(mode="client", connect=[endpoint])
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2)))
+        observer = Observer(scenario.keys)
+        async with (
+            open_session(router) as hub,
+            open_session(client) as fish_session,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(observer.run, hub)
+            for fish_id in (0, 1, 2):
+                await nursery.start(Fish(FishSettings(fish_id, policy, scenario.keys)).run,
+                                    fish_session)
+            nursery.start_soon(world.run, hub)
+            await observer.wait_for_tick(3)
+            await nursery.start(Fish(FishSettings(9, policy, scenario.keys)).run, fish_session)
+            with trio.fail_after(10):
+                while not world.joined:
+                    await trio.sleep(0.01)
+            joined_tick = world.joined[0][1]
+            await observer.wait_for_tick(joined_tick + 3)
+            nursery.cancel_scope.cancel()
+        return world.joined, [p.fish for p in observer.history]
+
+    joined, counts = run_trio(main)
+    assert joined[0][0] == 9
+    assert counts[0] == 3
+    assert counts[-1] == 4

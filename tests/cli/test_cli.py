@@ -1,0 +1,158 @@
+"""The fishswarm command as a user runs it: real processes, real files, real exit codes."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.conftest import free_port
+
+pytestmark = pytest.mark.integration
+
+FISHSWARM = [sys.executable, "-m", "fishswarm.cli"]
+
+
+def _run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [*FISHSWARM, *args], capture_output=True, text=True, timeout=timeout, check=False
+    )
+
+
+def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -> None:
+    record, summary = tmp_path / "run.mcap", tmp_path / "run.json"
+    result = _run("run", "--fish", "6", "--duration", "4", "--seed", "7", "--procs", "2",
+                  "--listen", f"tcp/127.0.0.1:{free_port()}",
+                  "--record", str(record), "--summary", str(summary))
+    assert result.returncode == 0, result.stderr
+    assert "tick 4/4" in result.stderr
+    data = json.loads(summary.read_text())
+    assert data["status"] == "finished"
+    assert data["scenario"]["fish"] == 6 and data["scenario"]["seed"] == 7
+    assert data["counts"]["ticks"] == 4
+    assert data["real_time_factor"] > 1
+    for name in ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance",
+                 "neighbors_seen"):
+        assert set(data["metrics"][name]) == {"initial", "final", "change_percent"}
+
+    npz, csv = tmp_path / "out.npz", tmp_path / "out.csv"
+    exported = _run("export", str(record), "--npz", str(npz), "--csv", str(csv))
+    assert exported.returncode == 0, exported.stderr
+    arrays = np.load(npz)
+    assert arrays["t"].tolist() == [0.0, 1.0, 2.0, 3.0, 4.0]
+    assert arrays["pos"].shape == (5, 6, 3)
+    assert arrays["vel"].shape == (5, 6, 3)
+    assert arrays["yaw"].shape == (5, 6)
+    assert arrays["ids"].tolist() == [0, 1, 2, 3, 4, 5]
+    rows = csv.read_text().splitlines()
+    assert rows[0].startswith("tick,t,id,x,y,z")
+    assert len(rows) == 1 + 5 * 6
+
+
+def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
+    config = tmp_path / "scenario.toml"
+    config.write_text('[scenario]\nfish = 4\nbehavior = "aggregation"\nduration = 2\nseed = 9\n')
+    summary = tmp_path / "s.json"
+    result = _run("run", "--config", str(config), "--seed", "10", "--quiet",
+                  "--listen", f"tcp/127.0.0.1:{free_port()}", "--record", str(tmp_path / "r.mcap"),
+                  "--summary", str(summary))
+    assert result.returncode == 0, result.stderr
+    scenario = json.loads(summary.read_text())["scenario"]
+    assert (scenario["fish"], scenario["behavior"], scenario["seed"]) == (4, "aggregation", 10)
+    assert scenario["target_distance"] == pytest.approx(0.26)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["run", "--fish", "0"], "fish must be a whole number from 1 to 100000"),
+        (["run", "--behavior", "schooling"], "behavior must be one of dispersion, aggregation"),
+        (["run", "--duration", "-3"], "duration must be a positive number of seconds"),
+        (["run", "--listen", "localhost"], "write PROTOCOL/HOST:PORT"),
+        (["run", "--procs", "0"], "--procs must be at least 1"),
+        (["run", "--fish", "many"], "invalid int value"),
+        (["export", "nowhere.mcap"], "say what to write"),
+    ],
+)
+def test_bad_arguments_exit_nonzero_with_a_reason(args: list[str], message: str) -> None:
+    result = _run(*args, timeout=30)
+    assert result.returncode == 2
+    assert message in result.stderr
+
+
+def test_bad_config_files_are_explained(tmp_path: Path) -> None:
+    broken = tmp_path / "broken.toml"
+    broken.write_text("fish = [\n")
+    unknown = tmp_path / "unknown.toml"
+    unknown.write_text("fishes = 3\n")
+    wrong = tmp_path / "wrong.toml"
+    wrong.write_text('fish = "three"\n')
+    assert "is not valid TOML" in _run("run", "--config", str(broken), timeout=30).stderr
+    result = _run("run", "--config", str(unknown), timeout=30)
+    assert result.returncode == 2
+    assert "unknown setting(s) fishes" in result.stderr
+    assert "fish must be a whole number" in _run("run", "--config", str(wrong), timeout=30).stderr
+    missing = _run("run", "--config", str(tmp_path / "none.toml"), timeout=30)
+    assert missing.returncode == 2 and "does not exist" in missing.stderr
+
+
+def test_export_of_a_non_recording_fails_clearly(tmp_path: Path) -> None:
+    bogus = tmp_path / "bogus.mcap"
+    bogus.write_bytes(b"not an mcap file at all")
+    result = _run("export", str(bogus), "--npz", str(tmp_path / "x.npz"), timeout=30)
+    assert result.returncode == 1
+    assert "is not a readable MCAP recording" in result.stderr
+
+
+def test_fish_alone_without_router_fails_clearly() -> None:
+    result = _run("fish", "--id", "3", "--connect", f"tcp/127.0.0.1:{free_port()}",
+                  "--connect-timeout", "0.5", timeout=30)
+    assert result.returncode == 1
+    assert "is a fishswarm run or router listening there" in result.stderr
+
+
+def test_ctrl_c_stops_the_run_within_two_seconds(tmp_path: Path) -> None:
+    with subprocess.Popen(
+        [*FISHSWARM, "run", "--fish", "5", "--duration", "1000000", "--procs", "2",
+         "--listen", f"tcp/127.0.0.1:{free_port()}", "--record", str(tmp_path / "r.mcap"),
+         "--summary", str(tmp_path / "s.json")],
+        stderr=subprocess.PIPE, text=True,
+    ) as process:
+        try:
+            assert process.stderr is not None
+            deadline = time.monotonic() + 60
+            while "tick" not in process.stderr.readline():
+                assert time.monotonic() < deadline, "the run never started"
+            process.send_signal(signal.SIGINT)
+            interrupted = time.monotonic()
+            code = process.wait(timeout=10)
+            elapsed = time.monotonic() - interrupted
+        finally:
+            if process.poll() is None:
+                process.kill()
+    assert code == 130
+    assert elapsed < 2.0
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["status"] == "interrupted"
+    assert _no_worker_left()
+
+
+def _no_worker_left() -> bool:
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                command = (entry / "cmdline").read_bytes()
+            except OSError:
+                continue
+            if b"multiprocessing.spawn" in command and str(os.getpid()).encode() not in command:
+                parent = (entry / "stat").read_text().split()[3]
+                if parent == "1":
+                    return False
+    return True

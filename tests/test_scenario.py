@@ -1,0 +1,48 @@
+"""Scenario settings: defaults from the study, TOML loading, clear errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fishswarm.scenario import ConfigError, Scenario
+
+
+def test_defaults_follow_the_study() -> None:
+    dispersion = Scenario()
+    assert (dispersion.fish, dispersion.duration, dispersion.control_period) == (25, 15.0, 1.0)
+    assert dispersion.ticks == 15
+    assert dispersion.resolved_target_distance() == pytest.approx(2.517, abs=1e-3)
+    assert dispersion.resolved_spawn_radius() == pytest.approx(0.26)
+    aggregation = Scenario(behavior="aggregation")
+    assert aggregation.resolved_target_distance() == pytest.approx(0.26)
+    assert aggregation.resolved_spawn_radius() == pytest.approx(1.3)
+
+
+def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text('[scenario]\nfish = 10\ntank = [3, 3, 1]\nblind_width = 0\n')
+    scenario = Scenario.from_toml(path)
+    assert scenario.fish == 10 and scenario.tank == (3.0, 3.0, 1.0)
+    assert scenario.blind_width == 0.0
+    path.write_text("fsh = 3\n")
+    with pytest.raises(ConfigError, match=r"unknown setting\(s\) fsh; known settings are"):
+        Scenario.from_toml(path)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"fish": 0}, "fish must be a whole number"),
+        ({"controller": "ai"}, "controller must be one of homing, pid"),
+        ({"tank": (1.0, -1.0, 1.0)}, "tank size must be three positive lengths"),
+        ({"blind_width": -0.1}, "blind_width must be a finite non-negative number"),
+        ({"channel_loss": 1.0}, "channel_loss must be a probability"),
+        ({"swarm": "a b"}, "letters, digits"),
+        ({"seed": -1}, "seed must be a non-negative integer"),
+    ],
+)
+def test_bad_settings_say_what_is_wrong(changes: dict[str, object], message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        Scenario().replace(**changes)
