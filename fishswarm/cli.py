@@ -20,9 +20,12 @@ _SCENARIO_FLAGS: dict[str, tuple[str, type, str]] = {
     "seed": ("--seed", int, "master seed; the same seed gives the same run (default 0)"),
     "control_period": ("--period", float, "control period in s (default 1: 1 Hz)"),
     "controller": ("--controller", str, "homing (default, the research code's) or pid"),
-    "target_distance": ("--target-distance", float,
-                        "Lennard-Jones target distance in m (default 0.26 for aggregation, "
-                        "the tank diagonal for dispersion)"),
+    "target_distance": (
+        "--target-distance",
+        float,
+        "Lennard-Jones target distance in m (default 0.26 for aggregation, "
+        "the tank diagonal for dispersion)",
+    ),
     "blind_width": ("--blind-width", float, "blind-spot width in m (default 0.05)"),
     "sphere_radius": ("--sphere-radius", float, "blocking-sphere radius in m (default 0.065)"),
     "swarm": ("--swarm", str, "swarm name: several swarms can share a router (default default)"),
@@ -31,8 +34,12 @@ _SCENARIO_FLAGS: dict[str, tuple[str, type, str]] = {
 
 def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -> None:
     group = parser.add_argument_group("scenario (override the --config file)")
-    group.add_argument("--config", type=Path, metavar="TOML",
-                       help="scenario file; keys are the long option names with _ (see docs)")
+    group.add_argument(
+        "--config",
+        type=Path,
+        metavar="TOML",
+        help="scenario file; keys are the long option names with _ (see docs)",
+    )
     for name in names:
         flag, kind, text = _SCENARIO_FLAGS[name]
         group.add_argument(flag, dest=name, type=kind, default=None, help=text)
@@ -53,55 +60,95 @@ def _parser() -> argparse.ArgumentParser:
         description="Run BlueBot robot-fish swarms as async actors over Eclipse Zenoh.",
         epilog="Run 'fishswarm COMMAND --help' for the options of a command.",
     )
-    parser.add_argument("--log-level", default="WARNING",
-                        choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="default WARNING")
+    parser.add_argument(
+        "--log-level",
+        default="WARNING",
+        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+        help="default WARNING",
+    )
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     run = commands.add_parser(
-        "run", help="run a whole simulated swarm with one command",
+        "run",
+        help="run a whole simulated swarm with one command",
         description="Start a router, the world, the channel and an observer, spawn the fish "
         "over worker processes, run the scenario, and write a recording and a summary.",
     )
     _add_scenario_flags(run, list(_SCENARIO_FLAGS))
     run.add_argument("--procs", type=int, default=1, help="fish worker processes (default 1)")
-    run.add_argument("--record", type=Path, default=Path("runs/latest.mcap"),
-                     help="MCAP recording to write (default runs/latest.mcap)")
-    run.add_argument("--summary", type=Path, default=Path("runs/latest.json"),
-                     help="JSON summary to write (default runs/latest.json)")
-    run.add_argument("--listen", default=DEFAULT_ENDPOINT,
-                     help=f"endpoint to listen on (default {DEFAULT_ENDPOINT}; "
-                     "tcp/0.0.0.0:7447 lets observers on other machines attach)")
-    run.add_argument("--start-timeout", type=float, default=60.0,
-                     help="longest wait for all fish to come up, s (default 60)")
+    run.add_argument(
+        "--record",
+        type=Path,
+        default=Path("runs/latest.mcap"),
+        help="MCAP recording to write (default runs/latest.mcap)",
+    )
+    run.add_argument(
+        "--summary",
+        type=Path,
+        default=Path("runs/latest.json"),
+        help="JSON summary to write (default runs/latest.json)",
+    )
+    run.add_argument(
+        "--listen",
+        default=DEFAULT_ENDPOINT,
+        help=f"endpoint to listen on (default {DEFAULT_ENDPOINT}; "
+        "tcp/0.0.0.0:7447 lets observers on other machines attach)",
+    )
+    run.add_argument(
+        "--start-timeout",
+        type=float,
+        default=60.0,
+        help="longest wait for all fish to come up, s (default 60)",
+    )
     run.add_argument("--quiet", action="store_true", help="no progress lines")
 
     fish = commands.add_parser(
-        "fish", help="run fish actors alone (what runs on a robot)",
+        "fish",
+        help="run fish actors alone (what runs on a robot)",
         description="Run one or more fish actors that connect to a router. The fish stop "
         "their fins when perceptions stop arriving.",
     )
-    fish.add_argument("--id", dest="ids", type=int, action="append", required=True,
-                      help="fish id; repeat for several fish in one process")
+    fish.add_argument(
+        "--id",
+        dest="ids",
+        type=int,
+        action="append",
+        required=True,
+        help="fish id; repeat for several fish in one process",
+    )
     _add_connect(fish)
-    _add_scenario_flags(fish, ["behavior", "target_distance", "controller", "control_period",
-                               "swarm"])
-    fish.add_argument("--perception-timeout", type=float, default=5.0,
-                      help="fins off after this long without a perception, s (default 5)")
+    _add_scenario_flags(
+        fish, ["behavior", "target_distance", "controller", "control_period", "swarm"]
+    )
+    fish.add_argument(
+        "--perception-timeout",
+        type=float,
+        default=5.0,
+        help="fins off after this long without a perception, s (default 5)",
+    )
 
-    world = commands.add_parser("world", help="run the world actor alone",
-                                description="Run the simulated world; it waits for --fish fish "
-                                "(ids 0..N-1) and then runs the scenario.")
+    world = commands.add_parser(
+        "world",
+        help="run the world actor alone",
+        description="Run the simulated world; it waits for --fish fish "
+        "(ids 0..N-1) and then runs the scenario.",
+    )
     _add_connect(world)
     _add_scenario_flags(world, list(_SCENARIO_FLAGS))
-    world.add_argument("--start-timeout", type=float, default=60.0,
-                       help="longest wait for the fish, s (default 60)")
+    world.add_argument(
+        "--start-timeout",
+        type=float,
+        default=60.0,
+        help="longest wait for the fish, s (default 60)",
+    )
 
     channel = commands.add_parser("channel", help="run the channel actor alone")
     _add_connect(channel)
     _add_scenario_flags(channel, ["seed", "swarm"])
 
     observe = commands.add_parser(
-        "observe", help="attach an observer to a running swarm",
+        "observe",
+        help="attach an observer to a running swarm",
         description="Watch a swarm's snapshots and liveliness from this or another machine; "
         "print progress and optionally record. Stops on Ctrl-C, or after --ticks snapshots.",
     )
@@ -111,12 +158,18 @@ def _parser() -> argparse.ArgumentParser:
     observe.add_argument("--ticks", type=int, help="stop after the snapshot of this tick")
 
     router = commands.add_parser("router", help="run a Zenoh router (e.g. on the base station)")
-    router.add_argument("--listen", default="tcp/0.0.0.0:7447",
-                        help="endpoint to listen on (default tcp/0.0.0.0:7447)")
+    router.add_argument(
+        "--listen",
+        default="tcp/0.0.0.0:7447",
+        help="endpoint to listen on (default tcp/0.0.0.0:7447)",
+    )
 
-    export = commands.add_parser("export", help="export a recording to NumPy or CSV",
-                                 description="Write arrays t (T,), pos (T,N,3), vel (T,N,3), "
-                                 "yaw (T,N), ids (N,) in SI units to .npz, and/or a flat CSV.")
+    export = commands.add_parser(
+        "export",
+        help="export a recording to NumPy or CSV",
+        description="Write arrays t (T,), pos (T,N,3), vel (T,N,3), "
+        "yaw (T,N), ids (N,) in SI units to .npz, and/or a flat CSV.",
+    )
     export.add_argument("recording", type=Path, help="MCAP recording of a run")
     export.add_argument("--npz", type=Path, help="NumPy archive to write")
     export.add_argument("--csv", type=Path, help="CSV table to write")
@@ -124,10 +177,17 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _add_connect(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--connect", default=DEFAULT_ENDPOINT,
-                        help=f"router endpoint to connect to (default {DEFAULT_ENDPOINT})")
-    parser.add_argument("--connect-timeout", type=float, default=10.0,
-                        help="longest wait for the router, s; negative waits forever (default 10)")
+    parser.add_argument(
+        "--connect",
+        default=DEFAULT_ENDPOINT,
+        help=f"router endpoint to connect to (default {DEFAULT_ENDPOINT})",
+    )
+    parser.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=10.0,
+        help="longest wait for the router, s; negative waits forever (default 10)",
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -148,7 +208,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     }
     try:
         scenario = _scenario(args) if hasattr(args, "config") else None
-        code: int = handlers[args.command](args, scenario)
+        code = int(handlers[args.command](args, scenario))
     except ConfigError as error:
         parser.exit(2, f"fishswarm {args.command}: error: {error}\n")
     except commands.UserError as error:

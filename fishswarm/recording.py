@@ -46,14 +46,16 @@ class Recorder:
             name="fishswarm.Record", encoding="jsonschema", data=b'{"type": "object"}'
         )
         self._channels = {
-            SNAPSHOT_TOPIC: self._writer.register_channel(SNAPSHOT_TOPIC, "msgpack", snapshot_schema),
+            SNAPSHOT_TOPIC: self._writer.register_channel(
+                SNAPSHOT_TOPIC, "msgpack", snapshot_schema
+            ),
             METRICS_TOPIC: self._writer.register_channel(METRICS_TOPIC, "json", json_schema),
             EVENTS_TOPIC: self._writer.register_channel(EVENTS_TOPIC, "json", json_schema),
         }
         self._sequence = 0
 
     def _add(self, topic: str, time: float, data: bytes) -> None:
-        stamp = int(round(time * 1e9))
+        stamp = round(time * 1e9)
         self._writer.add_message(self._channels[topic], stamp, data, stamp, self._sequence)
         self._sequence += 1
 
@@ -106,8 +108,10 @@ class Recording:
         """The run as arrays, SI units: ``t`` (T,), ``pos`` (T, N, 3), ``vel`` (T, N, 3),
         ``yaw`` (T, N), ``ids`` (N,). A fish absent at a tick (not yet joined, or lost) has
         NaN there."""
-        ids = np.unique(np.concatenate([s.ids for s in self.snapshots])) if self.snapshots else (
-            np.zeros(0, dtype=np.int64)
+        ids = (
+            np.unique(np.concatenate([s.ids for s in self.snapshots]))
+            if self.snapshots
+            else (np.zeros(0, dtype=np.int64))
         )
         column = {int(i): n for n, i in enumerate(ids.tolist())}
         count, steps = ids.size, len(self.snapshots)
@@ -159,7 +163,15 @@ def read_recording(path: Path) -> Recording:
 def export_npz(recording: Recording, out: Path) -> None:
     """Write the arrays of :meth:`Recording.arrays` to a ``.npz`` file."""
     out.parent.mkdir(parents=True, exist_ok=True)
-    np.savez_compressed(out, **recording.arrays())
+    arrays = recording.arrays()
+    np.savez_compressed(
+        out,
+        t=arrays["t"],
+        pos=arrays["pos"],
+        vel=arrays["vel"],
+        yaw=arrays["yaw"],
+        ids=arrays["ids"],
+    )
 
 
 def export_csv(recording: Recording, out: Path) -> None:
@@ -167,12 +179,19 @@ def export_csv(recording: Recording, out: Path) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     with out.open("w", newline="", encoding="utf-8") as stream:
         writer = csv.writer(stream)
-        writer.writerow(["tick", "t", "id", "x", "y", "z", "vx", "vy", "vz", "yaw", "neighbors_seen"])
+        writer.writerow(
+            ["tick", "t", "id", "x", "y", "z", "vx", "vy", "vz", "yaw", "neighbors_seen"]
+        )
         for s in recording.snapshots:
             for n, fish_id in enumerate(s.ids.tolist()):
-                writer.writerow([
-                    s.tick, repr(s.time), fish_id,
-                    *(repr(float(v)) for v in s.position[n]),
-                    *(repr(float(v)) for v in s.velocity[n]),
-                    repr(float(s.yaw[n])), int(s.neighbors_seen[n]),
-                ])
+                writer.writerow(
+                    [
+                        s.tick,
+                        repr(s.time),
+                        fish_id,
+                        *(repr(float(v)) for v in s.position[n]),
+                        *(repr(float(v)) for v in s.velocity[n]),
+                        repr(float(s.yaw[n])),
+                        int(s.neighbors_seen[n]),
+                    ]
+                )

@@ -99,7 +99,9 @@ class Scenario:
         )
         for name in ("target_distance", "spawn_radius"):
             value = getattr(self, name)
-            need(value is None or _positive(value), f"{name} must be positive metres, got {value!r}")
+            need(
+                value is None or _positive(value), f"{name} must be positive metres, got {value!r}"
+            )
         try:
             Tank(tuple(self.tank))  # type: ignore[arg-type]
             self.vision()
@@ -170,9 +172,19 @@ class Scenario:
             if not isinstance(tank, list | tuple) or len(tank) != 3:
                 raise ConfigError(f"{source}: tank must be a list of three lengths, got {tank!r}")
             values["tank"] = tuple(float(v) for v in tank)
-        for name in ("duration", "control_period", "caudal_cap", "target_distance",
-                     "spawn_radius", "visual_range", "blind_width", "sphere_radius",
-                     "vision_noise", "channel_range", "channel_loss"):
+        for name in (
+            "duration",
+            "control_period",
+            "caudal_cap",
+            "target_distance",
+            "spawn_radius",
+            "visual_range",
+            "blind_width",
+            "sphere_radius",
+            "vision_noise",
+            "channel_range",
+            "channel_loss",
+        ):
             if isinstance(values.get(name), int) and not isinstance(values[name], bool):
                 values[name] = float(values[name])
         try:

@@ -82,9 +82,13 @@ def observe(
     return perceive(state.position, state.yaw, vision=vision, rngs=rngs if vision.noise else None)
 
 
-def advance(scenario: Scenario, state: State, fins: FloatArray, robot: BlueBot = BlueBot()) -> State:
+def advance(
+    scenario: Scenario, state: State, fins: FloatArray, robot: BlueBot = BlueBot()
+) -> State:
     """Move every fish through one control period with its fins held."""
-    return step(state, fins, duration=scenario.control_period, robot=robot, tank=scenario.the_tank())
+    return step(
+        state, fins, duration=scenario.control_period, robot=robot, tank=scenario.the_tank()
+    )
 
 
 @dataclass(frozen=True)
@@ -132,7 +136,11 @@ def run_batch(scenario: Scenario) -> Trajectory:
         fins, memory = act_each(policy, perceived, memory)
         state = advance(scenario, state, fins)
     return Trajectory(
-        np.array(times), ids, np.array(positions), np.array(velocities), np.array(yaws),
+        np.array(times),
+        ids,
+        np.array(positions),
+        np.array(velocities),
+        np.array(yaws),
         np.array(seen),
     )
 

@@ -30,6 +30,10 @@ def test_centroid_of_the_others_on_a_square() -> None:
 
 def test_single_fish_and_neighbors_seen() -> None:
     values = swarm_metrics(SQUARE[:1], np.array([0]))
-    assert values == {"centroid_distance": 0.0, "pairwise_distance": 0.0,
-                      "nearest_neighbor_distance": 0.0, "neighbors_seen": 0.0}
+    assert values == {
+        "centroid_distance": 0.0,
+        "pairwise_distance": 0.0,
+        "nearest_neighbor_distance": 0.0,
+        "neighbors_seen": 0.0,
+    }
     assert swarm_metrics(SQUARE, np.array([3, 2, 1, 2]))["neighbors_seen"] == 2.0

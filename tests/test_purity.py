@@ -37,6 +37,9 @@ def test_pure_modules_import_no_plumbing(part: str) -> None:
 
 def test_protocols_import_nothing_else_of_fishswarm() -> None:
     for path in (PACKAGE / "protocols").rglob("*.py"):
-        others = {n for n in _imports(path)
-                  if n.startswith("fishswarm.") and not n.startswith("fishswarm.protocols")}
+        others = {
+            n
+            for n in _imports(path)
+            if n.startswith("fishswarm.") and not n.startswith("fishswarm.protocols")
+        }
         assert not others, f"{path.name} imports {sorted(others)}"

@@ -15,8 +15,16 @@ from fishswarm.recording import RecordingError, export_npz, open_recorder, read_
 def _snapshot(tick: int, ids: list[int]) -> Snapshot:
     count = len(ids)
     position = np.arange(count * 3, dtype=float).reshape(count, 3) + tick
-    return Snapshot(tick, float(tick), np.array(ids), position, -position, np.full(count, 0.1 * tick),
-                    np.ones(count, dtype=np.int64), np.zeros(count, dtype=np.int64))
+    return Snapshot(
+        tick,
+        float(tick),
+        np.array(ids),
+        position,
+        -position,
+        np.full(count, 0.1 * tick),
+        np.ones(count, dtype=np.int64),
+        np.zeros(count, dtype=np.int64),
+    )
 
 
 def test_round_trip_with_a_fish_that_joins_and_one_that_leaves(tmp_path: Path) -> None:

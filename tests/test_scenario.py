@@ -22,7 +22,7 @@ def test_defaults_follow_the_study() -> None:
 
 def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
     path = tmp_path / "s.toml"
-    path.write_text('[scenario]\nfish = 10\ntank = [3, 3, 1]\nblind_width = 0\n')
+    path.write_text("[scenario]\nfish = 10\ntank = [3, 3, 1]\nblind_width = 0\n")
     scenario = Scenario.from_toml(path)
     assert scenario.fish == 10 and scenario.tank == (3.0, 3.0, 1.0)
     assert scenario.blind_width == 0.0

@@ -107,7 +107,9 @@ async def open_session(settings: SessionSettings) -> AsyncIterator[zenoh.Session
             if settings.connect
             else "is another program using that port?"
         )
-        raise ConnectError(f"cannot open a {settings.mode} session on {where}: {hint} ({error})")
+        raise ConnectError(
+            f"cannot open a {settings.mode} session on {where}: {hint} ({error})"
+        ) from None
     try:
         yield session
     finally:
@@ -201,7 +203,9 @@ async def open_subscriber(
 
 
 @asynccontextmanager
-async def open_subscription(session: zenoh.Session, key_expr: str) -> AsyncIterator[Inbox[Received]]:
+async def open_subscription(
+    session: zenoh.Session, key_expr: str
+) -> AsyncIterator[Inbox[Received]]:
     """Subscribe to ``key_expr``; iterate the inbox for (key, payload) pairs."""
     inbox: Inbox[Received] = Inbox()
     async with open_subscriber(session, key_expr, lambda key, payload: inbox.push((key, payload))):

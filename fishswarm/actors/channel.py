@@ -55,14 +55,19 @@ class Channel:
         }
 
     async def run(
-        self, session: zenoh.Session, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
+        self,
+        session: zenoh.Session,
+        *,
+        task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
     ) -> None:
         """Deliver broadcasts until cancelled."""
         events, keys = self._events, self.keys
         put = publisher(session)
         async with (
             open_subscriber(session, keys.snapshot, lambda k, p: events.push(("snapshot", k, p))),
-            open_subscriber(session, keys.fish_outboxes(), lambda k, p: events.push(("outbox", k, p))),
+            open_subscriber(
+                session, keys.fish_outboxes(), lambda k, p: events.push(("outbox", k, p))
+            ),
             open_token(session, keys.alive("channel", 0)),
         ):
             task_status.started()
@@ -106,8 +111,12 @@ class Channel:
         got = self._outbox.pop(sent_tick, [])
         if len(got) < wanted:
             self._missing += wanted - len(got)
-            log.warning("channel: %d of %d broadcasts of tick %d never arrived",
-                        wanted - len(got), wanted, sent_tick)
+            log.warning(
+                "channel: %d of %d broadcasts of tick %d never arrived",
+                wanted - len(got),
+                wanted,
+                sent_tick,
+            )
         return sorted(got, key=lambda b: b.sender_id)
 
     def _deliver(self, put: Put, snapshot: Snapshot, broadcasts: list[Broadcast]) -> None:
@@ -127,7 +136,11 @@ class Channel:
             broadcast = present[reception.broadcast]
             receiver_id = int(snapshot.ids[reception.receiver])
             delivery = Delivery(
-                receiver_id, snapshot.tick, broadcast.kind, broadcast.value, reception.sender_position
+                receiver_id,
+                snapshot.tick,
+                broadcast.kind,
+                broadcast.value,
+                reception.sender_position,
             )
             put(self.keys.inbox(receiver_id), encode(delivery))
             counts[reception.receiver] += 1

@@ -17,7 +17,13 @@ from fishswarm.actors.launcher import EXIT_WORKER_DIED, LaunchSettings, WorkerFa
 from fishswarm.actors.observer import Observer, Progress
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
 from fishswarm.protocols.keys import KeySpace
-from fishswarm.recording import RecordingError, export_csv, export_npz, open_recorder, read_recording
+from fishswarm.recording import (
+    RecordingError,
+    export_csv,
+    export_npz,
+    open_recorder,
+    read_recording,
+)
 from fishswarm.scenario import ConfigError, Scenario
 from fishswarm.simulation import policy_of
 
@@ -81,7 +87,8 @@ def progress_printer(ticks: int, stream: Any = sys.stderr) -> Callable[[Progress
         line = (
             f"tick {progress.tick:>{len(str(ticks))}}/{ticks}  t={progress.time:7.1f} s  "
             f"fish {progress.fish}  centroid {m['centroid_distance']:.3f} m  "
-            f"pairwise {m['pairwise_distance']:.3f} m  nearest {m['nearest_neighbor_distance']:.3f} m"
+            f"pairwise {m['pairwise_distance']:.3f} m  "
+            f"nearest {m['nearest_neighbor_distance']:.3f} m"
             f"  seen {m['neighbors_seen']:.1f}"
         )
         if tty:
@@ -119,9 +126,12 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         print(f"fishswarm run: error: {line}", file=sys.stderr)
     print(_summary_text(summary), file=sys.stderr)
     if result.exit_code == EXIT_WORKER_DIED:
-        print("fishswarm run: a worker process died; the run finished without its fish "
-              "(see 'lost' in the summary)", file=sys.stderr)
-    return result.exit_code
+        print(
+            "fishswarm run: a worker process died; the run finished without its fish "
+            "(see 'lost' in the summary)",
+            file=sys.stderr,
+        )
+    return int(result.exit_code)
 
 
 def _summary_text(summary: dict[str, Any]) -> str:
@@ -151,8 +161,9 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
     async def main() -> None:
         async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
             for fish_id in args.ids:
-                settings = FishSettings(fish_id, policy, keys,
-                                        perception_timeout=args.perception_timeout)
+                settings = FishSettings(
+                    fish_id, policy, keys, perception_timeout=args.perception_timeout
+                )
                 await nursery.start(Fish(settings).run, session)
             print(f"fish {', '.join(map(str, args.ids))} up on {args.connect}", file=sys.stderr)
 

@@ -70,7 +70,10 @@ class Fish:
         }
 
     async def run(
-        self, session: zenoh.Session, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
+        self,
+        session: zenoh.Session,
+        *,
+        task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
     ) -> None:
         """Serve perceptions until cancelled; report readiness once subscribed and alive."""
         keys, fish_id = self.settings.keys, self.settings.fish_id
@@ -129,7 +132,7 @@ class Fish:
     async def _collect_deliveries(
         self, inbox: Inbox[tuple[str, bytes]], perception: Perception
     ) -> list[Delivery]:
-        wanted, found = perception.inbox_count, []
+        wanted, found = perception.inbox_count, list[Delivery]()
         with trio.move_on_after(self.settings.inbox_timeout):
             while len(found) < wanted:
                 key, payload = await inbox.receive()

@@ -87,12 +87,14 @@ async def run_swarm(
     workers: list[Worker] = []
     died: list[str] = []
     status = "failed"
-    world = World(WorldSettings(
-        scenario,
-        expected_fish=tuple(range(scenario.fish)),
-        start_timeout=settings.start_timeout,
-        command_timeout=settings.command_timeout,
-    ))
+    world = World(
+        WorldSettings(
+            scenario,
+            expected_fish=tuple(range(scenario.fish)),
+            start_timeout=settings.start_timeout,
+            command_timeout=settings.command_timeout,
+        )
+    )
     channel = Channel(scenario)
     with contextlib.ExitStack() as files:
         recorder = (
@@ -107,8 +109,14 @@ async def run_swarm(
                 await nursery.start(channel.run, session)
                 policy = policy_of(scenario)
                 for index, ids in enumerate(split_fish(list(range(scenario.fish)), settings.procs)):
-                    spec = WorkerSpec(index, ids, policy, scenario.swarm, _connect_to(settings.listen),
-                                      log_level=settings.log_level)
+                    spec = WorkerSpec(
+                        index,
+                        ids,
+                        policy,
+                        scenario.swarm,
+                        _connect_to(settings.listen),
+                        log_level=settings.log_level,
+                    )
                     workers.append(start_worker(spec))
                 nursery.start_soon(_watch_workers, workers, died, world)
                 await world.run(session)
@@ -122,8 +130,16 @@ async def run_swarm(
         finally:
             with trio.CancelScope(shield=True):
                 await _stop_all(workers)
-            summary = _summary(settings, status, world, channel, observer, workers, died,
-                               time.perf_counter() - started)
+            summary = _summary(
+                settings,
+                status,
+                world,
+                channel,
+                observer,
+                workers,
+                died,
+                time.perf_counter() - started,
+            )
             if settings.summary is not None:
                 settings.summary.parent.mkdir(parents=True, exist_ok=True)
                 settings.summary.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
@@ -158,7 +174,11 @@ async def _watch_workers(workers: list[Worker], died: list[str], world: World) -
 async def _stop_all(workers: list[Worker]) -> None:
     async with trio.open_nursery() as nursery:
         for worker in workers:
-            nursery.start_soon(trio.to_thread.run_sync, stop_worker, worker)
+            nursery.start_soon(_stop_in_thread, worker)
+
+
+async def _stop_in_thread(worker: Worker) -> None:
+    await trio.to_thread.run_sync(stop_worker, worker)
 
 
 def _summary(

@@ -73,13 +73,20 @@ class Observer:
         }
 
     async def run(
-        self, session: zenoh.Session, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
+        self,
+        session: zenoh.Session,
+        *,
+        task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
     ) -> None:
         """Observe until cancelled; readiness once subscribed."""
         inbox = self._inbox
         async with (
-            open_subscriber(session, self.keys.snapshot, lambda k, p: inbox.push(("snapshot", k, p))),
-            open_alive_events(session, self.keys.alive_all(), lambda k, a: inbox.push(("alive", k, a))),
+            open_subscriber(
+                session, self.keys.snapshot, lambda k, p: inbox.push(("snapshot", k, p))
+            ),
+            open_alive_events(
+                session, self.keys.alive_all(), lambda k, a: inbox.push(("alive", k, a))
+            ),
             open_token(session, self.keys.alive("observer", self.observer_id)),
         ):
             task_status.started()
@@ -102,8 +109,12 @@ class Observer:
             member, role = self.keys.member_of(key)
         except ValueError:
             return
-        event = {"event": "joined" if alive else "left", "role": role, "id": member,
-                 "time": self._sim_time}
+        event = {
+            "event": "joined" if alive else "left",
+            "role": role,
+            "id": member,
+            "time": self._sim_time,
+        }
         self.events.append(event)
         if self.recorder is not None:
             self.recorder.event(self._sim_time, event)
@@ -121,8 +132,10 @@ class Observer:
         self._sim_time = snapshot.time
         if self.recorder is not None:
             self.recorder.snapshot(snapshot.time, payload)
-            self.recorder.metrics(snapshot.time, {"tick": snapshot.tick, "time": snapshot.time,
-                                                  "fish": progress.fish, **metrics})
+            self.recorder.metrics(
+                snapshot.time,
+                {"tick": snapshot.tick, "time": snapshot.time, "fish": progress.fish, **metrics},
+            )
         self._last_tick = snapshot.tick
         self._tick_reached.set()
         if self.on_progress is not None:

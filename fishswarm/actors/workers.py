@@ -7,6 +7,7 @@ disappears (the pipe closes), then reports its fish's counters through the pipe.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import multiprocessing
 import signal
@@ -68,10 +69,8 @@ def worker_main(spec: WorkerSpec, connection: Connection) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     logging.basicConfig(level=spec.log_level, format="%(levelname)s %(name)s: %(message)s")
     statistics = trio.run(_serve, spec, connection)
-    try:
+    with contextlib.suppress(BrokenPipeError, OSError):
         connection.send(("statistics", statistics))
-    except (BrokenPipeError, OSError):
-        pass
 
 
 async def _serve(spec: WorkerSpec, connection: Connection) -> dict[str, Any]:
@@ -80,13 +79,13 @@ async def _serve(spec: WorkerSpec, connection: Connection) -> dict[str, Any]:
         Fish(FishSettings(i, spec.policy, keys, perception_timeout=spec.perception_timeout))
         for i in spec.fish_ids
     ]
-    async with open_session(SessionSettings(mode="client", connect=[spec.connect])) as session:
-        async with trio.open_nursery() as nursery:
-            for fish in fishes:
-                await nursery.start(fish.run, session)
-            connection.send(("ready", spec.index))
-            await trio.to_thread.run_sync(_wait_for_stop, connection, abandon_on_cancel=True)
-            nursery.cancel_scope.cancel()
+    settings = SessionSettings(mode="client", connect=[spec.connect])
+    async with open_session(settings) as session, trio.open_nursery() as nursery:
+        for fish in fishes:
+            await nursery.start(fish.run, session)
+        connection.send(("ready", spec.index))
+        await trio.to_thread.run_sync(_wait_for_stop, connection, abandon_on_cancel=True)
+        nursery.cancel_scope.cancel()
     totals: dict[str, Any] = {}
     for fish in fishes:
         for name, value in fish.statistics().items():

@@ -140,15 +140,22 @@ class World:
         }
 
     async def run(
-        self, session: zenoh.Session, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
+        self,
+        session: zenoh.Session,
+        *,
+        task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
     ) -> None:
         """Run the scenario to its end (or a stop request); readiness once subscribed."""
         keys = self.keys
         put = publisher(session)
         events = self._events
         async with (
-            open_subscriber(session, keys.fish_commands(), lambda k, p: events.push(("command", k, p))),
-            open_subscriber(session, keys.channel_report, lambda k, p: events.push(("report", k, p))),
+            open_subscriber(
+                session, keys.fish_commands(), lambda k, p: events.push(("command", k, p))
+            ),
+            open_subscriber(
+                session, keys.channel_report, lambda k, p: events.push(("report", k, p))
+            ),
             open_alive_events(
                 session, keys.alive_all(), lambda k, alive: events.push(("alive", k, alive))
             ),
@@ -328,7 +335,9 @@ class World:
         if not new:
             return
         for fish_id in new:
-            self._vision_rngs.setdefault(fish_id, stream(self.scenario.seed, Stream.VISION, fish_id))
+            self._vision_rngs.setdefault(
+                fish_id, stream(self.scenario.seed, Stream.VISION, fish_id)
+            )
             if self.tick > 0:
                 self.joined.append((fish_id, self.tick))
                 log.info("fish %d joined at tick %d", fish_id, self.tick)
@@ -353,7 +362,7 @@ class World:
     async def _serve_control(self, queries: Inbox[zenoh.Query]) -> None:
         async for query in queries:
             try:
-                payload = query.payload.to_bytes() if query.payload is not None else b""
+                payload = b"" if query.payload is None else query.payload.to_bytes()
                 request = decode(payload, ControlRequest)
             except MessageError as error:
                 self._intake.reject(str(query.key_expr), "malformed", str(error))
@@ -376,4 +385,3 @@ class World:
 
 def _ids_text(ids: list[int]) -> str:
     return ", ".join(map(str, ids[:20])) + (" …" if len(ids) > 20 else "")
-

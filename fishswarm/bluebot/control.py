@@ -126,9 +126,7 @@ def pid(
         raise ValueError(f"period must be positive, got {period}")
     planar = np.hypot(target[:, 0], target[:, 1])
     error = np.stack([target[:, 2], np.arctan2(target[:, 1], target[:, 0]), planar], axis=1)
-    integral = np.clip(
-        state.integral + error * period, -gains.integral_limit, gains.integral_limit
-    )
+    integral = np.clip(state.integral + error * period, -gains.integral_limit, gains.integral_limit)
     derivative = np.where(
         np.isnan(state.previous_error), 0.0, (error - state.previous_error) / period
     )
@@ -150,5 +148,3 @@ def stop_fins(count: int) -> FloatArray:
 def pitch_deg(target: FloatArray) -> FloatArray:
     """(B,) pitch of each target in degrees, positive below (z down)."""
     return np.degrees(np.arctan2(target[:, 2], np.hypot(target[:, 0], target[:, 1])))
-
-

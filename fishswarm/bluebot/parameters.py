@@ -67,9 +67,7 @@ class BlueBot:
 
     def terminal_speed(self) -> float:
         """Forward speed at full caudal where thrust equals drag, m/s (≈ 0.16)."""
-        return math.sqrt(
-            self.caudal_force / (0.5 * self.water_density * self.drag_x * self.area_x)
-        )
+        return math.sqrt(self.caudal_force / (0.5 * self.water_density * self.drag_x * self.area_x))
 
 
 @dataclass(frozen=True)

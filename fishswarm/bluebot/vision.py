@@ -134,11 +134,13 @@ class Perceived:
     @property
     def counts(self) -> NDArray[np.int64]:
         """(B,) how many neighbours each fish sees."""
-        return self.mask.sum(axis=1).astype(np.int64)
+        counts: NDArray[np.int64] = self.mask.sum(axis=1).astype(np.int64)
+        return counts
 
     def of(self, fish: int) -> FloatArray:
         """(k, 3) the neighbours fish ``fish`` (a batch index) sees."""
-        return self.neighbors[fish, self.mask[fish]]
+        rows: FloatArray = self.neighbors[fish, self.mask[fish]]
+        return rows
 
 
 KD_TREE_MIN_FISH = 200
@@ -251,9 +253,9 @@ def perceive_landmarks(
         vision: the vision parameters.
     """
     count = position.shape[0]
-    relative = np.broadcast_to(landmarks[None, :, :], (count, *landmarks.shape)) - position[
-        :, None, :
-    ]
+    relative = (
+        np.broadcast_to(landmarks[None, :, :], (count, *landmarks.shape)) - position[:, None, :]
+    )
     distance = np.linalg.norm(relative, axis=2)
     seen = distance <= vision.visual_range
     if vision.blind_width > 0:

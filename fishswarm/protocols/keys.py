@@ -93,7 +93,7 @@ class KeySpace:
         return f"{self.prefix}/fish/*/outbox"
 
     def member_of(self, key: str) -> tuple[str, str]:
-        """Split a per-member key into (id, last segment): ``.../fish/3/command`` → ("3", "command").
+        """Split a per-member key: ``.../fish/3/command`` → ("3", "command").
 
         Works for ``fish/<id>/<kind>`` and ``alive/<role>/<id>`` keys (then (id, role)).
 

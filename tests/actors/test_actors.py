@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 import trio
+import zenoh
 
 from fishswarm.actors.bridge import (
     SessionSettings,
@@ -37,10 +38,20 @@ from tests.conftest import run_trio
 pytestmark = pytest.mark.integration
 
 
-def _snapshot(tick: int, position: list[list[float]], yaw: list[float], sent: list[int]) -> Snapshot:
+def _snapshot(
+    tick: int, position: list[list[float]], yaw: list[float], sent: list[int]
+) -> Snapshot:
     count = len(position)
-    return Snapshot(tick, float(tick), np.arange(count), np.array(position), np.zeros((count, 3)),
-                    np.array(yaw), np.zeros(count, dtype=np.int64), np.array(sent))
+    return Snapshot(
+        tick,
+        float(tick),
+        np.arange(count),
+        np.array(position),
+        np.zeros((count, 3)),
+        np.array(yaw),
+        np.zeros(count, dtype=np.int64),
+        np.array(sent),
+    )
 
 
 def test_channel_delivers_in_range_with_sender_position_in_receiver_frame(endpoint: str) -> None:
@@ -100,8 +111,7 @@ def test_fish_turns_fins_off_when_perceptions_stop_and_resumes(endpoint: str) ->
             await nursery.start(fish.run, session)
             with trio.fail_after(3):
                 stop = decode((await commands.receive())[1], Command)
-            perception = Perception(3, 1, 1.0, 0.5, np.array([[1.0, -0.1, 0.0]]),
-                                    np.zeros((0, 3)))
+            perception = Perception(3, 1, 1.0, 0.5, np.array([[1.0, -0.1, 0.0]]), np.zeros((0, 3)))
             publisher(session)(keys.perception(3), encode(perception))
             with trio.fail_after(3):
                 answer = decode((await commands.receive())[1], Command)
@@ -120,9 +130,9 @@ def test_fish_turns_fins_off_when_perceptions_stop_and_resumes(endpoint: str) ->
 def test_world_answers_status_pause_resume_and_stop(endpoint: str) -> None:
     scenario = Scenario(fish=2, duration=100_000.0)
 
-    async def ask(session: object, action: str) -> ControlReply:
-        replies = await query(session, scenario.keys.control,  # type: ignore[arg-type]
-                              encode(ControlRequest(action)), timeout=5.0)
+    async def ask(session: zenoh.Session, action: str) -> ControlReply:
+        request = encode(ControlRequest(action))
+        replies = await query(session, scenario.keys.control, request, timeout=5.0)
         assert len(replies) == 1
         return decode(replies[0], ControlReply)
 

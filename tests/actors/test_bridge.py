@@ -82,16 +82,21 @@ def test_queryable_answers_from_trio(endpoint: str) -> None:
     async def main() -> list[bytes]:
         router = SessionSettings(mode="router", listen=[endpoint])
         client = SessionSettings(mode="client", connect=[endpoint])
-        async with open_session(router) as hub, open_session(client) as asker:
-            async with open_queryable(hub, "ctl") as queries, trio.open_nursery() as nursery:
+        async with (
+            open_session(router) as hub,
+            open_session(client) as asker,
+            open_queryable(hub, "ctl") as queries,
+            trio.open_nursery() as nursery,
+        ):
 
-                async def serve() -> None:
-                    request = await queries.receive()
-                    reply(request, b"pong:" + request.payload.to_bytes())
+            async def serve() -> None:
+                request = await queries.receive()
+                assert request.payload is not None
+                reply(request, b"pong:" + request.payload.to_bytes())
 
-                nursery.start_soon(serve)
-                await trio.sleep(0.2)
-                return await query(asker, "ctl", b"ping", timeout=5.0)
+            nursery.start_soon(serve)
+            await trio.sleep(0.2)
+            return await query(asker, "ctl", b"ping", timeout=5.0)
 
     assert run_trio(main) == [b"pong:ping"]
 

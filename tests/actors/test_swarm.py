@@ -70,8 +70,12 @@ def test_garbage_on_every_key_is_rejected_and_changes_nothing(
     garbage = [b"", b"\xc1\xc1", b"\x93\x01\x02\x03", b"\x83\xa1v\x01\xa1t\xa7command\xa1f\x80"]
     targets = [keys.snapshot, keys.control, keys.channel_report]
     for fish_id in range(scenario.fish):
-        targets += [keys.perception(fish_id), keys.command(fish_id), keys.outbox(fish_id),
-                    keys.inbox(fish_id)]
+        targets += [
+            keys.perception(fish_id),
+            keys.command(fish_id),
+            keys.outbox(fish_id),
+            keys.inbox(fish_id),
+        ]
 
     async def main() -> RunResult:
         settings = LaunchSettings(scenario, listen=endpoint, record=tmp_path / "bad.mcap")
@@ -118,8 +122,7 @@ def test_killed_worker_loses_its_fish_and_the_run_completes(endpoint: str, tmp_p
             killed["at"] = time.monotonic()
             killed["tick"] = progress.tick
 
-    settings = LaunchSettings(scenario, procs=2, listen=endpoint,
-                              summary=tmp_path / "summary.json")
+    settings = LaunchSettings(scenario, procs=2, listen=endpoint, summary=tmp_path / "summary.json")
     result = run_trio(lambda: run_swarm(settings, on_progress=kill_at_tick_5), timeout=120)
     summary = result.summary
     assert result.exit_code == EXIT_WORKER_DIED
@@ -173,7 +176,7 @@ def test_late_fish_is_included_from_a_later_tick(endpoint: str) -> None:
     scenario = Scenario(fish=3, duration=100_000.0, seed=4)
     policy = policy_of(scenario)
 
-    async def main() -> tuple[list[tuple[int, int]], list[list[int]]]:
+    async def main() -> tuple[list[tuple[int, int]], list[int]]:
         router = SessionSettings(mode="router", listen=[endpoint])
         client = SessionSettings(mode="client", connect=[endpoint])
         world = World(WorldSettings(scenario, expected_fish=(0, 1, 2)))
@@ -185,8 +188,9 @@ def test_late_fish_is_included_from_a_later_tick(endpoint: str) -> None:
         ):
             await nursery.start(observer.run, hub)
             for fish_id in (0, 1, 2):
-                await nursery.start(Fish(FishSettings(fish_id, policy, scenario.keys)).run,
-                                    fish_session)
+                await nursery.start(
+                    Fish(FishSettings(fish_id, policy, scenario.keys)).run, fish_session
+                )
             nursery.start_soon(world.run, hub)
             await observer.wait_for_tick(3)
             await nursery.start(Fish(FishSettings(9, policy, scenario.keys)).run, fish_session)

@@ -32,8 +32,9 @@ def test_near_neighbour_repels_far_one_attracts() -> None:
 def test_vector_magnitude_by_hand() -> None:
     # One neighbour 0.39 m ahead (= r_t + 1 body length), ε = 1, r_t = 0.26:
     # −dV/dr = 12/0.39·(0.0077073 − 0.0877915) = −2.4641 → 2.4641 m towards it.
-    result = lennard_jones(np.array([[[0.39, 0.0, 0.0]]]), np.ones((1, 1), bool),
-                           target_distance=0.26)
+    result = lennard_jones(
+        np.array([[[0.39, 0.0, 0.0]]]), np.ones((1, 1), bool), target_distance=0.26
+    )
     ratio6 = (0.26 / 0.39) ** 6
     expected = -12.0 / 0.39 * (ratio6**2 - ratio6)
     assert result[0, 0] == pytest.approx(expected)

@@ -23,8 +23,7 @@ def test_batch_equals_loop_of_single_fish(controller: str, behavior: tuple[str, 
         fins, next_memory = act(policy, neighbors, mask, memory)
         for i in range(count):
             own = neighbors[i : i + 1, : seen[i]]
-            single, _ = act(policy, own, np.ones((1, seen[i]), bool),
-                            memory.take(np.array([i])))
+            single, _ = act(policy, own, np.ones((1, seen[i]), bool), memory.take(np.array([i])))
             np.testing.assert_array_equal(single[0], fins[i])
         memory = next_memory
         neighbors = neighbors + rng.normal(0, 0.05, neighbors.shape) * mask[..., None]

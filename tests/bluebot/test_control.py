@@ -43,8 +43,9 @@ def test_homing_depth_bang_bang_with_band() -> None:
 
 
 def test_pid_turns_towards_the_target_and_holds_depth_against_buoyancy() -> None:
-    fins, state = pid(np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]),
-                      state=PidState.zeros(2), period=1.0)
+    fins, state = pid(
+        np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]), state=PidState.zeros(2), period=1.0
+    )
     assert fins[0, 2] > 0 and fins[0, 3] == 0
     assert fins[1, 0] > 0 and fins[1, 2] == 0 and fins[1, 3] == 0
     assert fins[1, 1] == pytest.approx(0.5)

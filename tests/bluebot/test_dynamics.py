@@ -88,8 +88,11 @@ def test_batch_equals_loop_of_single_fish() -> None:
     batch = step(rest_state(position, yaw), fins, duration=1.0, robot=ROBOT, tank=TANK)
     for i in range(7):
         single = step(
-            rest_state(position[i : i + 1], yaw[i : i + 1]), fins[i : i + 1],
-            duration=1.0, robot=ROBOT, tank=TANK,
+            rest_state(position[i : i + 1], yaw[i : i + 1]),
+            fins[i : i + 1],
+            duration=1.0,
+            robot=ROBOT,
+            tank=TANK,
         )
         np.testing.assert_array_equal(single.position[0], batch.position[i])
         np.testing.assert_array_equal(single.yaw[0], batch.yaw[i])

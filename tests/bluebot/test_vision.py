@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 import pytest
@@ -15,7 +16,9 @@ from fishswarm.bluebot.vision import Vision, in_blind_spot, perceive, perceive_l
 NO_OCCLUSION = Vision(blind_width=0.0, sphere_radius=0.0)
 
 
-def _seen(positions: list[list[float]], yaw: list[float], vision: Vision) -> list[set[int]]:
+def _seen(
+    positions: Sequence[Sequence[float]], yaw: Sequence[float], vision: Vision
+) -> list[set[int]]:
     result = perceive(np.array(positions, dtype=float), np.array(yaw, dtype=float), vision=vision)
     return [set(int(j) for j in row[row >= 0]) for row in result.index]
 
@@ -34,7 +37,7 @@ def test_range_limits_what_is_seen() -> None:
 def test_blind_spot_hides_a_fish_directly_behind() -> None:
     # Observer at origin facing +x. Behind at (−1, 0.01): lateral 0.01 < w/2 = 0.025 → hidden.
     # Behind at (−1, 0.03): lateral 0.03 > 0.025 → seen. In front at (1, 0): seen.
-    positions = [[1, 1, 0], [0, 1.01, 0], [0, 1.03, 0], [2, 1, 0]]
+    positions: list[list[float]] = [[1, 1, 0], [0, 1.01, 0], [0, 1.03, 0], [2, 1, 0]]
     seen = _seen(positions, [0, 0, 0, 0], Vision(blind_width=0.05, sphere_radius=0.0))
     assert seen[0] == {2, 3}
 
@@ -73,7 +76,7 @@ def test_only_visible_fish_occlude() -> None:
     # Observer at (1, 1) facing +x. Fish 1 straight behind at 0.5 m is in the blind strip;
     # fish 2 behind at (0, 1.04) lies 0.04 m off the heading line (outside the strip) and
     # within atan(0.065/0.5) = 7.4° of fish 1's direction (2.3°).
-    positions = [[1, 1, 0], [0.5, 1, 0], [0, 1.04, 0]]
+    positions: list[list[float]] = [[1, 1, 0], [0.5, 1, 0], [0, 1.04, 0]]
     # Fish 1 is unseen, so it cannot hide fish 2.
     assert _seen(positions, [0] * 3, Vision(blind_width=0.05, sphere_radius=0.065))[0] == {2}
     # Without a blind spot, fish 1 is seen and hides fish 2.
@@ -101,10 +104,12 @@ def test_neighbours_come_nearest_first_in_body_frame() -> None:
 def test_noise_is_per_fish_and_proportional_to_distance() -> None:
     positions = np.array([[0.0, 0, 0], [1.0, 0, 0], [0.0, 2.0, 0]])
     vision = Vision(blind_width=0, sphere_radius=0, noise=0.1)
-    first = perceive(positions, np.zeros(3),
-                     vision=vision, rngs=[np.random.default_rng(i) for i in range(3)])
-    second = perceive(positions, np.zeros(3),
-                      vision=vision, rngs=[np.random.default_rng(i) for i in range(3)])
+    first = perceive(
+        positions, np.zeros(3), vision=vision, rngs=[np.random.default_rng(i) for i in range(3)]
+    )
+    second = perceive(
+        positions, np.zeros(3), vision=vision, rngs=[np.random.default_rng(i) for i in range(3)]
+    )
     np.testing.assert_array_equal(first.neighbors, second.neighbors)
     clean = perceive(positions, np.zeros(3), vision=NO_OCCLUSION)
     assert not np.array_equal(first.neighbors, clean.neighbors)
@@ -126,7 +131,8 @@ def test_landmark_in_blind_spot_is_hidden() -> None:
 @settings(max_examples=50, deadline=None)
 @given(
     positions=hnp.arrays(
-        np.float64, st.tuples(st.integers(1, 12), st.just(3)),
+        np.float64,
+        st.tuples(st.integers(1, 12), st.just(3)),
         elements=st.sampled_from([0.0, 0.5, 1.0, 1.5]),
     ),
     yaw=st.floats(-math.pi, math.pi),

@@ -28,9 +28,23 @@ def _run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
 
 def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -> None:
     record, summary = tmp_path / "run.mcap", tmp_path / "run.json"
-    result = _run("run", "--fish", "6", "--duration", "4", "--seed", "7", "--procs", "2",
-                  "--listen", f"tcp/127.0.0.1:{free_port()}",
-                  "--record", str(record), "--summary", str(summary))
+    result = _run(
+        "run",
+        "--fish",
+        "6",
+        "--duration",
+        "4",
+        "--seed",
+        "7",
+        "--procs",
+        "2",
+        "--listen",
+        f"tcp/127.0.0.1:{free_port()}",
+        "--record",
+        str(record),
+        "--summary",
+        str(summary),
+    )
     assert result.returncode == 0, result.stderr
     assert "tick 4/4" in result.stderr
     data = json.loads(summary.read_text())
@@ -38,8 +52,12 @@ def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -
     assert data["scenario"]["fish"] == 6 and data["scenario"]["seed"] == 7
     assert data["counts"]["ticks"] == 4
     assert data["real_time_factor"] > 1
-    for name in ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance",
-                 "neighbors_seen"):
+    for name in (
+        "centroid_distance",
+        "pairwise_distance",
+        "nearest_neighbor_distance",
+        "neighbors_seen",
+    ):
         assert set(data["metrics"][name]) == {"initial", "final", "change_percent"}
 
     npz, csv = tmp_path / "out.npz", tmp_path / "out.csv"
@@ -60,9 +78,20 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
     config = tmp_path / "scenario.toml"
     config.write_text('[scenario]\nfish = 4\nbehavior = "aggregation"\nduration = 2\nseed = 9\n')
     summary = tmp_path / "s.json"
-    result = _run("run", "--config", str(config), "--seed", "10", "--quiet",
-                  "--listen", f"tcp/127.0.0.1:{free_port()}", "--record", str(tmp_path / "r.mcap"),
-                  "--summary", str(summary))
+    result = _run(
+        "run",
+        "--config",
+        str(config),
+        "--seed",
+        "10",
+        "--quiet",
+        "--listen",
+        f"tcp/127.0.0.1:{free_port()}",
+        "--record",
+        str(tmp_path / "r.mcap"),
+        "--summary",
+        str(summary),
+    )
     assert result.returncode == 0, result.stderr
     scenario = json.loads(summary.read_text())["scenario"]
     assert (scenario["fish"], scenario["behavior"], scenario["seed"]) == (4, "aggregation", 10)
@@ -112,18 +141,40 @@ def test_export_of_a_non_recording_fails_clearly(tmp_path: Path) -> None:
 
 
 def test_fish_alone_without_router_fails_clearly() -> None:
-    result = _run("fish", "--id", "3", "--connect", f"tcp/127.0.0.1:{free_port()}",
-                  "--connect-timeout", "0.5", timeout=30)
+    result = _run(
+        "fish",
+        "--id",
+        "3",
+        "--connect",
+        f"tcp/127.0.0.1:{free_port()}",
+        "--connect-timeout",
+        "0.5",
+        timeout=30,
+    )
     assert result.returncode == 1
     assert "is a fishswarm run or router listening there" in result.stderr
 
 
 def test_ctrl_c_stops_the_run_within_two_seconds(tmp_path: Path) -> None:
     with subprocess.Popen(
-        [*FISHSWARM, "run", "--fish", "5", "--duration", "1000000", "--procs", "2",
-         "--listen", f"tcp/127.0.0.1:{free_port()}", "--record", str(tmp_path / "r.mcap"),
-         "--summary", str(tmp_path / "s.json")],
-        stderr=subprocess.PIPE, text=True,
+        [
+            *FISHSWARM,
+            "run",
+            "--fish",
+            "5",
+            "--duration",
+            "1000000",
+            "--procs",
+            "2",
+            "--listen",
+            f"tcp/127.0.0.1:{free_port()}",
+            "--record",
+            str(tmp_path / "r.mcap"),
+            "--summary",
+            str(tmp_path / "s.json"),
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
     ) as process:
         try:
             assert process.stderr is not None
