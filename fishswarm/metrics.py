@@ -4,17 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+from scipy.spatial.distance import pdist
 
 FloatArray = NDArray[np.float64]
 
 METRIC_NAMES = ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance")
-
-
-def pairwise_distances(position: FloatArray) -> FloatArray:
-    """(N, N) distances between fish, m."""
-    difference = position[:, None, :] - position[None, :, :]
-    result: FloatArray = np.sqrt(np.einsum("ijd,ijd->ij", difference, difference))
-    return result
 
 
 def centroid_distance(position: FloatArray) -> float:
@@ -31,20 +26,17 @@ def centroid_distance(position: FloatArray) -> float:
 
 def pairwise_distance(position: FloatArray) -> float:
     """Mean distance over all pairs of fish, m."""
-    count = position.shape[0]
-    if count < 2:
+    if position.shape[0] < 2:
         return 0.0
-    upper = np.triu_indices(count, k=1)
-    return float(pairwise_distances(position)[upper].mean())
+    return float(pdist(position).mean())
 
 
 def nearest_neighbor_distance(position: FloatArray) -> float:
     """Distance of each fish to its nearest other fish, averaged over fish, m."""
     if position.shape[0] < 2:
         return 0.0
-    distances = pairwise_distances(position)
-    np.fill_diagonal(distances, np.inf)
-    return float(distances.min(axis=1).mean())
+    distance, _ = cKDTree(position).query(position, k=2)
+    return float(distance[:, 1].mean())
 
 
 def swarm_metrics(position: FloatArray, neighbors_seen: NDArray[np.int64]) -> dict[str, float]:

@@ -22,6 +22,7 @@ from fishswarm.bluebot.vision import Vision
 from fishswarm.protocols.keys import KeySpace
 
 BEHAVIORS = ("dispersion", "aggregation")
+SPAWN_REGIONS = ("ball", "tank")
 
 
 class ConfigError(ValueError):
@@ -44,6 +45,8 @@ class Scenario:
             diagonal for dispersion.
         spawn_radius: fish start uniformly within this distance of the tank centre, m; default
             2 body lengths for dispersion, 10 for aggregation (the study's set-ups).
+        spawn_region: ``ball`` (within ``spawn_radius`` of the centre, clipped to the tank) or
+            ``tank`` (uniform over the whole tank).
         tank: tank size (x, y, z), m.
         visual_range, blind_width, sphere_radius, vision_noise: the vision model (SPEC §1.2).
         channel_range: how far a broadcast carries, m.
@@ -60,6 +63,7 @@ class Scenario:
     caudal_cap: float = 1.0
     target_distance: float | None = None
     spawn_radius: float | None = None
+    spawn_region: str = "ball"
     tank: tuple[float, float, float] = Tank().size
     visual_range: float = 3.0
     blind_width: float = 0.05
@@ -85,6 +89,10 @@ class Scenario:
         need(
             self.controller in CONTROLLERS,
             f"controller must be one of {', '.join(CONTROLLERS)}, got {self.controller!r}",
+        )
+        need(
+            self.spawn_region in SPAWN_REGIONS,
+            f"spawn_region must be one of {', '.join(SPAWN_REGIONS)}, got {self.spawn_region!r}",
         )
         for name in ("duration", "control_period"):
             value = getattr(self, name)
@@ -127,6 +135,22 @@ class Scenario:
     def the_tank(self) -> Tank:
         """The tank as a :class:`Tank`."""
         return Tank(tuple(self.tank))  # type: ignore[arg-type]
+
+    @classmethod
+    def crowded(cls, fish: int, *, neighbors: float = 25.0, **settings: Any) -> Scenario:
+        """A scenario whose tank grows with the swarm so that each fish has about
+        ``neighbors`` others within visual range (for benchmarks of large swarms).
+
+        The study's tank is kept up to 25 fish. Beyond, the horizontal area is chosen so that
+        a disc of visual range holds ``neighbors`` fish on average; fish start uniformly over
+        the whole tank.
+        """
+        base = cls(**settings)
+        if fish <= 25:
+            return base.replace(fish=fish)
+        area = fish * math.pi * base.visual_range**2 / neighbors
+        side = math.sqrt(area)
+        return base.replace(fish=fish, tank=(side, side, base.tank[2]), spawn_region="tank")
 
     def vision(self) -> Vision:
         """The vision model."""

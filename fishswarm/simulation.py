@@ -47,6 +47,9 @@ def spawn_pose(scenario: Scenario, fish_id: int) -> tuple[FloatArray, float]:
     (clipped into the tank), uniform yaw."""
     rng = stream(scenario.seed, Stream.SPAWN, fish_id)
     tank = scenario.the_tank()
+    if scenario.spawn_region == "tank":
+        position = rng.uniform(0.0, 1.0, 3) * np.asarray(tank.size)
+        return position, float(rng.uniform(-np.pi, np.pi))
     direction = rng.normal(size=3)
     direction /= max(float(np.linalg.norm(direction)), 1e-12)
     radius = scenario.resolved_spawn_radius() * rng.uniform() ** (1 / 3)

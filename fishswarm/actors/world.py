@@ -91,6 +91,7 @@ class LostFish:
 @dataclass
 class _Tick:
     commands: dict[int, Command] = field(default_factory=dict)
+    waiting: set[int] = field(default_factory=set)
     report: ChannelReport | None = None
 
 
@@ -201,7 +202,7 @@ class World:
                 return
             await self._resume.wait()
             inbox_counts = await self._inbox_counts()
-            self._current = _Tick(report=self._current.report)
+            self._current = _Tick(waiting=set(self._ids.tolist()), report=self._current.report)
             for index, fish_id in enumerate(self._ids.tolist()):
                 perception = Perception(
                     fish_id,
@@ -258,14 +259,10 @@ class World:
     async def _collect_commands(self) -> None:
         deadline = trio.current_time() + self.settings.command_timeout
         with trio.move_on_at(deadline):
-            while self._waiting():
+            while self._current.waiting:
                 self._handle(await self._events.receive())
-        for fish_id in sorted(self._waiting()):
+        for fish_id in sorted(self._current.waiting):
             self._mark_lost(fish_id, f"no command within {self.settings.command_timeout:g} s")
-
-    def _waiting(self) -> set[int]:
-        lost = {f.fish_id for f in self.lost if f.tick == self.tick}
-        return set(self._ids.tolist()) - set(self._current.commands) - lost
 
     def _drain(self) -> None:
         while (event := self._events.receive_nowait()) is not None:
@@ -289,10 +286,11 @@ class World:
         sender, _ = self.keys.member_of(key)
         if sender != str(command.fish_id):
             self._intake.reject(key, "misaddressed", f"command of fish {command.fish_id}")
-        elif command.tick != self.tick or command.fish_id in self._current.commands:
+        elif command.tick != self.tick or command.fish_id not in self._current.waiting:
             self._intake.reject(key, "stale", f"command for tick {command.tick} at {self.tick}")
-        elif command.fish_id in self._ids:
+        else:
             self._current.commands[command.fish_id] = command
+            self._current.waiting.discard(command.fish_id)
 
     def _on_alive(self, key: str, alive: bool) -> None:
         try:
@@ -318,6 +316,7 @@ class World:
         log.warning("fish %d lost at tick %d: %s", fish_id, self.tick, reason)
         self.lost.append(LostFish(fish_id, self.tick, reason))
         self._alive_fish.discard(fish_id)
+        self._current.waiting.discard(fish_id)
 
     def _drop_lost(self) -> None:
         gone = {f.fish_id for f in self.lost if f.tick == self.tick}

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -155,8 +156,6 @@ def _in_range(position: FloatArray, visual_range: float) -> tuple[NDArray[np.int
     """
     count = position.shape[0]
     if count >= KD_TREE_MIN_FISH:
-        from scipy.spatial import cKDTree
-
         tree = cKDTree(position)
         k = min(count, 64)
         while True:
