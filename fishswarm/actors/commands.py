@@ -53,7 +53,7 @@ USER_ERRORS = (ConnectError, StartTimeout, RecordingError, WorkerFailed, ConfigE
 def _run_trio(main: Callable[[], Any]) -> Any:
     """Run ``main`` under trio; errors a user can fix come out as one :class:`UserError`."""
     try:
-        return trio.run(main, strict_exception_groups=False)
+        return trio.run(main)
     except KeyboardInterrupt:
         raise
     except BaseExceptionGroup as group:
@@ -112,6 +112,7 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         summary=args.summary,
         start_timeout=args.start_timeout,
         log_level=args.log_level,
+        handle_signals=True,
     )
     print(
         f"fishswarm: {scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
@@ -122,6 +123,11 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
     show = None if args.quiet else progress_printer(scenario.ticks)
     result = _run_trio(lambda: run_swarm(settings, on_progress=show))
     summary = result.summary
+    if summary["status"] == "interrupted":
+        print(
+            "\nfishswarm run: interrupted; recording and summary hold the run so far",
+            file=sys.stderr,
+        )
     for line in summary["workers_died"]:
         print(f"fishswarm run: error: {line}", file=sys.stderr)
     print(_summary_text(summary), file=sys.stderr)
@@ -159,12 +165,11 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
     keys = scenario.keys
 
     async def main() -> None:
+        settings = FishSettings(
+            tuple(args.ids), policy, keys, perception_timeout=args.perception_timeout
+        )
         async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
-            for fish_id in args.ids:
-                settings = FishSettings(
-                    fish_id, policy, keys, perception_timeout=args.perception_timeout
-                )
-                await nursery.start(Fish(settings).run, session)
+            await nursery.start(Fish(settings).run, session)
             print(f"fish {', '.join(map(str, args.ids))} up on {args.connect}", file=sys.stderr)
 
     _run_trio(main)

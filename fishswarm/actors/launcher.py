@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import signal
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -56,6 +57,8 @@ class LaunchSettings:
         start_timeout: longest wait for every fish to come up, s.
         command_timeout: a fish silent this long in a tick is marked lost, s.
         log_level: logging level of the workers.
+        handle_signals: stop cleanly on SIGINT (Ctrl-C) and SIGTERM, recording the run as
+            interrupted (needs the main thread; the command line sets it).
     """
 
     scenario: Scenario
@@ -66,6 +69,7 @@ class LaunchSettings:
     start_timeout: float = 60.0
     command_timeout: float = 10.0
     log_level: str = "WARNING"
+    handle_signals: bool = False
 
 
 @dataclass
@@ -96,6 +100,7 @@ async def run_swarm(
         )
     )
     channel = Channel(scenario)
+    interrupted = trio.Event()
     with contextlib.ExitStack() as files:
         recorder = (
             files.enter_context(open_recorder(settings.record, scenario.to_dict()))
@@ -119,13 +124,18 @@ async def run_swarm(
                     )
                     workers.append(start_worker(spec))
                 nursery.start_soon(_watch_workers, workers, died, world)
+                if settings.handle_signals:
+                    nursery.start_soon(_watch_signals, interrupted, nursery.cancel_scope)
                 await world.run(session)
                 with trio.move_on_after(5.0):
                     await observer.wait_for_tick(world.tick)
                 status = "stopped" if world.state_name == "stopped" else "finished"
                 nursery.cancel_scope.cancel()
-        except KeyboardInterrupt:
-            status = "interrupted"
+            if interrupted.is_set():
+                status = "interrupted"
+        except BaseException as error:
+            if _contains(error, KeyboardInterrupt):
+                status = "interrupted"
             raise
         finally:
             with trio.CancelScope(shield=True):
@@ -143,13 +153,31 @@ async def run_swarm(
             if settings.summary is not None:
                 settings.summary.parent.mkdir(parents=True, exist_ok=True)
                 settings.summary.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
-    exit_code = EXIT_WORKER_DIED if died else EXIT_OK
+    exit_code = (
+        EXIT_INTERRUPTED if status == "interrupted" else EXIT_WORKER_DIED if died else EXIT_OK
+    )
     return RunResult(exit_code, summary, observer.history)
+
+
+def _contains(error: BaseException, kind: type[BaseException]) -> bool:
+    """Whether ``error`` is ``kind`` or an exception group holding one."""
+    if isinstance(error, BaseExceptionGroup):
+        return error.subgroup(kind) is not None
+    return isinstance(error, kind)
 
 
 def _connect_to(listen: str) -> str:
     """Where local workers connect for a listening endpoint (0.0.0.0 → loopback)."""
     return listen.replace("0.0.0.0", "127.0.0.1").replace("[::]", "[::1]")
+
+
+async def _watch_signals(interrupted: trio.Event, scope: trio.CancelScope) -> None:
+    with trio.open_signal_receiver(signal.SIGINT, signal.SIGTERM) as signals:
+        async for number in signals:
+            log.warning("%s received: stopping", signal.Signals(number).name)
+            interrupted.set()
+            scope.cancel()
+            return
 
 
 async def _watch_workers(workers: list[Worker], died: list[str], world: World) -> None:

@@ -74,23 +74,21 @@ def worker_main(spec: WorkerSpec, connection: Connection) -> None:
 
 
 async def _serve(spec: WorkerSpec, connection: Connection) -> dict[str, Any]:
-    keys = KeySpace(spec.swarm)
-    fishes = [
-        Fish(FishSettings(i, spec.policy, keys, perception_timeout=spec.perception_timeout))
-        for i in spec.fish_ids
-    ]
+    fish = Fish(
+        FishSettings(
+            spec.fish_ids,
+            spec.policy,
+            KeySpace(spec.swarm),
+            perception_timeout=spec.perception_timeout,
+        )
+    )
     settings = SessionSettings(mode="client", connect=[spec.connect])
     async with open_session(settings) as session, trio.open_nursery() as nursery:
-        for fish in fishes:
-            await nursery.start(fish.run, session)
+        await nursery.start(fish.run, session)
         connection.send(("ready", spec.index))
         await trio.to_thread.run_sync(_wait_for_stop, connection, abandon_on_cancel=True)
         nursery.cancel_scope.cancel()
-    totals: dict[str, Any] = {}
-    for fish in fishes:
-        for name, value in fish.statistics().items():
-            totals[name] = totals.get(name, 0) + value
-    return totals
+    return dict(fish.statistics())
 
 
 def _wait_for_stop(connection: Connection) -> None:

@@ -21,6 +21,7 @@ import zenoh
 from fishswarm.actors.bridge import (
     Inbox,
     Put,
+    declare_subscriber,
     open_alive_events,
     open_queryable,
     open_subscriber,
@@ -62,6 +63,9 @@ class WorldSettings:
         start_timeout: longest wait for them, s.
         command_timeout: a fish that has not answered a tick within this is marked lost, s.
         channel_timeout: longest wait for the channel's report on a tick, s.
+        admit_delay: a fish that comes up is admitted at the first tick at least this long
+            after the world subscribed to its commands, s (the subscription must reach the
+            router first when the world runs as a client).
     """
 
     scenario: Scenario
@@ -69,6 +73,7 @@ class WorldSettings:
     start_timeout: float = 30.0
     command_timeout: float = 10.0
     channel_timeout: float = 5.0
+    admit_delay: float = 0.1
 
 
 @dataclass
@@ -110,6 +115,8 @@ class World:
         self._intake = Intake("world")
         self._events: Inbox[Event] = Inbox()
         self._alive_fish: set[int] = set()
+        self._session: zenoh.Session | None = None
+        self._command_subscribers: dict[int, tuple[zenoh.Subscriber[None], float]] = {}
         self._channel_alive = 0
         self._ids = np.zeros(0, dtype=np.int64)
         self._state = place(self.scenario, self._ids)
@@ -150,10 +157,10 @@ class World:
         keys = self.keys
         put = publisher(session)
         events = self._events
+        self._session = session
+        # One exact subscription per fish, not one on fish/*/command: a router matches a
+        # wildcard for every message (measured: 155 µs per command against 22 µs).
         async with (
-            open_subscriber(
-                session, keys.fish_commands(), lambda k, p: events.push(("command", k, p))
-            ),
             open_subscriber(
                 session, keys.channel_report, lambda k, p: events.push(("report", k, p))
             ),
@@ -166,13 +173,18 @@ class World:
         ):
             nursery.start_soon(self._serve_control, queries)
             task_status.started()
-            await self._wait_for_fish()
-            started = time.perf_counter()
-            self.state_name = "running"
             try:
-                await self._loop(put)
+                await self._wait_for_fish()
+                started = time.perf_counter()
+                self.state_name = "running"
+                try:
+                    await self._loop(put)
+                finally:
+                    self.wall_time = time.perf_counter() - started
             finally:
-                self.wall_time = time.perf_counter() - started
+                for subscriber, _ in self._command_subscribers.values():
+                    subscriber.undeclare()
+                self._command_subscribers.clear()
             self.state_name = "stopped" if self._stop_requested else "finished"
             nursery.cancel_scope.cancel()
 
@@ -187,6 +199,8 @@ class World:
                 f"{len(missing)} of {len(expected)} fish did not come up within "
                 f"{self.settings.start_timeout:g} s (missing ids: {_ids_text(missing)})"
             )
+        await trio.sleep(self.settings.admit_delay)
+        self._drain()
         self._admit_new_fish()
 
     async def _loop(self, put: Put) -> None:
@@ -305,10 +319,23 @@ class World:
         fish_id = int(member)
         if alive:
             self._alive_fish.add(fish_id)
+            self._subscribe_commands(fish_id)
         else:
             self._alive_fish.discard(fish_id)
             if fish_id in self._ids:
                 self._mark_lost(fish_id, "left (liveliness token gone)")
+
+    def _subscribe_commands(self, fish_id: int) -> None:
+        if fish_id in self._command_subscribers or self._session is None:
+            return
+        events = self._events
+        subscriber = declare_subscriber(
+            self._session,
+            self.keys.command(fish_id),
+            lambda key, payload: events.push(("command", key, payload)),
+            exact=True,
+        )
+        self._command_subscribers[fish_id] = (subscriber, trio.current_time())
 
     def _mark_lost(self, fish_id: int, reason: str) -> None:
         if any(f.fish_id == fish_id and f.tick == self.tick for f in self.lost):
@@ -330,7 +357,12 @@ class World:
         self._broadcasts = self._broadcasts[keep]
 
     def _admit_new_fish(self) -> None:
-        new = sorted(self._alive_fish - set(self._ids.tolist()))
+        ready_since = trio.current_time() - self.settings.admit_delay
+        new = sorted(
+            fish_id
+            for fish_id in self._alive_fish - set(self._ids.tolist())
+            if self._command_subscribers[fish_id][1] <= ready_since
+        )
         if not new:
             return
         for fish_id in new:

@@ -56,6 +56,16 @@ class Memory:
             PidState(self.pid.integral[index], self.pid.previous_error[index]),
         )
 
+    def replaced(self, index: NDArray[np.intp], rows: Memory) -> Memory:
+        """A copy in which the fish at ``index`` remember ``rows`` instead."""
+        dorsal_on = self.dorsal_on.copy()
+        integral = self.pid.integral.copy()
+        previous_error = self.pid.previous_error.copy()
+        dorsal_on[index] = rows.dorsal_on
+        integral[index] = rows.pid.integral
+        previous_error[index] = rows.pid.previous_error
+        return Memory(dorsal_on, PidState(integral, previous_error))
+
 
 def desired_motion(policy: Policy, neighbors: FloatArray, mask: BoolArray) -> FloatArray:
     """(B, 3) body-frame target vector of B fish, m."""

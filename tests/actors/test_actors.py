@@ -98,7 +98,7 @@ def test_channel_delivers_in_range_with_sender_position_in_receiver_frame(endpoi
 def test_fish_turns_fins_off_when_perceptions_stop_and_resumes(endpoint: str) -> None:
     scenario = Scenario()
     keys = scenario.keys
-    settings = FishSettings(3, policy_of(scenario), keys, perception_timeout=0.3)
+    settings = FishSettings((3,), policy_of(scenario), keys, perception_timeout=0.3)
 
     async def main() -> tuple[Command, Command, dict[str, int]]:
         router = SessionSettings(mode="router", listen=[endpoint])
@@ -148,7 +148,9 @@ def test_world_answers_status_pause_resume_and_stop(endpoint: str) -> None:
             trio.open_nursery() as nursery,
         ):
             for fish_id in (0, 1):
-                await nursery.start(Fish(FishSettings(fish_id, policy, scenario.keys)).run, other)
+                await nursery.start(
+                    Fish(FishSettings((fish_id,), policy, scenario.keys)).run, other
+                )
             await nursery.start(world.run, hub)
             with trio.fail_after(10):
                 while world.tick < 2:

@@ -189,11 +189,11 @@ def test_late_fish_is_included_from_a_later_tick(endpoint: str) -> None:
             await nursery.start(observer.run, hub)
             for fish_id in (0, 1, 2):
                 await nursery.start(
-                    Fish(FishSettings(fish_id, policy, scenario.keys)).run, fish_session
+                    Fish(FishSettings((fish_id,), policy, scenario.keys)).run, fish_session
                 )
             nursery.start_soon(world.run, hub)
             await observer.wait_for_tick(3)
-            await nursery.start(Fish(FishSettings(9, policy, scenario.keys)).run, fish_session)
+            await nursery.start(Fish(FishSettings((9,), policy, scenario.keys)).run, fish_session)
             with trio.fail_after(10):
                 while not world.joined:
                     await trio.sleep(0.01)

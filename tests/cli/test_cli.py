@@ -191,7 +191,7 @@ def test_ctrl_c_stops_the_run_within_two_seconds(tmp_path: Path) -> None:
     assert code == 130
     assert elapsed < 2.0
     summary = json.loads((tmp_path / "s.json").read_text())
-    assert summary["status"] == "interrupted"
+    assert summary["status"] == "interrupted", summary
     assert _no_worker_left()
 
 
