@@ -38,7 +38,8 @@ def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -
         "--config",
         type=Path,
         metavar="TOML",
-        help="scenario file; keys are the long option names with _ (see docs)",
+        help="scenario file (TOML); its settings are listed in the README under "
+        "'Scenario files'",
     )
     for name in names:
         flag, kind, text = _SCENARIO_FLAGS[name]

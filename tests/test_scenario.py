@@ -46,3 +46,11 @@ def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
 def test_bad_settings_say_what_is_wrong(changes: dict[str, object], message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         Scenario().replace(**changes)
+
+
+@pytest.mark.parametrize(
+    "path", sorted((Path(__file__).resolve().parents[1] / "experiments").glob("*.toml"))
+)
+def test_shipped_scenario_files_load(path: Path) -> None:
+    scenario = Scenario.from_toml(path)
+    assert scenario.behavior == path.stem

@@ -48,6 +48,9 @@ log = logging.getLogger(__name__)
 
 Event = tuple[str, str, bytes | bool]
 
+NO_LANDMARKS = np.zeros((0, 3))
+NO_LANDMARKS.setflags(write=False)
+
 
 class StartTimeout(RuntimeError):
     """The fish the world waits for did not all come up in time."""
@@ -217,15 +220,14 @@ class World:
             await self._resume.wait()
             inbox_counts = await self._inbox_counts()
             self._current = _Tick(waiting=set(self._ids.tolist()), report=self._current.report)
-            for index, fish_id in enumerate(self._ids.tolist()):
+            depths = self._state.position[:, 2].tolist()
+            counts = inbox_counts.tolist()
+            for index, (fish_id, neighbors) in enumerate(
+                zip(self._ids.tolist(), perceived.split(), strict=True)
+            ):
                 perception = Perception(
-                    fish_id,
-                    self.tick,
-                    self.time,
-                    float(self._state.position[index, 2]),
-                    perceived.of(index),
-                    np.zeros((0, 3)),
-                    int(inbox_counts[index]),
+                    fish_id, self.tick, self.time, depths[index], neighbors, NO_LANDMARKS,
+                    counts[index],
                 )
                 put(self.keys.perception(fish_id), encode(perception))
             self._messages_out += self._ids.size

@@ -47,7 +47,8 @@ def lennard_jones_force(
     Returns:
         Same shape as ``distance``, m.
     """
-    ratio6 = (target_distance / distance) ** 6
+    ratio2 = (target_distance / distance) ** 2
+    ratio6 = ratio2 * ratio2 * ratio2
     result: FloatArray = 12.0 * epsilon / distance * (ratio6 * ratio6 - ratio6)
     return result
 
