@@ -38,8 +38,7 @@ def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -
         "--config",
         type=Path,
         metavar="TOML",
-        help="scenario file (TOML); its settings are listed in the README under "
-        "'Scenario files'",
+        help="scenario file (TOML); its settings are listed in the README under 'Scenario files'",
     )
     for name in names:
         flag, kind, text = _SCENARIO_FLAGS[name]

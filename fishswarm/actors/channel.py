@@ -89,14 +89,12 @@ class Channel:
                 self._take_outbox(key, payload)
 
     def _take_outbox(self, key: str, payload: bytes) -> None:
-        broadcast = self._intake.decode(key, payload, Broadcast)
-        if broadcast is None:
-            return
         sender, _ = self.keys.member_of(key)
-        if sender != str(broadcast.sender_id):
-            self._intake.reject(key, "misaddressed", f"broadcast of fish {broadcast.sender_id}")
-            return
-        self._outbox[broadcast.tick].append(broadcast)
+        broadcast = self._intake.decode_addressed(
+            key, payload, Broadcast, field="sender_id", owner=int(sender)
+        )
+        if broadcast is not None:
+            self._outbox[broadcast.tick].append(broadcast)
 
     async def _gather(self, snapshot: Snapshot) -> list[Broadcast]:
         sent_tick = snapshot.tick - 1

@@ -153,11 +153,10 @@ class Fish:
                 self._decide(put)
 
     def _take_perception(self, index: int, key: str, payload: bytes) -> None:
-        perception = self._intake.decode(key, payload, Perception)
+        perception = self._intake.decode_addressed(
+            key, payload, Perception, field="fish_id", owner=self.settings.fish_ids[index]
+        )
         if perception is None:
-            return
-        if perception.fish_id != self.settings.fish_ids[index]:
-            self._intake.reject(key, "misaddressed", f"perception for fish {perception.fish_id}")
             return
         if perception.tick <= self._last_tick[index] or index in self._waiting:
             self._intake.reject(key, "stale", f"tick {perception.tick} repeated or out of order")
@@ -171,13 +170,10 @@ class Fish:
         self._waiting[index] = _Waiting(perception, deadline)
 
     def _take_delivery(self, index: int, key: str, payload: bytes) -> None:
-        delivery = self._intake.decode(key, payload, Delivery)
-        if delivery is None:
-            return
-        if delivery.receiver_id != self.settings.fish_ids[index]:
-            self._intake.reject(key, "misaddressed", f"delivery for fish {delivery.receiver_id}")
-            return
-        if delivery.tick > self._last_tick[index]:
+        delivery = self._intake.decode_addressed(
+            key, payload, Delivery, field="receiver_id", owner=self.settings.fish_ids[index]
+        )
+        if delivery is not None and delivery.tick > self._last_tick[index]:
             self._mail[index].append(delivery)
 
     def _next_deadline(self) -> float:

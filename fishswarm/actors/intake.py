@@ -37,6 +37,20 @@ class Intake:
         self.accepted += 1
         return message
 
+    def decode_addressed(
+        self, key: str, payload: bytes, expected: type[M], *, field: str, owner: int
+    ) -> M | None:
+        """Decode a message that must name ``owner`` in ``field`` (the fish its key is about).
+
+        A valid message about another fish is rejected as misaddressed.
+        """
+        message = self.decode(key, payload, expected)
+        if message is not None and getattr(message, field) != owner:
+            self.accepted -= 1
+            self.reject(key, "misaddressed", f"{field} {getattr(message, field)}, key of {owner}")
+            return None
+        return message
+
     def reject(self, key: str, kind: str, reason: str) -> None:
         """Count a rejected message; log the first of each (sender key, kind)."""
         self.rejected[kind] += 1

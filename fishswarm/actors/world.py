@@ -226,7 +226,12 @@ class World:
                 zip(self._ids.tolist(), perceived.split(), strict=True)
             ):
                 perception = Perception(
-                    fish_id, self.tick, self.time, depths[index], neighbors, NO_LANDMARKS,
+                    fish_id,
+                    self.tick,
+                    self.time,
+                    depths[index],
+                    neighbors,
+                    NO_LANDMARKS,
                     counts[index],
                 )
                 put(self.keys.perception(fish_id), encode(perception))
@@ -296,13 +301,13 @@ class World:
             if report is not None:
                 self._current.report = report
             return
-        command = self._intake.decode(key, payload, Command)
+        sender, _ = self.keys.member_of(key)
+        command = self._intake.decode_addressed(
+            key, payload, Command, field="fish_id", owner=int(sender)
+        )
         if command is None:
             return
-        sender, _ = self.keys.member_of(key)
-        if sender != str(command.fish_id):
-            self._intake.reject(key, "misaddressed", f"command of fish {command.fish_id}")
-        elif command.tick != self.tick or command.fish_id not in self._current.waiting:
+        if command.tick != self.tick or command.fish_id not in self._current.waiting:
             self._intake.reject(key, "stale", f"command for tick {command.tick} at {self.tick}")
         else:
             self._current.commands[command.fish_id] = command

@@ -108,6 +108,19 @@ def _command_fields(**overrides: object) -> dict[str, object]:
     return fields
 
 
+def _perception_fields(**overrides: object) -> dict[str, object]:
+    fields: dict[str, object] = {
+        "fish_id": 1,
+        "tick": 0,
+        "time": 0.0,
+        "depth": 0.0,
+        "neighbors": np.zeros((0, 3)),
+        "landmarks": np.zeros((0, 3)),
+    }
+    fields.update(overrides)
+    return fields
+
+
 @pytest.mark.parametrize(
     ("payload", "reason"),
     [
@@ -127,45 +140,15 @@ def _command_fields(**overrides: object) -> dict[str, object]:
         (_raw("command", _command_fields(extra=1)), "unexpected keyword"),
         (_raw("command", {"fish_id": 1}), "missing"),
         (
-            _raw(
-                "perception",
-                {
-                    "fish_id": 1,
-                    "tick": 0,
-                    "time": math.inf,
-                    "depth": 0.0,
-                    "neighbors": np.zeros((0, 3)),
-                    "landmarks": np.zeros((0, 3)),
-                },
-            ),
+            _raw("perception", _perception_fields(time=math.inf)),
             "time must be finite",
         ),
         (
-            _raw(
-                "perception",
-                {
-                    "fish_id": 1,
-                    "tick": 0,
-                    "time": 0.0,
-                    "depth": 0.0,
-                    "neighbors": np.zeros((2, 2)),
-                    "landmarks": np.zeros((0, 3)),
-                },
-            ),
+            _raw("perception", _perception_fields(neighbors=np.zeros((2, 2)))),
             r"shape \(n, 3\)",
         ),
         (
-            _raw(
-                "perception",
-                {
-                    "fish_id": 1,
-                    "tick": 0,
-                    "time": 0.0,
-                    "depth": 0.0,
-                    "neighbors": np.zeros((MAX_ROWS + 1, 3)),
-                    "landmarks": np.zeros((0, 3)),
-                },
-            ),
+            _raw("perception", _perception_fields(neighbors=np.zeros((MAX_ROWS + 1, 3)))),
             "exceeds",
         ),
     ],
