@@ -164,6 +164,50 @@ def _parser() -> argparse.ArgumentParser:
         help="endpoint to listen on (default tcp/0.0.0.0:7447)",
     )
 
+    learn = commands.add_parser(
+        "learn",
+        help="learn fish behaviour from observation (Turing learning with CMA-ES)",
+        description="Co-evolve replica fish and classifiers with CMA-ES until the replicas "
+        "behave like the ideal fish (SPEC §4). Writes checkpoints, the best replica, fitness "
+        "curves, spacing/speed and trajectory plots and the learned radii to --out.",
+    )
+    learn.add_argument(
+        "--behavior",
+        choices=["aggregation", "dispersion"],
+        default="aggregation",
+        help="what the ideal fish do (default aggregation)",
+    )
+    learn.add_argument(
+        "--inputs",
+        default="speed,neighbors",
+        help="classifier inputs, comma-separated, from speed, angular-speed, "
+        "neighbors (one learned radius), neighbors2 (two) (default "
+        "speed,neighbors)",
+    )
+    learn.add_argument(
+        "--radii",
+        choices=["bounded", "unbounded"],
+        default="bounded",
+        help="radii clipped to [0, 300] or free from a start in [-40, 300] (default bounded)",
+    )
+    learn.add_argument("--generations", type=int, default=500, help="default 500")
+    learn.add_argument("--models", type=int, default=100, help="replica population (100)")
+    learn.add_argument("--classifiers", type=int, default=100, help="classifier population (100)")
+    learn.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
+    learn.add_argument(
+        "--out", type=Path, default=Path("runs/learn"), help="output folder (default runs/learn)"
+    )
+    learn.add_argument(
+        "--checkpoint-every",
+        type=int,
+        default=10,
+        help="generations between checkpoints (default 10)",
+    )
+    learn.add_argument(
+        "--resume", action="store_true", help="continue from OUT/checkpoint.pkl up to --generations"
+    )
+    learn.add_argument("--quiet", action="store_true", help="no progress lines")
+
     export = commands.add_parser(
         "export",
         help="export a recording to NumPy or CSV",
@@ -190,6 +234,63 @@ def _add_connect(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _learn(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm learn``."""
+    from fishswarm.learning.coevolution import LearningSettings
+    from fishswarm.learning.session import LearningError, learn
+
+    try:
+        settings = LearningSettings(
+            behavior=args.behavior,
+            inputs=tuple(name.strip() for name in args.inputs.split(",") if name.strip()),
+            radii=args.radii,
+            models=args.models,
+            classifiers=args.classifiers,
+            seed=args.seed,
+        )
+    except ValueError as error:
+        raise ConfigError(str(error)) from None
+    every = max(1, args.generations // 50)
+    tty = sys.stderr.isatty()
+
+    def progress(run: Any, record: dict[str, float], seconds: float) -> None:
+        done = run.generation
+        if args.quiet or (done % every and done != args.generations):
+            return
+        left = (args.generations - done) * seconds
+        line = (
+            f"generation {done}/{args.generations}  models best {record['model_best']:.3f} "
+            f"mean {record['model_mean']:.3f}  classifiers best {record['classifier_best']:.3f} "
+            f"mean {record['classifier_mean']:.3f}  {seconds:.2f} s/gen  ~{left / 60:.1f} min left"
+        )
+        sys.stderr.write(("\r" + line) if tty else line + "\n")
+        sys.stderr.flush()
+
+    try:
+        summary = learn(
+            settings,
+            generations=args.generations,
+            out=args.out,
+            checkpoint_every=args.checkpoint_every,
+            resume=args.resume,
+            on_generation=progress,
+        )
+    except LearningError as error:
+        raise ConfigError(str(error)) from None
+    if tty and not args.quiet:
+        sys.stderr.write("\n")
+    ideal, replica = summary["ideal"], summary["replica"]
+    print(
+        f"done: {summary['generations']} generations in {args.out}\n"
+        f"  final spacing  ideal {ideal['final_spacing']:.1f}  replica "
+        f"{replica['final_spacing']:.1f}\n"
+        f"  final speed    ideal {ideal['final_speed']:.2f}  replica {replica['final_speed']:.2f}\n"
+        f"  learned radii  mean {summary['radii']['mean']}  s.d. {summary['radii']['sd']}",
+        file=sys.stderr,
+    )
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fishswarm`` console script."""
     parser = _parser()
@@ -205,6 +306,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "observe": commands.observe,
         "router": commands.router,
         "export": commands.export,
+        "learn": _learn,
     }
     try:
         scenario = _scenario(args) if hasattr(args, "config") else None

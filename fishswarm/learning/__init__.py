@@ -1,0 +1,1 @@
+"""Turing learning of fish behaviour: replicas and classifiers co-evolved with CMA-ES."""

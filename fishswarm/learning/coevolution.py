@@ -1,0 +1,274 @@
+"""Turing learning: replica models and classifiers co-evolved with CMA-ES (pycma ask/tell).
+
+Each generation runs one trial of the ideal fish (its N tracks are the genuine samples) and
+one trial per model (N counterfeit samples each), all from the same start (common random
+numbers). Every classifier judges every sample. A model's fitness is the fraction of
+judgements it fooled; a classifier's is ½(sensitivity + specificity).
+
+Known traps of pycma 4.5, handled here: ``tell`` minimises, so fitness goes in negated;
+runs loop a fixed number of generations (the stopping rules would end a run on tied
+fitness after one iteration); each optimiser draws from its own generator (the ``seed``
+option would reseed numpy's global one); radii live on a scale of 100 so that every
+coordinate has a step size near 1; and thresholded judgements tie easily, so a small share
+of the soft output (the classifier's probability) breaks ties.
+"""
+
+from __future__ import annotations
+
+import math
+import pickle
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import cma
+import numpy as np
+from numpy.typing import NDArray
+
+from fishswarm.learning.arena import (
+    SPREADS,
+    Arena,
+    ideal_velocity,
+    initial_positions,
+    replica_velocity,
+    simulate,
+)
+from fishswarm.learning.features import (
+    check_inputs,
+    feature_count,
+    neighbor_counts,
+    radii_count,
+    samples_from,
+)
+from fishswarm.learning.networks import REPLICA_SIZE, classifier_size, classify
+
+FloatArray = NDArray[np.float64]
+
+RADIUS_SCALE = 100.0
+"""A classifier genome holds radius / 100, so radii move at the pace of the weights."""
+
+RADII_MODES = {"bounded": (0.0, 300.0), "unbounded": (-40.0, 300.0)}
+"""Radii are clipped to [0, 300] (bounded), or start in [−40, 300] and roam free
+(unbounded: a negative radius counts nobody)."""
+
+
+@dataclass(frozen=True)
+class LearningSettings:
+    """What a learning run does.
+
+    Attributes:
+        behavior: ``aggregation`` (start spread 100) or ``dispersion`` (spread 20).
+        inputs: classifier inputs, see :mod:`fishswarm.learning.features`.
+        radii: ``bounded`` or ``unbounded``.
+        models: replica population size.
+        classifiers: classifier population size.
+        seed: master seed.
+        arena: the 2-D world.
+        soft_weight: share of the soft output added to the thresholded fitness.
+    """
+
+    behavior: str = "aggregation"
+    inputs: tuple[str, ...] = ("speed", "neighbors")
+    radii: str = "bounded"
+    models: int = 100
+    classifiers: int = 100
+    seed: int = 0
+    arena: Arena = field(default_factory=Arena)
+    soft_weight: float = 1e-3
+
+    def __post_init__(self) -> None:
+        if self.behavior not in SPREADS:
+            raise ValueError(f"behavior must be one of {', '.join(SPREADS)}, got {self.behavior!r}")
+        check_inputs(self.inputs)
+        if self.radii not in RADII_MODES:
+            raise ValueError(f"radii must be bounded or unbounded, got {self.radii!r}")
+        if self.models < 2 or self.classifiers < 2:
+            raise ValueError("models and classifiers need populations of at least 2")
+        if self.seed < 0:
+            raise ValueError(f"seed must be non-negative, got {self.seed}")
+
+    @property
+    def network_size(self) -> int:
+        """Parameters of a classifier network (radii excluded)."""
+        return classifier_size(feature_count(self.inputs))
+
+    @property
+    def radius_count(self) -> int:
+        """Radii each classifier learns."""
+        return radii_count(self.inputs)
+
+
+@dataclass(frozen=True)
+class Fitness:
+    """Fitness of one generation, thresholded (the study's) and soft.
+
+    Attributes:
+        models: (M,) fraction of judgements each model fooled.
+        classifiers: (C,) ½(sensitivity + specificity) of each classifier.
+        models_soft: (M,) mean "ideal" probability the classifiers gave each model's samples.
+        classifiers_soft: (C,) the same balance computed from probabilities.
+    """
+
+    models: FloatArray
+    classifiers: FloatArray
+    models_soft: FloatArray
+    classifiers_soft: FloatArray
+
+
+def fitness(judgement: FloatArray) -> Fitness:
+    """Fitness from judgements.
+
+    Args:
+        judgement: (C, 1 + M, N) probability that a sample is genuine; trial 0 holds the
+            ideal fish, trials 1..M the models' fish.
+    """
+    hard = (judgement > 0.5).astype(np.float64)
+    sensitivity = hard[:, 0].mean(axis=1)
+    specificity = 1.0 - hard[:, 1:].mean(axis=(1, 2))
+    soft_sensitivity = judgement[:, 0].mean(axis=1)
+    soft_specificity = 1.0 - judgement[:, 1:].mean(axis=(1, 2))
+    return Fitness(
+        models=hard[:, 1:].mean(axis=(0, 2)),
+        classifiers=0.5 * (sensitivity + specificity),
+        models_soft=judgement[:, 1:].mean(axis=(0, 2)),
+        classifiers_soft=0.5 * (soft_sensitivity + soft_specificity),
+    )
+
+
+def radii_of(genomes: FloatArray, settings: LearningSettings) -> FloatArray:
+    """(C, R) radii from classifier genomes (C, network_size + R)."""
+    radii = genomes[:, settings.network_size :] * RADIUS_SCALE
+    if settings.radii == "bounded":
+        low, high = RADII_MODES["bounded"]
+        radii = np.clip(radii, low, high)
+    return radii
+
+
+_TRIALS, _MODELS, _CLASSIFIERS = 1, 2, 3
+
+
+def _stream(seed: int, role: int, *key: int) -> np.random.Generator:
+    """The generator of one role (and generation) of a run, derived from the seed alone."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(role, *key)))
+
+
+class PrivateNormal:
+    """Standard normal samples for pycma from a generator of our own (picklable)."""
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+
+    def __call__(self, *shape: int) -> FloatArray:
+        result: FloatArray = self.rng.standard_normal(shape)
+        return result
+
+
+def _strategy(x0: FloatArray, popsize: int, rng: np.random.Generator) -> Any:
+    options = {
+        "popsize": popsize,
+        "seed": math.nan,
+        "randn": PrivateNormal(rng),
+        "verbose": -9,
+        "verb_log": 0,
+        "verb_disp": 0,
+        "tolfun": 0,
+        "tolfunhist": 0,
+        "tolflatfitness": 10**9,
+        "tolstagnation": 10**9,
+        "tolx": 0,
+        "tolxstagnation": [0, 10**9, 0],
+        "maxiter": 10**9,
+    }
+    return cma.CMAEvolutionStrategy(x0, 1.0, options)
+
+
+class Coevolution:
+    """A learning run, one generation per :meth:`step`; pickle it to checkpoint."""
+
+    def __init__(self, settings: LearningSettings) -> None:
+        self.settings = settings
+        self.generation = 0
+        self.history: list[dict[str, float]] = []
+        self._models = _strategy(
+            np.zeros(REPLICA_SIZE), settings.models, _stream(settings.seed, _MODELS)
+        )
+        low, high = RADII_MODES[settings.radii]
+        radii_start = np.full(settings.radius_count, (low + high) / 2 / RADIUS_SCALE)
+        self._classifiers = _strategy(
+            np.concatenate([np.zeros(settings.network_size), radii_start]),
+            settings.classifiers,
+            _stream(settings.seed, _CLASSIFIERS),
+        )
+        self.population: FloatArray = np.zeros((0, REPLICA_SIZE))
+        self.classifier_population: FloatArray = np.zeros((0, 0))
+        self.last_fitness: Fitness | None = None
+
+    def trial_start(self, generation: int, trials: int) -> FloatArray:
+        """The start positions of a generation (shared by the ideal fish and every model)."""
+        rng = _stream(self.settings.seed, _TRIALS, generation)
+        spread = SPREADS[self.settings.behavior]
+        return initial_positions(rng, arena=self.settings.arena, spread=spread, models=trials)
+
+    def step(self) -> dict[str, float]:
+        """Run one generation: simulate, judge, tell both optimisers; returns its record."""
+        settings, arena = self.settings, self.settings.arena
+        models = np.array(self._models.ask())
+        classifiers = np.array(self._classifiers.ask())
+        start = self.trial_start(self.generation, 1 + len(models))
+        ideal = simulate(lambda p: ideal_velocity(p, arena=arena), start[:1], arena=arena)
+        replicas = simulate(
+            lambda p: replica_velocity(p, models, arena=arena), start[1:], arena=arena
+        )
+        tracks = np.concatenate([ideal, replicas])
+        samples = samples_from(tracks, settings.inputs, arena=arena)
+        own = (
+            neighbor_counts(samples, radii_of(classifiers, settings))
+            if settings.radius_count
+            else np.zeros((len(classifiers), *samples.fixed.shape[:2], 0))
+        )
+        judgement = classify(classifiers[:, : settings.network_size], samples.fixed, own)
+        result = fitness(judgement.reshape(len(classifiers), 1 + len(models), arena.fish))
+        weight = settings.soft_weight
+        self._models.tell(list(models), list(-(result.models + weight * result.models_soft)))
+        self._classifiers.tell(
+            list(classifiers), list(-(result.classifiers + weight * result.classifiers_soft))
+        )
+        self.population, self.classifier_population = models, classifiers
+        self.last_fitness = result
+        record = {
+            "generation": float(self.generation),
+            "model_best": float(result.models.max()),
+            "model_mean": float(result.models.mean()),
+            "classifier_best": float(result.classifiers.max()),
+            "classifier_mean": float(result.classifiers.mean()),
+        }
+        self.history.append(record)
+        self.generation += 1
+        return record
+
+    def best_model(self) -> FloatArray:
+        """Weights of the fittest model of the last generation (soft output breaks ties)."""
+        if self.last_fitness is None:
+            raise RuntimeError("no generation has run yet")
+        score = self.last_fitness.models + self.settings.soft_weight * self.last_fitness.models_soft
+        best: FloatArray = self.population[int(np.argmax(score))]
+        return best
+
+    def final_radii(self) -> FloatArray:
+        """(C, R) radii of the last classifier population."""
+        return radii_of(self.classifier_population, self.settings)
+
+    def save(self, path: Path) -> None:
+        """Write a checkpoint (atomically: a crash never leaves half a file)."""
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial = path.with_suffix(path.suffix + ".partial")
+        partial.write_bytes(pickle.dumps(self))
+        partial.replace(path)
+
+    @staticmethod
+    def load(path: Path) -> Coevolution:
+        """Read a checkpoint written by :meth:`save`."""
+        loaded = pickle.loads(path.read_bytes())
+        if not isinstance(loaded, Coevolution):
+            raise ValueError(f"{path} is not a fishswarm learning checkpoint")
+        return loaded

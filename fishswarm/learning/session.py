@@ -1,0 +1,260 @@
+"""A learning run from start to outputs: generations, checkpoints, resume, results.
+
+Everything a run writes goes to one folder:
+
+- ``checkpoint.pkl``: the whole state, every few generations; ``--resume`` continues from it
+  exactly where it stopped (same results as a run that never stopped).
+- ``history.csv``: best and mean fitness of both populations per generation.
+- ``best_replica.npz``: the fittest model of the last generation (``weights``) with the
+  run's settings (``settings`` as JSON); :func:`load_replica` reads it back.
+- ``radii.md``: the learned radii, mean and s.d. over the final classifier population (the
+  study's Table I).
+- ``summary.json``: settings, final fitness, spacing and speed of ideal vs best replica.
+- ``fitness.png``, ``spacing_speed.png`` (the study's Figures 10–11) and
+  ``trajectories.png`` (Figures 12–13), when matplotlib is installed.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fishswarm.learning.arena import (
+    SPREADS,
+    Arena,
+    ideal_velocity,
+    initial_positions,
+    replica_velocity,
+    simulate,
+    spacing_and_speed,
+)
+from fishswarm.learning.coevolution import Coevolution, LearningSettings
+from fishswarm.learning.networks import REPLICA_SIZE
+
+FloatArray = NDArray[np.float64]
+CHECKPOINT = "checkpoint.pkl"
+
+
+class LearningError(RuntimeError):
+    """A learning run cannot start or go on (e.g. nothing to resume); the message says why."""
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Ideal fish against a replica over several fresh trials.
+
+    Attributes:
+        spacing: (2, T + 1) mean neighbour distance over time, ideal then replica.
+        speed: (2, T) mean speed over time, ideal then replica.
+        tracks: (2, T + 1, N, 2) one trial of each, for pictures.
+    """
+
+    spacing: FloatArray
+    speed: FloatArray
+    tracks: FloatArray
+
+
+def evaluate(
+    settings: LearningSettings, weights: FloatArray, *, trials: int = 20, seed: int = 2**20
+) -> Evaluation:
+    """Run ``trials`` fresh trials of the ideal fish and of the replica from the same starts."""
+    arena = settings.arena
+    rng = np.random.default_rng(seed)
+    spread = SPREADS[settings.behavior]
+    spacing, speed, first = [], [], None
+    for _ in range(trials):
+        start = initial_positions(rng, arena=arena, spread=spread, models=1)
+        ideal = simulate(lambda p: ideal_velocity(p, arena=arena), start, arena=arena)
+        replica = simulate(
+            lambda p: replica_velocity(p, weights[None], arena=arena), start, arena=arena
+        )
+        tracks = np.concatenate([ideal, replica])
+        trial_spacing, trial_speed = spacing_and_speed(tracks, arena=arena)
+        spacing.append(trial_spacing)
+        speed.append(trial_speed)
+        first = tracks if first is None else first
+    assert first is not None
+    return Evaluation(np.mean(spacing, axis=0), np.mean(speed, axis=0), first)
+
+
+def learn(
+    settings: LearningSettings,
+    *,
+    generations: int,
+    out: Path,
+    checkpoint_every: int = 10,
+    resume: bool = False,
+    on_generation: Callable[[Coevolution, dict[str, float], float], None] | None = None,
+) -> dict[str, Any]:
+    """Run (or resume) co-evolution up to ``generations`` and write the outputs to ``out``.
+
+    Args:
+        settings: the run's settings (ignored when resuming: the checkpoint's rule).
+        generations: total number of generations, counting those already done.
+        out: output folder.
+        checkpoint_every: write a checkpoint every this many generations (and at the end).
+        resume: continue from ``out/checkpoint.pkl``.
+        on_generation: called after each generation with the run, its record and the wall
+            time of the generation, s.
+
+    Returns:
+        The summary also written to ``out/summary.json``.
+    """
+    if generations < 1 or checkpoint_every < 1:
+        raise LearningError("generations and checkpoint interval must be at least 1")
+    checkpoint = out / CHECKPOINT
+    if resume:
+        if not checkpoint.exists():
+            raise LearningError(f"nothing to resume: {checkpoint} does not exist")
+        run = Coevolution.load(checkpoint)
+    else:
+        run = Coevolution(settings)
+    while run.generation < generations:
+        started = time.perf_counter()
+        record = run.step()
+        if on_generation is not None:
+            on_generation(run, record, time.perf_counter() - started)
+        if run.generation % checkpoint_every == 0 or run.generation == generations:
+            run.save(checkpoint)
+    return write_results(run, out)
+
+
+def write_results(run: Coevolution, out: Path) -> dict[str, Any]:
+    """Write every output of a run that has done at least one generation."""
+    out.mkdir(parents=True, exist_ok=True)
+    settings = run.settings
+    best = run.best_model()
+    settings_json = json.dumps(_settings_dict(settings))
+    np.savez(out / "best_replica.npz", weights=best, settings=np.array(settings_json))
+    with (out / "history.csv").open("w", newline="", encoding="utf-8") as stream:
+        writer = csv.DictWriter(stream, fieldnames=list(run.history[0]))
+        writer.writeheader()
+        writer.writerows(run.history)
+    radii = run.final_radii()
+    table = ["| radius | mean | s.d. |", "|---|---:|---:|"]
+    for index in range(radii.shape[1]):
+        table.append(
+            f"| r{index + 1} | {radii[:, index].mean():.1f} | {radii[:, index].std(ddof=1):.1f} |"
+        )
+    if radii.shape[1] == 0:
+        table.append("| (no radius: the classifiers did not count neighbours) | | |")
+    (out / "radii.md").write_text(
+        f"Learned radii over the final {len(radii)} classifiers "
+        f"({settings.behavior}, radii {settings.radii}, inputs {', '.join(settings.inputs)}, "
+        f"generation {run.generation}).\n\n" + "\n".join(table) + "\n",
+        encoding="utf-8",
+    )
+    evaluation = evaluate(settings, best)
+    final = run.history[-1]
+    summary: dict[str, Any] = {
+        "settings": _settings_dict(settings),
+        "generations": run.generation,
+        "final_fitness": final,
+        "radii": {"mean": radii.mean(axis=0).tolist(), "sd": radii.std(axis=0, ddof=1).tolist()},
+        "ideal": {
+            "final_spacing": float(evaluation.spacing[0, -1]),
+            "final_speed": float(evaluation.speed[0, -1]),
+        },
+        "replica": {
+            "final_spacing": float(evaluation.spacing[1, -1]),
+            "final_speed": float(evaluation.speed[1, -1]),
+        },
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    _pictures(run, evaluation, out)
+    return summary
+
+
+def load_replica(path: Path) -> tuple[FloatArray, dict[str, Any]]:
+    """Read ``best_replica.npz``: the weights (21,) and the settings they were learned with.
+
+    Raises:
+        LearningError: the file is missing or not a replica.
+    """
+    try:
+        with np.load(path) as data:
+            weights = np.asarray(data["weights"], dtype=np.float64)
+            settings = json.loads(str(data["settings"]))
+    except (OSError, KeyError, ValueError) as error:
+        raise LearningError(f"{path} is not a learned replica: {error}") from None
+    if weights.shape != (REPLICA_SIZE,) or not np.all(np.isfinite(weights)):
+        raise LearningError(f"{path} holds weights of shape {weights.shape}, not ({REPLICA_SIZE},)")
+    return weights, settings
+
+
+def _settings_dict(settings: LearningSettings) -> dict[str, Any]:
+    data = dataclasses.asdict(settings)
+    data["inputs"] = list(settings.inputs)
+    return data
+
+
+def _pictures(run: Coevolution, evaluation: Evaluation, out: Path) -> None:
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return
+    history = run.history
+    generation = [h["generation"] for h in history]
+    figure, axis = plt.subplots(figsize=(7, 4))
+    axis.plot(generation, [h["model_mean"] for h in history], label="models, mean")
+    axis.plot(generation, [h["model_best"] for h in history], label="models, best", alpha=0.6)
+    axis.plot(generation, [h["classifier_mean"] for h in history], label="classifiers, mean")
+    axis.plot(
+        generation, [h["classifier_best"] for h in history], label="classifiers, best", alpha=0.6
+    )
+    axis.set(
+        xlabel="generation",
+        ylabel="fitness",
+        ylim=(0, 1),
+        title=f"Turing learning, {run.settings.behavior}",
+    )
+    axis.legend(loc="lower right")
+    figure.tight_layout()
+    figure.savefig(out / "fitness.png", dpi=120)
+    plt.close(figure)
+
+    arena: Arena = run.settings.arena
+    figure, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+    for row, label in ((0, "ideal fish"), (1, "best replica")):
+        left.plot(
+            np.arange(evaluation.spacing.shape[1]) * arena.period,
+            evaluation.spacing[row],
+            label=label,
+        )
+        right.plot(
+            (np.arange(evaluation.speed.shape[1]) + 1) * arena.period,
+            evaluation.speed[row],
+            label=label,
+        )
+    left.axhline(arena.spacing, color="grey", linestyle=":", label="σ")
+    left.set(xlabel="time", ylabel="mean neighbour distance", title="spacing")
+    right.set(xlabel="time", ylabel="mean speed", title="speed")
+    left.legend()
+    right.legend()
+    figure.tight_layout()
+    figure.savefig(out / "spacing_speed.png", dpi=120)
+    plt.close(figure)
+
+    figure, axes = plt.subplots(1, 2, figsize=(10, 5), sharex=True, sharey=True)
+    for axis, row, label in ((axes[0], 0, "ideal fish"), (axes[1], 1, "best replica")):
+        tracks = evaluation.tracks[row]
+        for fish in range(tracks.shape[1]):
+            axis.plot(tracks[:, fish, 0], tracks[:, fish, 1], linewidth=0.8)
+            axis.plot(tracks[-1, fish, 0], tracks[-1, fish, 1], "k.", markersize=4)
+        axis.set(title=label, aspect="equal", xlabel="x")
+    axes[0].set_ylabel("y")
+    figure.tight_layout()
+    figure.savefig(out / "trajectories.png", dpi=120)
+    plt.close(figure)

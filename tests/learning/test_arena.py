@@ -1,0 +1,67 @@
+"""The 2-D arena: the ideal fish by hand, their settling, batch equals loop."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fishswarm.learning.arena import (
+    SPREADS,
+    Arena,
+    cap_speed,
+    ideal_velocity,
+    initial_positions,
+    replica_velocity,
+    simulate,
+    spacing_and_speed,
+)
+
+ARENA = Arena()
+
+
+def test_ideal_pair_by_hand() -> None:
+    # 50 apart: gap +10 → k·10² = 0.3 towards each other; 30 apart: 0.3 apart; 120: no one.
+    for distance, expected in ((50.0, 0.3), (30.0, -0.3), (120.0, 0.0)):
+        positions = np.array([[[100.0, 100.0], [100.0 + distance, 100.0]]])
+        velocity = ideal_velocity(positions, arena=ARENA)
+        np.testing.assert_allclose(velocity[0, 0], [expected, 0.0], atol=1e-12)
+        np.testing.assert_allclose(velocity[0, 1], [-expected, 0.0], atol=1e-12)
+
+
+def test_speed_is_capped() -> None:
+    capped = cap_speed(np.array([[30.0, 40.0], [1.0, 0.0]]), 9.0)
+    np.testing.assert_allclose(capped, [[5.4, 7.2], [1.0, 0.0]])
+
+
+@pytest.mark.parametrize("behavior", ["dispersion", "aggregation"])
+def test_ideal_fish_settle_near_sigma_and_come_to_rest(behavior: str) -> None:
+    arena = dataclasses.replace(ARENA, steps=40)
+    start = initial_positions(
+        np.random.default_rng(4), arena=arena, spread=SPREADS[behavior], models=1
+    )
+    tracks = simulate(lambda p: ideal_velocity(p, arena=arena), start, arena=arena)
+    spacing, speed = spacing_and_speed(tracks, arena=arena)
+    if behavior == "dispersion":
+        assert spacing[0, 0] < 15
+    else:
+        assert spacing[0, 0] > 45
+    assert 0.8 * arena.spacing < spacing[0, -1] < arena.spacing
+    assert speed[0, -1] < 0.1
+
+
+def test_models_in_a_batch_run_as_if_alone() -> None:
+    rng = np.random.default_rng(1)
+    weights = rng.normal(0, 1, (4, 21))
+    start = initial_positions(rng, arena=ARENA, spread=100.0, models=4)
+    together = simulate(lambda p: replica_velocity(p, weights, arena=ARENA), start, arena=ARENA)
+    for model in range(4):
+        own = weights[model : model + 1]
+
+        def velocity(positions: np.ndarray, own: np.ndarray = own) -> np.ndarray:
+            return replica_velocity(positions, own, arena=ARENA)
+
+        alone = simulate(velocity, start[model : model + 1], arena=ARENA)
+        np.testing.assert_allclose(alone[0], together[model], rtol=0, atol=1e-9)
+    assert np.all((together >= 0) & (together <= ARENA.side))

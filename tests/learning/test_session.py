@@ -1,0 +1,91 @@
+"""A whole learning run: outputs on disk, the replica loads back, the command works."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fishswarm.learning.coevolution import LearningSettings
+from fishswarm.learning.session import LearningError, learn, load_replica
+
+
+def test_learn_writes_every_output(tmp_path: Path) -> None:
+    settings = LearningSettings(models=6, classifiers=6, seed=2, inputs=("speed", "neighbors2"))
+    summary = learn(settings, generations=3, out=tmp_path, checkpoint_every=2)
+    for name in (
+        "checkpoint.pkl",
+        "history.csv",
+        "best_replica.npz",
+        "radii.md",
+        "summary.json",
+        "fitness.png",
+        "spacing_speed.png",
+        "trajectories.png",
+    ):
+        assert (tmp_path / name).exists(), name
+    assert summary["generations"] == 3
+    assert len(summary["radii"]["mean"]) == 2
+    assert (tmp_path / "history.csv").read_text().count("\n") == 4
+    weights, saved = load_replica(tmp_path / "best_replica.npz")
+    assert weights.shape == (21,)
+    assert saved["inputs"] == ["speed", "neighbors2"]
+    assert json.loads((tmp_path / "summary.json").read_text())["settings"]["seed"] == 2
+
+
+def test_resume_needs_a_checkpoint(tmp_path: Path) -> None:
+    with pytest.raises(LearningError, match="nothing to resume"):
+        learn(LearningSettings(), generations=2, out=tmp_path, resume=True)
+    with pytest.raises(LearningError, match="is not a learned replica"):
+        load_replica(tmp_path / "missing.npz")
+
+
+def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
+    base = [
+        sys.executable,
+        "-m",
+        "fishswarm.cli",
+        "learn",
+        "--models",
+        "6",
+        "--classifiers",
+        "6",
+        "--seed",
+        "5",
+        "--checkpoint-every",
+        "1",
+    ]
+    straight = subprocess.run(
+        [*base, "--generations", "4", "--out", str(tmp_path / "a")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert straight.returncode == 0, straight.stderr
+    assert "generation 4/4" in straight.stderr
+    first = subprocess.run(
+        [*base, "--generations", "2", "--out", str(tmp_path / "b")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    second = subprocess.run(
+        [*base, "--generations", "4", "--out", str(tmp_path / "b"), "--resume"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert first.returncode == 0 and second.returncode == 0, second.stderr
+    a = np.load(tmp_path / "a" / "best_replica.npz")["weights"]
+    b = np.load(tmp_path / "b" / "best_replica.npz")["weights"]
+    np.testing.assert_array_equal(a, b)
+    assert (tmp_path / "a" / "history.csv").read_text() == (
+        tmp_path / "b" / "history.csv"
+    ).read_text()
