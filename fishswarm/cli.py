@@ -29,6 +29,11 @@ _SCENARIO_FLAGS: dict[str, tuple[str, type, str]] = {
     "blind_width": ("--blind-width", float, "blind-spot width in m (default 0.05)"),
     "sphere_radius": ("--sphere-radius", float, "blocking-sphere radius in m (default 0.065)"),
     "swarm": ("--swarm", str, "swarm name: several swarms can share a router (default default)"),
+    "model": (
+        "--model",
+        str,
+        "learned replica (best_replica.npz from 'fishswarm learn') for --behavior replica",
+    ),
 }
 
 
@@ -118,7 +123,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     _add_connect(fish)
     _add_scenario_flags(
-        fish, ["behavior", "target_distance", "controller", "control_period", "swarm"]
+        fish, ["behavior", "target_distance", "controller", "control_period", "swarm", "model"]
     )
     fish.add_argument(
         "--perception-timeout",

@@ -21,7 +21,7 @@ from fishswarm.bluebot.parameters import BODY_LENGTH, Tank
 from fishswarm.bluebot.vision import Vision
 from fishswarm.protocols.keys import KeySpace
 
-BEHAVIORS = ("dispersion", "aggregation")
+BEHAVIORS = ("dispersion", "aggregation", "replica")
 SPAWN_REGIONS = ("ball", "tank")
 
 
@@ -35,7 +35,8 @@ class Scenario:
 
     Attributes:
         fish: number of fish.
-        behavior: ``dispersion`` or ``aggregation``.
+        behavior: ``dispersion``, ``aggregation`` or ``replica`` (a learned replica, see
+            ``fishswarm learn``; needs ``model``).
         duration: simulated time, s.
         control_period: time between two decisions of a fish, s (1 Hz in the study).
         seed: master seed; every random stream derives from (seed, role, id).
@@ -52,6 +53,7 @@ class Scenario:
         channel_range: how far a broadcast carries, m.
         channel_loss: probability that one delivery is lost, in [0, 1).
         swarm: swarm name in the key space.
+        model: a learned replica (``best_replica.npz``) for the ``replica`` behaviour.
     """
 
     fish: int = 25
@@ -72,6 +74,7 @@ class Scenario:
     channel_range: float = 3.0
     channel_loss: float = 0.0
     swarm: str = "default"
+    model: str | None = None
 
     def __post_init__(self) -> None:
         def need(ok: bool, message: str) -> None:
@@ -89,6 +92,15 @@ class Scenario:
         need(
             self.controller in CONTROLLERS,
             f"controller must be one of {', '.join(CONTROLLERS)}, got {self.controller!r}",
+        )
+        need(
+            self.behavior != "replica" or self.model is not None,
+            "the replica behavior needs a learned model: --model runs/learn/best_replica.npz "
+            "(make one with 'fishswarm learn')",
+        )
+        need(
+            self.model is None or Path(self.model).is_file(),
+            f"model file {self.model} does not exist",
         )
         need(
             self.spawn_region in SPAWN_REGIONS,
@@ -163,10 +175,11 @@ class Scenario:
         return AGGREGATION_DISTANCE if self.behavior == "aggregation" else self.the_tank().diagonal
 
     def resolved_spawn_radius(self) -> float:
-        """Spawn radius after defaults: 2 body lengths (dispersion) or 10 (aggregation)."""
+        """Spawn radius after defaults: 2 body lengths (dispersion) or 10 (aggregation and
+        replica)."""
         if self.spawn_radius is not None:
             return self.spawn_radius
-        return (10 if self.behavior == "aggregation" else 2) * BODY_LENGTH
+        return (2 if self.behavior == "dispersion" else 10) * BODY_LENGTH
 
     def replace(self, **changes: Any) -> Scenario:
         """A copy with some settings changed (``None`` values are ignored)."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,7 +23,8 @@ from fishswarm.behaviors.policy import Memory, Policy, act
 from fishswarm.bluebot.dynamics import State, rest_state, step
 from fishswarm.bluebot.parameters import BlueBot
 from fishswarm.bluebot.vision import Perceived, perceive
-from fishswarm.scenario import Scenario
+from fishswarm.learning.session import LearningError, load_replica
+from fishswarm.scenario import ConfigError, Scenario
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -67,13 +69,26 @@ def place(scenario: Scenario, ids: IntArray) -> State:
 
 
 def policy_of(scenario: Scenario) -> Policy:
-    """The policy every fish of the scenario follows."""
+    """The policy every fish of the scenario follows (reads the replica model if any).
+
+    Raises:
+        ConfigError: the model file is not a learned replica.
+    """
+    weights = None
+    if scenario.behavior == "replica":
+        assert scenario.model is not None
+        try:
+            loaded, _ = load_replica(Path(scenario.model))
+        except LearningError as error:
+            raise ConfigError(str(error)) from None
+        weights = tuple(float(w) for w in loaded)
     return Policy(
         behavior=scenario.behavior,
         target_distance=scenario.resolved_target_distance(),
         controller=scenario.controller,
         control_period=scenario.control_period,
         caudal_cap=scenario.caudal_cap,
+        replica_weights=weights,
     )
 
 
@@ -136,7 +151,7 @@ def run_batch(scenario: Scenario) -> Trajectory:
         seen.append(perceived.counts)
         if tick == scenario.ticks:
             break
-        fins, memory = act_each(policy, perceived, memory)
+        fins, memory = act_each(policy, perceived, state.position[:, 2], memory)
         state = advance(scenario, state, fins)
     return Trajectory(
         np.array(times),
@@ -148,10 +163,12 @@ def run_batch(scenario: Scenario) -> Trajectory:
     )
 
 
-def act_each(policy: Policy, perceived: Perceived, memory: Memory) -> tuple[FloatArray, Memory]:
+def act_each(
+    policy: Policy, perceived: Perceived, depth: FloatArray, memory: Memory
+) -> tuple[FloatArray, Memory]:
     """All fish act at once on their perceptions.
 
     The actor system runs the same policy with a batch of one per fish; batch and loop agree
     exactly (tested), so this is the fast path for the same result.
     """
-    return act(policy, perceived.neighbors, perceived.mask, memory)
+    return act(policy, perceived.neighbors, perceived.mask, depth, memory)

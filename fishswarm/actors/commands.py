@@ -104,6 +104,7 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm run``."""
     if args.procs < 1:
         raise ConfigError(f"--procs must be at least 1, got {args.procs}")
+    policy_of(scenario)  # reads a replica model now: a bad one is a usage error, not a crash
     settings = LaunchSettings(
         scenario=scenario,
         procs=args.procs,

@@ -204,7 +204,8 @@ class Fish:
             neighbors[row, :seen] = perception.neighbors
             mask[row, :seen] = True
         rows = np.array(ready, dtype=np.intp)
-        fins, memory = act(self.settings.policy, neighbors, mask, self._memory.take(rows))
+        depth = np.array([p.depth for p in perceptions])
+        fins, memory = act(self.settings.policy, neighbors, mask, depth, self._memory.take(rows))
         self._memory = self._memory.replaced(rows, memory)
         self._counters.batches += 1
         for row, perception in enumerate(perceptions):

@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.behaviors.lennard_jones import lennard_jones
+from fishswarm.behaviors.replica import STUDY_SCALE, replica_motion
 from fishswarm.bluebot.control import PidState, homing, pid
 
 FloatArray = NDArray[np.float64]
@@ -23,11 +24,14 @@ class Policy:
     """What a fish does.
 
     Attributes:
-        behavior: ``dispersion`` or ``aggregation`` (both Lennard-Jones).
+        behavior: ``dispersion`` or ``aggregation`` (both Lennard-Jones), or ``replica``
+            (a learned replica network; depth held).
         target_distance: Lennard-Jones r_t, m.
         controller: ``homing`` or ``pid``.
-        control_period: s (for the pid loops).
+        control_period: s (for the pid loops, and the replica's step).
         caudal_cap: largest caudal gain of the homing controller.
+        replica_weights: the replica network's 21 weights (``replica`` only).
+        replica_scale: metres per arena unit (``replica`` only).
     """
 
     behavior: str
@@ -35,6 +39,14 @@ class Policy:
     controller: str = "homing"
     control_period: float = 1.0
     caudal_cap: float = 1.0
+    replica_weights: tuple[float, ...] | None = None
+    replica_scale: float = STUDY_SCALE
+
+    def __post_init__(self) -> None:
+        if self.behavior == "replica" and (
+            self.replica_weights is None or len(self.replica_weights) != 21
+        ):
+            raise ValueError("the replica behaviour needs the 21 weights of a learned replica")
 
 
 @dataclass(frozen=True)
@@ -43,17 +55,19 @@ class Memory:
 
     dorsal_on: BoolArray
     pid: PidState
+    hold_depth: FloatArray
 
     @classmethod
     def fresh(cls, count: int) -> Memory:
         """Memory of ``count`` fish that have not acted yet."""
-        return cls(np.zeros(count, dtype=np.bool_), PidState.zeros(count))
+        return cls(np.zeros(count, dtype=np.bool_), PidState.zeros(count), np.full(count, np.nan))
 
     def take(self, index: NDArray[np.intp]) -> Memory:
         """The memory of the fish at ``index``."""
         return Memory(
             self.dorsal_on[index],
             PidState(self.pid.integral[index], self.pid.previous_error[index]),
+            self.hold_depth[index],
         )
 
     def replaced(self, index: NDArray[np.intp], rows: Memory) -> Memory:
@@ -61,19 +75,36 @@ class Memory:
         dorsal_on = self.dorsal_on.copy()
         integral = self.pid.integral.copy()
         previous_error = self.pid.previous_error.copy()
+        hold_depth = self.hold_depth.copy()
         dorsal_on[index] = rows.dorsal_on
         integral[index] = rows.pid.integral
         previous_error[index] = rows.pid.previous_error
-        return Memory(dorsal_on, PidState(integral, previous_error))
+        hold_depth[index] = rows.hold_depth
+        return Memory(dorsal_on, PidState(integral, previous_error), hold_depth)
 
 
-def desired_motion(policy: Policy, neighbors: FloatArray, mask: BoolArray) -> FloatArray:
-    """(B, 3) body-frame target vector of B fish, m."""
-    return lennard_jones(neighbors, mask, target_distance=policy.target_distance)
+def desired_motion(
+    policy: Policy, neighbors: FloatArray, mask: BoolArray, depth: FloatArray, memory: Memory
+) -> tuple[FloatArray, Memory]:
+    """(B, 3) body-frame target vector of B fish, m, and their memory after deciding."""
+    if policy.behavior != "replica":
+        target = lennard_jones(neighbors, mask, target_distance=policy.target_distance)
+        return target, memory
+    assert policy.replica_weights is not None
+    hold = np.where(np.isnan(memory.hold_depth), depth, memory.hold_depth)
+    planar = replica_motion(
+        neighbors,
+        mask,
+        weights=np.asarray(policy.replica_weights),
+        scale=policy.replica_scale,
+        period=policy.control_period,
+    )
+    target = np.concatenate([planar, (hold - depth)[:, None]], axis=1)
+    return target, Memory(memory.dorsal_on, memory.pid, hold)
 
 
 def act(
-    policy: Policy, neighbors: FloatArray, mask: BoolArray, memory: Memory
+    policy: Policy, neighbors: FloatArray, mask: BoolArray, depth: FloatArray, memory: Memory
 ) -> tuple[FloatArray, Memory]:
     """Fin gains of B fish for one control period.
 
@@ -81,14 +112,15 @@ def act(
         policy: what the fish do.
         neighbors: (B, K, 3) visible neighbours in body frames, m.
         mask: (B, K) which neighbour rows are real.
+        depth: (B,) each fish's own depth, m.
         memory: the fish's memory.
 
     Returns:
         fins (B, 4) in [0, 1] (caudal, dorsal, pectoral left, pectoral right), new memory.
     """
-    target = desired_motion(policy, neighbors, mask)
+    target, memory = desired_motion(policy, neighbors, mask, depth, memory)
     if policy.controller == "pid":
         fins, pid_state = pid(target, state=memory.pid, period=policy.control_period)
-        return fins, Memory(memory.dorsal_on, pid_state)
+        return fins, Memory(memory.dorsal_on, pid_state, memory.hold_depth)
     fins, dorsal = homing(target, dorsal_on=memory.dorsal_on, caudal_cap=policy.caudal_cap)
-    return fins, Memory(dorsal, memory.pid)
+    return fins, Memory(dorsal, memory.pid, memory.hold_depth)

@@ -184,8 +184,11 @@ def load_replica(path: Path) -> tuple[FloatArray, dict[str, Any]]:
         with np.load(path) as data:
             weights = np.asarray(data["weights"], dtype=np.float64)
             settings = json.loads(str(data["settings"]))
-    except (OSError, KeyError, ValueError) as error:
-        raise LearningError(f"{path} is not a learned replica: {error}") from None
+    except (OSError, KeyError, ValueError):
+        raise LearningError(
+            f"{path} is not a learned replica (expected a best_replica.npz written by "
+            "'fishswarm learn')"
+        ) from None
     if weights.shape != (REPLICA_SIZE,) or not np.all(np.isfinite(weights)):
         raise LearningError(f"{path} holds weights of shape {weights.shape}, not ({REPLICA_SIZE},)")
     return weights, settings

@@ -207,3 +207,43 @@ def _no_worker_left() -> bool:
                 if parent == "1":
                     return False
     return True
+
+
+def test_run_a_learned_replica_in_the_swarm(tmp_path: Path) -> None:
+    model = tmp_path / "best_replica.npz"
+    weights = np.random.default_rng(3).normal(0, 1, 21)
+    np.savez(model, weights=weights, settings=np.array(json.dumps({"behavior": "aggregation"})))
+    summary = tmp_path / "s.json"
+    result = _run(
+        "run",
+        "--behavior",
+        "replica",
+        "--model",
+        str(model),
+        "--fish",
+        "5",
+        "--duration",
+        "3",
+        "--quiet",
+        "--listen",
+        f"tcp/127.0.0.1:{free_port()}",
+        "--record",
+        str(tmp_path / "r.mcap"),
+        "--summary",
+        str(summary),
+    )
+    assert result.returncode == 0, result.stderr
+    data = json.loads(summary.read_text())
+    assert data["scenario"]["behavior"] == "replica"
+    assert data["counts"]["ticks"] == 3
+
+
+def test_replica_without_a_model_is_explained(tmp_path: Path) -> None:
+    result = _run("run", "--behavior", "replica", timeout=30)
+    assert result.returncode == 2
+    assert "needs a learned model" in result.stderr
+    bogus = tmp_path / "bogus.npz"
+    bogus.write_bytes(b"nope")
+    result = _run("run", "--behavior", "replica", "--model", str(bogus), timeout=30)
+    assert result.returncode == 2
+    assert "is not a learned replica" in result.stderr

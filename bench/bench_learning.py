@@ -1,0 +1,58 @@
+"""Benchmark: seconds per Turing-learning generation at the study's size.
+
+100 replica models and 100 classifiers, 25 fish, 15 s at 1 Hz: one ideal trial and 100
+model trials per generation, 2525 samples judged by every classifier. Runs a few warm-up
+generations, then times the next ones, for each classifier input choice given.
+
+Usage:
+    python bench/bench_learning.py
+    python bench/bench_learning.py --generations 20 --inputs speed,neighbors2
+
+Results and conditions are kept in docs/benchmarks.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+import numpy as np
+
+from fishswarm.learning.coevolution import Coevolution, LearningSettings
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--generations", type=int, default=10)
+    parser.add_argument("--warm-up", type=int, default=2)
+    parser.add_argument(
+        "--inputs",
+        nargs="+",
+        default=["speed", "speed,neighbors", "speed,angular-speed,neighbors2"],
+    )
+    args = parser.parse_args()
+    print(
+        f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
+        f"{platform.python_version()}, numpy {np.__version__}\n"
+    )
+    print("| classifier inputs | s/generation (mean) | min | 500 generations |")
+    print("|---|---:|---:|---:|")
+    for inputs in args.inputs:
+        run = Coevolution(LearningSettings(inputs=tuple(inputs.split(","))))
+        for _ in range(args.warm_up):
+            run.step()
+        times = []
+        for _ in range(args.generations):
+            started = time.perf_counter()
+            run.step()
+            times.append(time.perf_counter() - started)
+        mean = float(np.mean(times))
+        print(
+            f"| {inputs} | {mean:.2f} | {min(times):.2f} | {500 * mean / 60:.1f} min |", flush=True
+        )
+
+
+if __name__ == "__main__":
+    main()
