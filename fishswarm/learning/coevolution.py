@@ -48,8 +48,13 @@ RADIUS_SCALE = 100.0
 """A classifier genome holds radius / 100, so radii move at the pace of the weights."""
 
 RADII_MODES = {"bounded": (0.0, 300.0), "unbounded": (-40.0, 300.0)}
-"""Radii are clipped to [0, 300] (bounded), or start in [−40, 300] and roam free
-(unbounded: a negative radius counts nobody)."""
+"""Radii stay in [0, 300] (bounded), or start in [−40, 300] and roam free (unbounded: a
+negative radius counts nobody).
+
+Bounded radii are folded back into [0, 300] (a triangle wave of the genome), not clipped:
+with clipping every genome below 0 means radius 0, a flat plateau that CMA-ES drifts into
+while neighbour counts carry no signal yet, and never leaves (measured: the radii of all
+100 classifiers ended at exactly 0 in every clipped 500-generation run)."""
 
 
 @dataclass(frozen=True)
@@ -140,7 +145,8 @@ def radii_of(genomes: FloatArray, settings: LearningSettings) -> FloatArray:
     radii = genomes[:, settings.network_size :] * RADIUS_SCALE
     if settings.radii == "bounded":
         low, high = RADII_MODES["bounded"]
-        radii = np.clip(radii, low, high)
+        span = high - low
+        radii = low + span - np.abs(np.mod(radii - low, 2 * span) - span)
     return radii
 
 

@@ -31,13 +31,15 @@ def test_fitness_on_a_hand_made_example() -> None:
     )
 
 
-def test_bounded_radii_are_clipped() -> None:
+def test_bounded_radii_fold_back_into_range() -> None:
     settings = LearningSettings(inputs=("neighbors2",))
-    genomes = np.zeros((2, settings.network_size + 2))
-    genomes[:, -2:] = [[-1.0, 2.0], [4.0, 0.5]]
-    np.testing.assert_allclose(radii_of(genomes, settings), [[0, 200], [300, 50]])
+    genomes = np.zeros((3, settings.network_size + 2))
+    # Radii 100·genome folded into [0, 300]: −100 → 100, 200 → 200, 400 → 200, 50 → 50,
+    # 300 → 300, 650 → 50.
+    genomes[:, -2:] = [[-1.0, 2.0], [4.0, 0.5], [3.0, 6.5]]
+    np.testing.assert_allclose(radii_of(genomes, settings), [[100, 200], [200, 50], [300, 50]])
     free = LearningSettings(inputs=("neighbors2",), radii="unbounded")
-    np.testing.assert_allclose(radii_of(genomes, free), [[-100, 200], [400, 50]])
+    np.testing.assert_allclose(radii_of(genomes, free), [[-100, 200], [400, 50], [300, 650]])
 
 
 def _run(settings: LearningSettings, generations: int) -> Coevolution:
