@@ -40,7 +40,7 @@ class Channel:
         self.keys = scenario.keys
         self.outbox_timeout = outbox_timeout
         self._intake = Intake("channel")
-        self._events: Inbox[tuple[str, str, bytes]] = Inbox()
+        self._events: Inbox[tuple[str, str, bytes]]
         self._outbox: dict[int, list[Broadcast]] = defaultdict(list)
         self._rngs: dict[int, np.random.Generator] = {}
         self._delivered = 0
@@ -61,7 +61,8 @@ class Channel:
         task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
     ) -> None:
         """Deliver broadcasts until cancelled."""
-        events, keys = self._events, self.keys
+        self._events = events = Inbox[tuple[str, str, bytes]]()
+        keys = self.keys
         put = publisher(session)
         async with (
             open_subscriber(session, keys.snapshot, lambda k, p: events.push(("snapshot", k, p))),

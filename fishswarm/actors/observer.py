@@ -59,7 +59,7 @@ class Observer:
         self.history: list[Progress] = []
         self.events: list[dict[str, Any]] = []
         self._intake = Intake(f"observer {observer_id}")
-        self._inbox: Inbox[tuple[str, str, bytes | bool]] = Inbox()
+        self._inbox: Inbox[tuple[str, str, bytes | bool]]
         self._last_tick = -1
         self._tick_reached = trio.Event()
         self._sim_time = 0.0
@@ -79,7 +79,7 @@ class Observer:
         task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
     ) -> None:
         """Observe until cancelled; readiness once subscribed."""
-        inbox = self._inbox
+        self._inbox = inbox = Inbox[tuple[str, str, bytes | bool]]()
         async with (
             open_subscriber(
                 session, self.keys.snapshot, lambda k, p: inbox.push(("snapshot", k, p))

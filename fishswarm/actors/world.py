@@ -116,7 +116,7 @@ class World:
         self.joined: list[tuple[int, int]] = []
         self.wall_time = 0.0
         self._intake = Intake("world")
-        self._events: Inbox[Event] = Inbox()
+        self._events: Inbox[Event]
         self._alive_fish: set[int] = set()
         self._session: zenoh.Session | None = None
         self._command_subscribers: dict[int, tuple[zenoh.Subscriber[None], float]] = {}
@@ -157,6 +157,7 @@ class World:
         task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
     ) -> None:
         """Run the scenario to its end (or a stop request); readiness once subscribed."""
+        self._events = Inbox()
         keys = self.keys
         put = publisher(session)
         events = self._events

@@ -1,0 +1,79 @@
+"""Each actor alone, as separate processes on one router: what a tank with robots and a
+remote observer looks like, on 127.0.0.1."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from fishswarm.recording import read_recording
+from tests.conftest import free_port
+
+pytestmark = pytest.mark.integration
+
+FISHSWARM = [sys.executable, "-m", "fishswarm.cli"]
+
+
+def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    record = tmp_path / "observed.mcap"
+    processes: list[subprocess.Popen[str]] = []
+
+    def start(*args: str) -> subprocess.Popen[str]:
+        process = subprocess.Popen(
+            [*FISHSWARM, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        processes.append(process)
+        return process
+
+    try:
+        start("router", "--listen", endpoint)
+        time.sleep(1.0)
+        observer = start("observe", "--connect", endpoint, "--ticks", "6", "--record", str(record))
+        start("fish", "--id", "0", "--id", "1", "--connect", endpoint)
+        start("fish", "--id", "2", "--connect", endpoint)
+        start("channel", "--connect", endpoint)
+        world = subprocess.run(
+            [
+                *FISHSWARM,
+                "world",
+                "--connect",
+                endpoint,
+                "--fish",
+                "3",
+                "--duration",
+                "6",
+                "--start-timeout",
+                "60",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+        )
+        assert world.returncode == 0, world.stderr
+        statistics = json.loads(world.stderr.strip().splitlines()[-1])
+        assert statistics["ticks"] == 6
+        assert statistics["lost_fish"] == 0
+        assert statistics["rejected"] == 0
+        _, observer_errors = observer.communicate(timeout=30)
+        assert observer.returncode == 0, observer_errors
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.terminate()
+        for process in processes:
+            try:
+                process.communicate(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.communicate()
+    recording = read_recording(record)
+    assert [s.tick for s in recording.snapshots][-1] == 6
+    assert recording.snapshots[-1].ids.tolist() == [0, 1, 2]
+    assert any(e["role"] == "fish" for e in recording.events)
