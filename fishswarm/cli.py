@@ -200,6 +200,12 @@ def _parser() -> argparse.ArgumentParser:
     learn.add_argument("--classifiers", type=int, default=100, help="classifier population (100)")
     learn.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
     learn.add_argument(
+        "--hall-of-fame",
+        type=int,
+        default=0,
+        help="past champions drawn into every generation (default 0: the study's method)",
+    )
+    learn.add_argument(
         "--out", type=Path, default=Path("runs/learn"), help="output folder (default runs/learn)"
     )
     learn.add_argument(
@@ -252,6 +258,7 @@ def _learn(args: argparse.Namespace, scenario: Scenario | None) -> int:
             models=args.models,
             classifiers=args.classifiers,
             seed=args.seed,
+            hall_of_fame=args.hall_of_fame,
         )
     except ValueError as error:
         raise ConfigError(str(error)) from None

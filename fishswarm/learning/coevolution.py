@@ -70,6 +70,10 @@ class LearningSettings:
         seed: master seed.
         arena: the 2-D world.
         soft_weight: share of the soft output added to the thresholded fitness.
+        hall_of_fame: past champions drawn into each generation (0: the study's method).
+            Models are also judged by this many past best classifiers, and classifiers also
+            judge the tracks of this many past best models, against cycling and against
+            disengagement (one side winning so completely that the other gets no signal).
     """
 
     behavior: str = "aggregation"
@@ -80,6 +84,7 @@ class LearningSettings:
     seed: int = 0
     arena: Arena = field(default_factory=Arena)
     soft_weight: float = 1e-3
+    hall_of_fame: int = 0
 
     def __post_init__(self) -> None:
         if self.behavior not in SPREADS:
@@ -91,6 +96,8 @@ class LearningSettings:
             raise ValueError("models and classifiers need populations of at least 2")
         if self.seed < 0:
             raise ValueError(f"seed must be non-negative, got {self.seed}")
+        if self.hall_of_fame < 0:
+            raise ValueError(f"hall_of_fame must be 0 or more, got {self.hall_of_fame}")
 
     @property
     def network_size(self) -> int:
@@ -150,7 +157,7 @@ def radii_of(genomes: FloatArray, settings: LearningSettings) -> FloatArray:
     return radii
 
 
-_TRIALS, _MODELS, _CLASSIFIERS = 1, 2, 3
+_TRIALS, _MODELS, _CLASSIFIERS, _HALL = 1, 2, 3, 4
 
 
 def _stream(seed: int, role: int, *key: int) -> np.random.Generator:
@@ -205,6 +212,8 @@ class Coevolution:
             settings.classifiers,
             _stream(settings.seed, _CLASSIFIERS),
         )
+        self.model_champions: list[FloatArray] = []
+        self.classifier_champions: list[FloatArray] = []
         self.population: FloatArray = np.zeros((0, REPLICA_SIZE))
         self.classifier_population: FloatArray = np.zeros((0, 0))
         self.last_fitness: Fitness | None = None
@@ -220,6 +229,14 @@ class Coevolution:
         settings, arena = self.settings, self.settings.arena
         models = np.array(self._models.ask())
         classifiers = np.array(self._classifiers.ask())
+        current_models, current_classifiers = len(models), len(classifiers)
+        if settings.hall_of_fame and self.model_champions:
+            rng = _stream(settings.seed, _HALL, self.generation)
+            picks = min(settings.hall_of_fame, len(self.model_champions))
+            chosen = rng.choice(len(self.model_champions), picks, replace=False)
+            models = np.concatenate([models, np.array(self.model_champions)[chosen]])
+            chosen = rng.choice(len(self.classifier_champions), picks, replace=False)
+            classifiers = np.concatenate([classifiers, np.array(self.classifier_champions)[chosen]])
         start = self.trial_start(self.generation, 1 + len(models))
         ideal = simulate(lambda p: ideal_velocity(p, arena=arena), start[:1], arena=arena)
         replicas = simulate(
@@ -233,12 +250,23 @@ class Coevolution:
             else np.zeros((len(classifiers), *samples.fixed.shape[:2], 0))
         )
         judgement = classify(classifiers[:, : settings.network_size], samples.fixed, own)
-        result = fitness(judgement.reshape(len(classifiers), 1 + len(models), arena.fish))
-        weight = settings.soft_weight
-        self._models.tell(list(models), list(-(result.models + weight * result.models_soft)))
-        self._classifiers.tell(
-            list(classifiers), list(-(result.classifiers + weight * result.classifiers_soft))
+        everything = fitness(judgement.reshape(len(classifiers), 1 + len(models), arena.fish))
+        # Champions only judge and are judged: the optimisers hear about the current ones.
+        result = Fitness(
+            everything.models[:current_models],
+            everything.classifiers[:current_classifiers],
+            everything.models_soft[:current_models],
+            everything.classifiers_soft[:current_classifiers],
         )
+        models, classifiers = models[:current_models], classifiers[:current_classifiers]
+        weight = settings.soft_weight
+        model_score = result.models + weight * result.models_soft
+        classifier_score = result.classifiers + weight * result.classifiers_soft
+        self._models.tell(list(models), list(-model_score))
+        self._classifiers.tell(list(classifiers), list(-classifier_score))
+        if settings.hall_of_fame:
+            self.model_champions.append(models[int(np.argmax(model_score))])
+            self.classifier_champions.append(classifiers[int(np.argmax(classifier_score))])
         self.population, self.classifier_population = models, classifiers
         self.last_fitness = result
         record = {

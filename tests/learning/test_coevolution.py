@@ -89,3 +89,17 @@ def test_bad_settings_are_explained() -> None:
         LearningSettings(inputs=("neighbors", "neighbors2"))
     with pytest.raises(ValueError, match="behavior must be one of"):
         LearningSettings(behavior="schooling")
+
+
+def test_hall_of_fame_keeps_champions_and_resumes_exactly(tmp_path: Path) -> None:
+    settings = LearningSettings(models=6, classifiers=5, seed=3, hall_of_fame=2)
+    straight = _run(settings, 4)
+    assert len(straight.model_champions) == 4
+    assert straight.population.shape == (6, 21)
+    interrupted = _run(settings, 2)
+    interrupted.save(tmp_path / "checkpoint.pkl")
+    resumed = Coevolution.load(tmp_path / "checkpoint.pkl")
+    for _ in range(2):
+        resumed.step()
+    assert resumed.history == straight.history
+    assert not np.array_equal(straight.population, _run(SMALL, 4).population)
