@@ -26,6 +26,12 @@ def _run(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
     )
 
 
+def _outputs(tmp_path: Path, summary: Path) -> list[str]:
+    """Arguments that give a run a free port, a recording in tmp_path and ``summary``."""
+    listen = f"tcp/127.0.0.1:{free_port()}"
+    return ["--listen", listen, "--record", str(tmp_path / "r.mcap"), "--summary", str(summary)]
+
+
 def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -> None:
     record, summary = tmp_path / "run.mcap", tmp_path / "run.json"
     result = _run(
@@ -85,12 +91,7 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         "--seed",
         "10",
         "--quiet",
-        "--listen",
-        f"tcp/127.0.0.1:{free_port()}",
-        "--record",
-        str(tmp_path / "r.mcap"),
-        "--summary",
-        str(summary),
+        *_outputs(tmp_path, summary),
     )
     assert result.returncode == 0, result.stderr
     scenario = json.loads(summary.read_text())["scenario"]
@@ -225,12 +226,7 @@ def test_run_a_learned_replica_in_the_swarm(tmp_path: Path) -> None:
         "--duration",
         "3",
         "--quiet",
-        "--listen",
-        f"tcp/127.0.0.1:{free_port()}",
-        "--record",
-        str(tmp_path / "r.mcap"),
-        "--summary",
-        str(summary),
+        *_outputs(tmp_path, summary),
     )
     assert result.returncode == 0, result.stderr
     data = json.loads(summary.read_text())

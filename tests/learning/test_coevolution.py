@@ -62,13 +62,18 @@ def test_same_seed_same_run_and_global_numpy_untouched() -> None:
     assert not np.array_equal(other.population, first.population)
 
 
+def _resumed(settings: LearningSettings, path: Path, *, before: int, after: int) -> Coevolution:
+    """Run ``before`` generations, checkpoint, load, and run ``after`` more."""
+    _run(settings, before).save(path)
+    resumed = Coevolution.load(path)
+    for _ in range(after):
+        resumed.step()
+    return resumed
+
+
 def test_resume_continues_exactly(tmp_path: Path) -> None:
     straight = _run(SMALL, 4)
-    interrupted = _run(SMALL, 2)
-    interrupted.save(tmp_path / "checkpoint.pkl")
-    resumed = Coevolution.load(tmp_path / "checkpoint.pkl")
-    for _ in range(2):
-        resumed.step()
+    resumed = _resumed(SMALL, tmp_path / "checkpoint.pkl", before=2, after=2)
     assert resumed.history == straight.history
     np.testing.assert_array_equal(resumed.population, straight.population)
     np.testing.assert_array_equal(resumed.best_model(), straight.best_model())
@@ -96,10 +101,6 @@ def test_hall_of_fame_keeps_champions_and_resumes_exactly(tmp_path: Path) -> Non
     straight = _run(settings, 4)
     assert len(straight.model_champions) == 4
     assert straight.population.shape == (6, 21)
-    interrupted = _run(settings, 2)
-    interrupted.save(tmp_path / "checkpoint.pkl")
-    resumed = Coevolution.load(tmp_path / "checkpoint.pkl")
-    for _ in range(2):
-        resumed.step()
+    resumed = _resumed(settings, tmp_path / "checkpoint.pkl", before=2, after=2)
     assert resumed.history == straight.history
     assert not np.array_equal(straight.population, _run(SMALL, 4).population)
