@@ -270,7 +270,9 @@ def _learn(args: argparse.Namespace, scenario: Scenario | None) -> int:
         if args.quiet or (done % every and done != args.generations):
             return
         left = (args.generations - done) * seconds
+        filled = round(20 * done / args.generations)
         line = (
+            f"[{'#' * filled}{'.' * (20 - filled)}] "
             f"generation {done}/{args.generations}  models best {record['model_best']:.3f} "
             f"mean {record['model_mean']:.3f}  classifiers best {record['classifier_best']:.3f} "
             f"mean {record['classifier_mean']:.3f}  {seconds:.2f} s/gen  ~{left / 60:.1f} min left"

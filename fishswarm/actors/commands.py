@@ -84,8 +84,10 @@ def progress_printer(ticks: int, stream: Any = sys.stderr) -> Callable[[Progress
         if progress.tick % every and progress.tick != ticks:
             return
         m = progress.metrics
+        filled = round(20 * min(progress.tick, ticks) / ticks) if ticks else 0
+        bar = f"[{'#' * filled}{'.' * (20 - filled)}] " if ticks else ""
         line = (
-            f"tick {progress.tick:>{len(str(ticks))}}/{ticks}  t={progress.time:7.1f} s  "
+            f"{bar}tick {progress.tick:>{len(str(ticks))}}/{ticks}  t={progress.time:7.1f} s  "
             f"fish {progress.fish}  centroid {m['centroid_distance']:.3f} m  "
             f"pairwise {m['pairwise_distance']:.3f} m  "
             f"nearest {m['nearest_neighbor_distance']:.3f} m"
