@@ -5,10 +5,16 @@ driver does). It knows nothing of clocks or physics; it owns only its fish's mem
 safety watchdog and their messages.
 
 One actor serves one or more fish on one session: on a robot a single fish, in a worker
-process many. Each fish keeps its own keys, liveliness token, memory and watchdog; what the
-fish share is the work. Perceptions that arrive together are decided in one batched call of
-the policy — the same pure function, with the same result bit for bit as one call per fish
-(tested), but without paying Python's per-call overhead once per fish.
+process many. Each fish keeps its own liveliness token, memory, inbox and watchdog; what
+the fish share is the work. Perceptions that arrive together are decided in one batched
+call of the policy — the same pure function, with the same result bit for bit as one call
+per fish (tested).
+
+Perceptions and commands travel either on each fish's own keys (``fish/<id>/perception``
+and ``fish/<id>/command``: what a robot does) or, for a *school*, as one
+:class:`~fishswarm.protocols.messages.PerceptionBatch` and one
+:class:`~fishswarm.protocols.messages.CommandBatch` per tick on the school's keys, which
+spares Python's per-message cost once per fish.
 """
 
 from __future__ import annotations
@@ -21,19 +27,30 @@ from dataclasses import dataclass
 import numpy as np
 import trio
 import zenoh
+from numpy.typing import NDArray
 
 from fishswarm.actors.bridge import Inbox, Put, open_subscriber, open_token, publisher
 from fishswarm.actors.intake import Intake
-from fishswarm.behaviors.policy import Memory, Policy, act
+from fishswarm.behaviors.policy import Memory, Policy, act, pad_neighbors
 from fishswarm.bluebot.control import stop_fins
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
-from fishswarm.protocols.messages import Command, Delivery, Perception
+from fishswarm.protocols.messages import (
+    Command,
+    CommandBatch,
+    Delivery,
+    Perception,
+    PerceptionBatch,
+)
 
 log = logging.getLogger(__name__)
 
-Event = tuple[int, bool, str, bytes]
-"""(fish index, is a perception, key, payload)."""
+Rows = NDArray[np.intp]
+
+PERCEPTION, BATCH, DELIVERY = "perception", "batch", "delivery"
+
+Event = tuple[int, str, str, bytes]
+"""(fish index or −1 for a school batch, kind, key, payload)."""
 
 
 @dataclass(frozen=True)
@@ -46,6 +63,8 @@ class FishSettings:
         keys: the swarm's key space.
         perception_timeout: a fish with no perception for this long turns its fins off, s.
         inbox_timeout: longest wait for the deliveries a perception announces, s.
+        school: serve the fish through this school's batched keys; None: each fish on its
+            own keys.
     """
 
     fish_ids: tuple[int, ...]
@@ -53,20 +72,40 @@ class FishSettings:
     keys: KeySpace = KeySpace()
     perception_timeout: float = 5.0
     inbox_timeout: float = 5.0
+    school: str | None = None
 
     def __post_init__(self) -> None:
         if not self.fish_ids or len(set(self.fish_ids)) != len(self.fish_ids):
             raise ValueError(f"fish_ids must be distinct and not empty, got {self.fish_ids}")
         if self.perception_timeout <= 0 or self.inbox_timeout <= 0:
             raise ValueError("perception_timeout and inbox_timeout must be positive")
+        if self.school is not None:
+            self.keys.school_commands(self.school)  # checks the name
 
 
-@dataclass
-class _Waiting:
-    """A perception waiting for the deliveries it announces."""
+@dataclass(eq=False)
+class _Pending:
+    """Perceptions of some fish at one tick, waiting for the deliveries they announce.
 
-    perception: Perception
+    Attributes:
+        rows: (G,) indices of the fish in the actor's ``fish_ids``.
+        tick: the tick.
+        depth: (G,) m.
+        neighbor_counts: (G,) visible neighbours per fish.
+        neighbors: (ΣK, 3) their body-frame positions, m, fish by fish.
+        inbox_counts: (G,) deliveries each fish waits for.
+        deadline: when to stop waiting for deliveries (trio time).
+        batched: answer with one command batch (school) instead of a command per fish.
+    """
+
+    rows: Rows
+    tick: int
+    depth: NDArray[np.float64]
+    neighbor_counts: NDArray[np.int64]
+    neighbors: NDArray[np.float64]
+    inbox_counts: NDArray[np.int64]
     deadline: float
+    batched: bool
 
 
 @dataclass
@@ -83,13 +122,18 @@ class Fish:
 
     def __init__(self, settings: FishSettings) -> None:
         self.settings = settings
-        count = len(settings.fish_ids)
+        ids = np.array(settings.fish_ids, dtype=np.int64)
+        count = ids.size
+        self._ids = ids
+        self._order = np.argsort(ids)
+        self._sorted_ids = ids[self._order]
         self._intake = Intake(f"fish {_span(settings.fish_ids)}")
         self._memory = Memory.fresh(count)
         self._last_tick = np.full(count, -1, dtype=np.int64)
         self._last_seen = np.zeros(count)
         self._stopped = np.zeros(count, dtype=np.bool_)
-        self._waiting: dict[int, _Waiting] = {}
+        self._busy = np.zeros(count, dtype=np.bool_)
+        self._pending: list[_Pending] = []
         self._mail: dict[int, list[Delivery]] = {n: [] for n in range(count)}
         self._counters = _Counters()
         self._resumed = trio.Event()
@@ -97,8 +141,9 @@ class Fish:
         """The deliveries each fish acted on at its last tick, by fish id."""
 
     def statistics(self) -> dict[str, int]:
-        """Counters: perceptions accepted, commands sent, rejected messages, watchdog stops,
-        deliveries announced but never received, and batched decisions made."""
+        """Counters: perceptions accepted (per fish), commands sent (per fish), rejected
+        messages, watchdog stops, deliveries announced but never received, and batched
+        decisions made."""
         counters = self._counters
         return {
             "perceptions": counters.perceptions,
@@ -117,23 +162,30 @@ class Fish:
     ) -> None:
         """Serve perceptions until cancelled; report readiness once every fish is subscribed
         and alive."""
-        keys = self.settings.keys
+        keys, school = self.settings.keys, self.settings.school
         events: Inbox[Event] = Inbox()
         put = publisher(session)
         async with contextlib.AsyncExitStack() as stack:
             # Subscribe before declaring the tokens: whoever sees a fish alive can reach it.
-            for index, fish_id in enumerate(self.settings.fish_ids):
-                for is_perception, key in (
-                    (True, keys.perception(fish_id)),
-                    (False, keys.inbox(fish_id)),
-                ):
-                    await stack.enter_async_context(
-                        open_subscriber(
-                            session, key, _pusher(events, index, is_perception), exact=True
-                        )
-                    )
+            subscriptions = [
+                (index, DELIVERY, keys.inbox(fish_id))
+                for index, fish_id in enumerate(self.settings.fish_ids)
+            ]
+            if school is None:
+                subscriptions += [
+                    (index, PERCEPTION, keys.perception(fish_id))
+                    for index, fish_id in enumerate(self.settings.fish_ids)
+                ]
+            else:
+                subscriptions.append((-1, BATCH, keys.school_perceptions(school)))
+            for index, kind, key in subscriptions:
+                await stack.enter_async_context(
+                    open_subscriber(session, key, _pusher(events, index, kind), exact=True)
+                )
             for fish_id in self.settings.fish_ids:
-                await stack.enter_async_context(open_token(session, keys.alive("fish", fish_id)))
+                await stack.enter_async_context(
+                    open_token(session, keys.alive("fish", fish_id, school))
+                )
             nursery = await stack.enter_async_context(trio.open_nursery())
             self._last_seen[:] = trio.current_time()
             nursery.start_soon(self._watchdog, put)
@@ -145,9 +197,11 @@ class Fish:
                 batch = [] if event is None else [event]
                 while (more := events.receive_nowait()) is not None:
                     batch.append(more)
-                for index, is_perception, key, payload in batch:
-                    if is_perception:
+                for index, kind, key, payload in batch:
+                    if kind == PERCEPTION:
                         self._take_perception(index, key, payload)
+                    elif kind == BATCH:
+                        self._take_batch(key, payload)
                     else:
                         self._take_delivery(index, key, payload)
                 self._decide(put)
@@ -158,16 +212,52 @@ class Fish:
         )
         if perception is None:
             return
-        if perception.tick <= self._last_tick[index] or index in self._waiting:
-            self._intake.reject(key, "stale", f"tick {perception.tick} repeated or out of order")
+        rows = np.array([index], dtype=np.intp)
+        pending = _Pending(
+            rows,
+            perception.tick,
+            np.array([perception.depth]),
+            np.array([perception.neighbors.shape[0]], dtype=np.int64),
+            perception.neighbors,
+            np.array([perception.inbox_count], dtype=np.int64),
+            trio.current_time() + self.settings.inbox_timeout,
+            batched=False,
+        )
+        self._admit(key, pending)
+
+    def _take_batch(self, key: str, payload: bytes) -> None:
+        batch = self._intake.decode(key, payload, PerceptionBatch)
+        if batch is None:
             return
-        self._counters.perceptions += 1
-        self._last_seen[index] = trio.current_time()
-        if self._stopped[index]:
-            self._stopped[index] = False
+        places = np.searchsorted(self._sorted_ids, batch.ids)
+        places[places >= self._sorted_ids.size] = 0
+        if self._sorted_ids.size == 0 or not np.array_equal(self._sorted_ids[places], batch.ids):
+            self._intake.reject(key, "misaddressed", f"fish {batch.ids.tolist()} not all ours")
+            return
+        pending = _Pending(
+            self._order[places].astype(np.intp),
+            batch.tick,
+            batch.depth,
+            batch.neighbor_counts,
+            batch.neighbors,
+            batch.inbox_counts,
+            trio.current_time() + self.settings.inbox_timeout,
+            batched=True,
+        )
+        self._admit(key, pending)
+
+    def _admit(self, key: str, pending: _Pending) -> None:
+        rows = pending.rows
+        if np.any(pending.tick <= self._last_tick[rows]) or np.any(self._busy[rows]):
+            self._intake.reject(key, "stale", f"tick {pending.tick} repeated or out of order")
+            return
+        self._counters.perceptions += rows.size
+        self._last_seen[rows] = trio.current_time()
+        if self._stopped[rows].any():
+            self._stopped[rows] = False
             self._resumed.set()
-        deadline = trio.current_time() + self.settings.inbox_timeout
-        self._waiting[index] = _Waiting(perception, deadline)
+        self._busy[rows] = True
+        self._pending.append(pending)
 
     def _take_delivery(self, index: int, key: str, payload: bytes) -> None:
         delivery = self._intake.decode_addressed(
@@ -177,40 +267,57 @@ class Fish:
             self._mail[index].append(delivery)
 
     def _next_deadline(self) -> float:
-        if not self._waiting:
-            return float("inf")
-        return min(waiting.deadline for waiting in self._waiting.values())
+        return min((pending.deadline for pending in self._pending), default=float("inf"))
+
+    def _complete(self, pending: _Pending, now: float) -> bool:
+        """Whether the pending perceptions have their deliveries (or waited long enough);
+        if so, hand the deliveries to their fish."""
+        wanted = pending.inbox_counts.tolist()
+        if not any(wanted):
+            return True
+        rows, tick = pending.rows.tolist(), pending.tick
+        mail = [[d for d in self._mail[row] if d.tick == tick] for row in rows]
+        if now < pending.deadline and any(len(m) < w for m, w in zip(mail, wanted, strict=True)):
+            return False
+        for row, fish_mail, count in zip(rows, mail, wanted, strict=True):
+            self._counters.deliveries_missed += max(0, count - len(fish_mail))
+            self.deliveries[self.settings.fish_ids[row]] = fish_mail[:count]
+            self._mail[row] = [d for d in self._mail[row] if d.tick > tick]
+        return True
 
     def _decide(self, put: Put) -> None:
         """Act for every fish whose perception is complete (or whose deliveries timed out)."""
+        if not self._pending:
+            return
         now = trio.current_time()
-        ready = []
-        for index, waiting in sorted(self._waiting.items()):
-            tick, wanted = waiting.perception.tick, waiting.perception.inbox_count
-            mail = [d for d in self._mail[index] if d.tick == tick]
-            if len(mail) >= wanted or now >= waiting.deadline:
-                self._counters.deliveries_missed += max(0, wanted - len(mail))
-                self.deliveries[self.settings.fish_ids[index]] = mail[:wanted]
-                self._mail[index] = [d for d in self._mail[index] if d.tick > tick]
-                ready.append(index)
+        ready = [pending for pending in self._pending if self._complete(pending, now)]
         if not ready:
             return
-        perceptions = [self._waiting.pop(index).perception for index in ready]
-        width = max(p.neighbors.shape[0] for p in perceptions)
-        neighbors = np.zeros((len(ready), width, 3))
-        mask = np.zeros((len(ready), width), dtype=np.bool_)
-        for row, perception in enumerate(perceptions):
-            seen = perception.neighbors.shape[0]
-            neighbors[row, :seen] = perception.neighbors
-            mask[row, :seen] = True
-        rows = np.array(ready, dtype=np.intp)
-        depth = np.array([p.depth for p in perceptions])
+        self._pending = [pending for pending in self._pending if pending not in ready]
+        if len(ready) == 1:
+            only = ready[0]
+            rows, depth, counts, stacked = (
+                only.rows,
+                only.depth,
+                only.neighbor_counts,
+                only.neighbors,
+            )
+        else:
+            rows = np.concatenate([p.rows for p in ready])
+            depth = np.concatenate([p.depth for p in ready])
+            counts = np.concatenate([p.neighbor_counts for p in ready])
+            stacked = np.concatenate([p.neighbors for p in ready])
+        neighbors, mask = pad_neighbors(counts, stacked)
         fins, memory = act(self.settings.policy, neighbors, mask, depth, self._memory.take(rows))
         self._memory = self._memory.replaced(rows, memory)
         self._counters.batches += 1
-        for row, perception in enumerate(perceptions):
-            self._send(put, Command(perception.fish_id, perception.tick, fins[row]))
-            self._last_tick[ready[row]] = perception.tick
+        start = 0
+        for pending in ready:
+            end = start + pending.rows.size
+            self._send(put, pending.rows, pending.tick, fins[start:end], led=True)
+            self._last_tick[pending.rows] = pending.tick
+            self._busy[pending.rows] = False
+            start = end
 
     async def _watchdog(self, put: Put) -> None:
         """Turn a fish's fins off when its perceptions stop for ``perception_timeout``."""
@@ -223,23 +330,45 @@ class Fish:
                 continue
             due = float(self._last_seen[running].min()) + timeout
             await trio.sleep_until(due)
-            late = running & (self._last_seen + timeout <= trio.current_time())
-            for index in np.flatnonzero(late):
-                fish_id = self.settings.fish_ids[index]
-                log.warning("fish %d: no perception for %.1f s, fins off", fish_id, timeout)
-                self._stopped[index] = True
-                self._counters.watchdog_stops += 1
-                tick = int(max(self._last_tick[index], 0))
-                self._send(put, Command(fish_id, tick, stop_fins(1)[0], led=False))
+            late = np.flatnonzero(running & (self._last_seen + timeout <= trio.current_time()))
+            if late.size == 0:
+                continue
+            for index in late.tolist():
+                log.warning(
+                    "fish %d: no perception for %.1f s, fins off",
+                    self.settings.fish_ids[index],
+                    timeout,
+                )
+            self._stopped[late] = True
+            self._counters.watchdog_stops += late.size
+            # The last tick is repeated so that a driver acts on it at once.
+            tick = int(max(self._last_tick[late].max(), 0))
+            self._send(put, late, tick, stop_fins(late.size), led=False)
 
-    def _send(self, put: Put, command: Command) -> None:
-        put(self.settings.keys.command(command.fish_id), encode(command))
-        self._counters.commands += 1
+    def _send(self, put: Put, rows: Rows, tick: int, fins: np.ndarray, *, led: bool) -> None:
+        """Commands of the fish at ``rows`` for ``tick``: one batch for a school, or one
+        command per fish on its own key."""
+        keys, school = self.settings.keys, self.settings.school
+        self._counters.commands += rows.size
+        if school is not None:
+            order = np.argsort(self._ids[rows])
+            batch = CommandBatch(
+                tick,
+                self._ids[rows][order],
+                fins[order],
+                np.full(rows.size, led),
+                np.zeros(rows.size, dtype=np.int64),
+            )
+            put(keys.school_commands(school), encode(batch))
+            return
+        for row, gains in zip(rows.tolist(), fins, strict=True):
+            fish_id = self.settings.fish_ids[row]
+            put(keys.command(fish_id), encode(Command(fish_id, tick, gains, led=led)))
 
 
-def _pusher(events: Inbox[Event], index: int, is_perception: bool) -> Callable[[str, bytes], None]:
+def _pusher(events: Inbox[Event], index: int, kind: str) -> Callable[[str, bytes], None]:
     def push(key: str, payload: bytes) -> None:
-        events.push((index, is_perception, key, payload))
+        events.push((index, kind, key, payload))
 
     return push
 

@@ -106,13 +106,13 @@ class Observer:
 
     def _on_alive(self, key: str, alive: bool) -> None:
         try:
-            member, role = self.keys.member_of(key)
+            member = self.keys.parse_alive(key)
         except ValueError:
             return
         event = {
             "event": "joined" if alive else "left",
-            "role": role,
-            "id": member,
+            "role": member.role,
+            "id": member.member_id,
             "time": self._sim_time,
         }
         self.events.append(event)

@@ -45,6 +45,11 @@ class WorkerSpec:
     perception_timeout: float = 5.0
     log_level: str = "WARNING"
 
+    @property
+    def school(self) -> str:
+        """The school name its fish are served under (one message per tick each way)."""
+        return f"worker-{self.index}"
+
     def describe(self) -> str:
         """``worker 1 (fish 13–24)``."""
         ids = self.fish_ids
@@ -80,6 +85,7 @@ async def _serve(spec: WorkerSpec, connection: Connection) -> dict[str, Any]:
             spec.policy,
             KeySpace(spec.swarm),
             perception_timeout=spec.perception_timeout,
+            school=spec.school,
         )
     )
     settings = SessionSettings(mode="client", connect=[spec.connect])

@@ -36,9 +36,11 @@ from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.messages import (
     ChannelReport,
     Command,
+    CommandBatch,
     ControlReply,
     ControlRequest,
     Perception,
+    PerceptionBatch,
     Snapshot,
 )
 from fishswarm.scenario import Scenario
@@ -98,9 +100,24 @@ class LostFish:
 
 @dataclass
 class _Tick:
-    commands: dict[int, Command] = field(default_factory=dict)
+    """The commands of one tick as they come in, row by row in the order of the world's ids."""
+
+    rows: dict[int, int] = field(default_factory=dict)
     waiting: set[int] = field(default_factory=set)
+    fins: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    broadcasts: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     report: ChannelReport | None = None
+
+    @classmethod
+    def of(cls, ids: list[int], report: ChannelReport | None) -> _Tick:
+        """A tick waiting for a command of each of ``ids``."""
+        return cls(
+            {fish_id: row for row, fish_id in enumerate(ids)},
+            set(ids),
+            np.zeros((len(ids), 4)),
+            np.zeros(len(ids), dtype=np.int64),
+            report,
+        )
 
 
 class World:
@@ -119,7 +136,11 @@ class World:
         self._events: Inbox[Event]
         self._alive_fish: set[int] = set()
         self._session: zenoh.Session | None = None
-        self._command_subscribers: dict[int, tuple[zenoh.Subscriber[None], float]] = {}
+        # Command subscriptions by key, with the time each was declared; the command key of
+        # every fish (its own, or its school's).
+        self._command_subscribers: dict[str, tuple[zenoh.Subscriber[None], float]] = {}
+        self._command_key: dict[int, str] = {}
+        self._school_of: dict[int, str | None] = {}
         self._channel_alive = 0
         self._ids = np.zeros(0, dtype=np.int64)
         self._state = place(self.scenario, self._ids)
@@ -220,34 +241,55 @@ class World:
                 return
             await self._resume.wait()
             inbox_counts = await self._inbox_counts()
-            self._current = _Tick(waiting=set(self._ids.tolist()), report=self._current.report)
-            depths = self._state.position[:, 2].tolist()
-            counts = inbox_counts.tolist()
-            for index, (fish_id, neighbors) in enumerate(
-                zip(self._ids.tolist(), perceived.split(), strict=True)
-            ):
-                perception = Perception(
-                    fish_id,
-                    self.tick,
-                    self.time,
-                    depths[index],
-                    neighbors,
-                    NO_LANDMARKS,
-                    counts[index],
-                )
-                put(self.keys.perception(fish_id), encode(perception))
-            self._messages_out += self._ids.size
+            self._current = _Tick.of(self._ids.tolist(), self._current.report)
+            self._publish_perceptions(put, perceived, inbox_counts)
             await self._collect_commands()
             self._drop_lost()
-            fins = np.zeros((self._ids.size, 4))
-            broadcasts = np.zeros(self._ids.size, dtype=np.int64)
-            for index, fish_id in enumerate(self._ids.tolist()):
-                command = self._current.commands[fish_id]
-                fins[index] = command.fins
-                broadcasts[index] = command.broadcasts
-            self._state = advance(self.scenario, self._state, fins)
-            self._broadcasts = broadcasts
+            # Fish lost while the world waited have left self._ids; keep the others' rows.
+            rows = [self._current.rows[fish_id] for fish_id in self._ids.tolist()]
+            self._state = advance(self.scenario, self._state, self._current.fins[rows])
+            self._broadcasts = self._current.broadcasts[rows]
             self.tick += 1
+
+    def _publish_perceptions(
+        self, put: Put, perceived: Perceived, inbox_counts: np.ndarray
+    ) -> None:
+        """Every live fish's perception: one message per school, one per fish on its own keys."""
+        schools: dict[str, list[int]] = {}
+        depths = self._state.position[:, 2]
+        for row, fish_id in enumerate(self._ids.tolist()):
+            school = self._school_of.get(fish_id)
+            if school is not None:
+                schools.setdefault(school, []).append(row)
+                continue
+            perception = Perception(
+                fish_id,
+                self.tick,
+                self.time,
+                float(depths[row]),
+                perceived.neighbors[row, : perceived.counts[row]],
+                NO_LANDMARKS,
+                int(inbox_counts[row]),
+            )
+            put(self.keys.perception(fish_id), encode(perception))
+            self._messages_out += 1
+        for school, school_rows in sorted(schools.items()):
+            rows = np.array(school_rows, dtype=np.intp)
+            counts = perceived.counts[rows]
+            seen = np.arange(perceived.neighbors.shape[1]) < counts[:, None]
+            batch = PerceptionBatch(
+                self.tick,
+                self.time,
+                self._ids[rows],
+                depths[rows],
+                counts,
+                perceived.neighbors[rows][seen],
+                np.zeros(rows.size, dtype=np.int64),
+                NO_LANDMARKS,
+                inbox_counts[rows],
+            )
+            put(self.keys.school_perceptions(school), encode(batch))
+            self._messages_out += 1
 
     def _snapshot(self, perceived: Perceived) -> Snapshot:
         return Snapshot(
@@ -302,48 +344,79 @@ class World:
             if report is not None:
                 self._current.report = report
             return
+        if kind == "batch":
+            self._take_batch(key, payload)
+            return
         sender, _ = self.keys.member_of(key)
         command = self._intake.decode_addressed(
             key, payload, Command, field="fish_id", owner=int(sender)
         )
         if command is None:
             return
-        if command.tick != self.tick or command.fish_id not in self._current.waiting:
+        current = self._current
+        if command.tick != self.tick or command.fish_id not in current.waiting:
             self._intake.reject(key, "stale", f"command for tick {command.tick} at {self.tick}")
-        else:
-            self._current.commands[command.fish_id] = command
-            self._current.waiting.discard(command.fish_id)
+            return
+        row = current.rows[command.fish_id]
+        current.fins[row] = command.fins
+        current.broadcasts[row] = command.broadcasts
+        current.waiting.discard(command.fish_id)
+
+    def _take_batch(self, key: str, payload: bytes) -> None:
+        batch = self._intake.decode(key, payload, CommandBatch)
+        if batch is None:
+            return
+        ids = batch.ids.tolist()
+        if any(self._command_key.get(fish_id) != key for fish_id in ids):
+            self._intake.reject(key, "misaddressed", f"fish {ids} are not all of this school")
+            return
+        current = self._current
+        if batch.tick != self.tick or not current.waiting.issuperset(ids):
+            self._intake.reject(key, "stale", f"commands for tick {batch.tick} at {self.tick}")
+            return
+        rows = [current.rows[fish_id] for fish_id in ids]
+        current.fins[rows] = batch.fins
+        current.broadcasts[rows] = batch.broadcasts
+        current.waiting.difference_update(ids)
 
     def _on_alive(self, key: str, alive: bool) -> None:
         try:
-            member, role = self.keys.member_of(key)
+            member = self.keys.parse_alive(key)
         except ValueError:
             return
-        if role == "channel":
+        if member.role == "channel":
             self._channel_alive += 1 if alive else -1
             return
-        if role != "fish" or not member.isdigit():
+        if member.role != "fish" or not member.member_id.isdigit():
             return
-        fish_id = int(member)
+        fish_id = int(member.member_id)
         if alive:
             self._alive_fish.add(fish_id)
-            self._subscribe_commands(fish_id)
+            self._school_of[fish_id] = member.school
+            self._subscribe_commands(fish_id, member.school)
         else:
             self._alive_fish.discard(fish_id)
             if fish_id in self._ids:
                 self._mark_lost(fish_id, "left (liveliness token gone)")
 
-    def _subscribe_commands(self, fish_id: int) -> None:
-        if fish_id in self._command_subscribers or self._session is None:
+    def _subscribe_commands(self, fish_id: int, school: str | None) -> None:
+        if self._session is None:
+            return
+        if school is None:
+            key, kind = self.keys.command(fish_id), "command"
+        else:
+            key, kind = self.keys.school_commands(school), "batch"
+        self._command_key[fish_id] = key
+        if key in self._command_subscribers:
             return
         events = self._events
         subscriber = declare_subscriber(
             self._session,
-            self.keys.command(fish_id),
-            lambda key, payload: events.push(("command", key, payload)),
+            key,
+            lambda key, payload: events.push((kind, key, payload)),
             exact=True,
         )
-        self._command_subscribers[fish_id] = (subscriber, trio.current_time())
+        self._command_subscribers[key] = (subscriber, trio.current_time())
 
     def _mark_lost(self, fish_id: int, reason: str) -> None:
         if any(f.fish_id == fish_id and f.tick == self.tick for f in self.lost):
@@ -369,7 +442,7 @@ class World:
         new = sorted(
             fish_id
             for fish_id in self._alive_fish - set(self._ids.tolist())
-            if self._command_subscribers[fish_id][1] <= ready_since
+            if self._command_subscribers[self._command_key[fish_id]][1] <= ready_since
         )
         if not new:
             return

@@ -83,6 +83,23 @@ class Memory:
         return Memory(dorsal_on, PidState(integral, previous_error), hold_depth)
 
 
+def pad_neighbors(counts: NDArray[np.int64], stacked: FloatArray) -> tuple[FloatArray, BoolArray]:
+    """Neighbours stacked fish after fish, as the padded batch the policy takes.
+
+    Args:
+        counts: (B,) how many neighbours each fish sees.
+        stacked: (ΣK, 3) their body-frame positions, m, fish by fish.
+
+    Returns:
+        neighbors (B, K, 3) with K = max(counts), zero in the padding, and mask (B, K).
+    """
+    width = int(counts.max()) if counts.size else 0
+    mask: BoolArray = np.arange(width) < counts[:, None]
+    neighbors = np.zeros((counts.size, width, 3))
+    neighbors[mask] = stacked
+    return neighbors, mask
+
+
 def desired_motion(
     policy: Policy, neighbors: FloatArray, mask: BoolArray, depth: FloatArray, memory: Memory
 ) -> tuple[FloatArray, Memory]:

@@ -143,9 +143,6 @@ class Perceived:
         rows: FloatArray = self.neighbors[fish, self.mask[fish]]
         return rows
 
-    def split(self) -> list[FloatArray]:
-        """Every fish's (k, 3) neighbours; rows are compact (seen first), so slices serve."""
-        return [self.neighbors[fish, :seen] for fish, seen in enumerate(self.counts.tolist())]
 
 
 KD_TREE_MIN_FISH = 200

@@ -22,6 +22,21 @@ def _check_name(kind: str, value: str) -> str:
 
 
 @dataclass(frozen=True)
+class Member:
+    """A member of the swarm as its liveliness token names it.
+
+    Attributes:
+        role: fish, world, channel or observer.
+        member_id: its id within the role.
+        school: the school whose keys serve it (fish only), or None for its own keys.
+    """
+
+    role: str
+    member_id: str
+    school: str | None = None
+
+
+@dataclass(frozen=True)
 class KeySpace:
     """The key expressions of one swarm.
 
@@ -55,6 +70,18 @@ class KeySpace:
         """Channel → fish: a delivered broadcast, situated in the receiver's body frame."""
         return f"{self.prefix}/fish/{fish_id}/inbox"
 
+    def school_perceptions(self, school: str) -> str:
+        """World → school: the perceptions of all the school's fish at a tick, as arrays.
+
+        A school is a group of fish served by one actor (a worker process). It carries one
+        message per tick each way instead of one per fish; robots keep the per-fish keys.
+        """
+        return f"{self.prefix}/school/{_check_name('school', school)}/perceptions"
+
+    def school_commands(self, school: str) -> str:
+        """School → world: the commands of all the school's fish for a tick."""
+        return f"{self.prefix}/school/{_check_name('school', school)}/commands"
+
     @property
     def snapshot(self) -> str:
         """World → channel, observers: every fish's pose and velocity at a tick."""
@@ -70,23 +97,30 @@ class KeySpace:
         """Channel → world: how many broadcasts each fish will find in its inbox at a tick."""
         return f"{self.prefix}/channel/report"
 
-    def alive(self, role: str, member_id: int | str) -> str:
-        """Liveliness token of one member (``role`` is fish, world, channel or observer)."""
+    def alive(self, role: str, member_id: int | str, school: str | None = None) -> str:
+        """Liveliness token of one member (``role`` is fish, world, channel or observer).
+
+        A fish served through a school's keys says so in its token:
+        ``alive/fish/<id>/<school>``; a fish on its own keys has ``alive/fish/<id>``.
+        """
         _check_name("role", role)
-        return f"{self.prefix}/alive/{role}/{member_id}"
+        token = f"{self.prefix}/alive/{role}/{member_id}"
+        return token if school is None else f"{token}/{_check_name('school', school)}"
 
     def alive_all(self, role: str = "*") -> str:
         """Key expression matching the liveliness tokens of every member of ``role``."""
-        return f"{self.prefix}/alive/{role}/*"
+        return f"{self.prefix}/alive/{role}/**"
 
-    @property
-    def all_fish(self) -> str:
-        """Key expression matching every per-fish key."""
-        return f"{self.prefix}/fish/*/*"
+    def parse_alive(self, key: str) -> Member:
+        """Who a liveliness token stands for.
 
-    def fish_commands(self) -> str:
-        """Key expression matching every fish's command key."""
-        return f"{self.prefix}/fish/*/command"
+        Raises:
+            ValueError: the key is not a liveliness token of this swarm.
+        """
+        parts = key.split("/")
+        if len(parts) in (5, 6) and "/".join(parts[:2]) == self.prefix and parts[2] == "alive":
+            return Member(parts[3], parts[4], parts[5] if len(parts) == 6 else None)
+        raise ValueError(f"{key!r} is not a liveliness token of swarm {self.swarm!r}")
 
     def fish_outboxes(self) -> str:
         """Key expression matching every fish's outbox key."""
@@ -95,15 +129,12 @@ class KeySpace:
     def member_of(self, key: str) -> tuple[str, str]:
         """Split a per-member key: ``.../fish/3/command`` → ("3", "command").
 
-        Works for ``fish/<id>/<kind>`` and ``alive/<role>/<id>`` keys (then (id, role)).
+        Works for ``fish/<id>/<kind>`` keys; for liveliness tokens see :meth:`parse_alive`.
 
         Raises:
             ValueError: the key is not a per-member key of this swarm.
         """
         parts = key.split("/")
-        if len(parts) == 5 and "/".join(parts[:2]) == self.prefix:
-            if parts[2] == "fish":
-                return parts[3], parts[4]
-            if parts[2] == "alive":
-                return parts[4], parts[3]
+        if len(parts) == 5 and "/".join(parts[:2]) == self.prefix and parts[2] == "fish":
+            return parts[3], parts[4]
         raise ValueError(f"{key!r} is not a per-member key of swarm {self.swarm!r}")

@@ -30,6 +30,7 @@ CONTROL_ACTIONS = ("status", "pause", "resume", "stop")
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
 
 
 def _set(obj: object, name: str, value: object) -> None:
@@ -73,6 +74,9 @@ def _array(
         raise TypeError(f"{name} must be a numeric array, got dtype {array.dtype}")
     if dtype is np.int64 and array.dtype.kind == "f":
         raise TypeError(f"{name} must be an integer array, got dtype {array.dtype}")
+    if (dtype is np.bool_) != (array.dtype.kind == "b") and array.size:
+        kind = "a boolean" if dtype is np.bool_ else "a numeric"
+        raise TypeError(f"{name} must be {kind} array, got dtype {array.dtype}")
     expected_ndim = 1 if columns is None else 2
     if array.ndim != expected_ndim or (columns is not None and array.shape[1] != columns):
         want = "(n,)" if columns is None else f"(n, {columns})"
@@ -176,6 +180,100 @@ class Command(Message):
         _check_int("broadcasts", self.broadcasts, high=MAX_ROWS)
 
 
+def _check_ids(ids: IntArray) -> None:
+    if ids.shape[0] > 1 and np.any(np.diff(ids) <= 0):
+        raise ValueError("ids must be strictly ascending")
+    if np.any(ids < 0):
+        raise ValueError("ids must be non-negative")
+
+
+def _check_counts(name: str, counts: IntArray, rows: int, what: str) -> None:
+    if np.any(counts < 0):
+        raise ValueError(f"{name} must be non-negative")
+    if int(counts.sum()) != rows:
+        raise ValueError(f"{name} add up to {int(counts.sum())}, but {what} has {rows} rows")
+
+
+@dataclass(frozen=True, eq=False)
+class PerceptionBatch(Message):
+    """What every fish of a school perceives at a tick: world → school.
+
+    The same content as one :class:`Perception` per fish, as arrays: the neighbours of all
+    fish are stacked, fish after fish, and ``neighbor_counts`` says how many rows are whose.
+
+    Attributes:
+        tick: control tick.
+        time: simulated time of the tick, s.
+        ids: (G,) the fish, ascending.
+        depth: (G,) each fish's depth, m.
+        neighbor_counts: (G,) visible neighbours of each fish.
+        neighbors: (ΣK, 3) body-frame positions of the visible neighbours, m, fish by fish.
+        landmark_counts: (G,) visible landmarks of each fish.
+        landmarks: (ΣL, 3) body-frame positions of the visible landmarks, m, fish by fish.
+        inbox_counts: (G,) deliveries each fish waits for.
+    """
+
+    type_name: ClassVar[str] = "perception_batch"
+    tick: int
+    time: float
+    ids: IntArray
+    depth: FloatArray
+    neighbor_counts: IntArray
+    neighbors: FloatArray
+    landmark_counts: IntArray
+    landmarks: FloatArray
+    inbox_counts: IntArray
+
+    def __post_init__(self) -> None:
+        _check_int("tick", self.tick)
+        _check_float("time", self.time, low=0.0)
+        _array(self, "ids", np.int64, None)
+        count = self.ids.shape[0]
+        _check_ids(self.ids)
+        _array(self, "depth", np.float64, None, rows=count)
+        for name, rows in (("neighbor", "neighbors"), ("landmark", "landmarks")):
+            _array(self, f"{name}_counts", np.int64, None, rows=count)
+            _array(self, rows, np.float64, 3)
+            counts = getattr(self, f"{name}_counts")
+            _check_counts(f"{name}_counts", counts, getattr(self, rows).shape[0], rows)
+        _array(self, "inbox_counts", np.int64, None, rows=count)
+        if np.any(self.inbox_counts < 0) or np.any(self.inbox_counts > MAX_ROWS):
+            raise ValueError(f"inbox_counts must be in [0, {MAX_ROWS}]")
+
+
+@dataclass(frozen=True, eq=False)
+class CommandBatch(Message):
+    """What every fish of a school orders for a tick: school → world.
+
+    Attributes:
+        tick: the perception tick these commands answer.
+        ids: (G,) the fish, ascending.
+        fins: (G, 4) fin gains in [0, 1], columns in the order of :data:`FIN_NAMES`.
+        led: (G,) whether each fish's LEDs are on.
+        broadcasts: (G,) outbox messages each fish sent for this tick.
+    """
+
+    type_name: ClassVar[str] = "command_batch"
+    tick: int
+    ids: IntArray
+    fins: FloatArray
+    led: BoolArray
+    broadcasts: IntArray
+
+    def __post_init__(self) -> None:
+        _check_int("tick", self.tick)
+        _array(self, "ids", np.int64, None)
+        count = self.ids.shape[0]
+        _check_ids(self.ids)
+        _array(self, "fins", np.float64, len(FIN_NAMES), rows=count)
+        if np.any(self.fins < 0.0) or np.any(self.fins > 1.0):
+            raise ValueError("fins must be gains in [0, 1]")
+        _array(self, "led", np.bool_, None, rows=count)
+        _array(self, "broadcasts", np.int64, None, rows=count)
+        if np.any(self.broadcasts < 0) or np.any(self.broadcasts > MAX_ROWS):
+            raise ValueError(f"broadcasts must be in [0, {MAX_ROWS}]")
+
+
 @dataclass(frozen=True, eq=False)
 class Broadcast(Message):
     """A broadcast a fish sends to whoever can receive it: fish → channel.
@@ -263,10 +361,7 @@ class Snapshot(Message):
         _array(self, "yaw", np.float64, None, rows=count)
         _array(self, "neighbors_seen", np.int64, None, rows=count)
         _array(self, "broadcasts", np.int64, None, rows=count)
-        if count > 1 and np.any(np.diff(self.ids) <= 0):
-            raise ValueError("ids must be strictly ascending")
-        if np.any(self.ids < 0):
-            raise ValueError("ids must be non-negative")
+        _check_ids(self.ids)
 
 
 @dataclass(frozen=True, eq=False)
@@ -336,6 +431,8 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
     for cls in (
         Perception,
         Command,
+        PerceptionBatch,
+        CommandBatch,
         Broadcast,
         Delivery,
         Snapshot,

@@ -20,15 +20,18 @@ from fishswarm.actors.bridge import (
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.world import World, WorldSettings
+from fishswarm.behaviors.policy import Memory, act
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.messages import (
     Broadcast,
     ChannelReport,
     Command,
+    CommandBatch,
     ControlReply,
     ControlRequest,
     Delivery,
     Perception,
+    PerceptionBatch,
     Snapshot,
 )
 from fishswarm.scenario import Scenario
@@ -125,6 +128,70 @@ def test_fish_turns_fins_off_when_perceptions_stop_and_resumes(endpoint: str) ->
     assert answer.tick == 1
     assert answer.fins.tolist() == [0.0, 0.0, 1.0, 0.0]
     assert statistics["watchdog_stops"] >= 1
+
+
+def test_school_answers_a_perception_batch_with_one_command_batch(endpoint: str) -> None:
+    scenario = Scenario()
+    keys = scenario.keys
+    policy = policy_of(scenario)
+    settings = FishSettings((5, 2), policy, keys, school="pond")
+    near = np.array([[0.3, 0.0, 0.0]])
+    far = np.array([[1.0, -0.1, 0.0], [-0.5, 0.5, 0.1]])
+    batch = PerceptionBatch(
+        4,
+        4.0,
+        np.array([2, 5]),
+        np.array([0.5, 0.2]),
+        np.array([1, 2]),
+        np.concatenate([near, far]),
+        np.zeros(2, dtype=np.int64),
+        np.zeros((0, 3)),
+        np.zeros(2, dtype=np.int64),
+    )
+    stranger = PerceptionBatch(
+        5,
+        5.0,
+        np.array([2, 7]),
+        np.zeros(2),
+        np.zeros(2, dtype=np.int64),
+        np.zeros((0, 3)),
+        np.zeros(2, dtype=np.int64),
+        np.zeros((0, 3)),
+        np.zeros(2, dtype=np.int64),
+    )
+
+    async def main() -> tuple[CommandBatch, dict[str, int]]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        fish = Fish(settings)
+        async with (
+            open_session(router) as session,
+            open_subscription(session, keys.school_commands("pond")) as commands,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(fish.run, session)
+            put = publisher(session)
+            put(keys.school_perceptions("pond"), encode(stranger))
+            put(keys.school_perceptions("pond"), encode(batch))
+            with trio.fail_after(3):
+                answer = decode((await commands.receive())[1], CommandBatch)
+            nursery.cancel_scope.cancel()
+        return answer, fish.statistics()
+
+    answer, statistics = run_trio(main)
+    assert answer.tick == 4
+    assert answer.ids.tolist() == [2, 5]
+    for row, (neighbors, depth) in enumerate(((near, 0.5), (far, 0.2))):
+        alone, _ = act(
+            policy,
+            neighbors[None],
+            np.ones((1, len(neighbors)), bool),
+            np.array([depth]),
+            Memory.fresh(1),
+        )
+        np.testing.assert_array_equal(answer.fins[row], alone[0])
+    assert answer.led.tolist() == [True, True]
+    assert statistics["rejected"] == 1  # the batch naming fish 7, which the school lacks
+    assert statistics["perceptions"] == 2 and statistics["commands"] == 2
 
 
 def test_world_answers_status_pause_resume_and_stop(endpoint: str) -> None:

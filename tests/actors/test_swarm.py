@@ -69,6 +69,7 @@ def test_garbage_on_every_key_is_rejected_and_changes_nothing(
     keys = scenario.keys
     garbage = [b"", b"\xc1\xc1", b"\x93\x01\x02\x03", b"\x83\xa1v\x01\xa1t\xa7command\xa1f\x80"]
     targets = [keys.snapshot, keys.control, keys.channel_report]
+    targets += [keys.school_perceptions("worker-0"), keys.school_commands("worker-0")]
     for fish_id in range(scenario.fish):
         targets += [
             keys.perception(fish_id),
@@ -187,10 +188,9 @@ def test_late_fish_is_included_from_a_later_tick(endpoint: str) -> None:
             trio.open_nursery() as nursery,
         ):
             await nursery.start(observer.run, hub)
-            for fish_id in (0, 1, 2):
-                await nursery.start(
-                    Fish(FishSettings((fish_id,), policy, scenario.keys)).run, fish_session
-                )
+            # A school of three, then a fish on its own keys (as a robot would be).
+            school = FishSettings((0, 1, 2), policy, scenario.keys, school="tank")
+            await nursery.start(Fish(school).run, fish_session)
             nursery.start_soon(world.run, hub)
             await observer.wait_for_tick(3)
             await nursery.start(Fish(FishSettings((9,), policy, scenario.keys)).run, fish_session)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fishswarm.behaviors.policy import Memory, Policy, act
+from fishswarm.behaviors.policy import Memory, Policy, act, pad_neighbors
 from fishswarm.behaviors.replica import STUDY_SCALE, replica_motion
 
 REPLICA = tuple(np.random.default_rng(0).normal(0, 1, 21).tolist())
@@ -73,3 +73,15 @@ def test_replica_holds_its_first_depth() -> None:
 def test_replica_needs_its_weights() -> None:
     with pytest.raises(ValueError, match="21 weights"):
         Policy("replica", 0.26)
+
+
+def test_pad_neighbors_unstacks_fish_after_fish() -> None:
+    stacked = np.arange(9.0).reshape(3, 3)
+    neighbors, mask = pad_neighbors(np.array([2, 0, 1]), stacked)
+    assert neighbors.shape == (3, 2, 3)
+    assert mask.tolist() == [[True, True], [False, False], [True, False]]
+    np.testing.assert_array_equal(neighbors[0], stacked[:2])
+    np.testing.assert_array_equal(neighbors[1], np.zeros((2, 3)))
+    np.testing.assert_array_equal(neighbors[2], [stacked[2], [0.0, 0.0, 0.0]])
+    empty, empty_mask = pad_neighbors(np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+    assert empty.shape == (0, 0, 3) and empty_mask.shape == (0, 0)

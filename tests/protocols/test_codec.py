@@ -19,17 +19,37 @@ from fishswarm.protocols.messages import (
     Broadcast,
     ChannelReport,
     Command,
+    CommandBatch,
     ControlReply,
     ControlRequest,
     Delivery,
     Message,
     Perception,
+    PerceptionBatch,
     Snapshot,
 )
 
 EXAMPLES: list[Message] = [
     Perception(3, 7, 7.0, 0.5, np.array([[0.1, 0.2, 0.3], [1.0, -1.0, 0.0]]), np.zeros((0, 3)), 2),
     Command(3, 7, np.array([1.0, 0.0, 0.6, 0.0]), led=True, broadcasts=1),
+    PerceptionBatch(
+        7,
+        7.0,
+        np.array([2, 3, 9]),
+        np.array([0.5, 0.4, 0.3]),
+        np.array([2, 0, 1]),
+        np.arange(9.0).reshape(3, 3),
+        np.array([0, 1, 0]),
+        np.ones((1, 3)),
+        np.array([0, 2, 0]),
+    ),
+    CommandBatch(
+        7,
+        np.array([2, 3]),
+        np.array([[1.0, 0.0, 0.6, 0.0], [0.0, 1.0, 0.0, 0.0]]),
+        np.array([True, False]),
+        np.array([0, 1]),
+    ),
     Broadcast(3, 7, "formation", 2),
     Delivery(4, 8, "formation", 2, np.array([0.3, -0.1, 0.0])),
     Snapshot(
@@ -156,6 +176,87 @@ def _perception_fields(**overrides: object) -> dict[str, object]:
 def test_malformed_input_is_rejected_with_reason(payload: bytes, reason: str) -> None:
     with pytest.raises(MessageError, match=reason):
         decode(payload, Command if b"perception" not in payload else Perception)
+
+
+def _perception_batch_fields(**overrides: object) -> dict[str, object]:
+    fields: dict[str, object] = {
+        "tick": 1,
+        "time": 1.0,
+        "ids": np.array([0, 1]),
+        "depth": np.array([0.5, 0.5]),
+        "neighbor_counts": np.array([1, 1]),
+        "neighbors": np.zeros((2, 3)),
+        "landmark_counts": np.array([0, 0]),
+        "landmarks": np.zeros((0, 3)),
+        "inbox_counts": np.array([0, 0]),
+    }
+    fields.update(overrides)
+    return fields
+
+
+def _command_batch_fields(**overrides: object) -> dict[str, object]:
+    fields: dict[str, object] = {
+        "tick": 1,
+        "ids": np.array([0, 1]),
+        "fins": np.zeros((2, 4)),
+        "led": np.array([True, True]),
+        "broadcasts": np.array([0, 0]),
+    }
+    fields.update(overrides)
+    return fields
+
+
+@pytest.mark.parametrize(
+    ("payload", "expected", "reason"),
+    [
+        (_raw("perception_batch", _perception_batch_fields()), CommandBatch, "expected a command"),
+        (
+            _raw("perception_batch", _perception_batch_fields(neighbor_counts=np.array([1, 2]))),
+            PerceptionBatch,
+            "add up to 3, but neighbors has 2 rows",
+        ),
+        (
+            _raw("perception_batch", _perception_batch_fields(neighbor_counts=np.array([3, -1]))),
+            PerceptionBatch,
+            "non-negative",
+        ),
+        (
+            _raw("perception_batch", _perception_batch_fields(ids=np.array([1, 1]))),
+            PerceptionBatch,
+            "strictly ascending",
+        ),
+        (
+            _raw("perception_batch", _perception_batch_fields(depth=np.array([0.5]))),
+            PerceptionBatch,
+            "depth must have 2 rows",
+        ),
+        (
+            _raw("command_batch", _command_batch_fields(led=np.array([1.0, 0.0]))),
+            CommandBatch,
+            "led must be a boolean array",
+        ),
+        (
+            _raw("command_batch", _command_batch_fields(fins=np.full((2, 4), math.nan))),
+            CommandBatch,
+            "finite",
+        ),
+        (
+            _raw("command_batch", _command_batch_fields(fins=np.zeros((2, 3)))),
+            CommandBatch,
+            r"shape \(n, 4\)",
+        ),
+        (
+            _raw("command_batch", _command_batch_fields(broadcasts=np.array([0, -2]))),
+            CommandBatch,
+            r"broadcasts must be in",
+        ),
+    ],
+)
+def test_malformed_batches_are_rejected_with_reason(
+    payload: bytes, expected: type[Message], reason: str
+) -> None:
+    with pytest.raises(MessageError, match=reason):
+        decode(payload, expected)
 
 
 def test_truncated_array_is_rejected() -> None:
