@@ -127,6 +127,7 @@ class Fish:
         self._ids = ids
         self._order = np.argsort(ids)
         self._sorted_ids = ids[self._order]
+        self._all_rows = np.arange(count)
         self._intake = Intake(f"fish {_span(settings.fish_ids)}")
         self._memory = Memory.fresh(count)
         self._last_tick = np.full(count, -1, dtype=np.int64)
@@ -248,7 +249,7 @@ class Fish:
 
     def _admit(self, key: str, pending: _Pending) -> None:
         rows = pending.rows
-        if np.any(pending.tick <= self._last_tick[rows]) or np.any(self._busy[rows]):
+        if (self._last_tick[rows] >= pending.tick).any() or self._busy[rows].any():
             self._intake.reject(key, "stale", f"tick {pending.tick} repeated or out of order")
             return
         self._counters.perceptions += rows.size
@@ -308,8 +309,12 @@ class Fish:
             counts = np.concatenate([p.neighbor_counts for p in ready])
             stacked = np.concatenate([p.neighbors for p in ready])
         neighbors, mask = pad_neighbors(counts, stacked)
-        fins, memory = act(self.settings.policy, neighbors, mask, depth, self._memory.take(rows))
-        self._memory = self._memory.replaced(rows, memory)
+        if rows.size == self._ids.size and (rows == self._all_rows).all():
+            fins, self._memory = act(self.settings.policy, neighbors, mask, depth, self._memory)
+        else:
+            taken = self._memory.take(rows)
+            fins, memory = act(self.settings.policy, neighbors, mask, depth, taken)
+            self._memory = self._memory.replaced(rows, memory)
         self._counters.batches += 1
         start = 0
         for pending in ready:

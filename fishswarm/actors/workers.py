@@ -35,6 +35,8 @@ class WorkerSpec:
         connect: the router's endpoint.
         perception_timeout: the fish's safety watchdog, s.
         log_level: logging level name.
+        schooled: serve the fish as one school (batched keys) rather than each on its own
+            keys as a robot would.
     """
 
     index: int
@@ -44,11 +46,13 @@ class WorkerSpec:
     connect: str
     perception_timeout: float = 5.0
     log_level: str = "WARNING"
+    schooled: bool = True
 
     @property
-    def school(self) -> str:
-        """The school name its fish are served under (one message per tick each way)."""
-        return f"worker-{self.index}"
+    def school(self) -> str | None:
+        """The school its fish are served under (one message per tick each way), or None
+        when each fish has its own keys."""
+        return f"worker-{self.index}" if self.schooled else None
 
     def describe(self) -> str:
         """``worker 1 (fish 13–24)``."""

@@ -75,7 +75,11 @@ def lennard_jones(
     """
     if target_distance <= 0:
         raise ValueError(f"target_distance must be positive, got {target_distance}")
-    distance = np.sqrt(np.einsum("bkd,bkd->bk", neighbors, neighbors))
+    if neighbors.shape[1] == 0:
+        return np.zeros((neighbors.shape[0], 3))
+    # Ufuncs called directly (np.add.reduce rather than np.sum): at the batch of one a fish
+    # actor decides with, numpy's Python wrappers cost as much as the arithmetic.
+    distance = np.sqrt(np.add.reduce(neighbors * neighbors, axis=2))
     capped = np.minimum(np.maximum(distance, MIN_DISTANCE), target_distance + cap)
     magnitude = lennard_jones_force(capped, target_distance=target_distance, epsilon=epsilon)
     # Repulsion (positive) points away from the neighbour: −magnitude along its unit vector.
@@ -83,11 +87,9 @@ def lennard_jones(
     real = mask & (distance > 0)
     scale = -magnitude / np.where(real, distance, 1.0) * real
     contribution = neighbors * scale[..., None]
-    count = mask.sum(axis=1)
+    count = np.add.reduce(mask, axis=1)
     # A running sum adds in neighbour order, so padding (zeros at the end) never changes a
     # result: a fish alone (batch of one) and the same fish in a padded batch agree exactly.
-    if neighbors.shape[1] == 0:
-        return np.zeros((neighbors.shape[0], 3))
-    total = np.cumsum(contribution, axis=1)[:, -1]
+    total = np.add.accumulate(contribution, axis=1)[:, -1]
     result: FloatArray = total / np.maximum(count, 1)[:, None]
     return result

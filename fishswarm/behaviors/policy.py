@@ -93,6 +93,8 @@ def pad_neighbors(counts: NDArray[np.int64], stacked: FloatArray) -> tuple[Float
     Returns:
         neighbors (B, K, 3) with K = max(counts), zero in the padding, and mask (B, K).
     """
+    if counts.size == 1:  # one fish (a robot): nothing to pad
+        return stacked[None], np.ones((1, stacked.shape[0]), dtype=np.bool_)
     width = int(counts.max()) if counts.size else 0
     mask: BoolArray = np.arange(width) < counts[:, None]
     neighbors = np.zeros((counts.size, width, 3))

@@ -144,9 +144,16 @@ def step(
         dt[-1] = duration - robot.euler_step * (steps - 1)
     velocity = np.concatenate([state.body_velocity, state.yaw_rate[:, None]], axis=1)
     history = np.empty((steps, count, 4))
+    change = np.empty_like(velocity)
+    magnitude = np.empty_like(velocity)
+    # In place, with the operations in the order of
+    # velocity + (acceleration − drag·velocity·|velocity|)·dt, so results are the same bits.
     for n in range(steps):
-        velocity = velocity + (acceleration - drag_all * velocity * np.abs(velocity)) * dt[n]
-        history[n] = velocity
+        np.multiply(drag_all, velocity, out=change)
+        np.multiply(change, np.abs(velocity, out=magnitude), out=change)
+        np.subtract(acceleration, change, out=change)
+        np.multiply(change, dt[n], out=change)
+        velocity = np.add(velocity, change, out=history[n])
     yaw_path = np.cumsum(
         np.concatenate([state.yaw[None, :], history[:, :, 3] * dt[:, None]]), axis=0
     )[1:]
@@ -162,8 +169,10 @@ def step(
     if walled.size:
         # Fish that touch a wall are clipped after every step, as the model says.
         clipped = state.position[walled].copy()
+        moves = displacement[:, walled]
         for n in range(steps):
-            np.clip(clipped + displacement[n, walled], 0.0, upper, out=clipped)
+            np.add(clipped, moves[n], out=clipped)
+            np.minimum(np.maximum(clipped, 0.0, out=clipped), upper, out=clipped)
         position[walled] = clipped
     yaw = yaw_path[-1] if steps else state.yaw.copy()
     yaw = np.remainder(yaw + math.pi, 2 * math.pi) - math.pi

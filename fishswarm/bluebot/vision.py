@@ -144,7 +144,6 @@ class Perceived:
         return rows
 
 
-
 KD_TREE_MIN_FISH = 200
 """From this many fish on, neighbours in range are found with a KD-tree instead of all pairs."""
 

@@ -173,7 +173,7 @@ class Command(Message):
         _check_int("fish_id", self.fish_id)
         _check_int("tick", self.tick)
         _array(self, "fins", np.float64, None, rows=len(FIN_NAMES))
-        if np.any(self.fins < 0.0) or np.any(self.fins > 1.0):
+        if (self.fins < 0.0).any() or (self.fins > 1.0).any():
             raise ValueError(f"fins must be gains in [0, 1], got {self.fins.tolist()}")
         if not isinstance(self.led, bool):
             raise TypeError(f"led must be a bool, got {type(self.led).__name__}")
@@ -181,14 +181,14 @@ class Command(Message):
 
 
 def _check_ids(ids: IntArray) -> None:
-    if ids.shape[0] > 1 and np.any(np.diff(ids) <= 0):
+    if ids.shape[0] > 1 and (ids[1:] <= ids[:-1]).any():
         raise ValueError("ids must be strictly ascending")
-    if np.any(ids < 0):
+    if ids.shape[0] and ids[0] < 0:  # ascending: the first is the least
         raise ValueError("ids must be non-negative")
 
 
 def _check_counts(name: str, counts: IntArray, rows: int, what: str) -> None:
-    if np.any(counts < 0):
+    if (counts < 0).any():
         raise ValueError(f"{name} must be non-negative")
     if int(counts.sum()) != rows:
         raise ValueError(f"{name} add up to {int(counts.sum())}, but {what} has {rows} rows")
@@ -237,7 +237,7 @@ class PerceptionBatch(Message):
             counts = getattr(self, f"{name}_counts")
             _check_counts(f"{name}_counts", counts, getattr(self, rows).shape[0], rows)
         _array(self, "inbox_counts", np.int64, None, rows=count)
-        if np.any(self.inbox_counts < 0) or np.any(self.inbox_counts > MAX_ROWS):
+        if (self.inbox_counts < 0).any() or (self.inbox_counts > MAX_ROWS).any():
             raise ValueError(f"inbox_counts must be in [0, {MAX_ROWS}]")
 
 
@@ -266,11 +266,11 @@ class CommandBatch(Message):
         count = self.ids.shape[0]
         _check_ids(self.ids)
         _array(self, "fins", np.float64, len(FIN_NAMES), rows=count)
-        if np.any(self.fins < 0.0) or np.any(self.fins > 1.0):
+        if (self.fins < 0.0).any() or (self.fins > 1.0).any():
             raise ValueError("fins must be gains in [0, 1]")
         _array(self, "led", np.bool_, None, rows=count)
         _array(self, "broadcasts", np.int64, None, rows=count)
-        if np.any(self.broadcasts < 0) or np.any(self.broadcasts > MAX_ROWS):
+        if (self.broadcasts < 0).any() or (self.broadcasts > MAX_ROWS).any():
             raise ValueError(f"broadcasts must be in [0, {MAX_ROWS}]")
 
 
@@ -443,6 +443,18 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
 }
 
 
+_FIELD_NAMES: dict[str, tuple[str, ...]] = {}
+
+
+def field_names(cls: type[Message]) -> tuple[str, ...]:
+    """The names of a message type's fields, in order (looked up once per type)."""
+    names = _FIELD_NAMES.get(cls.type_name)
+    if names is None:
+        fields = dataclasses.fields(cls)  # type: ignore[arg-type]
+        names = _FIELD_NAMES[cls.type_name] = tuple(f.name for f in fields)
+    return names
+
+
 def fields_of(message: Message) -> dict[str, Any]:
     """The message's fields as a dict (arrays not copied)."""
-    return {f.name: getattr(message, f.name) for f in dataclasses.fields(message)}  # type: ignore[arg-type]
+    return {name: getattr(message, name) for name in field_names(type(message))}
