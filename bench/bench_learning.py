@@ -7,6 +7,7 @@ generations, then times the next ones, for each classifier input choice given.
 Usage:
     python bench/bench_learning.py
     python bench/bench_learning.py --generations 20 --inputs speed,neighbors2
+    python bench/bench_learning.py --inputs speed,neighbors --hall-of-fame 10
 
 Results and conditions are kept in docs/benchmarks.md.
 """
@@ -32,6 +33,9 @@ def main() -> None:
         nargs="+",
         default=["speed", "speed,neighbors", "speed,angular-speed,neighbors2"],
     )
+    parser.add_argument(
+        "--hall-of-fame", type=int, default=0, help="past champions kept (0: no hall of fame)"
+    )
     args = parser.parse_args()
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
@@ -40,7 +44,8 @@ def main() -> None:
     print("| classifier inputs | s/generation (mean) | min | 500 generations |")
     print("|---|---:|---:|---:|")
     for inputs in args.inputs:
-        run = Coevolution(LearningSettings(inputs=tuple(inputs.split(","))))
+        settings = LearningSettings(inputs=tuple(inputs.split(",")), hall_of_fame=args.hall_of_fame)
+        run = Coevolution(settings)
         for _ in range(args.warm_up):
             run.step()
         times = []

@@ -131,6 +131,13 @@ def _parser() -> argparse.ArgumentParser:
         default=5.0,
         help="fins off after this long without a perception, s (default 5)",
     )
+    fish.add_argument(
+        "--school",
+        metavar="NAME",
+        help="serve the fish as one school: one perception batch and one command batch per "
+        "tick instead of a message per fish (for many simulated fish in one process; a robot "
+        "keeps its own keys)",
+    )
 
     world = commands.add_parser(
         "world",

@@ -167,10 +167,18 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
     policy = policy_of(scenario)
     keys = scenario.keys
 
-    async def main() -> None:
+    try:
         settings = FishSettings(
-            tuple(args.ids), policy, keys, perception_timeout=args.perception_timeout
+            tuple(args.ids),
+            policy,
+            keys,
+            perception_timeout=args.perception_timeout,
+            school=args.school,
         )
+    except ValueError as error:
+        raise ConfigError(str(error)) from None
+
+    async def main() -> None:
         async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
             await nursery.start(Fish(settings).run, session)
             print(f"fish {', '.join(map(str, args.ids))} up on {args.connect}", file=sys.stderr)

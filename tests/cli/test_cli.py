@@ -156,6 +156,12 @@ def test_fish_alone_without_router_fails_clearly() -> None:
     assert "is a fishswarm run or router listening there" in result.stderr
 
 
+def test_bad_school_name_is_explained() -> None:
+    result = _run("fish", "--id", "3", "--school", "a/b", "--connect", "tcp/127.0.0.1:1")
+    assert result.returncode == 2
+    assert "school name 'a/b' is not valid: use letters, digits" in result.stderr
+
+
 def test_ctrl_c_stops_the_run_within_two_seconds(tmp_path: Path) -> None:
     with subprocess.Popen(
         [

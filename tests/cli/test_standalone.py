@@ -35,7 +35,7 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
         start("router", "--listen", endpoint)
         time.sleep(1.0)
         observer = start("observe", "--connect", endpoint, "--ticks", "6", "--record", str(record))
-        start("fish", "--id", "0", "--id", "1", "--connect", endpoint)
+        start("fish", "--id", "0", "--id", "1", "--school", "pair", "--connect", endpoint)
         start("fish", "--id", "2", "--connect", endpoint)
         start("channel", "--connect", endpoint)
         world = subprocess.run(
