@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from fishswarm.progress import ProgressLine, bar
 from fishswarm.scenario import BEHAVIORS, ConfigError, Scenario
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
@@ -235,6 +236,9 @@ def _parser() -> argparse.ArgumentParser:
     export.add_argument("recording", type=Path, help="MCAP recording of a run")
     export.add_argument("--npz", type=Path, help="NumPy archive to write")
     export.add_argument("--csv", type=Path, help="CSV table to write")
+    from fishswarm.actors import study_commands
+
+    study_commands.add_parsers(commands)
     return parser
 
 
@@ -270,22 +274,20 @@ def _learn(args: argparse.Namespace, scenario: Scenario | None) -> int:
     except ValueError as error:
         raise ConfigError(str(error)) from None
     every = max(1, args.generations // 50)
-    tty = sys.stderr.isatty()
+    output = ProgressLine()
 
     def progress(run: Any, record: dict[str, float], seconds: float) -> None:
         done = run.generation
         if args.quiet or (done % every and done != args.generations):
             return
         left = (args.generations - done) * seconds
-        filled = round(20 * done / args.generations)
         line = (
-            f"[{'#' * filled}{'.' * (20 - filled)}] "
+            f"{bar(done, args.generations)} "
             f"generation {done}/{args.generations}  models best {record['model_best']:.3f} "
             f"mean {record['model_mean']:.3f}  classifiers best {record['classifier_best']:.3f} "
             f"mean {record['classifier_mean']:.3f}  {seconds:.2f} s/gen  ~{left / 60:.1f} min left"
         )
-        sys.stderr.write(("\r" + line) if tty else line + "\n")
-        sys.stderr.flush()
+        output.show(line)
 
     try:
         summary = learn(
@@ -298,7 +300,7 @@ def _learn(args: argparse.Namespace, scenario: Scenario | None) -> int:
         )
     except LearningError as error:
         raise ConfigError(str(error)) from None
-    if tty and not args.quiet:
+    if output.tty and not args.quiet:
         sys.stderr.write("\n")
     ideal, replica = summary["ideal"], summary["replica"]
     print(
@@ -317,7 +319,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level, format="%(levelname)s %(name)s: %(message)s")
-    from fishswarm.actors import commands
+    from fishswarm.actors import commands, study_commands
 
     handlers: dict[str, Any] = {
         "run": commands.run,
@@ -328,6 +330,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "router": commands.router,
         "export": commands.export,
         "learn": _learn,
+        "experiment": study_commands.experiment,
+        "plot": study_commands.plot,
     }
     try:
         scenario = _scenario(args) if hasattr(args, "config") else None

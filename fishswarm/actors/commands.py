@@ -16,6 +16,7 @@ from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.launcher import EXIT_WORKER_DIED, LaunchSettings, WorkerFailed, run_swarm
 from fishswarm.actors.observer import Observer, Progress
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
+from fishswarm.progress import ProgressLine, bar
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.recording import (
     RecordingError,
@@ -78,26 +79,21 @@ def progress_printer(ticks: int, stream: Any = sys.stderr) -> Callable[[Progress
     """Print a progress line per snapshot (about 20 lines for long runs; one updating line on
     a terminal)."""
     every = max(1, ticks // 20)
-    tty = stream.isatty()
+    output = ProgressLine(stream)
 
     def show(progress: Progress) -> None:
         if progress.tick % every and progress.tick != ticks:
             return
         m = progress.metrics
-        filled = round(20 * min(progress.tick, ticks) / ticks) if ticks else 0
-        bar = f"[{'#' * filled}{'.' * (20 - filled)}] " if ticks else ""
+        prefix = bar(progress.tick, ticks) + " " if ticks else ""
         line = (
-            f"{bar}tick {progress.tick:>{len(str(ticks))}}/{ticks}  t={progress.time:7.1f} s  "
+            f"{prefix}tick {progress.tick:>{len(str(ticks))}}/{ticks}  t={progress.time:7.1f} s  "
             f"fish {progress.fish}  centroid {m['centroid_distance']:.3f} m  "
             f"pairwise {m['pairwise_distance']:.3f} m  "
             f"nearest {m['nearest_neighbor_distance']:.3f} m"
             f"  seen {m['neighbors_seen']:.1f}"
         )
-        if tty:
-            stream.write("\r" + line + ("\n" if progress.tick >= ticks else ""))
-        else:
-            stream.write(line + "\n")
-        stream.flush()
+        output.show(line, last=progress.tick >= ticks)
 
     return show
 

@@ -79,6 +79,14 @@ def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -
     assert rows[0].startswith("tick,t,id,x,y,z")
     assert len(rows) == 1 + 5 * 6
 
+    picture = tmp_path / "run.png"
+    plotted = _run("plot", str(record), "--out", str(picture))
+    assert plotted.returncode == 0, plotted.stderr
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    wrong = _run("plot", str(record), "--out", str(tmp_path / "run.gif"))
+    assert wrong.returncode == 2
+    assert "--out must end in .png, .svg or .pdf" in wrong.stderr
+
 
 def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
     config = tmp_path / "scenario.toml"

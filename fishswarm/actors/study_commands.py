@@ -1,0 +1,140 @@
+"""``fishswarm experiment`` and ``fishswarm plot``: the study's experiments and pictures of runs."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fishswarm.scenario import ConfigError, Scenario
+
+
+def add_parsers(commands: Any) -> None:
+    """Add the ``experiment`` and ``plot`` commands to the ``fishswarm`` parser."""
+    from fishswarm.actors.sweep import ENGINES
+    from fishswarm.experiment import available
+
+    names = ", ".join(available()) or "see experiments/"
+    experiment = commands.add_parser(
+        "experiment",
+        help="run one of the study's experiments (tables and plots)",
+        description="Run one of the study's simulator experiments: a scenario swept over a "
+        "parameter, several seeds per value, settings in parallel on the available cores. "
+        f"Experiments: {names} (the files in experiments/); or give the path of an experiment "
+        "TOML file to run a changed copy. Writes table.md, table.csv, runs.csv, summary.json "
+        "and plots (metrics vs parameter, metrics over time, tracks) to --out.",
+    )
+    experiment.add_argument("name", help=f"experiment name ({names}) or TOML file")
+    experiment.add_argument(
+        "--seeds", type=int, help="runs per value (default: the experiment's, 5 in the study)"
+    )
+    experiment.add_argument("--duration", type=float, help="simulated time per run, s")
+    experiment.add_argument(
+        "--engine",
+        choices=ENGINES,
+        default="actors",
+        help="actors: every run through the actor system over Zenoh (default); batch: the "
+        "in-process batch engine, same trajectories, much faster for large sweeps",
+    )
+    experiment.add_argument(
+        "--jobs", type=int, help="runs at a time in separate processes (default: one per core)"
+    )
+    experiment.add_argument(
+        "--out", type=Path, help="output folder (default runs/experiments/NAME)"
+    )
+    experiment.add_argument("--quiet", action="store_true", help="no progress lines")
+
+    plot = commands.add_parser(
+        "plot",
+        help="draw a recorded run: tracks from above and from the side, metrics over time",
+        description="Draw a recording made with 'fishswarm run --record' or 'fishswarm "
+        "observe --record': every fish's track seen from above and from the side, and the "
+        "three mean distances and the neighbours seen over time.",
+    )
+    plot.add_argument("recording", type=Path, help="MCAP recording of a run")
+    plot.add_argument(
+        "--out", type=Path, help="picture to write, .png/.svg/.pdf (default RECORDING.png)"
+    )
+
+
+def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm experiment NAME``."""
+    from fishswarm.actors.sweep import run_experiment
+    from fishswarm.experiment import find, write_report
+    from fishswarm.progress import ProgressLine, bar
+
+    chosen = find(args.name)
+    if args.seeds is not None and args.seeds < 1:
+        raise ConfigError("--seeds must be at least 1")
+    if args.jobs is not None and args.jobs < 1:
+        raise ConfigError("--jobs must be at least 1")
+    chosen = chosen.with_changes(seeds=args.seeds, duration=args.duration)
+    out = args.out or Path("runs/experiments") / chosen.name
+    total = len(chosen.runs())
+    print(
+        f"fishswarm: {chosen.title}: {chosen.parameter} in "
+        f"{', '.join(f'{v:g}' for v in chosen.values)}, {chosen.seeds} seed(s) each, "
+        f"{total} runs, engine {args.engine}",
+        file=sys.stderr,
+    )
+    output = ProgressLine()
+    started = time.perf_counter()
+
+    def show(done: int, runs: int, outcome: Any) -> None:
+        if args.quiet:
+            return
+        elapsed = time.perf_counter() - started
+        left = elapsed / done * (runs - done)
+        output.show(
+            f"{bar(done, runs)} run {done}/{runs}  {chosen.parameter}={outcome.value:g} "
+            f"seed {outcome.seed}  {outcome.wall_time:.1f} s  ~{left:.0f} s left",
+            last=done == runs,
+        )
+
+    outcomes = run_experiment(chosen, engine=args.engine, jobs=args.jobs, on_run=show)
+    wall_time = time.perf_counter() - started
+    paths = write_report(chosen, outcomes, out, engine=args.engine, wall_time=wall_time)
+    print((out / "table.md").read_text(encoding="utf-8"))
+    print(
+        f"{total} runs in {wall_time:.1f} s; wrote {', '.join(p.name for p in paths)} to {out}",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm plot RECORDING``."""
+    from fishswarm.figures import FiguresUnavailable, run_figure
+    from fishswarm.metrics import METRIC_NAMES
+    from fishswarm.recording import RecordingError, read_recording
+
+    out = args.out or args.recording.with_suffix(".png")
+    if out.suffix not in (".png", ".svg", ".pdf"):
+        raise ConfigError(f"--out must end in .png, .svg or .pdf, got {out.name}")
+    try:
+        recording = read_recording(args.recording)
+    except RecordingError as error:
+        raise ConfigError(str(error)) from None
+    if not recording.snapshots:
+        raise ConfigError(f"{args.recording} holds no snapshots: nothing to draw")
+    arrays = recording.arrays()
+    metrics = {
+        name: np.array([m[name] for m in recording.metrics])
+        for name in (*METRIC_NAMES, "neighbors_seen")
+    }
+    settings = recording.scenario
+    title = (
+        f"{settings.get('fish', '?')} fish, {settings.get('behavior', '?')}, "
+        f"seed {settings.get('seed', '?')} ({args.recording.name})"
+    )
+    try:
+        figure = run_figure(arrays["t"], arrays["pos"], metrics, settings["tank"], title=title)
+        figure.savefig(out, dpi=110)
+    except FiguresUnavailable as error:
+        raise ConfigError(str(error)) from None
+    print(f"wrote {out}", file=sys.stderr)
+    return 0

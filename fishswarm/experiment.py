@@ -1,0 +1,322 @@
+"""The study's simulator experiments: one scenario swept over a parameter, several seeds each.
+
+An experiment is a TOML file (``experiments/<name>.toml``): an ``[experiment]`` table naming
+the scenario setting to sweep, its values and the number of seeds, and a ``[scenario]``
+table with the study's set-up. This module defines experiments and turns their runs into
+tables and pictures; :mod:`fishswarm.actors.sweep` runs them.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fishswarm.scenario import ConfigError, Scenario
+
+FloatArray = NDArray[np.float64]
+
+METRICS = ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance", "neighbors_seen")
+"""Columns of a run's metric series: the three mean distances (m) of SPEC §3 and neighbours
+seen."""
+
+SWEEPABLE = ("blind_width", "sphere_radius", "visual_range", "target_distance", "fish")
+EXPERIMENTS_FOLDER = Path(__file__).resolve().parents[1] / "experiments"
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One experiment of the study.
+
+    Attributes:
+        name: short name, e.g. ``blindspot``.
+        title: what it shows, for tables and plots.
+        parameter: the scenario setting swept (e.g. ``blind_width``).
+        label: the parameter as an axis label, with its unit.
+        values: the settings of the parameter.
+        seeds: runs per value (seeds 0 … seeds−1).
+        scenario: the set-up every run starts from.
+    """
+
+    name: str
+    title: str
+    parameter: str
+    label: str
+    values: tuple[float, ...]
+    seeds: int
+    scenario: Scenario
+
+    def __post_init__(self) -> None:
+        if self.parameter not in SWEEPABLE:
+            raise ConfigError(
+                f"experiment {self.name}: parameter must be one of {', '.join(SWEEPABLE)}, "
+                f"got {self.parameter!r}"
+            )
+        if not self.values:
+            raise ConfigError(f"experiment {self.name}: values must not be empty")
+        if not isinstance(self.seeds, int) or self.seeds < 1:
+            raise ConfigError(f"experiment {self.name}: seeds must be at least 1")
+        for value in self.values:
+            self.scenario_for(value, 0)  # every setting must make a valid scenario
+
+    def scenario_for(self, value: float, seed: int) -> Scenario:
+        """The scenario of one run."""
+        kind = int if self.parameter == "fish" else float
+        return self.scenario.replace(**{self.parameter: kind(value), "seed": seed})
+
+    def runs(self) -> list[tuple[float, int]]:
+        """Every (value, seed) pair, value by value."""
+        return [(value, seed) for value in self.values for seed in range(self.seeds)]
+
+    def with_changes(
+        self,
+        *,
+        seeds: int | None = None,
+        duration: float | None = None,
+        values: tuple[float, ...] | None = None,
+    ) -> Experiment:
+        """A copy with fewer seeds, a shorter duration or other values (None: unchanged)."""
+        return Experiment(
+            self.name,
+            self.title,
+            self.parameter,
+            self.label,
+            self.values if values is None else values,
+            self.seeds if seeds is None else seeds,
+            self.scenario.replace(duration=duration),
+        )
+
+    @classmethod
+    def from_toml(cls, path: Path) -> Experiment:
+        """Load an experiment file.
+
+        Raises:
+            ConfigError: the file is missing, not TOML, or a setting is wrong (with which).
+        """
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ConfigError(f"experiment file {path} does not exist") from None
+        except tomllib.TOMLDecodeError as error:
+            raise ConfigError(f"{path} is not valid TOML: {error}") from None
+        table = data.get("experiment")
+        if not isinstance(table, dict):
+            raise ConfigError(f"{path}: needs an [experiment] table (name, parameter, values)")
+        known = {"name", "title", "parameter", "label", "values", "seeds"}
+        unknown = sorted(set(table) - known)
+        if unknown:
+            raise ConfigError(
+                f"{path}: unknown [experiment] setting(s) {', '.join(unknown)}; known: "
+                f"{', '.join(sorted(known))}"
+            )
+        missing = sorted({"name", "parameter", "values"} - set(table))
+        if missing:
+            raise ConfigError(f"{path}: [experiment] needs {', '.join(missing)}")
+        values = table["values"]
+        if not isinstance(values, list) or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in values
+        ):
+            raise ConfigError(f"{path}: values must be a list of numbers, got {values!r}")
+        scenario_table = data.get("scenario", {})
+        if not isinstance(scenario_table, Mapping):
+            raise ConfigError(f"{path}: [scenario] must be a table")
+        scenario = Scenario.from_mapping(scenario_table, source=str(path))
+        name = str(table["name"])
+        return cls(
+            name,
+            str(table.get("title", name)),
+            str(table["parameter"]),
+            str(table.get("label", table["parameter"])),
+            tuple(float(v) for v in values),
+            table.get("seeds", 5),
+            scenario,
+        )
+
+
+def available() -> list[str]:
+    """Names of the experiments in the repository's ``experiments/`` folder."""
+    if not EXPERIMENTS_FOLDER.is_dir():
+        return []
+    return sorted(
+        path.stem
+        for path in EXPERIMENTS_FOLDER.glob("*.toml")
+        if "experiment" in tomllib.loads(path.read_text(encoding="utf-8"))
+    )
+
+
+def find(name_or_path: str) -> Experiment:
+    """An experiment by name (``experiments/<name>.toml``) or by the path of its file.
+
+    Raises:
+        ConfigError: no such experiment, with the names there are.
+    """
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        return Experiment.from_toml(path)
+    candidate = EXPERIMENTS_FOLDER / f"{name_or_path}.toml"
+    if not candidate.is_file():
+        names = ", ".join(available()) or "(none found)"
+        raise ConfigError(
+            f"no experiment named {name_or_path!r}: choose one of {names}, or give the path "
+            "of an experiment TOML file"
+        )
+    return Experiment.from_toml(candidate)
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """The result of one run.
+
+    Attributes:
+        value: the parameter's value.
+        seed: the seed.
+        t: (T,) times, s.
+        metrics: (T, 4) the columns of :data:`METRICS` at every tick.
+        position: (T, N, 3) every fish's position, m.
+        wall_time: how long the run took, s.
+    """
+
+    value: float
+    seed: int
+    t: FloatArray
+    metrics: FloatArray
+    position: FloatArray
+    wall_time: float
+
+
+def change_percent(series: FloatArray) -> float:
+    """Change of a metric from its first to its last value, per cent of the first."""
+    first, last = float(series[0]), float(series[-1])
+    return math.nan if first == 0 else 100.0 * (last - first) / first
+
+
+def table_rows(experiment: Experiment, outcomes: list[RunOutcome]) -> list[dict[str, Any]]:
+    """Mean and s.d. over seeds, per value: each metric's initial and final value and its
+    change in per cent."""
+    rows = []
+    for value in experiment.values:
+        mine = [o for o in outcomes if o.value == value]
+        row: dict[str, Any] = {experiment.parameter: value, "runs": len(mine)}
+        for column, name in enumerate(METRICS):
+            initial = np.array([o.metrics[0, column] for o in mine])
+            final = np.array([o.metrics[-1, column] for o in mine])
+            change = np.array([change_percent(o.metrics[:, column]) for o in mine])
+            for label, values in (
+                ("initial", initial),
+                ("final", final),
+                ("change_percent", change),
+            ):
+                row[f"{name}_{label}_mean"] = float(values.mean())
+                row[f"{name}_{label}_sd"] = float(values.std(ddof=1)) if values.size > 1 else 0.0
+        row["wall_time_mean"] = float(np.mean([o.wall_time for o in mine]))
+        rows.append(row)
+    return rows
+
+
+def write_report(
+    experiment: Experiment,
+    outcomes: list[RunOutcome],
+    folder: Path,
+    *,
+    engine: str,
+    wall_time: float,
+) -> list[Path]:
+    """Write the experiment's tables, per-run data and pictures into ``folder``.
+
+    Files: ``table.md`` and ``table.csv`` (mean ± s.d. per value), ``runs.csv`` (one row
+    per run), ``summary.json`` (settings, rows, timing) and, with matplotlib, the pictures of
+    :func:`fishswarm.figures.experiment_figures`.
+
+    Returns:
+        The paths written.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = table_rows(experiment, outcomes)
+    paths = [folder / "table.md", folder / "table.csv", folder / "runs.csv"]
+    paths[0].write_text(markdown_table(experiment, rows), encoding="utf-8")
+    with paths[1].open("w", newline="", encoding="utf-8") as stream:
+        table = csv.DictWriter(stream, fieldnames=list(rows[0]))
+        table.writeheader()
+        table.writerows(rows)
+    with paths[2].open("w", newline="", encoding="utf-8") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(
+            [
+                experiment.parameter,
+                "seed",
+                *(f"{m}_initial" for m in METRICS),
+                *(f"{m}_final" for m in METRICS),
+                "wall_time",
+            ]
+        )
+        for outcome in outcomes:
+            writer.writerow(
+                [
+                    outcome.value,
+                    outcome.seed,
+                    *outcome.metrics[0].tolist(),
+                    *outcome.metrics[-1].tolist(),
+                    round(outcome.wall_time, 3),
+                ]
+            )
+    summary = {
+        "experiment": experiment.name,
+        "title": experiment.title,
+        "parameter": experiment.parameter,
+        "values": list(experiment.values),
+        "seeds": experiment.seeds,
+        "engine": engine,
+        "scenario": experiment.scenario.to_dict(),
+        "rows": rows,
+        "wall_time": wall_time,
+    }
+    summary_path = folder / "summary.json"
+    summary_path.write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    paths.append(summary_path)
+    try:
+        from fishswarm.figures import experiment_figures
+
+        paths += experiment_figures(experiment, outcomes, folder)
+    except ImportError:
+        pass
+    return paths
+
+
+def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
+    """The table of an experiment in Markdown: change of each mean distance in per cent and
+    neighbours seen, mean ± s.d. over seeds."""
+
+    def cell(row: dict[str, Any], name: str, what: str, digits: int) -> str:
+        return f"{row[f'{name}_{what}_mean']:.{digits}f} ± {row[f'{name}_{what}_sd']:.{digits}f}"
+
+    lines = [
+        f"# {experiment.title}",
+        "",
+        f"{experiment.scenario.fish} fish, {experiment.scenario.behavior}, "
+        f"{experiment.scenario.duration:g} s at {1 / experiment.scenario.control_period:g} Hz; "
+        f"{experiment.seeds} seeds per value; mean ± s.d. over seeds. Changes are from the "
+        "first to the last tick, per cent of the first.",
+        "",
+        f"| {experiment.label} | centroid distance change (%) | pairwise distance change (%) "
+        "| nearest-neighbour distance change (%) | neighbours seen, initial | neighbours seen, "
+        "final |",
+        "|---:|---:|---:|---:|---:|---:|",
+    ]
+    for row in rows:
+        lines.append(
+            f"| {row[experiment.parameter]:g} "
+            f"| {cell(row, 'centroid_distance', 'change_percent', 1)} "
+            f"| {cell(row, 'pairwise_distance', 'change_percent', 1)} "
+            f"| {cell(row, 'nearest_neighbor_distance', 'change_percent', 1)} "
+            f"| {cell(row, 'neighbors_seen', 'initial', 1)} "
+            f"| {cell(row, 'neighbors_seen', 'final', 1)} |"
+        )
+    return "\n".join(lines) + "\n"

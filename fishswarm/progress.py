@@ -1,0 +1,32 @@
+"""Progress lines for long runs: a bar, one updating line on a terminal, plain lines in logs."""
+
+from __future__ import annotations
+
+import sys
+from typing import TextIO
+
+
+def bar(done: int, total: int, width: int = 20) -> str:
+    """``[#####...............]``: ``done`` of ``total`` as a bar of ``width`` cells."""
+    filled = round(width * min(done, total) / total) if total > 0 else 0
+    return f"[{'#' * filled}{'.' * (width - filled)}]"
+
+
+class ProgressLine:
+    """Writes progress lines: rewritten in place on a terminal, one per line otherwise.
+
+    Args:
+        stream: where to write (standard error by default).
+    """
+
+    def __init__(self, stream: TextIO | None = None) -> None:
+        self.stream = sys.stderr if stream is None else stream
+        self.tty = self.stream.isatty()
+
+    def show(self, line: str, *, last: bool = False) -> None:
+        """Show a line; ``last`` ends the updating line on a terminal."""
+        if self.tty:
+            self.stream.write("\r" + line + ("\n" if last else ""))
+        else:
+            self.stream.write(line + "\n")
+        self.stream.flush()
