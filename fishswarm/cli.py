@@ -29,6 +29,12 @@ _SCENARIO_FLAGS: dict[str, tuple[str, type, str]] = {
     ),
     "blind_width": ("--blind-width", float, "blind-spot width in m (default 0.05)"),
     "sphere_radius": ("--sphere-radius", float, "blocking-sphere radius in m (default 0.065)"),
+    "orbit_radius": (
+        "--orbit-radius",
+        float,
+        "orbit radius R of orbit and milling around the post at the tank centre, partner "
+        "distance of waltz, m (default 0.45)",
+    ),
     "swarm": ("--swarm", str, "swarm name: several swarms can share a router (default default)"),
     "model": (
         "--model",
@@ -124,7 +130,16 @@ def _parser() -> argparse.ArgumentParser:
     )
     _add_connect(fish)
     _add_scenario_flags(
-        fish, ["behavior", "target_distance", "controller", "control_period", "swarm", "model"]
+        fish,
+        [
+            "behavior",
+            "target_distance",
+            "controller",
+            "control_period",
+            "orbit_radius",
+            "swarm",
+            "model",
+        ],
     )
     fish.add_argument(
         "--perception-timeout",

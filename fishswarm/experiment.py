@@ -12,7 +12,7 @@ import csv
 import json
 import math
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,15 +20,115 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.metrics import ORBIT_METRIC_NAMES, orbit_metrics, swarm_metrics
 from fishswarm.scenario import ConfigError, Scenario
 
 FloatArray = NDArray[np.float64]
 
 METRICS = ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance", "neighbors_seen")
-"""Columns of a run's metric series: the three mean distances (m) of SPEC §3 and neighbours
-seen."""
+"""Columns of a swarm run's metric series: the three mean distances (m) of SPEC §3 and
+neighbours seen."""
 
-SWEEPABLE = ("blind_width", "sphere_radius", "visual_range", "target_distance", "fish")
+ORBITING = ("orbit", "milling", "waltz")
+
+METRIC_LABELS = {
+    "centroid_distance": "distance to centroid of others (m)",
+    "pairwise_distance": "mean pairwise distance (m)",
+    "nearest_neighbor_distance": "nearest-neighbour distance (m)",
+    "neighbors_seen": "neighbours seen",
+    "radius": "radius (m)",
+    "revolutions": "revolutions",
+    "speed": "speed (m/s)",
+    "collisions": "colliding pairs",
+}
+
+
+def _first(series: FloatArray) -> float:
+    return float(series[0])
+
+
+def _last(series: FloatArray) -> float:
+    return float(series[-1])
+
+
+def _second_half(series: FloatArray) -> FloatArray:
+    return series[len(series) // 2 :]
+
+
+def _late_mean(series: FloatArray) -> float:
+    return float(_second_half(series).mean())
+
+
+def _late_sd(series: FloatArray) -> float:
+    return float(_second_half(series).std())
+
+
+def _total(series: FloatArray) -> float:
+    return float(series.sum())
+
+
+@dataclass(frozen=True)
+class Summary:
+    """One column of an experiment's table: a number per run, then mean ± s.d. over seeds.
+
+    Attributes:
+        key: column name in table.csv.
+        label: column heading in table.md and on plots.
+        metric: the metric series it reduces.
+        reduce: series (T,) → the number of one run.
+        digits: decimals shown in table.md.
+    """
+
+    key: str
+    label: str
+    metric: str
+    reduce: Callable[[FloatArray], float]
+    digits: int
+
+
+SWARM_SUMMARIES = (
+    Summary(
+        "centroid_distance_change_percent",
+        "centroid distance change (%)",
+        "centroid_distance",
+        lambda series: change_percent(series),
+        1,
+    ),
+    Summary(
+        "pairwise_distance_change_percent",
+        "pairwise distance change (%)",
+        "pairwise_distance",
+        lambda series: change_percent(series),
+        1,
+    ),
+    Summary(
+        "nearest_neighbor_distance_change_percent",
+        "nearest-neighbour distance change (%)",
+        "nearest_neighbor_distance",
+        lambda series: change_percent(series),
+        1,
+    ),
+    Summary("neighbors_seen_initial", "neighbours seen, initial", "neighbors_seen", _first, 1),
+    Summary("neighbors_seen_final", "neighbours seen, final", "neighbors_seen", _last, 1),
+)
+
+ORBIT_SUMMARIES = (
+    Summary("radius", "radius, 2nd half (m)", "radius", _late_mean, 3),
+    Summary("radius_wobble", "radius s.d. in time, 2nd half (m)", "radius", _late_sd, 3),
+    Summary("revolutions", "revolutions", "revolutions", _last, 2),
+    Summary("speed", "speed, 2nd half (m/s)", "speed", _late_mean, 3),
+    Summary("collisions", "collisions (pair-ticks)", "collisions", _total, 1),
+)
+
+SWEEPABLE = (
+    "blind_width",
+    "sphere_radius",
+    "visual_range",
+    "target_distance",
+    "fish",
+    "orbit_radius",
+)
 EXPERIMENTS_FOLDER = Path(__file__).resolve().parents[1] / "experiments"
 
 
@@ -66,6 +166,41 @@ class Experiment:
             raise ConfigError(f"experiment {self.name}: seeds must be at least 1")
         for value in self.values:
             self.scenario_for(value, 0)  # every setting must make a valid scenario
+
+    @property
+    def orbiting(self) -> bool:
+        """Whether the fish orbit (orbit, milling, waltz) rather than aggregate or disperse."""
+        return self.scenario.behavior in ORBITING
+
+    @property
+    def metric_names(self) -> tuple[str, ...]:
+        """The columns of each run's metric series."""
+        return ORBIT_METRIC_NAMES if self.orbiting else METRICS
+
+    @property
+    def summaries(self) -> tuple[Summary, ...]:
+        """The columns of the experiment's table."""
+        return ORBIT_SUMMARIES if self.orbiting else SWARM_SUMMARIES
+
+    def metrics_of(
+        self, scenario: Scenario, position: FloatArray, seen: NDArray[np.int64]
+    ) -> FloatArray:
+        """(T, M) the metric series of one run from its positions (T, N, 3) and the
+        neighbours each fish saw (T, N)."""
+        if self.orbiting:
+            landmarks = scenario.landmarks()
+            return orbit_metrics(
+                position,
+                centre=landmarks[0] if landmarks.shape[0] else None,
+                period=scenario.control_period,
+                contact=BODY_LENGTH,
+            )
+        return np.array(
+            [
+                [swarm_metrics(p, s)[name] for name in METRICS]
+                for p, s in zip(position, seen, strict=True)
+            ]
+        )
 
     def scenario_for(self, value: float, seed: int) -> Scenario:
         """The scenario of one run."""
@@ -179,7 +314,7 @@ class RunOutcome:
         value: the parameter's value.
         seed: the seed.
         t: (T,) times, s.
-        metrics: (T, 4) the columns of :data:`METRICS` at every tick.
+        metrics: (T, M) the experiment's metric series (:attr:`Experiment.metric_names`).
         position: (T, N, 3) every fish's position, m.
         wall_time: how long the run took, s.
     """
@@ -199,23 +334,16 @@ def change_percent(series: FloatArray) -> float:
 
 
 def table_rows(experiment: Experiment, outcomes: list[RunOutcome]) -> list[dict[str, Any]]:
-    """Mean and s.d. over seeds, per value: each metric's initial and final value and its
-    change in per cent."""
+    """One row per value: each of the experiment's summaries, mean and s.d. over seeds."""
     rows = []
     for value in experiment.values:
         mine = [o for o in outcomes if o.value == value]
         row: dict[str, Any] = {experiment.parameter: value, "runs": len(mine)}
-        for column, name in enumerate(METRICS):
-            initial = np.array([o.metrics[0, column] for o in mine])
-            final = np.array([o.metrics[-1, column] for o in mine])
-            change = np.array([change_percent(o.metrics[:, column]) for o in mine])
-            for label, values in (
-                ("initial", initial),
-                ("final", final),
-                ("change_percent", change),
-            ):
-                row[f"{name}_{label}_mean"] = float(values.mean())
-                row[f"{name}_{label}_sd"] = float(values.std(ddof=1)) if values.size > 1 else 0.0
+        for summary in experiment.summaries:
+            column = experiment.metric_names.index(summary.metric)
+            values = np.array([summary.reduce(o.metrics[:, column]) for o in mine])
+            row[f"{summary.key}_mean"] = float(values.mean())
+            row[f"{summary.key}_sd"] = float(values.std(ddof=1)) if values.size > 1 else 0.0
         row["wall_time_mean"] = float(np.mean([o.wall_time for o in mine]))
         rows.append(row)
     return rows
@@ -252,8 +380,8 @@ def write_report(
             [
                 experiment.parameter,
                 "seed",
-                *(f"{m}_initial" for m in METRICS),
-                *(f"{m}_final" for m in METRICS),
+                *(f"{m}_initial" for m in experiment.metric_names),
+                *(f"{m}_final" for m in experiment.metric_names),
                 "wall_time",
             ]
         )
@@ -291,32 +419,28 @@ def write_report(
 
 
 def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
-    """The table of an experiment in Markdown: change of each mean distance in per cent and
-    neighbours seen, mean ± s.d. over seeds."""
-
-    def cell(row: dict[str, Any], name: str, what: str, digits: int) -> str:
-        return f"{row[f'{name}_{what}_mean']:.{digits}f} ± {row[f'{name}_{what}_sd']:.{digits}f}"
-
+    """The table of an experiment in Markdown, mean ± s.d. over seeds."""
+    scenario = experiment.scenario
+    explain = (
+        "Radius, speed: means over the second half of each run; revolutions: at the end; "
+        "collisions: pairs closer than one body length, summed over ticks."
+        if experiment.orbiting
+        else "Changes are from the first to the last tick, per cent of the first."
+    )
     lines = [
         f"# {experiment.title}",
         "",
-        f"{experiment.scenario.fish} fish, {experiment.scenario.behavior}, "
-        f"{experiment.scenario.duration:g} s at {1 / experiment.scenario.control_period:g} Hz; "
-        f"{experiment.seeds} seeds per value; mean ± s.d. over seeds. Changes are from the "
-        "first to the last tick, per cent of the first.",
+        f"{scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
+        f"{1 / scenario.control_period:g} Hz; {experiment.seeds} seeds per value; mean ± s.d. "
+        f"over seeds. {explain}",
         "",
-        f"| {experiment.label} | centroid distance change (%) | pairwise distance change (%) "
-        "| nearest-neighbour distance change (%) | neighbours seen, initial | neighbours seen, "
-        "final |",
-        "|---:|---:|---:|---:|---:|---:|",
+        "| " + " | ".join([experiment.label, *(s.label for s in experiment.summaries)]) + " |",
+        "|" + "---:|" * (1 + len(experiment.summaries)),
     ]
     for row in rows:
-        lines.append(
-            f"| {row[experiment.parameter]:g} "
-            f"| {cell(row, 'centroid_distance', 'change_percent', 1)} "
-            f"| {cell(row, 'pairwise_distance', 'change_percent', 1)} "
-            f"| {cell(row, 'nearest_neighbor_distance', 'change_percent', 1)} "
-            f"| {cell(row, 'neighbors_seen', 'initial', 1)} "
-            f"| {cell(row, 'neighbors_seen', 'final', 1)} |"
-        )
+        cells = [f"{row[experiment.parameter]:g}"]
+        for summary in experiment.summaries:
+            mean, sd = row[f"{summary.key}_mean"], row[f"{summary.key}_sd"]
+            cells.append(f"{mean:.{summary.digits}f} ± {sd:.{summary.digits}f}")
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -10,6 +10,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.experiment import METRIC_LABELS
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.figure import Figure
@@ -17,13 +19,6 @@ if TYPE_CHECKING:
     from fishswarm.experiment import Experiment, RunOutcome
 
 FloatArray = NDArray[np.float64]
-
-METRIC_LABELS = {
-    "centroid_distance": "distance to centroid of others (m)",
-    "pairwise_distance": "mean pairwise distance (m)",
-    "nearest_neighbor_distance": "nearest-neighbour distance (m)",
-    "neighbors_seen": "neighbours seen",
-}
 
 
 class FiguresUnavailable(RuntimeError):
@@ -118,42 +113,42 @@ def experiment_figures(
 ) -> list[Path]:
     """Write the experiment's pictures into ``folder``; returns their paths.
 
-    - ``metrics_vs_parameter.png``: change of each mean distance (per cent) and final
-      neighbours seen against the parameter, mean ± s.d. over seeds.
+    - ``metrics_vs_parameter.png``: each column of the experiment's table against the
+      parameter, mean ± s.d. over seeds.
     - ``metrics_over_time.png``: each metric over time, one line per value (mean, band ± s.d.).
     - ``tracks.png``: the first seed's tracks for every value, from above and from the side.
     """
-    from fishswarm.experiment import METRICS, change_percent
-
     plt = _pyplot()
     values = experiment.values
     positions = np.arange(len(values))
-    labels = [f"{v:g}" for v in values]
+    names = experiment.metric_names
     paths = []
 
-    figure, axes = plt.subplots(1, 4, figsize=(15, 3.6), layout="constrained")
-    for ax, (column, name) in zip(axes, enumerate(METRICS), strict=True):
-        per_value = []
-        for value in values:
-            series = [o.metrics[:, column] for o in outcomes if o.value == value]
-            if name == "neighbors_seen":
-                per_value.append([s[-1] for s in series])
-            else:
-                per_value.append([change_percent(s) for s in series])
+    summaries = experiment.summaries
+    figure, axes = plt.subplots(
+        1, len(summaries), figsize=(3.4 * len(summaries), 3.6), layout="constrained"
+    )
+    for ax, summary in zip(axes, summaries, strict=True):
+        column = names.index(summary.metric)
+        per_value = [
+            [summary.reduce(o.metrics[:, column]) for o in outcomes if o.value == value]
+            for value in values
+        ]
         means = [float(np.mean(v)) for v in per_value]
         errors = [float(np.std(v, ddof=1)) if len(v) > 1 else 0.0 for v in per_value]
         ax.errorbar(positions, means, yerr=errors, fmt="o-", capsize=4)
-        ax.set_xticks(positions, labels)
+        ax.set_xticks(positions, [f"{v:g}" for v in values])
         ax.set_xlabel(experiment.label)
-        ax.set_ylabel("final neighbours seen" if name == "neighbors_seen" else "change (%)")
-        ax.set_title(METRIC_LABELS[name], fontsize=9)
+        ax.set_title(summary.label, fontsize=9)
         ax.grid(alpha=0.3)
     figure.suptitle(f"{experiment.title}: mean ± s.d. over {experiment.seeds} seeds")
     paths.append(_save(figure, folder / "metrics_vs_parameter.png"))
 
-    figure, axes = plt.subplots(1, 4, figsize=(15, 3.6), layout="constrained")
+    figure, axes = plt.subplots(
+        1, len(names), figsize=(3.8 * len(names), 3.6), layout="constrained"
+    )
     colors = _colors(len(values))
-    for ax, (column, name) in zip(axes, enumerate(METRICS), strict=True):
+    for ax, (column, name) in zip(axes, enumerate(names), strict=True):
         for color, value in zip(colors, values, strict=True):
             mine = [o for o in outcomes if o.value == value]
             stacked = np.array([o.metrics[:, column] for o in mine])
@@ -179,6 +174,9 @@ def experiment_figures(
             tank,
             title=f"{experiment.label.split(' (')[0]} = {value:g}, seed {first.seed}",
         )
+        for landmark in experiment.scenario_for(value, first.seed).landmarks():
+            axes[0, column].plot(landmark[0], landmark[1], "+", color="red", markersize=8)
+            axes[1, column].plot(landmark[0], landmark[2], "+", color="red", markersize=8)
     figure.suptitle(f"{experiment.title}: tracks from above and from the side")
     paths.append(_save(figure, folder / "tracks.png"))
     return paths

@@ -15,14 +15,21 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
 from fishswarm.behaviors.lennard_jones import AGGREGATION_DISTANCE
 from fishswarm.bluebot.control import CONTROLLERS
 from fishswarm.bluebot.parameters import BODY_LENGTH, Tank
 from fishswarm.bluebot.vision import Vision
 from fishswarm.protocols.keys import KeySpace
 
-BEHAVIORS = ("dispersion", "aggregation", "replica")
+BEHAVIORS = ("dispersion", "aggregation", "orbit", "milling", "waltz", "replica")
+ORBITING = ("orbit", "milling")
+"""Behaviours that circle a landmark (by default a post at the tank centre)."""
 SPAWN_REGIONS = ("ball", "tank")
+
+FloatArray = NDArray[np.float64]
 
 
 class ConfigError(ValueError):
@@ -54,6 +61,9 @@ class Scenario:
         channel_loss: probability that one delivery is lost, in [0, 1).
         swarm: swarm name in the key space.
         model: a learned replica (``best_replica.npz``) for the ``replica`` behaviour.
+        orbit_radius: R of ``orbit`` and ``milling``; the partner distance of ``waltz``, m.
+        landmark: position (x, y, z) of a fixed, visible landmark in the tank, m; the orbit
+            centre. Default for ``orbit`` and ``milling``: the tank centre; otherwise none.
     """
 
     fish: int = 25
@@ -75,6 +85,8 @@ class Scenario:
     channel_loss: float = 0.0
     swarm: str = "default"
     model: str | None = None
+    orbit_radius: float = 0.45
+    landmark: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         def need(ok: bool, message: str) -> None:
@@ -128,6 +140,15 @@ class Scenario:
             KeySpace(self.swarm)
         except ValueError as error:
             raise ConfigError(str(error)) from None
+        need(_positive(self.orbit_radius), "orbit_radius must be positive metres")
+        if self.landmark is not None:
+            size = self.tank
+            need(
+                len(self.landmark) == 3
+                and all(0 <= v <= s for v, s in zip(self.landmark, size, strict=True)),
+                f"landmark must be a point (x, y, z) inside the tank {tuple(size)}, "
+                f"got {self.landmark!r}",
+            )
         need(_positive(self.channel_range), "channel_range must be positive metres")
         need(
             isinstance(self.channel_loss, int | float) and 0 <= self.channel_loss < 1,
@@ -174,6 +195,14 @@ class Scenario:
             return self.target_distance
         return AGGREGATION_DISTANCE if self.behavior == "aggregation" else self.the_tank().diagonal
 
+    def landmarks(self) -> FloatArray:
+        """(L, 3) positions of the fixed landmarks in the tank, m (the orbit centre first)."""
+        if self.landmark is not None:
+            return np.array([self.landmark], dtype=np.float64)
+        if self.behavior in ORBITING:
+            return np.array([self.the_tank().center], dtype=np.float64)
+        return np.zeros((0, 3))
+
     def resolved_spawn_radius(self) -> float:
         """Spawn radius after defaults: 2 body lengths (dispersion) or 10 (aggregation and
         replica)."""
@@ -204,11 +233,14 @@ class Scenario:
                 f"{', '.join(sorted(known))}"
             )
         values = dict(data)
-        if "tank" in values:
-            tank = values["tank"]
-            if not isinstance(tank, list | tuple) or len(tank) != 3:
-                raise ConfigError(f"{source}: tank must be a list of three lengths, got {tank!r}")
-            values["tank"] = tuple(float(v) for v in tank)
+        for point in ("tank", "landmark"):
+            if point in values:
+                given = values[point]
+                if not isinstance(given, list | tuple) or len(given) != 3:
+                    raise ConfigError(
+                        f"{source}: {point} must be a list of three lengths, got {given!r}"
+                    )
+                values[point] = tuple(float(v) for v in given)
         for name in (
             "duration",
             "control_period",
@@ -221,6 +253,7 @@ class Scenario:
             "vision_noise",
             "channel_range",
             "channel_loss",
+            "orbit_radius",
         ):
             if isinstance(values.get(name), int) and not isinstance(values[name], bool):
                 values[name] = float(values[name])

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 from fishswarm.behaviors.policy import Memory, Policy, act
 from fishswarm.bluebot.dynamics import State, rest_state, step
 from fishswarm.bluebot.parameters import BlueBot
-from fishswarm.bluebot.vision import Perceived, perceive
+from fishswarm.bluebot.vision import Perceived, perceive, perceive_landmarks
 from fishswarm.learning.session import LearningError, load_replica
 from fishswarm.scenario import ConfigError, Scenario
 
@@ -89,6 +89,7 @@ def policy_of(scenario: Scenario) -> Policy:
         control_period=scenario.control_period,
         caudal_cap=scenario.caudal_cap,
         replica_weights=weights,
+        orbit_radius=scenario.orbit_radius,
     )
 
 
@@ -98,6 +99,13 @@ def observe(
     """What every fish sees now (vision of SPEC §1.2)."""
     vision = scenario.vision()
     return perceive(state.position, state.yaw, vision=vision, rngs=rngs if vision.noise else None)
+
+
+def observe_landmarks(scenario: Scenario, state: State) -> Perceived:
+    """Which of the scenario's landmarks every fish sees now, in its body frame."""
+    return perceive_landmarks(
+        state.position, state.yaw, scenario.landmarks(), vision=scenario.vision()
+    )
 
 
 def advance(
@@ -151,7 +159,8 @@ def run_batch(scenario: Scenario) -> Trajectory:
         seen.append(perceived.counts)
         if tick == scenario.ticks:
             break
-        fins, memory = act_each(policy, perceived, state.position[:, 2], memory)
+        landmarks = observe_landmarks(scenario, state)
+        fins, memory = act_each(policy, perceived, landmarks, state.position[:, 2], memory)
         state = advance(scenario, state, fins)
     return Trajectory(
         np.array(times),
@@ -164,11 +173,19 @@ def run_batch(scenario: Scenario) -> Trajectory:
 
 
 def act_each(
-    policy: Policy, perceived: Perceived, depth: FloatArray, memory: Memory
+    policy: Policy, perceived: Perceived, landmarks: Perceived, depth: FloatArray, memory: Memory
 ) -> tuple[FloatArray, Memory]:
     """All fish act at once on their perceptions.
 
     The actor system runs the same policy with a batch of one per fish; batch and loop agree
     exactly (tested), so this is the fast path for the same result.
     """
-    return act(policy, perceived.neighbors, perceived.mask, depth, memory)
+    return act(
+        policy,
+        perceived.neighbors,
+        perceived.mask,
+        depth,
+        memory,
+        landmarks.neighbors,
+        landmarks.mask,
+    )

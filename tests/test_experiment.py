@@ -21,7 +21,7 @@ from fishswarm.scenario import ConfigError
 
 
 def test_the_studys_experiments_are_defined_as_in_spec() -> None:
-    assert {"blindspot", "blockingsphere"} <= set(available())
+    assert {"blindspot", "blockingsphere", "orbit", "milling", "waltz"} <= set(available())
     blindspot = find("blindspot")
     assert blindspot.parameter == "blind_width"
     assert blindspot.values == (0.0, 0.05, 0.25, 2.517)
@@ -88,7 +88,7 @@ def test_table_gives_mean_and_sd_of_the_change_over_seeds() -> None:
     assert rows[1]["centroid_distance_change_percent_mean"] == pytest.approx(-50.0)
     assert rows[1]["centroid_distance_change_percent_sd"] == 0.0
     assert rows[0]["neighbors_seen_final_mean"] == 2.0
-    assert rows[0]["pairwise_distance_initial_mean"] == pytest.approx(1.5)
+    assert rows[0]["neighbors_seen_initial_mean"] == 4.0
     table = markdown_table(experiment, rows)
     assert "| 0 | 30.0 ± 28.3 | 30.0 ± 28.3 | 30.0 ± 28.3 | 4.0 ± 0.0 | 2.0 ± 0.0 |" in table
     assert len(METRICS) == 4
@@ -97,3 +97,29 @@ def test_table_gives_mean_and_sd_of_the_change_over_seeds() -> None:
 def test_change_percent_of_a_series() -> None:
     assert change_percent(np.array([2.0, 5.0, 3.0])) == pytest.approx(50.0)
     assert np.isnan(change_percent(np.array([0.0, 1.0])))
+
+
+def test_orbit_experiments_summarise_radius_revolutions_speed_and_collisions() -> None:
+    for name, fish in (("orbit", 1), ("milling", 25), ("waltz", 2)):
+        experiment = find(name)
+        assert experiment.orbiting and experiment.scenario.fish == fish
+        assert experiment.metric_names == ("radius", "revolutions", "speed", "collisions")
+    orbit = find("orbit").with_changes(values=(0.45,), seeds=1)
+    t = np.arange(5.0)
+    metrics = np.array(
+        [
+            [0.9, 0, 0, 0],
+            [0.5, 0.1, 0.2, 1],
+            [0.44, 0.2, 0.1, 0],
+            [0.46, 0.3, 0.1, 2],
+            [0.45, 0.4, 0.1, 0],
+        ]
+    )
+    rows = table_rows(orbit, [RunOutcome(0.45, 0, t, metrics, np.zeros((5, 1, 3)), 1.0)])
+    # The second half is ticks 2–4: radius mean 0.45, speed 0.1; revolutions at the end 0.4;
+    # collisions summed over the run 3.
+    assert rows[0]["radius_mean"] == pytest.approx(0.45)
+    assert rows[0]["radius_wobble_mean"] == pytest.approx(np.std([0.44, 0.46, 0.45]))
+    assert rows[0]["revolutions_mean"] == pytest.approx(0.4)
+    assert rows[0]["speed_mean"] == pytest.approx(0.1)
+    assert rows[0]["collisions_mean"] == 3.0

@@ -93,6 +93,8 @@ class _Pending:
         depth: (G,) m.
         neighbor_counts: (G,) visible neighbours per fish.
         neighbors: (ΣK, 3) their body-frame positions, m, fish by fish.
+        landmark_counts: (G,) visible landmarks per fish.
+        landmarks: (ΣL, 3) their body-frame positions, m, fish by fish.
         inbox_counts: (G,) deliveries each fish waits for.
         deadline: when to stop waiting for deliveries (trio time).
         batched: answer with one command batch (school) instead of a command per fish.
@@ -103,6 +105,8 @@ class _Pending:
     depth: NDArray[np.float64]
     neighbor_counts: NDArray[np.int64]
     neighbors: NDArray[np.float64]
+    landmark_counts: NDArray[np.int64]
+    landmarks: NDArray[np.float64]
     inbox_counts: NDArray[np.int64]
     deadline: float
     batched: bool
@@ -220,6 +224,8 @@ class Fish:
             np.array([perception.depth]),
             np.array([perception.neighbors.shape[0]], dtype=np.int64),
             perception.neighbors,
+            np.array([perception.landmarks.shape[0]], dtype=np.int64),
+            perception.landmarks,
             np.array([perception.inbox_count], dtype=np.int64),
             trio.current_time() + self.settings.inbox_timeout,
             batched=False,
@@ -241,6 +247,8 @@ class Fish:
             batch.depth,
             batch.neighbor_counts,
             batch.neighbors,
+            batch.landmark_counts,
+            batch.landmarks,
             batch.inbox_counts,
             trio.current_time() + self.settings.inbox_timeout,
             batched=True,
@@ -297,24 +305,24 @@ class Fish:
         self._pending = [pending for pending in self._pending if pending not in ready]
         if len(ready) == 1:
             only = ready[0]
-            rows, depth, counts, stacked = (
-                only.rows,
-                only.depth,
-                only.neighbor_counts,
-                only.neighbors,
-            )
+            rows, depth = only.rows, only.depth
+            counts, stacked = only.neighbor_counts, only.neighbors
+            landmark_counts, landmark_rows = only.landmark_counts, only.landmarks
         else:
             rows = np.concatenate([p.rows for p in ready])
             depth = np.concatenate([p.depth for p in ready])
             counts = np.concatenate([p.neighbor_counts for p in ready])
             stacked = np.concatenate([p.neighbors for p in ready])
+            landmark_counts = np.concatenate([p.landmark_counts for p in ready])
+            landmark_rows = np.concatenate([p.landmarks for p in ready])
         neighbors, mask = pad_neighbors(counts, stacked)
-        if rows.size == self._ids.size and (rows == self._all_rows).all():
-            fins, self._memory = act(self.settings.policy, neighbors, mask, depth, self._memory)
-        else:
-            taken = self._memory.take(rows)
-            fins, memory = act(self.settings.policy, neighbors, mask, depth, taken)
-            self._memory = self._memory.replaced(rows, memory)
+        landmarks, landmark_mask = pad_neighbors(landmark_counts, landmark_rows)
+        whole = rows.size == self._ids.size and bool((rows == self._all_rows).all())
+        memory = self._memory if whole else self._memory.take(rows)
+        fins, memory = act(
+            self.settings.policy, neighbors, mask, depth, memory, landmarks, landmark_mask
+        )
+        self._memory = memory if whole else self._memory.replaced(rows, memory)
         self._counters.batches += 1
         start = 0
         for pending in ready:

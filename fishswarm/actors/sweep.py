@@ -22,8 +22,7 @@ import trio
 from numpy.typing import NDArray
 
 from fishswarm.actors.launcher import LaunchSettings, run_swarm
-from fishswarm.experiment import METRICS, Experiment, RunOutcome
-from fishswarm.metrics import swarm_metrics
+from fishswarm.experiment import Experiment, RunOutcome
 from fishswarm.recording import read_recording
 from fishswarm.scenario import ConfigError, Scenario
 from fishswarm.simulation import run_batch
@@ -44,12 +43,7 @@ def run_one(experiment: Experiment, value: float, seed: int, engine: str) -> Run
         t, position, seen = _run_actors(scenario)
     else:
         raise ValueError(f"engine must be one of {', '.join(ENGINES)}, got {engine!r}")
-    metrics = np.array(
-        [
-            [swarm_metrics(p, s)[name] for name in METRICS]
-            for p, s in zip(position, seen, strict=True)
-        ]
-    )
+    metrics = experiment.metrics_of(scenario, position, seen)
     return RunOutcome(value, seed, t, metrics, position, time.perf_counter() - started)
 
 

@@ -44,14 +44,11 @@ from fishswarm.protocols.messages import (
     Snapshot,
 )
 from fishswarm.scenario import Scenario
-from fishswarm.simulation import Stream, advance, observe, place, stream
+from fishswarm.simulation import Stream, advance, observe, observe_landmarks, place, stream
 
 log = logging.getLogger(__name__)
 
 Event = tuple[str, str, bytes | bool]
-
-NO_LANDMARKS = np.zeros((0, 3))
-NO_LANDMARKS.setflags(write=False)
 
 
 class StartTimeout(RuntimeError):
@@ -242,7 +239,8 @@ class World:
             await self._resume.wait()
             inbox_counts = await self._inbox_counts()
             self._current = _Tick.of(self._ids.tolist(), self._current.report)
-            self._publish_perceptions(put, perceived, inbox_counts)
+            landmarks = observe_landmarks(self.scenario, self._state)
+            self._publish_perceptions(put, perceived, landmarks, inbox_counts)
             await self._collect_commands()
             self._drop_lost()
             # Fish lost while the world waited have left self._ids; keep the others' rows.
@@ -252,7 +250,7 @@ class World:
             self.tick += 1
 
     def _publish_perceptions(
-        self, put: Put, perceived: Perceived, inbox_counts: np.ndarray
+        self, put: Put, perceived: Perceived, landmarks: Perceived, inbox_counts: np.ndarray
     ) -> None:
         """Every live fish's perception: one message per school, one per fish on its own keys."""
         schools: dict[str, list[int]] = {}
@@ -268,7 +266,7 @@ class World:
                 self.time,
                 float(depths[row]),
                 perceived.neighbors[row, : perceived.counts[row]],
-                NO_LANDMARKS,
+                landmarks.neighbors[row][landmarks.mask[row]],
                 int(inbox_counts[row]),
             )
             put(self.keys.perception(fish_id), encode(perception))
@@ -284,8 +282,8 @@ class World:
                 depths[rows],
                 counts,
                 perceived.neighbors[rows][seen],
-                np.zeros(rows.size, dtype=np.int64),
-                NO_LANDMARKS,
+                landmarks.counts[rows],
+                landmarks.neighbors[rows][landmarks.mask[rows]],
                 inbox_counts[rows],
             )
             put(self.keys.school_perceptions(school), encode(batch))

@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.behaviors.lennard_jones import lennard_jones
+from fishswarm.behaviors.orbit import ORBIT_RADIUS, milling, orbit, waltz
 from fishswarm.behaviors.replica import STUDY_SCALE, replica_motion
 from fishswarm.bluebot.control import PidState, homing, pid
 
@@ -24,14 +25,16 @@ class Policy:
     """What a fish does.
 
     Attributes:
-        behavior: ``dispersion`` or ``aggregation`` (both Lennard-Jones), or ``replica``
-            (a learned replica network; depth held).
+        behavior: ``dispersion`` or ``aggregation`` (both Lennard-Jones), ``orbit`` and
+            ``milling`` (circle the landmark seen first), ``waltz`` (circle the nearest
+            neighbour), or ``replica`` (a learned replica network; depth held).
         target_distance: Lennard-Jones r_t, m.
         controller: ``homing`` or ``pid``.
         control_period: s (for the pid loops, and the replica's step).
         caudal_cap: largest caudal gain of the homing controller.
         replica_weights: the replica network's 21 weights (``replica`` only).
         replica_scale: metres per arena unit (``replica`` only).
+        orbit_radius: R of ``orbit`` and ``milling``, the partner distance of ``waltz``, m.
     """
 
     behavior: str
@@ -41,6 +44,7 @@ class Policy:
     caudal_cap: float = 1.0
     replica_weights: tuple[float, ...] | None = None
     replica_scale: float = STUDY_SCALE
+    orbit_radius: float = ORBIT_RADIUS
 
     def __post_init__(self) -> None:
         if self.behavior == "replica" and (
@@ -103,12 +107,29 @@ def pad_neighbors(counts: NDArray[np.int64], stacked: FloatArray) -> tuple[Float
 
 
 def desired_motion(
-    policy: Policy, neighbors: FloatArray, mask: BoolArray, depth: FloatArray, memory: Memory
+    policy: Policy,
+    neighbors: FloatArray,
+    mask: BoolArray,
+    depth: FloatArray,
+    memory: Memory,
+    landmarks: FloatArray | None = None,
+    landmark_mask: BoolArray | None = None,
 ) -> tuple[FloatArray, Memory]:
     """(B, 3) body-frame target vector of B fish, m, and their memory after deciding."""
-    if policy.behavior != "replica":
+    if policy.behavior in ("dispersion", "aggregation"):
         target = lennard_jones(neighbors, mask, target_distance=policy.target_distance)
         return target, memory
+    if policy.behavior == "waltz":
+        return waltz(neighbors, mask, radius=policy.orbit_radius), memory
+    if policy.behavior in ("orbit", "milling"):
+        count = neighbors.shape[0]
+        if landmarks is None or landmark_mask is None or landmarks.shape[1] == 0:
+            centre, seen = np.zeros((count, 3)), np.zeros(count, dtype=np.bool_)
+        else:
+            centre, seen = landmarks[:, 0], landmark_mask[:, 0]
+        if policy.behavior == "orbit":
+            return orbit(centre, seen, radius=policy.orbit_radius), memory
+        return milling(centre, seen, neighbors, mask, radius=policy.orbit_radius), memory
     assert policy.replica_weights is not None
     hold = np.where(np.isnan(memory.hold_depth), depth, memory.hold_depth)
     planar = replica_motion(
@@ -123,7 +144,13 @@ def desired_motion(
 
 
 def act(
-    policy: Policy, neighbors: FloatArray, mask: BoolArray, depth: FloatArray, memory: Memory
+    policy: Policy,
+    neighbors: FloatArray,
+    mask: BoolArray,
+    depth: FloatArray,
+    memory: Memory,
+    landmarks: FloatArray | None = None,
+    landmark_mask: BoolArray | None = None,
 ) -> tuple[FloatArray, Memory]:
     """Fin gains of B fish for one control period.
 
@@ -133,11 +160,15 @@ def act(
         mask: (B, K) which neighbour rows are real.
         depth: (B,) each fish's own depth, m.
         memory: the fish's memory.
+        landmarks: (B, L, 3) visible landmarks in body frames, m (the orbit centre first).
+        landmark_mask: (B, L) which landmark rows are real.
 
     Returns:
         fins (B, 4) in [0, 1] (caudal, dorsal, pectoral left, pectoral right), new memory.
     """
-    target, memory = desired_motion(policy, neighbors, mask, depth, memory)
+    target, memory = desired_motion(
+        policy, neighbors, mask, depth, memory, landmarks, landmark_mask
+    )
     if policy.controller == "pid":
         fins, pid_state = pid(target, state=memory.pid, period=policy.control_period)
         return fins, Memory(memory.dorsal_on, pid_state, memory.hold_depth)

@@ -22,15 +22,20 @@ def test_actor_and_batch_engines_give_the_same_trajectories() -> None:
     through_actors = run_experiment(experiment, engine="actors", jobs=2)
     in_batch = run_experiment(experiment, engine="batch", jobs=1)
     assert [(o.value, o.seed) for o in through_actors] == [(0.0, 0), (0.39, 0)]
+    # Orbiting: the landmark travels in perceptions and perception batches alike.
+    orbiting = find("milling").with_changes(values=(0.45,), seeds=1, duration=6.0)
+    through_actors += run_experiment(orbiting, engine="actors", jobs=1)
+    in_batch += run_experiment(orbiting, engine="batch", jobs=1)
     for actors, batch in zip(through_actors, in_batch, strict=True):
-        assert actors.position.shape == (5, 25, 3)
+        assert actors.position.shape[1:] == (25, 3)
         np.testing.assert_array_equal(actors.position, batch.position)
         np.testing.assert_array_equal(actors.metrics, batch.metrics)
     # A bigger blocking sphere hides more: fewer neighbours seen at the start.
     assert in_batch[1].metrics[0, 3] < in_batch[0].metrics[0, 3]
+    assert in_batch[2].metrics[-1, 2] > 0  # the milling fish move
 
 
-@pytest.mark.parametrize("name", ["blindspot", "blockingsphere"])
+@pytest.mark.parametrize("name", ["blindspot", "blockingsphere", "orbit", "milling", "waltz"])
 def test_experiment_command_end_to_end(
     name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
