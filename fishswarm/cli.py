@@ -35,6 +35,12 @@ _SCENARIO_FLAGS: dict[str, tuple[str, type, str]] = {
         "orbit radius R of orbit and milling around the post at the tank centre, partner "
         "distance of waltz, m (default 0.45)",
     ),
+    "time_mode": (
+        "--time",
+        str,
+        "lockstep (default: as fast as possible, deterministic) or realtime (one tick per "
+        "control period of wall-clock time; late fish keep their last command)",
+    ),
     "swarm": ("--swarm", str, "swarm name: several swarms can share a router (default default)"),
     "model": (
         "--model",

@@ -28,6 +28,7 @@ BEHAVIORS = ("dispersion", "aggregation", "orbit", "milling", "waltz", "replica"
 ORBITING = ("orbit", "milling")
 """Behaviours that circle a landmark (by default a post at the tank centre)."""
 SPAWN_REGIONS = ("ball", "tank")
+TIME_MODES = ("lockstep", "realtime")
 
 FloatArray = NDArray[np.float64]
 
@@ -64,6 +65,9 @@ class Scenario:
         orbit_radius: R of ``orbit`` and ``milling``; the partner distance of ``waltz``, m.
         landmark: position (x, y, z) of a fixed, visible landmark in the tank, m; the orbit
             centre. Default for ``orbit`` and ``milling``: the tank centre; otherwise none.
+        time_mode: ``lockstep`` (every tick waits for every live fish: as fast as the machine
+            allows, deterministic) or ``realtime`` (one tick per control period of wall-clock
+            time; a fish that misses its deadline keeps its last command, as on hardware).
     """
 
     fish: int = 25
@@ -87,6 +91,7 @@ class Scenario:
     model: str | None = None
     orbit_radius: float = 0.45
     landmark: tuple[float, float, float] | None = None
+    time_mode: str = "lockstep"
 
     def __post_init__(self) -> None:
         def need(ok: bool, message: str) -> None:
@@ -141,6 +146,10 @@ class Scenario:
         except ValueError as error:
             raise ConfigError(str(error)) from None
         need(_positive(self.orbit_radius), "orbit_radius must be positive metres")
+        need(
+            self.time_mode in TIME_MODES,
+            f"time_mode must be one of {', '.join(TIME_MODES)}, got {self.time_mode!r}",
+        )
         if self.landmark is not None:
             size = self.tank
             need(

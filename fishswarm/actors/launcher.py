@@ -249,6 +249,7 @@ def _summary(
             },
             "lost_fish": len(world.lost),
             "joined_fish": len(world.joined),
+            "late_commands": world.late_commands,
             "deliveries": channel.statistics()["delivered"],
         },
         "lost": [{"id": f.fish_id, "tick": f.tick, "reason": f.reason} for f in world.lost],

@@ -149,6 +149,9 @@ class World:
         self._stop_requested = False
         self._messages_out = 0
         self._current = _Tick()
+        self._last_fins: dict[int, np.ndarray] = {}
+        self.late_commands = 0
+        """Realtime mode: commands that missed their tick's deadline (the fish kept its last)."""
 
     @property
     def time(self) -> float:
@@ -165,6 +168,7 @@ class World:
             "rejected_by_kind": dict(self._intake.rejected),
             "lost_fish": len(self.lost),
             "joined_fish": len(self.joined),
+            "late_commands": self.late_commands,
             "live_fish": int(self._ids.size),
         }
 
@@ -226,6 +230,8 @@ class World:
         self._admit_new_fish()
 
     async def _loop(self, put: Put) -> None:
+        realtime = self.scenario.time_mode == "realtime"
+        tick_start = trio.current_time()
         while True:
             self._drain()
             self._drop_lost()
@@ -237,16 +243,23 @@ class World:
             if self.tick >= self.scenario.ticks or self._stop_requested:
                 return
             await self._resume.wait()
+            if realtime and trio.current_time() - tick_start > self.scenario.control_period:
+                tick_start = trio.current_time()  # after a pause: pace from now on
             inbox_counts = await self._inbox_counts()
             self._current = _Tick.of(self._ids.tolist(), self._current.report)
             landmarks = observe_landmarks(self.scenario, self._state)
             self._publish_perceptions(put, perceived, landmarks, inbox_counts)
-            await self._collect_commands()
+            if realtime:
+                tick_start += self.scenario.control_period
+                await self._collect_until(tick_start)
+            else:
+                await self._collect_commands()
             self._drop_lost()
             # Fish lost while the world waited have left self._ids; keep the others' rows.
             rows = [self._current.rows[fish_id] for fish_id in self._ids.tolist()]
             self._state = advance(self.scenario, self._state, self._current.fins[rows])
             self._broadcasts = self._current.broadcasts[rows]
+            self._last_fins = dict(zip(self._ids.tolist(), self._current.fins[rows], strict=True))
             self.tick += 1
 
     def _publish_perceptions(
@@ -318,6 +331,23 @@ class World:
         by_id = dict(zip(report.ids.tolist(), report.inbox_counts.tolist(), strict=True))
         return np.array([by_id.get(i, 0) for i in self._ids.tolist()], dtype=np.int64)
 
+    async def _collect_until(self, deadline: float) -> None:
+        """Realtime mode: take commands until the tick's wall-clock end; a fish that has not
+        answered by then keeps its last command (fins off if it never sent one)."""
+        for fish_id in self._current.waiting:
+            last = self._last_fins.get(fish_id)
+            if last is not None:
+                self._current.fins[self._current.rows[fish_id]] = last
+        with trio.move_on_at(deadline):
+            while True:
+                self._handle(await self._events.receive())
+        self.late_commands += len(self._current.waiting)
+
+    def _late(self, tick: int) -> bool:
+        """Realtime mode: a command for a tick already integrated came late, which is normal
+        there (counted in ``late_commands`` when its tick closed), not bad input."""
+        return self.scenario.time_mode == "realtime" and tick < self.tick
+
     async def _collect_commands(self) -> None:
         deadline = trio.current_time() + self.settings.command_timeout
         with trio.move_on_at(deadline):
@@ -352,6 +382,8 @@ class World:
         if command is None:
             return
         current = self._current
+        if self._late(command.tick):
+            return
         if command.tick != self.tick or command.fish_id not in current.waiting:
             self._intake.reject(key, "stale", f"command for tick {command.tick} at {self.tick}")
             return
@@ -369,6 +401,8 @@ class World:
             self._intake.reject(key, "misaddressed", f"fish {ids} are not all of this school")
             return
         current = self._current
+        if self._late(batch.tick):
+            return
         if batch.tick != self.tick or not current.waiting.issuperset(ids):
             self._intake.reject(key, "stale", f"commands for tick {batch.tick} at {self.tick}")
             return

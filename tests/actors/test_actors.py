@@ -14,6 +14,7 @@ from fishswarm.actors.bridge import (
     SessionSettings,
     open_session,
     open_subscription,
+    open_token,
     publisher,
     query,
 )
@@ -240,3 +241,49 @@ def test_world_answers_status_pause_resume_and_stop(endpoint: str) -> None:
     assert status.live_fish == 2
     assert resume.state == "running"
     assert stop.tick >= status.tick
+
+
+def test_realtime_world_keeps_pace_and_a_late_fish_keeps_its_last_command(endpoint: str) -> None:
+    # One fish answered by hand: full caudal for ticks 0 and 1, then silence. In realtime
+    # mode the world does not wait: it goes on at one tick per 0.1 s of wall-clock time, the
+    # silent fish keeps swimming on its last command, and nobody is marked lost.
+    scenario = Scenario(fish=1, duration=1.2, control_period=0.1, time_mode="realtime", seed=3)
+    keys = scenario.keys
+
+    async def main() -> tuple[World, list[Snapshot], float]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.05))
+        snapshots: list[Snapshot] = []
+        async with (
+            open_session(router) as session,
+            open_subscription(session, keys.perception(0)) as perceptions,
+            open_subscription(session, keys.snapshot) as snapshot_inbox,
+            trio.open_nursery() as nursery,
+        ):
+            put = publisher(session)
+            async with open_token(session, keys.alive("fish", 0)):
+                nursery.start_soon(world.run, session)
+                for _ in range(2):
+                    with trio.fail_after(5):
+                        perception = decode((await perceptions.receive())[1], Perception)
+                    command = Command(0, perception.tick, np.array([1.0, 0.0, 0.0, 0.0]))
+                    put(keys.command(0), encode(command))
+                started = trio.current_time()
+                with trio.fail_after(10):
+                    while world.state_name != "finished":
+                        await trio.sleep(0.01)
+                elapsed = trio.current_time() - started
+            while (item := snapshot_inbox.receive_nowait()) is not None:
+                snapshots.append(decode(item[1], Snapshot))
+            nursery.cancel_scope.cancel()
+        return world, snapshots, elapsed
+
+    world, snapshots, elapsed = run_trio(main)
+    assert world.tick == 12
+    assert world.lost == []
+    assert world.late_commands == 10  # ticks 2–11 had no answer
+    # From the answer at the start of tick 1 to the end: 11 control periods of wall-clock
+    # time (1.1 s), within a few per cent.
+    assert elapsed == pytest.approx(1.1, rel=0.05)
+    speeds = [float(np.linalg.norm(s.velocity[0, :2])) for s in snapshots]
+    assert speeds[-1] > speeds[2] > 0  # still accelerating on the last command: caudal on
