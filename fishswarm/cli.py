@@ -38,8 +38,14 @@ _SCENARIO_FLAGS: dict[str, tuple[str, type, str]] = {
     "time_mode": (
         "--time",
         str,
-        "lockstep (default: as fast as possible, deterministic) or realtime (one tick per "
-        "control period of wall-clock time; late fish keep their last command)",
+        "lockstep (default: as fast as possible, deterministic), jitter (each fish on its own "
+        "clock, periods drawn from N(period, --jitter); deterministic) or realtime (one tick "
+        "per control period of wall-clock time; late fish keep their last command)",
+    ),
+    "jitter": (
+        "--jitter",
+        float,
+        "with --time jitter: s.d. of each fish's control period, s (default 0.05)",
     ),
     "swarm": ("--swarm", str, "swarm name: several swarms can share a router (default default)"),
     "model": (

@@ -28,7 +28,7 @@ BEHAVIORS = ("dispersion", "aggregation", "orbit", "milling", "waltz", "replica"
 ORBITING = ("orbit", "milling")
 """Behaviours that circle a landmark (by default a post at the tank centre)."""
 SPAWN_REGIONS = ("ball", "tank")
-TIME_MODES = ("lockstep", "realtime")
+TIME_MODES = ("lockstep", "jitter", "realtime")
 
 FloatArray = NDArray[np.float64]
 
@@ -66,8 +66,11 @@ class Scenario:
         landmark: position (x, y, z) of a fixed, visible landmark in the tank, m; the orbit
             centre. Default for ``orbit`` and ``milling``: the tank centre; otherwise none.
         time_mode: ``lockstep`` (every tick waits for every live fish: as fast as the machine
-            allows, deterministic) or ``realtime`` (one tick per control period of wall-clock
-            time; a fish that misses its deadline keeps its last command, as on hardware).
+            allows, deterministic), ``jitter`` (each fish decides on its own clock, periods
+            drawn from N(control_period, jitter); simulated time goes event by event;
+            deterministic) or ``realtime`` (one tick per control period of wall-clock time; a
+            fish that misses its deadline keeps its last command, as on hardware).
+        jitter: standard deviation of a fish's control period in ``jitter`` mode, s.
     """
 
     fish: int = 25
@@ -92,6 +95,7 @@ class Scenario:
     orbit_radius: float = 0.45
     landmark: tuple[float, float, float] | None = None
     time_mode: str = "lockstep"
+    jitter: float = 0.05
 
     def __post_init__(self) -> None:
         def need(ok: bool, message: str) -> None:
@@ -146,6 +150,12 @@ class Scenario:
         except ValueError as error:
             raise ConfigError(str(error)) from None
         need(_positive(self.orbit_radius), "orbit_radius must be positive metres")
+        need(
+            isinstance(self.jitter, int | float)
+            and math.isfinite(self.jitter)
+            and 0 <= self.jitter <= self.control_period,
+            f"jitter must be a standard deviation in [0, control_period] s, got {self.jitter!r}",
+        )
         need(
             self.time_mode in TIME_MODES,
             f"time_mode must be one of {', '.join(TIME_MODES)}, got {self.time_mode!r}",
@@ -263,6 +273,7 @@ class Scenario:
             "channel_range",
             "channel_loss",
             "orbit_radius",
+            "jitter",
         ):
             if isinstance(values.get(name), int) and not isinstance(values[name], bool):
                 values[name] = float(values[name])

@@ -109,12 +109,16 @@ def observe_landmarks(scenario: Scenario, state: State) -> Perceived:
 
 
 def advance(
-    scenario: Scenario, state: State, fins: FloatArray, robot: BlueBot = BlueBot()
+    scenario: Scenario,
+    state: State,
+    fins: FloatArray,
+    robot: BlueBot = BlueBot(),
+    *,
+    duration: float | None = None,
 ) -> State:
-    """Move every fish through one control period with its fins held."""
-    return step(
-        state, fins, duration=scenario.control_period, robot=robot, tank=scenario.the_tank()
-    )
+    """Move every fish through one control period (or ``duration`` s) with its fins held."""
+    period = scenario.control_period if duration is None else duration
+    return step(state, fins, duration=period, robot=robot, tank=scenario.the_tank())
 
 
 @dataclass(frozen=True)
@@ -142,8 +146,13 @@ def run_batch(scenario: Scenario) -> Trajectory:
     """Run a scenario in this process, all fish as one batch, and record every tick.
 
     The sequence per tick matches the actor system exactly: observe → every fish acts on its
-    perception → advance. Tick 0 is the initial state.
+    perception → advance. Tick 0 is the initial state. In jitter mode the events of
+    :func:`fishswarm.jitter.run_jittered`.
     """
+    if scenario.time_mode == "jitter":
+        from fishswarm.jitter import run_jittered  # jitter builds on this module
+
+        return run_jittered(scenario)
     ids = np.arange(scenario.fish, dtype=np.int64)
     state = place(scenario, ids)
     policy = policy_of(scenario)

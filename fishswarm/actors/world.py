@@ -32,6 +32,7 @@ from fishswarm.actors.bridge import (
 from fishswarm.actors.intake import Intake
 from fishswarm.bluebot.dynamics import State
 from fishswarm.bluebot.vision import Perceived
+from fishswarm.jitter import JitterSchedule, next_event
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.messages import (
     ChannelReport,
@@ -47,6 +48,9 @@ from fishswarm.scenario import Scenario
 from fishswarm.simulation import Stream, advance, observe, observe_landmarks, place, stream
 
 log = logging.getLogger(__name__)
+
+NO_FINS = np.zeros(4)
+"""Fins of a fish that has not decided yet: off."""
 
 Event = tuple[str, str, bytes | bool]
 
@@ -149,6 +153,8 @@ class World:
         self._stop_requested = False
         self._messages_out = 0
         self._current = _Tick()
+        self._answer_tick = 0
+        """The tick the commands now awaited must carry (the event number in jitter mode)."""
         self._last_fins: dict[int, np.ndarray] = {}
         self.late_commands = 0
         """Realtime mode: commands that missed their tick's deadline (the fish kept its last)."""
@@ -230,6 +236,9 @@ class World:
         self._admit_new_fish()
 
     async def _loop(self, put: Put) -> None:
+        if self.scenario.time_mode == "jitter":
+            await self._loop_jitter(put)
+            return
         realtime = self.scenario.time_mode == "realtime"
         tick_start = trio.current_time()
         while True:
@@ -248,7 +257,10 @@ class World:
             inbox_counts = await self._inbox_counts()
             self._current = _Tick.of(self._ids.tolist(), self._current.report)
             landmarks = observe_landmarks(self.scenario, self._state)
-            self._publish_perceptions(put, perceived, landmarks, inbox_counts)
+            self._answer_tick = self.tick
+            self._publish_perceptions(
+                put, perceived, landmarks, inbox_counts, tick=self.tick, time=self.time
+            )
             if realtime:
                 tick_start += self.scenario.control_period
                 await self._collect_until(tick_start)
@@ -262,21 +274,83 @@ class World:
             self._last_fins = dict(zip(self._ids.tolist(), self._current.fins[rows], strict=True))
             self.tick += 1
 
+    async def _loop_jitter(self, put: Put) -> None:
+        """Jitter mode: event by event, each fish on its own clock (:mod:`fishswarm.jitter`).
+
+        The same events as :func:`fishswarm.jitter.run_jittered`: snapshots at whole control
+        periods, decisions of the due fish in between; perceptions carry the event number as
+        their tick. Broadcasts are not delivered in this mode.
+        """
+        schedule = JitterSchedule(self.scenario)
+        fins: dict[int, np.ndarray] = {}
+        now, event = 0.0, 0
+        while True:
+            self._drain()
+            self._drop_lost()
+            self._admit_new_fish()
+            live = self._ids.tolist()
+            for fish_id in set(schedule.next_time) - set(live):
+                schedule.remove(fish_id)
+            for fish_id in live:
+                if fish_id not in schedule.next_time:
+                    schedule.add(fish_id, now)
+            kind, at = next_event(schedule, self.tick * self.scenario.control_period)
+            held = np.array([fins.get(i, NO_FINS) for i in live]).reshape(-1, 4)
+            self._state = advance(self.scenario, self._state, held, duration=at - now)
+            now = at
+            vision_rngs = [self._vision_rngs[i] for i in live]
+            perceived = observe(self.scenario, self._state, vision_rngs)
+            if kind == "snapshot":
+                put(self.keys.snapshot, encode(self._snapshot(perceived)))
+                self._messages_out += 1
+                if self.tick >= self.scenario.ticks or self._stop_requested:
+                    return
+                self.tick += 1
+                continue
+            await self._resume.wait()
+            due = schedule.due(now)
+            rows = [live.index(fish_id) for fish_id in due]
+            event += 1
+            self._answer_tick = event
+            self._current = _Tick.of(due, None)
+            landmarks = observe_landmarks(self.scenario, self._state)
+            inbox_counts = np.zeros(len(live), dtype=np.int64)
+            self._publish_perceptions(
+                put, perceived, landmarks, inbox_counts, tick=event, time=now, rows=rows
+            )
+            await self._collect_commands()
+            for fish_id in due:
+                if fish_id in self._current.waiting:
+                    continue  # lost while the world waited
+                fins[fish_id] = self._current.fins[self._current.rows[fish_id]]
+            schedule.decided([i for i in due if i not in self._current.waiting])
+
     def _publish_perceptions(
-        self, put: Put, perceived: Perceived, landmarks: Perceived, inbox_counts: np.ndarray
+        self,
+        put: Put,
+        perceived: Perceived,
+        landmarks: Perceived,
+        inbox_counts: np.ndarray,
+        *,
+        tick: int,
+        time: float,
+        rows: list[int] | None = None,
     ) -> None:
-        """Every live fish's perception: one message per school, one per fish on its own keys."""
+        """The perceptions of the fish at ``rows`` (default all live fish): one message per
+        school, one per fish on its own keys."""
         schools: dict[str, list[int]] = {}
         depths = self._state.position[:, 2]
-        for row, fish_id in enumerate(self._ids.tolist()):
+        ids = self._ids.tolist()
+        for row in range(len(ids)) if rows is None else rows:
+            fish_id = ids[row]
             school = self._school_of.get(fish_id)
             if school is not None:
                 schools.setdefault(school, []).append(row)
                 continue
             perception = Perception(
                 fish_id,
-                self.tick,
-                self.time,
+                tick,
+                time,
                 float(depths[row]),
                 perceived.neighbors[row, : perceived.counts[row]],
                 landmarks.neighbors[row][landmarks.mask[row]],
@@ -285,19 +359,19 @@ class World:
             put(self.keys.perception(fish_id), encode(perception))
             self._messages_out += 1
         for school, school_rows in sorted(schools.items()):
-            rows = np.array(school_rows, dtype=np.intp)
-            counts = perceived.counts[rows]
+            members = np.array(school_rows, dtype=np.intp)
+            counts = perceived.counts[members]
             seen = np.arange(perceived.neighbors.shape[1]) < counts[:, None]
             batch = PerceptionBatch(
-                self.tick,
-                self.time,
-                self._ids[rows],
-                depths[rows],
+                tick,
+                time,
+                self._ids[members],
+                depths[members],
                 counts,
-                perceived.neighbors[rows][seen],
-                landmarks.counts[rows],
-                landmarks.neighbors[rows][landmarks.mask[rows]],
-                inbox_counts[rows],
+                perceived.neighbors[members][seen],
+                landmarks.counts[members],
+                landmarks.neighbors[members][landmarks.mask[members]],
+                inbox_counts[members],
             )
             put(self.keys.school_perceptions(school), encode(batch))
             self._messages_out += 1
@@ -346,7 +420,7 @@ class World:
     def _late(self, tick: int) -> bool:
         """Realtime mode: a command for a tick already integrated came late, which is normal
         there (counted in ``late_commands`` when its tick closed), not bad input."""
-        return self.scenario.time_mode == "realtime" and tick < self.tick
+        return self.scenario.time_mode == "realtime" and tick < self._answer_tick
 
     async def _collect_commands(self) -> None:
         deadline = trio.current_time() + self.settings.command_timeout
@@ -384,8 +458,10 @@ class World:
         current = self._current
         if self._late(command.tick):
             return
-        if command.tick != self.tick or command.fish_id not in current.waiting:
-            self._intake.reject(key, "stale", f"command for tick {command.tick} at {self.tick}")
+        if command.tick != self._answer_tick or command.fish_id not in current.waiting:
+            self._intake.reject(
+                key, "stale", f"command for tick {command.tick} at {self._answer_tick}"
+            )
             return
         row = current.rows[command.fish_id]
         current.fins[row] = command.fins
@@ -403,8 +479,10 @@ class World:
         current = self._current
         if self._late(batch.tick):
             return
-        if batch.tick != self.tick or not current.waiting.issuperset(ids):
-            self._intake.reject(key, "stale", f"commands for tick {batch.tick} at {self.tick}")
+        if batch.tick != self._answer_tick or not current.waiting.issuperset(ids):
+            self._intake.reject(
+                key, "stale", f"commands for tick {batch.tick} at {self._answer_tick}"
+            )
             return
         rows = [current.rows[fish_id] for fish_id in ids]
         current.fins[rows] = batch.fins

@@ -47,11 +47,13 @@ def test_25_fish_run_moves_the_mean_distance_the_right_way(
     assert (tmp_path / "run.json").exists()
 
 
+@pytest.mark.parametrize("time_mode", ["lockstep", "jitter"])
 def test_same_seed_same_trajectory_across_processes_and_batch_engine(
-    endpoint: str, tmp_path: Path
+    endpoint: str, tmp_path: Path, time_mode: str
 ) -> None:
-    scenario = Scenario(fish=12, duration=8.0, seed=11, vision_noise=0.05)
+    scenario = Scenario(fish=12, duration=8.0, seed=11, vision_noise=0.05, time_mode=time_mode)
     reference = run_batch(scenario)
+    np.testing.assert_array_equal(run_batch(scenario).position, reference.position)
     for procs in (1, 2):
         path = tmp_path / f"procs{procs}.mcap"
         result = _launch(scenario, endpoint, path, procs=procs)
