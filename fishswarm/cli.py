@@ -359,6 +359,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "learn": _learn,
         "experiment": study_commands.experiment,
         "plot": study_commands.plot,
+        "animate": study_commands.animate,
     }
     try:
         scenario = _scenario(args) if hasattr(args, "config") else None

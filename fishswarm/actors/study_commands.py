@@ -60,6 +60,24 @@ def add_parsers(commands: Any) -> None:
         "--out", type=Path, help="picture to write, .png/.svg/.pdf (default RECORDING.png)"
     )
 
+    animate = commands.add_parser(
+        "animate",
+        help="animate a recorded run: arrows in the tank, and what one fish sees",
+        description="Animate a recording: the fish as arrows in the tank seen from above, "
+        "from the side and from a circling camera, and through one fish's eyes (only the "
+        "neighbours its vision model lets it see, at their bearing and elevation).",
+    )
+    animate.add_argument("recording", type=Path, help="MCAP recording of a run")
+    animate.add_argument(
+        "--out", type=Path, required=True, help="animation to write: FILE.gif or FILE.mp4"
+    )
+    animate.add_argument(
+        "--fish", type=int, default=0, help="whose eyes the fourth view shows (default 0)"
+    )
+    animate.add_argument("--fps", type=int, default=10, help="frames per second (default 10)")
+    animate.add_argument("--speed", type=float, default=2.0, help="times real time (default 2)")
+    animate.add_argument("--quiet", action="store_true", help="no progress line")
+
 
 def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm experiment NAME``."""
@@ -137,4 +155,58 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     except FiguresUnavailable as error:
         raise ConfigError(str(error)) from None
     print(f"wrote {out}", file=sys.stderr)
+    return 0
+
+
+def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm animate RECORDING --out FILE``."""
+    from fishswarm.animation import AnimationError, frames_per_step, interpolate
+    from fishswarm.animation import animate as make_animation
+    from fishswarm.bluebot.vision import Vision
+    from fishswarm.progress import ProgressLine, bar
+    from fishswarm.recording import RecordingError, read_recording
+
+    if args.fps < 1 or not args.speed > 0:
+        raise ConfigError("--fps must be at least 1 and --speed positive")
+    try:
+        recording = read_recording(args.recording)
+    except RecordingError as error:
+        raise ConfigError(str(error)) from None
+    if len(recording.snapshots) < 2:
+        raise ConfigError(f"{args.recording} holds fewer than two snapshots: nothing to animate")
+    arrays = recording.arrays()
+    settings = recording.scenario
+    period = float(settings.get("control_period", 1.0))
+    frames = interpolate(
+        arrays["t"],
+        arrays["pos"],
+        arrays["yaw"],
+        arrays["ids"],
+        per_step=frames_per_step(args.fps, period, args.speed),
+    )
+    vision = Vision(
+        float(settings.get("visual_range", 3.0)),
+        float(settings.get("blind_width", 0.05)),
+        float(settings.get("sphere_radius", 0.065)),
+    )
+    output = ProgressLine()
+
+    def show(done: int, total: int) -> None:
+        if not args.quiet and (done % 10 == 0 or done == total):
+            output.show(f"{bar(done, total)} frame {done}/{total}", last=done == total)
+
+    try:
+        make_animation(
+            frames,
+            tank=settings["tank"],
+            vision=vision,
+            viewer=args.fish,
+            out=args.out,
+            fps=args.fps,
+            title=f"{settings.get('fish', '?')} fish, {settings.get('behavior', '?')}",
+            on_frame=show,
+        )
+    except AnimationError as error:
+        raise ConfigError(str(error)) from None
+    print(f"wrote {args.out} ({frames.t.size} frames)", file=sys.stderr)
     return 0

@@ -87,6 +87,18 @@ def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -
     assert wrong.returncode == 2
     assert "--out must end in .png, .svg or .pdf" in wrong.stderr
 
+    gif, mp4 = tmp_path / "run.gif", tmp_path / "run.mp4"
+    animated = _run("animate", str(record), "--out", str(gif), "--fish", "2", "--speed", "4")
+    assert animated.returncode == 0, animated.stderr
+    assert gif.read_bytes()[:6] == b"GIF89a"
+    assert "(13 frames)" in animated.stderr  # 4 steps of 3 frames, and the last snapshot
+    movie = _run("animate", str(record), "--out", str(mp4), "--fps", "4", "--speed", "4")
+    assert movie.returncode == 0, movie.stderr
+    assert mp4.read_bytes()[4:8] == b"ftyp"
+    stranger = _run("animate", str(record), "--out", str(gif), "--fish", "99")
+    assert stranger.returncode == 2
+    assert "fish 99 is not in the recording (fish: 0, 1, 2, 3, 4, 5)" in stranger.stderr
+
 
 def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
     config = tmp_path / "scenario.toml"
