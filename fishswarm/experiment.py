@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.metrics import ORBIT_METRIC_NAMES, orbit_metrics, swarm_metrics
-from fishswarm.scenario import ConfigError, Scenario
+from fishswarm.scenario import ConfigError, Scenario, read_toml
 
 FloatArray = NDArray[np.float64]
 
@@ -236,12 +236,7 @@ class Experiment:
         Raises:
             ConfigError: the file is missing, not TOML, or a setting is wrong (with which).
         """
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ConfigError(f"experiment file {path} does not exist") from None
-        except tomllib.TOMLDecodeError as error:
-            raise ConfigError(f"{path} is not valid TOML: {error}") from None
+        data = read_toml(path, "experiment")
         table = data.get("experiment")
         if not isinstance(table, dict):
             raise ConfigError(f"{path}: needs an [experiment] table (name, parameter, values)")

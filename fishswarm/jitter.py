@@ -21,6 +21,7 @@ from fishswarm.scenario import Scenario
 from fishswarm.simulation import (
     Stream,
     Trajectory,
+    TrajectoryRecorder,
     advance,
     observe,
     observe_landmarks,
@@ -95,7 +96,7 @@ def run_jittered(scenario: Scenario) -> Trajectory:
     schedule = JitterSchedule(scenario)
     for fish_id in ids.tolist():
         schedule.add(fish_id, 0.0)
-    times, positions, velocities, yaws, seen = [], [], [], [], []
+    recorder = TrajectoryRecorder()
     now, snapshot_tick = 0.0, 0
     while True:
         kind, at = next_event(schedule, snapshot_tick * scenario.control_period)
@@ -103,11 +104,7 @@ def run_jittered(scenario: Scenario) -> Trajectory:
         now = at
         perceived = observe(scenario, state, vision_rngs)
         if kind == "snapshot":
-            times.append(now)
-            positions.append(state.position)
-            velocities.append(state.tank_velocity())
-            yaws.append(state.yaw)
-            seen.append(perceived.counts)
+            recorder.add(now, state, perceived)
             if snapshot_tick == scenario.ticks:
                 break
             snapshot_tick += 1
@@ -126,11 +123,4 @@ def run_jittered(scenario: Scenario) -> Trajectory:
         fins[due] = decided
         memory = memory.replaced(due, remembered)
         schedule.decided(due.tolist())
-    return Trajectory(
-        np.array(times),
-        ids,
-        np.array(positions),
-        np.array(velocities),
-        np.array(yaws),
-        np.array(seen),
-    )
+    return recorder.trajectory(ids)

@@ -287,16 +287,25 @@ class Scenario:
     @classmethod
     def from_toml(cls, path: Path) -> Scenario:
         """Load a scenario from a TOML file (keys as the attribute names; all optional)."""
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ConfigError(f"scenario file {path} does not exist") from None
-        except tomllib.TOMLDecodeError as error:
-            raise ConfigError(f"{path} is not valid TOML: {error}") from None
+        data = read_toml(path, "scenario")
         table = data.get("scenario", data)
         if not isinstance(table, dict):
             raise ConfigError(f"{path}: [scenario] must be a table")
         return cls.from_mapping(table, source=str(path))
+
+
+def read_toml(path: Path, kind: str) -> dict[str, Any]:
+    """Parse a settings file.
+
+    Raises:
+        ConfigError: the ``kind`` file (e.g. "scenario") is missing or not valid TOML.
+    """
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{kind} file {path} does not exist") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"{path} is not valid TOML: {error}") from None
 
 
 def _positive(value: object) -> bool:

@@ -142,6 +142,31 @@ class Trajectory:
     neighbors_seen: IntArray
 
 
+class TrajectoryRecorder:
+    """Collects the fish at each snapshot and makes a :class:`Trajectory` of them."""
+
+    def __init__(self) -> None:
+        self._rows: list[tuple[float, FloatArray, FloatArray, FloatArray, IntArray]] = []
+
+    def add(self, time: float, state: State, perceived: Perceived) -> None:
+        """Record the fish at ``time``, with the neighbours each sees."""
+        self._rows.append(
+            (time, state.position, state.tank_velocity(), state.yaw, perceived.counts)
+        )
+
+    def trajectory(self, ids: IntArray) -> Trajectory:
+        """Everything recorded, as arrays."""
+        times, positions, velocities, yaws, seen = zip(*self._rows, strict=True)
+        return Trajectory(
+            np.array(times),
+            ids,
+            np.array(positions),
+            np.array(velocities),
+            np.array(yaws),
+            np.array(seen),
+        )
+
+
 def run_batch(scenario: Scenario) -> Trajectory:
     """Run a scenario in this process, all fish as one batch, and record every tick.
 
@@ -158,27 +183,16 @@ def run_batch(scenario: Scenario) -> Trajectory:
     policy = policy_of(scenario)
     memory = Memory.fresh(scenario.fish)
     vision_rngs = [stream(scenario.seed, Stream.VISION, int(i)) for i in ids]
-    times, positions, velocities, yaws, seen = [], [], [], [], []
+    recorder = TrajectoryRecorder()
     for tick in range(scenario.ticks + 1):
         perceived = observe(scenario, state, vision_rngs)
-        times.append(tick * scenario.control_period)
-        positions.append(state.position)
-        velocities.append(state.tank_velocity())
-        yaws.append(state.yaw)
-        seen.append(perceived.counts)
+        recorder.add(tick * scenario.control_period, state, perceived)
         if tick == scenario.ticks:
             break
         landmarks = observe_landmarks(scenario, state)
         fins, memory = act_each(policy, perceived, landmarks, state.position[:, 2], memory)
         state = advance(scenario, state, fins)
-    return Trajectory(
-        np.array(times),
-        ids,
-        np.array(positions),
-        np.array(velocities),
-        np.array(yaws),
-        np.array(seen),
-    )
+    return recorder.trajectory(ids)
 
 
 def act_each(
