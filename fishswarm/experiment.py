@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import json
+import logging
 import math
 import tomllib
 from collections.abc import Callable, Mapping
@@ -26,11 +27,16 @@ from fishswarm.scenario import ConfigError, Scenario, read_toml
 
 FloatArray = NDArray[np.float64]
 
+log = logging.getLogger(__name__)
+
 METRICS = ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance", "neighbors_seen")
 """Columns of a swarm run's metric series: the three mean distances (m) of SPEC §3 and
 neighbours seen."""
 
 ORBITING = ("orbit", "milling", "waltz")
+
+ENGINES = ("actors", "batch")
+"""How an experiment's runs go: through the actor system, or the in-process batch engine."""
 
 METRIC_LABELS = {
     "centroid_distance": "distance to centroid of others (m)",
@@ -404,12 +410,12 @@ def write_report(
     summary_path = folder / "summary.json"
     summary_path.write_text(json.dumps(summary, indent=2), encoding="utf-8")
     paths.append(summary_path)
-    try:
-        from fishswarm.figures import experiment_figures
+    from fishswarm.figures import FiguresUnavailable, experiment_figures
 
+    try:
         paths += experiment_figures(experiment, outcomes, folder)
-    except ImportError:
-        pass
+    except FiguresUnavailable as error:
+        log.warning("tables written, no pictures: %s", error)
     return paths
 
 

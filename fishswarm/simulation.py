@@ -23,7 +23,7 @@ from fishswarm.behaviors.policy import Memory, Policy, act
 from fishswarm.bluebot.dynamics import State, rest_state, step
 from fishswarm.bluebot.parameters import BlueBot
 from fishswarm.bluebot.vision import Perceived, perceive, perceive_landmarks
-from fishswarm.learning.session import LearningError, load_replica
+from fishswarm.learning.replica_file import ReplicaFileError, load_replica
 from fishswarm.scenario import ConfigError, Scenario
 
 FloatArray = NDArray[np.float64]
@@ -79,7 +79,7 @@ def policy_of(scenario: Scenario) -> Policy:
         assert scenario.model is not None
         try:
             loaded, _ = load_replica(Path(scenario.model))
-        except LearningError as error:
+        except ReplicaFileError as error:
             raise ConfigError(str(error)) from None
         weights = tuple(float(w) for w in loaded)
     return Policy(

@@ -103,6 +103,12 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
     if args.procs < 1:
         raise ConfigError(f"--procs must be at least 1, got {args.procs}")
     policy_of(scenario)  # reads a replica model now: a bad one is a usage error, not a crash
+    for flag, path in (("--record", args.record), ("--summary", args.summary)):
+        if path is not None and (str(path) in ("", ".") or path.is_dir()):
+            raise ConfigError(
+                f"{flag} must name a file, e.g. {flag} runs/latest"
+                f"{'.mcap' if flag == '--record' else '.json'}; {str(path)!r} is a directory"
+            )
     settings = LaunchSettings(
         scenario=scenario,
         procs=args.procs,

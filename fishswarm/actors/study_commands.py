@@ -15,8 +15,7 @@ from fishswarm.scenario import ConfigError, Scenario
 
 def add_parsers(commands: Any) -> None:
     """Add the ``experiment`` and ``plot`` commands to the ``fishswarm`` parser."""
-    from fishswarm.actors.sweep import ENGINES
-    from fishswarm.experiment import available
+    from fishswarm.experiment import ENGINES, available
 
     names = ", ".join(available()) or "see experiments/"
     experiment = commands.add_parser(

@@ -22,14 +22,12 @@ import trio
 from numpy.typing import NDArray
 
 from fishswarm.actors.launcher import LaunchSettings, run_swarm
-from fishswarm.experiment import Experiment, RunOutcome
+from fishswarm.experiment import ENGINES, Experiment, RunOutcome
 from fishswarm.recording import read_recording
 from fishswarm.scenario import ConfigError, Scenario
 from fishswarm.simulation import run_batch
 
 FloatArray = NDArray[np.float64]
-
-ENGINES = ("actors", "batch")
 
 
 def run_one(experiment: Experiment, value: float, seed: int, engine: str) -> RunOutcome:

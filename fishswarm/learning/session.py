@@ -6,7 +6,8 @@ Everything a run writes goes to one folder:
   exactly where it stopped (same results as a run that never stopped).
 - ``history.csv``: best and mean fitness of both populations per generation.
 - ``best_replica.npz``: the fittest model of the last generation (``weights``) with the
-  run's settings (``settings`` as JSON); :func:`load_replica` reads it back.
+  run's settings (``settings`` as JSON);
+  :func:`fishswarm.learning.replica_file.load_replica` reads it back.
 - ``radii.md``: the learned radii, mean and s.d. over the final classifier population (the
   study's Table I).
 - ``summary.json``: settings, final fitness, spacing and speed of ideal vs best replica.
@@ -38,7 +39,6 @@ from fishswarm.learning.arena import (
     spacing_and_speed,
 )
 from fishswarm.learning.coevolution import Coevolution, LearningSettings
-from fishswarm.learning.networks import REPLICA_SIZE
 
 FloatArray = NDArray[np.float64]
 CHECKPOINT = "checkpoint.pkl"
@@ -172,26 +172,6 @@ def write_results(run: Coevolution, out: Path) -> dict[str, Any]:
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     _pictures(run, evaluation, out)
     return summary
-
-
-def load_replica(path: Path) -> tuple[FloatArray, dict[str, Any]]:
-    """Read ``best_replica.npz``: the weights (21,) and the settings they were learned with.
-
-    Raises:
-        LearningError: the file is missing or not a replica.
-    """
-    try:
-        with np.load(path) as data:
-            weights = np.asarray(data["weights"], dtype=np.float64)
-            settings = json.loads(str(data["settings"]))
-    except (OSError, KeyError, ValueError):
-        raise LearningError(
-            f"{path} is not a learned replica (expected a best_replica.npz written by "
-            "'fishswarm learn')"
-        ) from None
-    if weights.shape != (REPLICA_SIZE,) or not np.all(np.isfinite(weights)):
-        raise LearningError(f"{path} holds weights of shape {weights.shape}, not ({REPLICA_SIZE},)")
-    return weights, settings
 
 
 def _settings_dict(settings: LearningSettings) -> dict[str, Any]:

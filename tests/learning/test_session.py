@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from fishswarm.learning.coevolution import LearningSettings
-from fishswarm.learning.session import LearningError, learn, load_replica
+from fishswarm.learning.replica_file import ReplicaFileError, load_replica
+from fishswarm.learning.session import LearningError, learn
 
 
 def test_learn_writes_every_output(tmp_path: Path) -> None:
@@ -40,7 +41,7 @@ def test_learn_writes_every_output(tmp_path: Path) -> None:
 def test_resume_needs_a_checkpoint(tmp_path: Path) -> None:
     with pytest.raises(LearningError, match="nothing to resume"):
         learn(LearningSettings(), generations=2, out=tmp_path, resume=True)
-    with pytest.raises(LearningError, match="is not a learned replica"):
+    with pytest.raises(ReplicaFileError, match="is not a learned replica"):
         load_replica(tmp_path / "missing.npz")
 
 

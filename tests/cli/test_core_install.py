@@ -1,0 +1,111 @@
+"""A robot or a fresh machine installs the core only (no cma, no matplotlib): the swarm must
+still run and every command's --help must work."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import free_port
+
+pytestmark = pytest.mark.integration
+
+# Blocks the extras as if they were not installed: importing them raises ImportError.
+WITHOUT_EXTRAS = (
+    "import sys\n"
+    "for name in ('cma', 'matplotlib', 'imageio_ffmpeg', 'hypothesis'):\n"
+    "    sys.modules[name] = None\n"
+    "from fishswarm.cli import main\n"
+    "sys.exit(main(sys.argv[1:]))\n"
+)
+
+
+def _core(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", WITHOUT_EXTRAS, *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+
+
+def test_a_swarm_runs_with_the_core_dependencies_only(tmp_path: Path) -> None:
+    listen = f"tcp/127.0.0.1:{free_port()}"
+    record, summary = str(tmp_path / "r.mcap"), str(tmp_path / "s.json")
+    result = _core(
+        "run",
+        "--fish",
+        "3",
+        "--duration",
+        "2",
+        "--quiet",
+        "--listen",
+        listen,
+        "--record",
+        record,
+        "--summary",
+        summary,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "status: finished" in result.stderr
+    directory = _core("run", "--record", str(tmp_path), "--listen", listen)
+    assert directory.returncode == 2
+    assert "--record must name a file" in directory.stderr
+
+
+@pytest.mark.parametrize(
+    "command", ["run", "fish", "world", "observe", "experiment", "plot", "animate", "learn"]
+)
+def test_every_help_works_with_the_core_dependencies_only(command: str) -> None:
+    result = _core(command, "--help")
+    assert result.returncode == 0, result.stderr
+    assert "usage: fishswarm" in result.stdout
+
+
+def test_pictures_without_matplotlib_say_how_to_get_it(tmp_path: Path) -> None:
+    listen = f"tcp/127.0.0.1:{free_port()}"
+    record = tmp_path / "r.mcap"
+    made = _core(
+        "run",
+        "--fish",
+        "2",
+        "--duration",
+        "1",
+        "--quiet",
+        "--listen",
+        listen,
+        "--record",
+        str(record),
+        "--summary",
+        str(tmp_path / "s.json"),
+    )
+    assert made.returncode == 0, made.stderr
+    result = _core("plot", str(record))
+    assert result.returncode == 2
+    assert "pictures need matplotlib: pip install -e '.[viz]'" in result.stderr
+
+
+def test_an_experiment_without_matplotlib_writes_its_tables(tmp_path: Path) -> None:
+    out = tmp_path / "blindspot"
+    result = _core(
+        "experiment",
+        "blindspot",
+        "--seeds",
+        "1",
+        "--duration",
+        "1",
+        "--engine",
+        "batch",
+        "--jobs",
+        "1",
+        "--out",
+        str(out),
+        "--quiet",
+    )
+    assert result.returncode == 0, result.stderr
+    assert (out / "table.md").exists() and not (out / "tracks.png").exists()
+    assert "tables written, no pictures: pictures need matplotlib" in result.stderr
