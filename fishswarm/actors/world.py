@@ -30,6 +30,7 @@ from fishswarm.actors.bridge import (
     reply,
 )
 from fishswarm.actors.intake import Intake
+from fishswarm.actors.perceptions import perception_messages
 from fishswarm.bluebot.dynamics import State
 from fishswarm.bluebot.vision import Perceived
 from fishswarm.jitter import JitterSchedule, next_event
@@ -40,8 +41,6 @@ from fishswarm.protocols.messages import (
     CommandBatch,
     ControlReply,
     ControlRequest,
-    Perception,
-    PerceptionBatch,
     Snapshot,
 )
 from fishswarm.scenario import Scenario
@@ -338,42 +337,19 @@ class World:
     ) -> None:
         """The perceptions of the fish at ``rows`` (default all live fish): one message per
         school, one per fish on its own keys."""
-        schools: dict[str, list[int]] = {}
-        depths = self._state.position[:, 2]
-        ids = self._ids.tolist()
-        for row in range(len(ids)) if rows is None else rows:
-            fish_id = ids[row]
-            school = self._school_of.get(fish_id)
-            if school is not None:
-                schools.setdefault(school, []).append(row)
-                continue
-            perception = Perception(
-                fish_id,
-                tick,
-                time,
-                float(depths[row]),
-                perceived.neighbors[row, : perceived.counts[row]],
-                landmarks.neighbors[row][landmarks.mask[row]],
-                int(inbox_counts[row]),
-            )
-            put(self.keys.perception(fish_id), encode(perception))
-            self._messages_out += 1
-        for school, school_rows in sorted(schools.items()):
-            members = np.array(school_rows, dtype=np.intp)
-            counts = perceived.counts[members]
-            seen = np.arange(perceived.neighbors.shape[1]) < counts[:, None]
-            batch = PerceptionBatch(
-                tick,
-                time,
-                self._ids[members],
-                depths[members],
-                counts,
-                perceived.neighbors[members][seen],
-                landmarks.counts[members],
-                landmarks.neighbors[members][landmarks.mask[members]],
-                inbox_counts[members],
-            )
-            put(self.keys.school_perceptions(school), encode(batch))
+        for key, message in perception_messages(
+            self.keys,
+            ids=self._ids,
+            school_of=self._school_of,
+            depth=self._state.position[:, 2],
+            perceived=perceived,
+            landmarks=landmarks,
+            inbox_counts=inbox_counts,
+            tick=tick,
+            time=time,
+            rows=rows,
+        ):
+            put(key, encode(message))
             self._messages_out += 1
 
     def _snapshot(self, perceived: Perceived) -> Snapshot:

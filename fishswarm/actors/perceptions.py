@@ -1,0 +1,86 @@
+"""Addressing perceptions: one message per school, one per fish on its own keys.
+
+What the world computed for a tick (vision, landmarks, inbox counts, as arrays over the live
+fish) is cut into the messages each fish actor expects. Pure: the world puts what this
+returns.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fishswarm.bluebot.vision import Perceived
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.messages import Message, Perception, PerceptionBatch
+
+
+def perception_messages(
+    keys: KeySpace,
+    *,
+    ids: NDArray[np.int64],
+    school_of: Mapping[int, str | None],
+    depth: NDArray[np.float64],
+    perceived: Perceived,
+    landmarks: Perceived,
+    inbox_counts: NDArray[np.int64],
+    tick: int,
+    time: float,
+    rows: Sequence[int] | None = None,
+) -> list[tuple[str, Message]]:
+    """The perception messages of the fish at ``rows`` (default all) for one tick.
+
+    Args:
+        keys: the swarm's key space.
+        ids: (N,) the live fish, ascending.
+        school_of: each fish's school, or None for a fish on its own keys.
+        depth: (N,) each fish's depth, m.
+        perceived: what each fish sees of the others (padded, compact rows).
+        landmarks: which landmarks each fish sees.
+        inbox_counts: (N,) deliveries each fish waits for.
+        tick: the tick (the event number in jitter mode).
+        time: simulated time, s.
+        rows: indices into ``ids`` of the fish to address.
+
+    Returns:
+        (key, message) pairs: a :class:`Perception` per fish on its own keys, then a
+        :class:`PerceptionBatch` per school, schools in name order.
+    """
+    messages: list[tuple[str, Message]] = []
+    schools: dict[str, list[int]] = {}
+    fish_ids = ids.tolist()
+    for row in range(len(fish_ids)) if rows is None else rows:
+        fish_id = fish_ids[row]
+        school = school_of.get(fish_id)
+        if school is not None:
+            schools.setdefault(school, []).append(row)
+            continue
+        perception = Perception(
+            fish_id,
+            tick,
+            time,
+            float(depth[row]),
+            perceived.neighbors[row, : perceived.counts[row]],
+            landmarks.neighbors[row][landmarks.mask[row]],
+            int(inbox_counts[row]),
+        )
+        messages.append((keys.perception(fish_id), perception))
+    for school, school_rows in sorted(schools.items()):
+        members = np.array(school_rows, dtype=np.intp)
+        counts = perceived.counts[members]
+        seen = np.arange(perceived.neighbors.shape[1]) < counts[:, None]
+        batch = PerceptionBatch(
+            tick,
+            time,
+            ids[members],
+            depth[members],
+            counts,
+            perceived.neighbors[members][seen],
+            landmarks.counts[members],
+            landmarks.neighbors[members][landmarks.mask[members]],
+            inbox_counts[members],
+        )
+        messages.append((keys.school_perceptions(school), batch))
+    return messages
