@@ -15,9 +15,11 @@ inside, centre ahead      away from the centre: b + 90° + 90°·(R − d)/R
 inside, centre behind     along the tangent, veering out: b + 90° + 90°·(R − d)/R
 ========================  =====================================================
 
-On the circle (d = R) every zone gives b + 90°: straight along the tangent. The target's
-planar length is R, which sets the homing controller's cruise speed; its vertical part holds
-the centre's depth. Before the centre is seen (home phase) a fish swims straight on.
+The study's phases fall out of these zones: far away the tangent point lies almost on the
+line to the centre, so the fish homes in; near the circle it turns onto the tangent
+(transition); on the circle (d = R) every zone gives b + 90°: straight along the tangent.
+The target's planar length is R, which sets the homing controller's cruise speed; its
+vertical part holds the centre's depth. Before the centre is seen a fish swims straight on.
 """
 
 from __future__ import annotations
