@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
-import socket
 import threading
 import time
 
@@ -25,15 +24,15 @@ import numpy as np
 import trio
 import zenoh
 
-from fishswarm.actors.bridge import SessionSettings, open_session, open_subscription, publisher
+from fishswarm.actors.bridge import (
+    SessionSettings,
+    free_loopback_endpoint,
+    open_session,
+    open_subscription,
+    publisher,
+)
 
 PING, PONG = "bench/ping", "bench/pong"
-
-
-def _endpoint() -> str:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{probe.getsockname()[1]}"
 
 
 def zenoh_echo(endpoint: str) -> None:
@@ -59,7 +58,7 @@ def trio_echo(endpoint: str) -> None:
 
 def echo_round_trips(target: str, samples: int) -> np.ndarray:
     """Round trips in ms to an echo process running ``target`` (``zenoh`` or ``trio``)."""
-    endpoint = _endpoint()
+    endpoint = free_loopback_endpoint()
     session = zenoh.open(SessionSettings(mode="router", listen=[endpoint]).to_config())
     arrived = threading.Event()
     stamp = [0.0]

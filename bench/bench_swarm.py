@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import socket
 import statistics
 import threading
 import time
@@ -29,7 +28,13 @@ import numpy as np
 import trio
 import zenoh
 
-from fishswarm.actors.bridge import SessionSettings, open_session, open_subscription, publisher
+from fishswarm.actors.bridge import (
+    SessionSettings,
+    free_loopback_endpoint,
+    open_session,
+    open_subscription,
+    publisher,
+)
 from fishswarm.actors.launcher import LaunchSettings, run_swarm
 from fishswarm.actors.workers import WorkerSpec, start_worker, stop_worker
 from fishswarm.protocols.codec import encode
@@ -40,16 +45,12 @@ from fishswarm.simulation import policy_of
 DURATION = {25: 120.0, 100: 60.0, 1000: 15.0}
 
 
-def _endpoint() -> str:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{probe.getsockname()[1]}"
-
-
 def swarm_row(fish: int, procs: int) -> dict[str, float]:
     """Run one swarm; return fish, procs, steps/s, real-time factor."""
     scenario = Scenario.crowded(fish, duration=DURATION.get(fish, 15.0), seed=1)
-    settings = LaunchSettings(scenario, procs=procs, listen=_endpoint(), start_timeout=120)
+    settings = LaunchSettings(
+        scenario, procs=procs, listen=free_loopback_endpoint(), start_timeout=120
+    )
     result = trio.run(lambda: run_swarm(settings))
     summary = result.summary
     loop_time = summary["loop_time"]
@@ -76,7 +77,7 @@ def round_trips_from_zenoh(count: int) -> list[float]:
     """Round trips timed from a plain Zenoh session: the perception is put from this thread
     and the command time-stamped in Zenoh's callback thread, so the harness adds no event
     loop of its own; what is timed is Zenoh both ways plus the fish actor."""
-    endpoint = _endpoint()
+    endpoint = free_loopback_endpoint()
     scenario = Scenario()
     keys = scenario.keys
     spec = WorkerSpec(0, (0,), policy_of(scenario), scenario.swarm, endpoint, schooled=False)
@@ -112,7 +113,7 @@ def round_trips_from_zenoh(count: int) -> list[float]:
 async def round_trips_from_trio(count: int) -> list[float]:
     """The same round trips timed from a trio task (as a trio world or driver would see
     them): adds the harness's own wake-up from Zenoh's thread into trio."""
-    endpoint = _endpoint()
+    endpoint = free_loopback_endpoint()
     scenario = Scenario()
     keys = scenario.keys
     spec = WorkerSpec(0, (0,), policy_of(scenario), scenario.swarm, endpoint, schooled=False)

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.bluebot.vision import Vision, perceive
+from fishswarm.progress import ids_text
 
 FloatArray = NDArray[np.float64]
 
@@ -132,7 +133,7 @@ def animate(
         raise AnimationError(f"the output must end in {' or '.join(FORMATS)}, got {out.name}")
     ids = frames.ids.tolist()
     if viewer not in ids:
-        raise AnimationError(f"fish {viewer} is not in the recording (fish: {_ids(ids)})")
+        raise AnimationError(f"fish {viewer} is not in the recording (fish: {ids_text(ids)})")
     plt, animation = _matplotlib()
     writer = _writer(animation, out, fps)
     figure = plt.figure(figsize=(10, 7.5), dpi=80, layout="constrained")
@@ -261,10 +262,6 @@ def _writer(animation: Any, out: Path, fps: int) -> Any:
 
     matplotlib.rcParams["animation.ffmpeg_path"] = imageio_ffmpeg.get_ffmpeg_exe()
     return animation.FFMpegWriter(fps=fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p"])
-
-
-def _ids(ids: list[int]) -> str:
-    return ", ".join(map(str, ids[:20])) + (" …" if len(ids) > 20 else "")
 
 
 def frames_per_step(fps: int, period: float, speed: float) -> int:

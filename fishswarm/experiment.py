@@ -50,6 +50,12 @@ METRIC_LABELS = {
 }
 
 
+def change_percent(series: FloatArray) -> float:
+    """Change of a metric from its first to its last value, per cent of the first."""
+    first, last = float(series[0]), float(series[-1])
+    return math.nan if first == 0 else 100.0 * (last - first) / first
+
+
 def _first(series: FloatArray) -> float:
     return float(series[0])
 
@@ -98,21 +104,21 @@ SWARM_SUMMARIES = (
         "centroid_distance_change_percent",
         "centroid distance change (%)",
         "centroid_distance",
-        lambda series: change_percent(series),
+        change_percent,
         1,
     ),
     Summary(
         "pairwise_distance_change_percent",
         "pairwise distance change (%)",
         "pairwise_distance",
-        lambda series: change_percent(series),
+        change_percent,
         1,
     ),
     Summary(
         "nearest_neighbor_distance_change_percent",
         "nearest-neighbour distance change (%)",
         "nearest_neighbor_distance",
-        lambda series: change_percent(series),
+        change_percent,
         1,
     ),
     Summary("neighbors_seen_initial", "neighbours seen, initial", "neighbors_seen", _first, 1),
@@ -326,12 +332,6 @@ class RunOutcome:
     metrics: FloatArray
     position: FloatArray
     wall_time: float
-
-
-def change_percent(series: FloatArray) -> float:
-    """Change of a metric from its first to its last value, per cent of the first."""
-    first, last = float(series[0]), float(series[-1])
-    return math.nan if first == 0 else 100.0 * (last - first) / first
 
 
 def table_rows(experiment: Experiment, outcomes: list[RunOutcome]) -> list[dict[str, Any]]:

@@ -1,4 +1,5 @@
-"""Progress lines for long runs: a bar, one updating line on a terminal, plain lines in logs."""
+"""Text for people: progress lines for long runs (a bar, one updating line on a terminal,
+plain lines in logs) and short lists of fish ids."""
 
 from __future__ import annotations
 
@@ -30,3 +31,8 @@ class ProgressLine:
         else:
             self.stream.write(line + "\n")
         self.stream.flush()
+
+
+def ids_text(ids: list[int], limit: int = 20) -> str:
+    """``0, 1, 2 …``: at most ``limit`` ids, for messages."""
+    return ", ".join(map(str, ids[:limit])) + (" …" if len(ids) > limit else "")

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
+import socket
 from collections import deque
 from collections.abc import AsyncIterator, Callable, Sequence
 from contextlib import asynccontextmanager
@@ -88,6 +89,14 @@ def check_endpoint(endpoint: str) -> str:
             "e.g. tcp/127.0.0.1:7447 or tcp/0.0.0.0:7447"
         )
     return endpoint
+
+
+def free_loopback_endpoint() -> str:
+    """``tcp/127.0.0.1:PORT`` with a port nothing listens on right now (for runs that must
+    not collide, e.g. experiments run side by side)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{probe.getsockname()[1]}"
 
 
 @asynccontextmanager

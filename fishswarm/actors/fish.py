@@ -97,7 +97,6 @@ class _Pending:
         landmarks: (ΣL, 3) their body-frame positions, m, fish by fish.
         inbox_counts: (G,) deliveries each fish waits for.
         deadline: when to stop waiting for deliveries (trio time).
-        batched: answer with one command batch (school) instead of a command per fish.
     """
 
     rows: Rows
@@ -109,7 +108,6 @@ class _Pending:
     landmarks: NDArray[np.float64]
     inbox_counts: NDArray[np.int64]
     deadline: float
-    batched: bool
 
 
 @dataclass
@@ -228,7 +226,6 @@ class Fish:
             perception.landmarks,
             np.array([perception.inbox_count], dtype=np.int64),
             trio.current_time() + self.settings.inbox_timeout,
-            batched=False,
         )
         self._admit(key, pending)
 
@@ -251,7 +248,6 @@ class Fish:
             batch.landmarks,
             batch.inbox_counts,
             trio.current_time() + self.settings.inbox_timeout,
-            batched=True,
         )
         self._admit(key, pending)
 
@@ -303,20 +299,11 @@ class Fish:
         if not ready:
             return
         self._pending = [pending for pending in self._pending if pending not in ready]
-        if len(ready) == 1:
-            only = ready[0]
-            rows, depth = only.rows, only.depth
-            counts, stacked = only.neighbor_counts, only.neighbors
-            landmark_counts, landmark_rows = only.landmark_counts, only.landmarks
-        else:
-            rows = np.concatenate([p.rows for p in ready])
-            depth = np.concatenate([p.depth for p in ready])
-            counts = np.concatenate([p.neighbor_counts for p in ready])
-            stacked = np.concatenate([p.neighbors for p in ready])
-            landmark_counts = np.concatenate([p.landmark_counts for p in ready])
-            landmark_rows = np.concatenate([p.landmarks for p in ready])
-        neighbors, mask = pad_neighbors(counts, stacked)
-        landmarks, landmark_mask = pad_neighbors(landmark_counts, landmark_rows)
+        # One fish's perception (a robot) is decided as it is; several are stacked first.
+        merged = ready[0] if len(ready) == 1 else _merge(ready)
+        rows, depth = merged.rows, merged.depth
+        neighbors, mask = pad_neighbors(merged.neighbor_counts, merged.neighbors)
+        landmarks, landmark_mask = pad_neighbors(merged.landmark_counts, merged.landmarks)
         whole = rows.size == self._ids.size and bool((rows == self._all_rows).all())
         memory = self._memory if whole else self._memory.take(rows)
         fins, memory = act(
@@ -377,6 +364,23 @@ class Fish:
         for row, gains in zip(rows.tolist(), fins, strict=True):
             fish_id = self.settings.fish_ids[row]
             put(keys.command(fish_id), encode(Command(fish_id, tick, gains, led=led)))
+
+
+def _merge(ready: list[_Pending]) -> _Pending:
+    """Several pending perceptions stacked into one, rows in order (tick and deadline of the
+    first: only the arrays are decided on)."""
+    first = ready[0]
+    return _Pending(
+        np.concatenate([p.rows for p in ready]),
+        first.tick,
+        np.concatenate([p.depth for p in ready]),
+        np.concatenate([p.neighbor_counts for p in ready]),
+        np.concatenate([p.neighbors for p in ready]),
+        np.concatenate([p.landmark_counts for p in ready]),
+        np.concatenate([p.landmarks for p in ready]),
+        np.concatenate([p.inbox_counts for p in ready]),
+        first.deadline,
+    )
 
 
 def _pusher(events: Inbox[Event], index: int, kind: str) -> Callable[[str, bytes], None]:

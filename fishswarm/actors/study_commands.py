@@ -6,11 +6,14 @@ import argparse
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from fishswarm.scenario import ConfigError, Scenario
+
+if TYPE_CHECKING:
+    from fishswarm.recording import Recording
 
 
 def add_parsers(commands: Any) -> None:
@@ -127,17 +130,11 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm plot RECORDING``."""
     from fishswarm.figures import FiguresUnavailable, run_figure
     from fishswarm.metrics import METRIC_NAMES
-    from fishswarm.recording import RecordingError, read_recording
 
     out = args.out or args.recording.with_suffix(".png")
     if out.suffix not in (".png", ".svg", ".pdf"):
         raise ConfigError(f"--out must end in .png, .svg or .pdf, got {out.name}")
-    try:
-        recording = read_recording(args.recording)
-    except RecordingError as error:
-        raise ConfigError(str(error)) from None
-    if not recording.snapshots:
-        raise ConfigError(f"{args.recording} holds no snapshots: nothing to draw")
+    recording = _read(args.recording, at_least=1, purpose="draw")
     arrays = recording.arrays()
     metrics = {
         name: np.array([m[name] for m in recording.metrics])
@@ -163,16 +160,10 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
     from fishswarm.animation import animate as make_animation
     from fishswarm.bluebot.vision import Vision
     from fishswarm.progress import ProgressLine, bar
-    from fishswarm.recording import RecordingError, read_recording
 
     if args.fps < 1 or not args.speed > 0:
         raise ConfigError("--fps must be at least 1 and --speed positive")
-    try:
-        recording = read_recording(args.recording)
-    except RecordingError as error:
-        raise ConfigError(str(error)) from None
-    if len(recording.snapshots) < 2:
-        raise ConfigError(f"{args.recording} holds fewer than two snapshots: nothing to animate")
+    recording = _read(args.recording, at_least=2, purpose="animate")
     arrays = recording.arrays()
     settings = recording.scenario
     period = float(settings.get("control_period", 1.0))
@@ -209,3 +200,17 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
         raise ConfigError(str(error)) from None
     print(f"wrote {args.out} ({frames.t.size} frames)", file=sys.stderr)
     return 0
+
+
+def _read(path: Path, *, at_least: int, purpose: str) -> Recording:
+    """A recording with at least ``at_least`` snapshots, or a usage error saying why not."""
+    from fishswarm.recording import RecordingError, read_recording
+
+    try:
+        recording = read_recording(path)
+    except RecordingError as error:
+        raise ConfigError(str(error)) from None
+    if len(recording.snapshots) < at_least:
+        few = "no snapshots" if at_least == 1 else f"fewer than {at_least} snapshots"
+        raise ConfigError(f"{path} holds {few}: nothing to {purpose}")
+    return recording

@@ -11,7 +11,6 @@ from __future__ import annotations
 import concurrent.futures
 import multiprocessing
 import os
-import socket
 import tempfile
 import time
 from collections.abc import Callable
@@ -21,6 +20,7 @@ import numpy as np
 import trio
 from numpy.typing import NDArray
 
+from fishswarm.actors.bridge import free_loopback_endpoint
 from fishswarm.actors.launcher import LaunchSettings, run_swarm
 from fishswarm.experiment import ENGINES, Experiment, RunOutcome
 from fishswarm.recording import read_recording
@@ -47,9 +47,7 @@ def run_one(experiment: Experiment, value: float, seed: int, engine: str) -> Run
 
 def _run_actors(scenario: Scenario) -> tuple[FloatArray, FloatArray, NDArray[np.int64]]:
     """Run through the actor system, recording to a temporary MCAP file read back after."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        endpoint = f"tcp/127.0.0.1:{probe.getsockname()[1]}"
+    endpoint = free_loopback_endpoint()
     with tempfile.TemporaryDirectory(prefix="fishswarm-experiment-") as folder:
         record = Path(folder) / "run.mcap"
         settings = LaunchSettings(scenario, listen=endpoint, record=record)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import trio
 import zenoh
+from numpy.typing import ArrayLike
 
 from fishswarm.actors.bridge import (
     Inbox,
@@ -34,6 +35,7 @@ from fishswarm.actors.perceptions import perception_messages
 from fishswarm.bluebot.dynamics import State
 from fishswarm.bluebot.vision import Perceived
 from fishswarm.jitter import JitterSchedule, next_event
+from fishswarm.progress import ids_text
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.messages import (
     ChannelReport,
@@ -228,7 +230,7 @@ class World:
         if missing:
             raise StartTimeout(
                 f"{len(missing)} of {len(expected)} fish did not come up within "
-                f"{self.settings.start_timeout:g} s (missing ids: {_ids_text(missing)})"
+                f"{self.settings.start_timeout:g} s (missing ids: {ids_text(missing)})"
             )
         await trio.sleep(self.settings.admit_delay)
         self._drain()
@@ -244,11 +246,8 @@ class World:
             self._drain()
             self._drop_lost()
             self._admit_new_fish()
-            vision_rngs = [self._vision_rngs[int(i)] for i in self._ids]
-            perceived = observe(self.scenario, self._state, vision_rngs)
-            put(self.keys.snapshot, encode(self._snapshot(perceived)))
-            self._messages_out += 1
-            if self.tick >= self.scenario.ticks or self._stop_requested:
+            perceived = self._observe()
+            if self._publish_snapshot(put, perceived):
                 return
             await self._resume.wait()
             if realtime and trio.current_time() - tick_start > self.scenario.control_period:
@@ -270,7 +269,10 @@ class World:
             rows = [self._current.rows[fish_id] for fish_id in self._ids.tolist()]
             self._state = advance(self.scenario, self._state, self._current.fins[rows])
             self._broadcasts = self._current.broadcasts[rows]
-            self._last_fins = dict(zip(self._ids.tolist(), self._current.fins[rows], strict=True))
+            if realtime:
+                self._last_fins = dict(
+                    zip(self._ids.tolist(), self._current.fins[rows], strict=True)
+                )
             self.tick += 1
 
     async def _loop_jitter(self, put: Put) -> None:
@@ -297,12 +299,9 @@ class World:
             held = np.array([fins.get(i, NO_FINS) for i in live]).reshape(-1, 4)
             self._state = advance(self.scenario, self._state, held, duration=at - now)
             now = at
-            vision_rngs = [self._vision_rngs[i] for i in live]
-            perceived = observe(self.scenario, self._state, vision_rngs)
+            perceived = self._observe()
             if kind == "snapshot":
-                put(self.keys.snapshot, encode(self._snapshot(perceived)))
-                self._messages_out += 1
-                if self.tick >= self.scenario.ticks or self._stop_requested:
+                if self._publish_snapshot(put, perceived):
                     return
                 self.tick += 1
                 continue
@@ -317,12 +316,11 @@ class World:
             self._publish_perceptions(
                 put, perceived, landmarks, inbox_counts, tick=event, time=now, rows=rows
             )
+            # A fish lost while the world waited keeps fins off; it leaves at the next event.
             await self._collect_commands()
             for fish_id in due:
-                if fish_id in self._current.waiting:
-                    continue  # lost while the world waited
                 fins[fish_id] = self._current.fins[self._current.rows[fish_id]]
-            schedule.decided([i for i in due if i not in self._current.waiting])
+            schedule.decided(due)
 
     def _publish_perceptions(
         self,
@@ -351,6 +349,17 @@ class World:
         ):
             put(key, encode(message))
             self._messages_out += 1
+
+    def _observe(self) -> Perceived:
+        """What every live fish sees now (each fish's own vision-noise stream)."""
+        rngs = [self._vision_rngs[fish_id] for fish_id in self._ids.tolist()]
+        return observe(self.scenario, self._state, rngs)
+
+    def _publish_snapshot(self, put: Put, perceived: Perceived) -> bool:
+        """Publish the snapshot of this tick; whether the run ends with it."""
+        put(self.keys.snapshot, encode(self._snapshot(perceived)))
+        self._messages_out += 1
+        return self.tick >= self.scenario.ticks or self._stop_requested
 
     def _snapshot(self, perceived: Perceived) -> Snapshot:
         return Snapshot(
@@ -431,18 +440,7 @@ class World:
         )
         if command is None:
             return
-        current = self._current
-        if self._late(command.tick):
-            return
-        if command.tick != self._answer_tick or command.fish_id not in current.waiting:
-            self._intake.reject(
-                key, "stale", f"command for tick {command.tick} at {self._answer_tick}"
-            )
-            return
-        row = current.rows[command.fish_id]
-        current.fins[row] = command.fins
-        current.broadcasts[row] = command.broadcasts
-        current.waiting.discard(command.fish_id)
+        self._accept(key, command.tick, [command.fish_id], command.fins[None], [command.broadcasts])
 
     def _take_batch(self, key: str, payload: bytes) -> None:
         batch = self._intake.decode(key, payload, CommandBatch)
@@ -452,17 +450,21 @@ class World:
         if any(self._command_key.get(fish_id) != key for fish_id in ids):
             self._intake.reject(key, "misaddressed", f"fish {ids} are not all of this school")
             return
+        self._accept(key, batch.tick, ids, batch.fins, batch.broadcasts)
+
+    def _accept(
+        self, key: str, tick: int, ids: list[int], fins: np.ndarray, broadcasts: ArrayLike
+    ) -> None:
+        """Take the commands of fish ``ids`` for ``tick``, unless late or stale."""
         current = self._current
-        if self._late(batch.tick):
+        if self._late(tick):
             return
-        if batch.tick != self._answer_tick or not current.waiting.issuperset(ids):
-            self._intake.reject(
-                key, "stale", f"commands for tick {batch.tick} at {self._answer_tick}"
-            )
+        if tick != self._answer_tick or not current.waiting.issuperset(ids):
+            self._intake.reject(key, "stale", f"commands for tick {tick} at {self._answer_tick}")
             return
         rows = [current.rows[fish_id] for fish_id in ids]
-        current.fins[rows] = batch.fins
-        current.broadcasts[rows] = batch.broadcasts
+        current.fins[rows] = fins
+        current.broadcasts[rows] = broadcasts
         current.waiting.difference_update(ids)
 
     def _on_alive(self, key: str, alive: bool) -> None:
@@ -579,7 +581,3 @@ class World:
                 self.state_name, self.tick, self.time, len(self._alive_fish)
             )
             reply(query, encode(reply_message))
-
-
-def _ids_text(ids: list[int]) -> str:
-    return ", ".join(map(str, ids[:20])) + (" …" if len(ids) > 20 else "")

@@ -70,9 +70,9 @@ def orbit(centre: FloatArray, seen: BoolArray, *, radius: float) -> FloatArray:
 
 def nearest(neighbors: FloatArray, mask: BoolArray) -> tuple[FloatArray, BoolArray]:
     """Each fish's nearest visible neighbour (B, 3), and whether it sees any (B,)."""
-    distance = np.where(mask, np.einsum("bkd,bkd->bk", neighbors, neighbors), np.inf)
     if neighbors.shape[1] == 0:
         return np.zeros((neighbors.shape[0], 3)), np.zeros(neighbors.shape[0], dtype=np.bool_)
+    distance = np.where(mask, np.einsum("bkd,bkd->bk", neighbors, neighbors), np.inf)
     closest = np.argmin(distance, axis=1)
     rows = np.arange(neighbors.shape[0])
     seen: BoolArray = np.logical_or.reduce(mask, axis=1)
