@@ -9,6 +9,7 @@ tables and pictures; :mod:`fishswarm.actors.sweep` runs them.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import logging
 import math
@@ -33,7 +34,7 @@ METRICS = ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance"
 """Columns of a swarm run's metric series: the three mean distances (m) of SPEC §3 and
 neighbours seen."""
 
-ORBITING = ("orbit", "milling", "waltz")
+ORBIT_BEHAVIORS = ("orbit", "milling", "waltz")
 
 ENGINES = ("actors", "batch")
 """How an experiment's runs go: through the actor system, or the in-process batch engine."""
@@ -182,7 +183,7 @@ class Experiment:
     @property
     def orbiting(self) -> bool:
         """Whether the fish orbit (orbit, milling, waltz) rather than aggregate or disperse."""
-        return self.scenario.behavior in ORBITING
+        return self.scenario.behavior in ORBIT_BEHAVIORS
 
     @property
     def metric_names(self) -> tuple[str, ...]:
@@ -231,14 +232,11 @@ class Experiment:
         values: tuple[float, ...] | None = None,
     ) -> Experiment:
         """A copy with fewer seeds, a shorter duration or other values (None: unchanged)."""
-        return Experiment(
-            self.name,
-            self.title,
-            self.parameter,
-            self.label,
-            self.values if values is None else values,
-            self.seeds if seeds is None else seeds,
-            self.scenario.replace(duration=duration),
+        return dataclasses.replace(
+            self,
+            values=self.values if values is None else values,
+            seeds=self.seeds if seeds is None else seeds,
+            scenario=self.scenario.replace(duration=duration),
         )
 
     @classmethod
@@ -413,7 +411,7 @@ def write_report(
     from fishswarm.figures import FiguresUnavailable, experiment_figures
 
     try:
-        paths += experiment_figures(experiment, outcomes, folder)
+        paths += experiment_figures(experiment, outcomes, rows, folder)
     except FiguresUnavailable as error:
         log.warning("tables written, no pictures: %s", error)
     return paths

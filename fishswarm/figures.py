@@ -109,12 +109,15 @@ def run_figure(
 
 
 def experiment_figures(
-    experiment: Experiment, outcomes: list[RunOutcome], folder: Path
+    experiment: Experiment,
+    outcomes: list[RunOutcome],
+    rows: list[dict[str, Any]],
+    folder: Path,
 ) -> list[Path]:
     """Write the experiment's pictures into ``folder``; returns their paths.
 
-    - ``metrics_vs_parameter.png``: each column of the experiment's table against the
-      parameter, mean ± s.d. over seeds.
+    - ``metrics_vs_parameter.png``: each column of the experiment's table (``rows``, from
+      :func:`fishswarm.experiment.table_rows`) against the parameter, mean ± s.d. over seeds.
     - ``metrics_over_time.png``: each metric over time, one line per value (mean, band ± s.d.).
     - ``tracks.png``: the first seed's tracks for every value, from above and from the side.
     """
@@ -129,13 +132,8 @@ def experiment_figures(
         1, len(summaries), figsize=(3.4 * len(summaries), 3.6), layout="constrained"
     )
     for ax, summary in zip(axes, summaries, strict=True):
-        column = names.index(summary.metric)
-        per_value = [
-            [summary.reduce(o.metrics[:, column]) for o in outcomes if o.value == value]
-            for value in values
-        ]
-        means = [float(np.mean(v)) for v in per_value]
-        errors = [float(np.std(v, ddof=1)) if len(v) > 1 else 0.0 for v in per_value]
+        means = [row[f"{summary.key}_mean"] for row in rows]
+        errors = [row[f"{summary.key}_sd"] for row in rows]
         ax.errorbar(positions, means, yerr=errors, fmt="o-", capsize=4)
         ax.set_xticks(positions, [f"{v:g}" for v in values])
         ax.set_xlabel(experiment.label)
