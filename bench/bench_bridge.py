@@ -7,7 +7,7 @@ thread), like the fish round trip in ``bench_swarm.py``:
 - ``zenoh``: the echo process answers inside Zenoh's callback (a put from a callback is
   fine here because nothing else runs in that process; the actors never do it).
 - ``trio bridge``: the echo process is a trio task reading an :class:`Inbox` and putting
-  with :func:`publisher`, as every actor does.
+  on a :class:`ZenohBus`, as every actor does.
 
 Usage:
     python bench/bench_bridge.py [--samples 2000]
@@ -24,13 +24,10 @@ import numpy as np
 import trio
 import zenoh
 
-from fishswarm.actors.bridge import (
-    SessionSettings,
-    free_loopback_endpoint,
-    open_session,
-    open_subscription,
-    publisher,
-)
+from fishswarm.actors.bus import open_subscriber
+from fishswarm.actors.inbox import Inbox
+from fishswarm.actors.session import SessionSettings, free_loopback_endpoint, open_session
+from fishswarm.actors.zenoh_bus import ZenohBus
 
 PING, PONG = "bench/ping", "bench/pong"
 
@@ -48,10 +45,11 @@ def trio_echo(endpoint: str) -> None:
 
     async def serve() -> None:
         async with open_session(SessionSettings(mode="client", connect=[endpoint])) as session:
-            put = publisher(session)
-            async with open_subscription(session, PING) as inbox:
-                async for _, payload in inbox:
-                    put(PONG, payload)
+            bus = ZenohBus(session)
+            inbox: Inbox[bytes] = Inbox()
+            async with open_subscriber(bus, PING, lambda _, payload: inbox.push(payload)):
+                async for payload in inbox:
+                    bus.put(PONG, payload)
 
     trio.run(serve)
 

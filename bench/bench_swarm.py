@@ -28,19 +28,15 @@ import numpy as np
 import trio
 import zenoh
 
-from fishswarm.actors.bridge import (
-    SessionSettings,
-    free_loopback_endpoint,
-    open_session,
-    open_subscription,
-    publisher,
-)
+from fishswarm.actors.bus import open_subscriber
+from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.launcher import LaunchSettings, run_swarm
+from fishswarm.actors.session import SessionSettings, free_loopback_endpoint, open_session
 from fishswarm.actors.workers import WorkerSpec, start_worker, stop_worker
+from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.messages import Perception
-from fishswarm.scenario import Scenario
-from fishswarm.simulation import policy_of
+from fishswarm.sim.scenario import Scenario
 
 DURATION = {25: 120.0, 100: 60.0, 1000: 15.0}
 
@@ -80,7 +76,7 @@ def round_trips_from_zenoh(count: int) -> list[float]:
     endpoint = free_loopback_endpoint()
     scenario = Scenario()
     keys = scenario.keys
-    spec = WorkerSpec(0, (0,), policy_of(scenario), scenario.swarm, endpoint, schooled=False)
+    spec = WorkerSpec(0, (0,), scenario.fish_params(), scenario.swarm, endpoint, schooled=False)
     session = zenoh.open(SessionSettings(mode="router", listen=[endpoint]).to_config())
     arrived = threading.Event()
     stamp = [0.0]
@@ -116,18 +112,19 @@ async def round_trips_from_trio(count: int) -> list[float]:
     endpoint = free_loopback_endpoint()
     scenario = Scenario()
     keys = scenario.keys
-    spec = WorkerSpec(0, (0,), policy_of(scenario), scenario.swarm, endpoint, schooled=False)
+    spec = WorkerSpec(0, (0,), scenario.fish_params(), scenario.swarm, endpoint, schooled=False)
     router = SessionSettings(mode="router", listen=[endpoint])
     samples: list[float] = []
     async with open_session(router) as session:
         worker = start_worker(spec)
         try:
-            async with open_subscription(session, keys.command(0)) as commands:
+            bus = ZenohBus(session)
+            commands: Inbox[bytes] = Inbox()
+            async with open_subscriber(bus, keys.command(0), lambda _, p: commands.push(p)):
                 await trio.sleep(2.0)  # let the worker start and subscribe
-                put = publisher(session)
                 for tick, payload in enumerate(_perceptions(count + 50)):
                     started = time.perf_counter()
-                    put(keys.perception(0), payload)
+                    bus.put(keys.perception(0), payload)
                     with trio.fail_after(5):
                         await commands.receive()
                     if tick >= 50:  # warm-up

@@ -3,11 +3,17 @@
 from __future__ import annotations
 
 import socket
-from collections.abc import Awaitable, Callable
+import time
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
 from typing import TypeVar
 
 import pytest
 import trio
+import trio.testing
+
+from fishswarm.actors.bus import Bus, open_subscriber
+from fishswarm.actors.inbox import Inbox
 
 T = TypeVar("T")
 
@@ -18,6 +24,20 @@ def free_port() -> int:
         probe.bind(("127.0.0.1", 0))
         port: int = probe.getsockname()[1]
         return port
+
+
+def wait_for_port(port: int, *, timeout: float = 20.0) -> None:
+    """Wait until something accepts TCP connections on 127.0.0.1:``port`` (e.g. a router
+    started in another process)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            probe.settimeout(0.2)
+            if probe.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"nothing listens on 127.0.0.1:{port} after {timeout:g} s")
+        time.sleep(0.05)
 
 
 @pytest.fixture
@@ -34,3 +54,34 @@ def run_trio(main: Callable[[], Awaitable[T]], *, timeout: float = 60.0) -> T:
             return await main()
 
     return trio.run(bounded)
+
+
+@asynccontextmanager
+async def subscription(bus: Bus, key_expr: str) -> AsyncIterator[Inbox[tuple[str, bytes]]]:
+    """Subscribe to ``key_expr`` on ``bus``; (key, payload) pairs arrive in the inbox."""
+    inbox: Inbox[tuple[str, bytes]] = Inbox()
+    async with open_subscriber(bus, key_expr, lambda key, payload: inbox.push((key, payload))):
+        yield inbox
+
+
+async def wait_until_routed(bus: Bus, inbox: Inbox[tuple[str, bytes]], key: str) -> None:
+    """Put probes on ``key`` until one comes back through ``inbox``: the subscription has
+    reached the router. Then the inbox is emptied of probes."""
+    with trio.fail_after(10):
+        while True:
+            bus.put(key, b"probe")
+            with trio.move_on_after(0.05):
+                await inbox.receive()
+                break
+    inbox.drain()
+
+
+def run_mock(main: Callable[[], Awaitable[T]], *, timeout: float = 3600.0) -> T:
+    """Run ``main`` under trio with a MockClock that jumps ahead whenever every task waits:
+    simulated seconds cost nothing. ``timeout`` bounds the mock time."""
+
+    async def bounded() -> T:
+        with trio.fail_after(timeout):
+            return await main()
+
+    return trio.run(bounded, clock=trio.testing.MockClock(autojump_threshold=0))

@@ -11,24 +11,41 @@ from __future__ import annotations
 
 import logging
 from collections import defaultdict
+from dataclasses import dataclass
 
 import numpy as np
 import trio
-import zenoh
 
-from fishswarm.actors.bridge import Inbox, Put, open_subscriber, open_token, publisher
+from fishswarm.actors.bus import Bus, open_subscriber, open_token
+from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
-from fishswarm.medium import receptions
 from fishswarm.protocols.codec import encode
+from fishswarm.protocols.keys import fish_id_of
 from fishswarm.protocols.messages import Broadcast, ChannelReport, Delivery, Snapshot
-from fishswarm.scenario import Scenario
-from fishswarm.simulation import Stream, stream
+from fishswarm.sim.medium import receptions
+from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.streams import Stream, stream
 
 log = logging.getLogger(__name__)
 
 
+@dataclass(frozen=True)
+class ChannelStatistics:
+    """Counters of the channel.
+
+    Attributes:
+        delivered: deliveries made.
+        missing_broadcasts: broadcasts announced in a snapshot that never arrived.
+        rejected: messages rejected.
+    """
+
+    delivered: int
+    missing_broadcasts: int
+    rejected: int
+
+
 class Channel:
-    """The simulated broadcast medium. ``await channel.run(session)`` serves until cancelled.
+    """The simulated broadcast medium. ``await channel.run(bus)`` serves until cancelled.
 
     Args:
         scenario: range, loss and seed of the medium.
@@ -45,31 +62,22 @@ class Channel:
         self._rngs: dict[int, np.random.Generator] = {}
         self._delivered = 0
         self._missing = 0
+        self._last_tick = 0
 
-    def statistics(self) -> dict[str, int]:
-        """Counters: deliveries made, broadcasts that never arrived, rejected messages."""
-        return {
-            "delivered": self._delivered,
-            "missing_broadcasts": self._missing,
-            "rejected": self._intake.rejected_total,
-        }
+    def statistics(self) -> ChannelStatistics:
+        """The channel's counters so far."""
+        return ChannelStatistics(self._delivered, self._missing, self._intake.rejected_total)
 
     async def run(
-        self,
-        session: zenoh.Session,
-        *,
-        task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
+        self, bus: Bus, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
     ) -> None:
         """Deliver broadcasts until cancelled."""
         self._events = events = Inbox[tuple[str, str, bytes]]()
         keys = self.keys
-        put = publisher(session)
         async with (
-            open_subscriber(session, keys.snapshot, lambda k, p: events.push(("snapshot", k, p))),
-            open_subscriber(
-                session, keys.fish_outboxes(), lambda k, p: events.push(("outbox", k, p))
-            ),
-            open_token(session, keys.alive("channel", 0)),
+            open_subscriber(bus, keys.snapshot, lambda k, p: events.push(("snapshot", k, p))),
+            open_subscriber(bus, keys.fish_outboxes(), lambda k, p: events.push(("outbox", k, p))),
+            open_token(bus, keys.alive("channel", 0)),
         ):
             task_status.started()
             while True:
@@ -77,7 +85,7 @@ class Channel:
                 if snapshot.tick == 0 or int(snapshot.broadcasts.sum()) == 0:
                     continue
                 broadcasts = await self._gather(snapshot)
-                self._deliver(put, snapshot, broadcasts)
+                self._deliver(bus, snapshot, broadcasts)
 
     async def _next_snapshot(self) -> Snapshot:
         while True:
@@ -85,17 +93,28 @@ class Channel:
             if kind == "snapshot":
                 snapshot = self._intake.decode(key, payload, Snapshot)
                 if snapshot is not None:
+                    self._last_tick = snapshot.tick
                     return snapshot
             else:
                 self._take_outbox(key, payload)
 
     def _take_outbox(self, key: str, payload: bytes) -> None:
         sender, _ = self.keys.member_of(key)
+        owner = fish_id_of(sender)
+        if owner is None:
+            self._intake.reject(key, "misaddressed", f"{sender!r} is not a fish id")
+            return
         broadcast = self._intake.decode_addressed(
-            key, payload, Broadcast, field="sender_id", owner=int(sender)
+            key, payload, Broadcast, field="sender_id", owner=owner
         )
-        if broadcast is not None:
-            self._outbox[broadcast.tick].append(broadcast)
+        if broadcast is None:
+            return
+        # Only broadcasts of the ticks about to be delivered are kept: anything else is
+        # stale or forged, and would pile up.
+        if not self._last_tick - 1 <= broadcast.tick <= self._last_tick + 2:
+            self._intake.reject(key, "stale", f"broadcast of tick {broadcast.tick}")
+            return
+        self._outbox[broadcast.tick].append(broadcast)
 
     async def _gather(self, snapshot: Snapshot) -> list[Broadcast]:
         sent_tick = snapshot.tick - 1
@@ -118,7 +137,7 @@ class Channel:
             )
         return sorted(got, key=lambda b: b.sender_id)
 
-    def _deliver(self, put: Put, snapshot: Snapshot, broadcasts: list[Broadcast]) -> None:
+    def _deliver(self, bus: Bus, snapshot: Snapshot, broadcasts: list[Broadcast]) -> None:
         index_of = {int(i): n for n, i in enumerate(snapshot.ids.tolist())}
         present = [b for b in broadcasts if b.sender_id in index_of]
         rngs = [self._rng(int(i)) for i in snapshot.ids.tolist()]
@@ -138,13 +157,15 @@ class Channel:
                 receiver_id,
                 snapshot.tick,
                 broadcast.kind,
-                broadcast.value,
+                broadcast.values,
                 reception.sender_position,
             )
-            put(self.keys.inbox(receiver_id), encode(delivery))
+            bus.put(self.keys.inbox(receiver_id), encode(delivery))
             counts[reception.receiver] += 1
         self._delivered += len(found)
-        put(self.keys.channel_report, encode(ChannelReport(snapshot.tick, snapshot.ids, counts)))
+        bus.put(
+            self.keys.channel_report, encode(ChannelReport(snapshot.tick, snapshot.ids, counts))
+        )
 
     def _rng(self, fish_id: int) -> np.random.Generator:
         if fish_id not in self._rngs:

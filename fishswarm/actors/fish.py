@@ -1,20 +1,25 @@
-"""The fish actor: perception in → policy → command out, and fins off when perceptions stop.
+"""The fish actor: perception and inbox in → the fish core decides → command and broadcasts
+out; fins off when perceptions stop.
 
-The same actor runs in simulation (the world sends perceptions) and on a BlueBot (the
-driver does). It knows nothing of clocks or physics; it owns only its fish's memory, their
-safety watchdog and their messages.
+The same actor runs in simulation (the world sends perceptions, the channel deliveries) and
+on a BlueBot (the driver does both, over an in-memory Bus in the same process). It knows
+nothing of clocks or physics; it owns only its fish's memory, their safety watchdog and
+their messages: the decision itself is :func:`fishswarm.behaviors.core.decide`.
 
-One actor serves one or more fish on one session: on a robot a single fish, in a worker
-process many. Each fish keeps its own liveliness token, memory, inbox and watchdog; what
-the fish share is the work. Perceptions that arrive together are decided in one batched
-call of the policy — the same pure function, with the same result bit for bit as one call
-per fish (tested).
+One actor serves one or more fish on one Bus: on a robot a single fish, in a worker process
+many. Each fish keeps its own liveliness token, memory, inbox and watchdog; what the fish
+share is the work. Perceptions that arrive together are decided in one batched call — the
+same result bit for bit as one call per fish (tested).
 
 Perceptions and commands travel either on each fish's own keys (``fish/<id>/perception``
 and ``fish/<id>/command``: what a robot does) or, for a *school*, as one
 :class:`~fishswarm.protocols.messages.PerceptionBatch` and one
-:class:`~fishswarm.protocols.messages.CommandBatch` per tick on the school's keys, which
-spares Python's per-message cost once per fish.
+:class:`~fishswarm.protocols.messages.CommandBatch` per tick on the school's keys.
+A fish's broadcasts always go out on its own outbox key, before its command, and the command
+says how many there were, so that the world's tick waits for their delivery.
+
+A perception of another run of the world (its ``run`` differs from the last one the fish
+saw) starts the fish afresh: a robot's fish actor serves run after run.
 """
 
 from __future__ import annotations
@@ -26,28 +31,46 @@ from dataclasses import dataclass
 
 import numpy as np
 import trio
-import zenoh
 from numpy.typing import NDArray
 
-from fishswarm.actors.bridge import Inbox, Put, open_subscriber, open_token, publisher
+from fishswarm.actors.bus import Bus, open_subscriber, open_token
+from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
-from fishswarm.behaviors.policy import Memory, Policy, act, pad_neighbors
+from fishswarm.behaviors.core import (
+    Decision,
+    FishMemory,
+    FishParams,
+    Heard,
+    Outbox,
+    Perception,
+    decide,
+    inbox_of,
+    pad_rows,
+    put_rows,
+    take_rows,
+)
+from fishswarm.behaviors.formation import switch_memory, with_formation
 from fishswarm.bluebot.control import stop_fins
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import (
+    BROADCAST_KINDS,
+    Broadcast,
     Command,
     CommandBatch,
     Delivery,
-    Perception,
     PerceptionBatch,
 )
+from fishswarm.protocols.messages import Perception as PerceptionMessage
 
 log = logging.getLogger(__name__)
 
 Rows = NDArray[np.intp]
 
 PERCEPTION, BATCH, DELIVERY = "perception", "batch", "delivery"
+
+MAX_WAITING_DELIVERIES = 10_000
+"""Most deliveries one fish keeps waiting for their perception."""
 
 Event = tuple[int, str, str, bytes]
 """(fish index or −1 for a school batch, kind, key, payload)."""
@@ -59,7 +82,7 @@ class FishSettings:
 
     Attributes:
         fish_ids: the fish it serves (one on a robot).
-        policy: what they do.
+        params: what they do (behaviour, controller, parameters).
         keys: the swarm's key space.
         perception_timeout: a fish with no perception for this long turns its fins off, s.
         inbox_timeout: longest wait for the deliveries a perception announces, s.
@@ -68,7 +91,7 @@ class FishSettings:
     """
 
     fish_ids: tuple[int, ...]
-    policy: Policy
+    params: FishParams
     keys: KeySpace = KeySpace()
     perception_timeout: float = 5.0
     inbox_timeout: float = 5.0
@@ -83,6 +106,33 @@ class FishSettings:
             self.keys.school_commands(self.school)  # checks the name
 
 
+@dataclass(frozen=True)
+class FishStatistics:
+    """Counters of a fish actor (summed over its fish).
+
+    Attributes:
+        perceptions: perceptions accepted.
+        commands: commands sent.
+        broadcasts: broadcasts sent.
+        deliveries: deliveries acted on.
+        rejected: messages rejected (malformed, misaddressed, stale).
+        watchdog_stops: times a fish's fins were turned off for lack of perceptions.
+        deliveries_missed: deliveries announced but never received.
+        batches: batched decisions made.
+        runs: new runs of the world started (after the first).
+    """
+
+    perceptions: int = 0
+    commands: int = 0
+    broadcasts: int = 0
+    deliveries: int = 0
+    rejected: int = 0
+    watchdog_stops: int = 0
+    deliveries_missed: int = 0
+    batches: int = 0
+    runs: int = 0
+
+
 @dataclass(eq=False)
 class _Pending:
     """Perceptions of some fish at one tick, waiting for the deliveries they announce.
@@ -90,6 +140,7 @@ class _Pending:
     Attributes:
         rows: (G,) indices of the fish in the actor's ``fish_ids``.
         tick: the tick.
+        time: simulated (or robot) time of the tick, s.
         depth: (G,) m.
         neighbor_counts: (G,) visible neighbours per fish.
         neighbors: (ΣK, 3) their body-frame positions, m, fish by fish.
@@ -97,10 +148,13 @@ class _Pending:
         landmarks: (ΣL, 3) their body-frame positions, m, fish by fish.
         inbox_counts: (G,) deliveries each fish waits for.
         deadline: when to stop waiting for deliveries (trio time).
+        heading: (G,) compass headings, rad, or None without a compass.
+        formation: the formation the fish are told to take (None: as configured).
     """
 
     rows: Rows
     tick: int
+    time: float
     depth: NDArray[np.float64]
     neighbor_counts: NDArray[np.int64]
     neighbors: NDArray[np.float64]
@@ -108,19 +162,12 @@ class _Pending:
     landmarks: NDArray[np.float64]
     inbox_counts: NDArray[np.int64]
     deadline: float
-
-
-@dataclass
-class _Counters:
-    perceptions: int = 0
-    commands: int = 0
-    watchdog_stops: int = 0
-    deliveries_missed: int = 0
-    batches: int = 0
+    heading: NDArray[np.float64] | None = None
+    formation: str | None = None
 
 
 class Fish:
-    """Fish actors. ``await fish.run(session)`` serves until cancelled."""
+    """Fish actors. ``await fish.run(bus)`` serves until cancelled."""
 
     def __init__(self, settings: FishSettings) -> None:
         self.settings = settings
@@ -131,43 +178,43 @@ class Fish:
         self._sorted_ids = ids[self._order]
         self._all_rows = np.arange(count)
         self._intake = Intake(f"fish {_span(settings.fish_ids)}")
-        self._memory = Memory.fresh(count)
+        self._params = settings.params
+        """What the fish do now (an operator may switch their formation)."""
+        self._memory = FishMemory.fresh(settings.params, count)
+        self._run = np.full(count, -1, dtype=np.int64)
+        self._latest_run = -1
         self._last_tick = np.full(count, -1, dtype=np.int64)
         self._last_seen = np.zeros(count)
         self._stopped = np.zeros(count, dtype=np.bool_)
         self._busy = np.zeros(count, dtype=np.bool_)
         self._pending: list[_Pending] = []
         self._mail: dict[int, list[Delivery]] = {n: [] for n in range(count)}
-        self._counters = _Counters()
+        self._counts = dict.fromkeys(
+            (
+                "perceptions",
+                "commands",
+                "broadcasts",
+                "deliveries",
+                "watchdog_stops",
+                "deliveries_missed",
+                "batches",
+                "runs",
+            ),
+            0,
+        )
         self._resumed = trio.Event()
-        self.deliveries: dict[int, list[Delivery]] = {}
-        """The deliveries each fish acted on at its last tick, by fish id."""
 
-    def statistics(self) -> dict[str, int]:
-        """Counters: perceptions accepted (per fish), commands sent (per fish), rejected
-        messages, watchdog stops, deliveries announced but never received, and batched
-        decisions made."""
-        counters = self._counters
-        return {
-            "perceptions": counters.perceptions,
-            "commands": counters.commands,
-            "rejected": self._intake.rejected_total,
-            "watchdog_stops": counters.watchdog_stops,
-            "deliveries_missed": counters.deliveries_missed,
-            "batches": counters.batches,
-        }
+    def statistics(self) -> FishStatistics:
+        """The actor's counters so far."""
+        return FishStatistics(rejected=self._intake.rejected_total, **self._counts)
 
     async def run(
-        self,
-        session: zenoh.Session,
-        *,
-        task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
+        self, bus: Bus, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
     ) -> None:
         """Serve perceptions until cancelled; report readiness once every fish is subscribed
         and alive."""
         keys, school = self.settings.keys, self.settings.school
         events: Inbox[Event] = Inbox()
-        put = publisher(session)
         async with contextlib.AsyncExitStack() as stack:
             # Subscribe before declaring the tokens: whoever sees a fish alive can reach it.
             subscriptions = [
@@ -183,23 +230,21 @@ class Fish:
                 subscriptions.append((-1, BATCH, keys.school_perceptions(school)))
             for index, kind, key in subscriptions:
                 await stack.enter_async_context(
-                    open_subscriber(session, key, _pusher(events, index, kind), exact=True)
+                    open_subscriber(bus, key, _pusher(events, index, kind))
                 )
             for fish_id in self.settings.fish_ids:
                 await stack.enter_async_context(
-                    open_token(session, keys.alive("fish", fish_id, school))
+                    open_token(bus, keys.alive("fish", fish_id, school))
                 )
             nursery = await stack.enter_async_context(trio.open_nursery())
             self._last_seen[:] = trio.current_time()
-            nursery.start_soon(self._watchdog, put)
+            nursery.start_soon(self._watchdog, bus)
             task_status.started()
             while True:
-                event = None
+                batch: list[Event] = []
                 with trio.move_on_at(self._next_deadline()):
-                    event = await events.receive()
-                batch = [] if event is None else [event]
-                while (more := events.receive_nowait()) is not None:
-                    batch.append(more)
+                    batch.append(await events.receive())
+                batch += events.drain()
                 for index, kind, key, payload in batch:
                     if kind == PERCEPTION:
                         self._take_perception(index, key, payload)
@@ -207,18 +252,18 @@ class Fish:
                         self._take_batch(key, payload)
                     else:
                         self._take_delivery(index, key, payload)
-                self._decide(put)
+                self._decide(bus)
 
     def _take_perception(self, index: int, key: str, payload: bytes) -> None:
         perception = self._intake.decode_addressed(
-            key, payload, Perception, field="fish_id", owner=self.settings.fish_ids[index]
+            key, payload, PerceptionMessage, field="fish_id", owner=self.settings.fish_ids[index]
         )
         if perception is None:
             return
-        rows = np.array([index], dtype=np.intp)
         pending = _Pending(
-            rows,
+            np.array([index], dtype=np.intp),
             perception.tick,
+            perception.time,
             np.array([perception.depth]),
             np.array([perception.neighbors.shape[0]], dtype=np.int64),
             perception.neighbors,
@@ -226,8 +271,10 @@ class Fish:
             perception.landmarks,
             np.array([perception.inbox_count], dtype=np.int64),
             trio.current_time() + self.settings.inbox_timeout,
+            None if perception.heading is None else np.array([perception.heading]),
+            perception.formation,
         )
-        self._admit(key, pending)
+        self._admit(key, pending, perception.run)
 
     def _take_batch(self, key: str, payload: bytes) -> None:
         batch = self._intake.decode(key, payload, PerceptionBatch)
@@ -241,6 +288,7 @@ class Fish:
         pending = _Pending(
             self._order[places].astype(np.intp),
             batch.tick,
+            batch.time,
             batch.depth,
             batch.neighbor_counts,
             batch.neighbors,
@@ -248,15 +296,20 @@ class Fish:
             batch.landmarks,
             batch.inbox_counts,
             trio.current_time() + self.settings.inbox_timeout,
+            batch.heading,
+            batch.formation,
         )
-        self._admit(key, pending)
+        self._admit(key, pending, batch.run)
 
-    def _admit(self, key: str, pending: _Pending) -> None:
+    def _admit(self, key: str, pending: _Pending, run: int) -> None:
         rows = pending.rows
+        fresh = rows[self._run[rows] != run]
+        if fresh.size:
+            self._start_run(fresh, run)
         if (self._last_tick[rows] >= pending.tick).any() or self._busy[rows].any():
             self._intake.reject(key, "stale", f"tick {pending.tick} repeated or out of order")
             return
-        self._counters.perceptions += rows.size
+        self._counts["perceptions"] += rows.size
         self._last_seen[rows] = trio.current_time()
         if self._stopped[rows].any():
             self._stopped[rows] = False
@@ -264,62 +317,114 @@ class Fish:
         self._busy[rows] = True
         self._pending.append(pending)
 
+    def _start_run(self, rows: Rows, run: int) -> None:
+        """These fish start a new run of the world: ticks from the start, memory fresh."""
+        if run != self._latest_run:
+            if self._latest_run >= 0:
+                self._counts["runs"] += 1
+                log.info("fish %s: a new run (%d) starts", _span(self._ids[rows].tolist()), run)
+            self._latest_run = run
+        self._run[rows] = run
+        self._last_tick[rows] = -1
+        # Perceptions of the old run waiting for deliveries are dropped whole: every fish in
+        # them is free to take the next perception.
+        dropped = [p for p in self._pending if np.isin(p.rows, rows).any()]
+        for pending in dropped:
+            self._busy[pending.rows] = False
+        self._busy[rows] = False
+        self._pending = [p for p in self._pending if not np.isin(p.rows, rows).any()]
+        for row in rows.tolist():
+            self._mail[row] = []
+        self._params = self.settings.params  # a new run starts as configured
+        fresh = FishMemory.fresh(self._params, rows.size)
+        self._memory = put_rows(self._memory, rows, fresh)
+
     def _take_delivery(self, index: int, key: str, payload: bytes) -> None:
         delivery = self._intake.decode_addressed(
             key, payload, Delivery, field="receiver_id", owner=self.settings.fish_ids[index]
         )
-        if delivery is not None and delivery.tick > self._last_tick[index]:
-            self._mail[index].append(delivery)
+        if delivery is None:
+            return
+        last = int(self._last_tick[index])
+        if delivery.tick <= last:
+            self._intake.reject(key, "stale", f"delivery for tick {delivery.tick} after {last}")
+            return
+        # Deliveries wait for their perception; a fish that gets many more than any tick
+        # could bring is being flooded: the excess is dropped, not kept.
+        if len(self._mail[index]) >= MAX_WAITING_DELIVERIES:
+            self._intake.reject(key, "flood", f"more than {MAX_WAITING_DELIVERIES} waiting")
+            return
+        self._mail[index].append(delivery)
 
     def _next_deadline(self) -> float:
         return min((pending.deadline for pending in self._pending), default=float("inf"))
 
-    def _complete(self, pending: _Pending, now: float) -> bool:
-        """Whether the pending perceptions have their deliveries (or waited long enough);
-        if so, hand the deliveries to their fish."""
+    def _complete(self, pending: _Pending, now: float) -> list[list[Delivery]] | None:
+        """The deliveries of the pending fish if all have arrived (or waited long enough),
+        else None."""
+        rows, tick = pending.rows.tolist(), pending.tick
         wanted = pending.inbox_counts.tolist()
         if not any(wanted):
-            return True
-        rows, tick = pending.rows.tolist(), pending.tick
+            for row in rows:  # nothing announced: whatever waits for this tick is stale
+                if self._mail[row]:
+                    self._mail[row] = [d for d in self._mail[row] if d.tick > tick]
+            return [[] for _ in rows]
         mail = [[d for d in self._mail[row] if d.tick == tick] for row in rows]
         if now < pending.deadline and any(len(m) < w for m, w in zip(mail, wanted, strict=True)):
-            return False
+            return None
         for row, fish_mail, count in zip(rows, mail, wanted, strict=True):
-            self._counters.deliveries_missed += max(0, count - len(fish_mail))
-            self.deliveries[self.settings.fish_ids[row]] = fish_mail[:count]
+            self._counts["deliveries_missed"] += max(0, count - len(fish_mail))
             self._mail[row] = [d for d in self._mail[row] if d.tick > tick]
-        return True
+        return [fish_mail[:count] for fish_mail, count in zip(mail, wanted, strict=True)]
 
-    def _decide(self, put: Put) -> None:
-        """Act for every fish whose perception is complete (or whose deliveries timed out)."""
+    def _decide(self, bus: Bus) -> None:
+        """Decide for every fish whose perception is complete (or whose deliveries timed
+        out), in one batched call."""
         if not self._pending:
             return
         now = trio.current_time()
-        ready = [pending for pending in self._pending if self._complete(pending, now)]
+        ready: list[_Pending] = []
+        mail: list[list[Delivery]] = []
+        waiting: list[_Pending] = []
+        for pending in self._pending:
+            delivered = self._complete(pending, now)
+            if delivered is None:
+                waiting.append(pending)
+            else:
+                ready.append(pending)
+                mail += delivered
         if not ready:
             return
-        self._pending = [pending for pending in self._pending if pending not in ready]
-        # One fish's perception (a robot) is decided as it is; several are stacked first.
-        merged = ready[0] if len(ready) == 1 else _merge(ready)
-        rows, depth = merged.rows, merged.depth
-        neighbors, mask = pad_neighbors(merged.neighbor_counts, merged.neighbors)
-        landmarks, landmark_mask = pad_neighbors(merged.landmark_counts, merged.landmarks)
+        self._pending = waiting
+        directive = next((p.formation for p in ready if p.formation is not None), None)
+        if directive is not None:
+            switched = with_formation(self._params, directive)
+            if switched is not self._params:
+                log.info("fish %s switch to formation %s", _span(self.settings.fish_ids), directive)
+                self._params = switched
+                self._memory = switch_memory(self._memory, switched)
+        rows = np.concatenate([p.rows for p in ready]) if len(ready) > 1 else ready[0].rows
         whole = rows.size == self._ids.size and bool((rows == self._all_rows).all())
-        memory = self._memory if whole else self._memory.take(rows)
-        fins, memory = act(
-            self.settings.policy, neighbors, mask, depth, memory, landmarks, landmark_mask
-        )
-        self._memory = memory if whole else self._memory.replaced(rows, memory)
-        self._counters.batches += 1
+        memory = self._memory if whole else take_rows(self._memory, rows)
+        heard: list[list[Heard]] = [
+            [(BROADCAST_KINDS.index(d.kind), d.values, d.sender_position) for d in fish_mail]
+            for fish_mail in mail
+        ]
+        memory, decision = decide(memory, _perception(ready), inbox_of(heard), params=self._params)
+        self._memory = memory if whole else put_rows(self._memory, rows, memory)
+        self._counts["batches"] += 1
+        self._counts["deliveries"] += sum(len(m) for m in mail)
         start = 0
         for pending in ready:
             end = start + pending.rows.size
-            self._send(put, pending.rows, pending.tick, fins[start:end], led=True)
+            part = decision if len(ready) == 1 else take_rows(decision, np.arange(start, end))
+            self._broadcast(bus, pending.rows, pending.tick, part)
+            self._send(bus, pending.rows, pending.tick, part)
             self._last_tick[pending.rows] = pending.tick
             self._busy[pending.rows] = False
             start = end
 
-    async def _watchdog(self, put: Put) -> None:
+    async def _watchdog(self, bus: Bus) -> None:
         """Turn a fish's fins off when its perceptions stop for ``perception_timeout``."""
         timeout = self.settings.perception_timeout
         while True:
@@ -340,46 +445,86 @@ class Fish:
                     timeout,
                 )
             self._stopped[late] = True
-            self._counters.watchdog_stops += late.size
+            self._counts["watchdog_stops"] += late.size
             # The last tick is repeated so that a driver acts on it at once.
             tick = int(max(self._last_tick[late].max(), 0))
-            self._send(put, late, tick, stop_fins(late.size), led=False)
+            count = late.size
+            stop = Decision(stop_fins(count), np.zeros(count, dtype=np.bool_), Outbox.silent(count))
+            self._send(bus, late, tick, stop)
 
-    def _send(self, put: Put, rows: Rows, tick: int, fins: np.ndarray, *, led: bool) -> None:
+    def _broadcast(self, bus: Bus, rows: Rows, tick: int, decision: Decision) -> None:
+        """Each broadcasting fish's broadcast, on its own outbox key."""
+        outbox = decision.outbox
+        for row in np.flatnonzero(outbox.mask).tolist():
+            fish_id = self.settings.fish_ids[int(rows[row])]
+            message = Broadcast(
+                fish_id, tick, BROADCAST_KINDS[int(outbox.kind[row])], outbox.values[row]
+            )
+            bus.put(self.settings.keys.outbox(fish_id), encode(message))
+            self._counts["broadcasts"] += 1
+
+    def _send(self, bus: Bus, rows: Rows, tick: int, decision: Decision) -> None:
         """Commands of the fish at ``rows`` for ``tick``: one batch for a school, or one
         command per fish on its own key."""
         keys, school = self.settings.keys, self.settings.school
-        self._counters.commands += rows.size
+        self._counts["commands"] += rows.size
+        broadcasts = decision.outbox.mask.astype(np.int64)
         if school is not None:
             order = np.argsort(self._ids[rows])
             batch = CommandBatch(
                 tick,
                 self._ids[rows][order],
-                fins[order],
-                np.full(rows.size, led),
-                np.zeros(rows.size, dtype=np.int64),
+                decision.fins[order],
+                decision.led[order],
+                broadcasts[order],
             )
-            put(keys.school_commands(school), encode(batch))
+            bus.put(keys.school_commands(school), encode(batch))
             return
-        for row, gains in zip(rows.tolist(), fins, strict=True):
+        for n, row in enumerate(rows.tolist()):
             fish_id = self.settings.fish_ids[row]
-            put(keys.command(fish_id), encode(Command(fish_id, tick, gains, led=led)))
+            command = Command(
+                fish_id,
+                tick,
+                decision.fins[n],
+                led=bool(decision.led[n]),
+                broadcasts=int(broadcasts[n]),
+            )
+            bus.put(keys.command(fish_id), encode(command))
 
 
-def _merge(ready: list[_Pending]) -> _Pending:
-    """Several pending perceptions stacked into one, rows in order (tick and deadline of the
-    first: only the arrays are decided on)."""
-    first = ready[0]
-    return _Pending(
-        np.concatenate([p.rows for p in ready]),
-        first.tick,
-        np.concatenate([p.depth for p in ready]),
+def _perception(ready: list[_Pending]) -> Perception:
+    """The pending perceptions as one batch for the fish core, rows in order."""
+    if len(ready) == 1:  # one fish (a robot) or one school: nothing to stack
+        first = ready[0]
+        neighbors, mask = pad_rows(first.neighbor_counts, first.neighbors)
+        landmarks, landmark_mask = pad_rows(first.landmark_counts, first.landmarks)
+        return Perception(
+            np.full(first.rows.size, first.time),
+            first.depth,
+            neighbors,
+            mask,
+            landmarks,
+            landmark_mask,
+            first.heading,
+        )
+    neighbors, mask = pad_rows(
         np.concatenate([p.neighbor_counts for p in ready]),
         np.concatenate([p.neighbors for p in ready]),
+    )
+    landmarks, landmark_mask = pad_rows(
         np.concatenate([p.landmark_counts for p in ready]),
         np.concatenate([p.landmarks for p in ready]),
-        np.concatenate([p.inbox_counts for p in ready]),
-        first.deadline,
+    )
+    headings = [np.full(p.rows.size, np.nan) if p.heading is None else p.heading for p in ready]
+    known = any(p.heading is not None for p in ready)
+    return Perception(
+        np.concatenate([np.full(p.rows.size, p.time) for p in ready]),
+        np.concatenate([p.depth for p in ready]),
+        neighbors,
+        mask,
+        landmarks,
+        landmark_mask,
+        np.concatenate(headings) if known else None,
     )
 
 
@@ -390,5 +535,5 @@ def _pusher(events: Inbox[Event], index: int, kind: str) -> Callable[[str, bytes
     return push
 
 
-def _span(ids: tuple[int, ...]) -> str:
+def _span(ids: list[int] | tuple[int, ...]) -> str:
     return str(ids[0]) if len(ids) == 1 else f"{ids[0]}–{ids[-1]}"

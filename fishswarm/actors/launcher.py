@@ -10,6 +10,7 @@ exit).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import logging
 import signal
@@ -21,15 +22,16 @@ from typing import Any
 
 import trio
 
-from fishswarm.actors.bridge import SessionSettings, open_session
 from fishswarm.actors.channel import Channel
+from fishswarm.actors.control import serve_control
 from fishswarm.actors.observer import Observer, Progress
+from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.workers import Worker, WorkerSpec, split_fish, start_worker, stop_worker
 from fishswarm.actors.world import World, WorldSettings
-from fishswarm.metrics import METRIC_NAMES
-from fishswarm.recording import open_recorder
-from fishswarm.scenario import Scenario
-from fishswarm.simulation import policy_of
+from fishswarm.actors.zenoh_bus import ZenohBus
+from fishswarm.sim.scenario import Scenario
+from fishswarm.study.metrics import METRIC_NAMES, formation_summary, formation_target_of
+from fishswarm.study.recording import open_recorder
 
 log = logging.getLogger(__name__)
 
@@ -107,17 +109,24 @@ async def run_swarm(
             if settings.record is not None
             else None
         )
-        observer = Observer(scenario.keys, recorder=recorder, on_progress=on_progress)
+        observer = Observer(
+            scenario.keys,
+            recorder=recorder,
+            on_progress=on_progress,
+            formation=formation_target_of(scenario),
+        )
         try:
             async with open_session(router) as session, trio.open_nursery() as nursery:
-                await nursery.start(observer.run, session)
-                await nursery.start(channel.run, session)
-                policy = policy_of(scenario)
+                bus = ZenohBus(session)
+                await nursery.start(observer.run, bus)
+                await nursery.start(channel.run, bus)
+                await nursery.start(serve_control, session, world)
+                params = scenario.fish_params()
                 for index, ids in enumerate(split_fish(list(range(scenario.fish)), settings.procs)):
                     spec = WorkerSpec(
                         index,
                         ids,
-                        policy,
+                        params,
                         scenario.swarm,
                         _connect_to(settings.listen),
                         log_level=settings.log_level,
@@ -126,7 +135,7 @@ async def run_swarm(
                 nursery.start_soon(_watch_workers, workers, died, world)
                 if settings.handle_signals:
                     nursery.start_soon(_watch_signals, interrupted, nursery.cancel_scope)
-                await world.run(session)
+                await world.run(bus)
                 with trio.move_on_after(5.0):
                     await observer.wait_for_tick(world.tick)
                 status = "stopped" if world.state_name == "stopped" else "finished"
@@ -226,11 +235,19 @@ def _summary(
         for name in (*METRIC_NAMES, "neighbors_seen"):
             change = 100.0 * (last[name] - first[name]) / first[name] if first[name] else None
             metrics[name] = {"initial": first[name], "final": last[name], "change_percent": change}
+    formation = (
+        formation_summary([p.time for p in history], [p.metrics for p in history])
+        if history and observer.formation is not None
+        else None
+    )
     fish_totals: dict[str, int] = {}
     for worker in workers:
-        for name, value in (worker.statistics or {}).items():
+        if worker.statistics is None:
+            continue
+        for name, value in dataclasses.asdict(worker.statistics).items():
             fish_totals[name] = fish_totals.get(name, 0) + int(value)
     world_stats = world.statistics()
+    channel_stats = channel.statistics()
     simulated = world.tick * settings.scenario.control_period
     return {
         "status": status,
@@ -238,19 +255,29 @@ def _summary(
         "procs": len(workers),
         "listen": settings.listen,
         "metrics": metrics,
+        "formation": formation,
+        "effort": (
+            {
+                "school": history[-1].metrics["effort"],
+                "spread": history[-1].metrics["effort_spread"],
+            }
+            if history and "effort" in history[-1].metrics
+            else None
+        ),
         "counts": {
             "ticks": world.tick,
-            "messages": int(world_stats["messages_in"]) + int(world_stats["messages_out"]),  # type: ignore[call-overload]
+            "messages": world_stats.messages_in + world_stats.messages_out,
             "rejected": {
-                "world": world_stats["rejected"],
-                "channel": channel.statistics()["rejected"],
-                "observer": observer.statistics()["rejected"],
+                "world": world_stats.rejected_total,
+                "channel": channel_stats.rejected,
+                "observer": observer.statistics().rejected,
                 "fish": fish_totals.get("rejected", 0),
             },
             "lost_fish": len(world.lost),
             "joined_fish": len(world.joined),
             "late_commands": world.late_commands,
-            "deliveries": channel.statistics()["delivered"],
+            "deliveries": channel_stats.delivered,
+            "broadcasts": fish_totals.get("broadcasts", 0),
         },
         "lost": [{"id": f.fish_id, "tick": f.tick, "reason": f.reason} for f in world.lost],
         "workers_died": died,

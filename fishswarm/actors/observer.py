@@ -12,14 +12,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import trio
-import zenoh
 
-from fishswarm.actors.bridge import Inbox, open_alive_events, open_subscriber, open_token
+from fishswarm.actors.bus import Bus, open_alive_events, open_subscriber, open_token
+from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
-from fishswarm.metrics import swarm_metrics
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import Snapshot
-from fishswarm.recording import Recorder
+from fishswarm.study.metrics import FormationTarget, swarm_metrics
+from fishswarm.study.recording import Recorder
 
 log = logging.getLogger(__name__)
 
@@ -34,14 +34,30 @@ class Progress:
     metrics: dict[str, float]
 
 
+@dataclass(frozen=True)
+class ObserverStatistics:
+    """Counters of an observer.
+
+    Attributes:
+        snapshots: snapshots accepted.
+        rejected: messages rejected.
+        events: liveliness events seen.
+    """
+
+    snapshots: int
+    rejected: int
+    events: int
+
+
 class Observer:
-    """Watches a swarm. ``await observer.run(session)`` serves until cancelled.
+    """Watches a swarm. ``await observer.run(bus)`` serves until cancelled.
 
     Args:
         keys: the swarm's key space.
         recorder: where to record snapshots, metrics and events (optional).
         on_progress: called after every snapshot.
         observer_id: id of this observer's liveliness token.
+        formation: a target shape to measure formation metrics against (formation runs).
     """
 
     def __init__(
@@ -51,43 +67,37 @@ class Observer:
         recorder: Recorder | None = None,
         on_progress: Callable[[Progress], None] | None = None,
         observer_id: str = "0",
+        formation: FormationTarget | None = None,
     ) -> None:
         self.keys = keys
         self.recorder = recorder
         self.on_progress = on_progress
         self.observer_id = observer_id
+        self.formation = formation
         self.history: list[Progress] = []
         self.events: list[dict[str, Any]] = []
         self._intake = Intake(f"observer {observer_id}")
         self._inbox: Inbox[tuple[str, str, bytes | bool]]
         self._last_tick = -1
         self._tick_reached = trio.Event()
+        self._world_left = trio.Event()
         self._sim_time = 0.0
 
-    def statistics(self) -> dict[str, int]:
-        """Counters: snapshots accepted, rejected messages, events seen."""
-        return {
-            "snapshots": self._intake.accepted,
-            "rejected": self._intake.rejected_total,
-            "events": len(self.events),
-        }
+    def statistics(self) -> ObserverStatistics:
+        """The observer's counters so far."""
+        return ObserverStatistics(
+            self._intake.accepted, self._intake.rejected_total, len(self.events)
+        )
 
     async def run(
-        self,
-        session: zenoh.Session,
-        *,
-        task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
+        self, bus: Bus, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
     ) -> None:
         """Observe until cancelled; readiness once subscribed."""
         self._inbox = inbox = Inbox[tuple[str, str, bytes | bool]]()
         async with (
-            open_subscriber(
-                session, self.keys.snapshot, lambda k, p: inbox.push(("snapshot", k, p))
-            ),
-            open_alive_events(
-                session, self.keys.alive_all(), lambda k, a: inbox.push(("alive", k, a))
-            ),
-            open_token(session, self.keys.alive("observer", self.observer_id)),
+            open_subscriber(bus, self.keys.snapshot, lambda k, p: inbox.push(("snapshot", k, p))),
+            open_alive_events(bus, self.keys.alive_all(), lambda k, a: inbox.push(("alive", k, a))),
+            open_token(bus, self.keys.alive("observer", self.observer_id)),
         ):
             task_status.started()
             async for kind, key, payload in inbox:
@@ -99,10 +109,15 @@ class Observer:
                     self._on_snapshot(key, payload)
 
     async def wait_for_tick(self, tick: int) -> None:
-        """Wait until a snapshot of ``tick`` or later has been seen (bound it with a timeout)."""
+        """Wait until a snapshot of ``tick`` or later has been seen (bound it with a timeout).
+
+        Any number of tasks may wait at once."""
         while self._last_tick < tick:
-            self._tick_reached = trio.Event()
             await self._tick_reached.wait()
+
+    async def wait_for_world_end(self) -> None:
+        """Wait until the world leaves the swarm: its run is over (bound it with a timeout)."""
+        await self._world_left.wait()
 
     def _on_alive(self, key: str, alive: bool) -> None:
         try:
@@ -118,15 +133,23 @@ class Observer:
         self.events.append(event)
         if self.recorder is not None:
             self.recorder.event(self._sim_time, event)
+        if member.role == "world" and not alive:
+            self._world_left.set()
 
     def _on_snapshot(self, key: str, payload: bytes) -> None:
         snapshot = self._intake.decode(key, payload, Snapshot)
         if snapshot is None:
             return
         if snapshot.tick <= self._last_tick:
+            self._intake.accepted -= 1
             self._intake.reject(key, "stale", f"snapshot of tick {snapshot.tick} repeated")
             return
-        metrics = swarm_metrics(snapshot.position, snapshot.neighbors_seen)
+        metrics = swarm_metrics(snapshot.position, snapshot.neighbors_seen, snapshot.effort)
+        if self.formation is not None:
+            try:
+                metrics.update(self.formation.metrics(snapshot.position))
+            except ValueError as error:  # e.g. positions no assignment can handle
+                log.warning("no formation metrics at tick %d: %s", snapshot.tick, error)
         progress = Progress(snapshot.tick, snapshot.time, int(snapshot.ids.size), metrics)
         self.history.append(progress)
         self._sim_time = snapshot.time
@@ -137,6 +160,8 @@ class Observer:
                 {"tick": snapshot.tick, "time": snapshot.time, "fish": progress.fish, **metrics},
             )
         self._last_tick = snapshot.tick
+        # Wake every waiter, and give later waiters a fresh event.
         self._tick_reached.set()
+        self._tick_reached = trio.Event()
         if self.on_progress is not None:
             self.on_progress(progress)

@@ -28,6 +28,9 @@ def perception_messages(
     inbox_counts: NDArray[np.int64],
     tick: int,
     time: float,
+    run: int = 0,
+    heading: NDArray[np.float64] | None = None,
+    formation: str | None = None,
     rows: Sequence[int] | None = None,
 ) -> list[tuple[str, Message]]:
     """The perception messages of the fish at ``rows`` (default all) for one tick.
@@ -42,6 +45,9 @@ def perception_messages(
         inbox_counts: (N,) deliveries each fish waits for.
         tick: the tick (the event number in jitter mode).
         time: simulated time, s.
+        run: the world's run id.
+        heading: (N,) each fish's compass heading, rad (None: no compass).
+        formation: the formation fish are told to take (None: as configured).
         rows: indices into ``ids`` of the fish to address.
 
     Returns:
@@ -65,6 +71,9 @@ def perception_messages(
             perceived.neighbors[row, : perceived.counts[row]],
             landmarks.neighbors[row][landmarks.mask[row]],
             int(inbox_counts[row]),
+            run,
+            None if heading is None else float(heading[row]),
+            formation,
         )
         messages.append((keys.perception(fish_id), perception))
     for school, school_rows in sorted(schools.items()):
@@ -81,6 +90,9 @@ def perception_messages(
             landmarks.counts[members],
             landmarks.neighbors[members][landmarks.mask[members]],
             inbox_counts[members],
+            run,
+            None if heading is None else heading[members],
+            formation,
         )
         messages.append((keys.school_perceptions(school), batch))
     return messages

@@ -13,13 +13,13 @@ import multiprocessing
 import signal
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
-from typing import Any
 
 import trio
 
-from fishswarm.actors.bridge import SessionSettings, open_session
-from fishswarm.actors.fish import Fish, FishSettings
-from fishswarm.behaviors.policy import Policy
+from fishswarm.actors.fish import Fish, FishSettings, FishStatistics
+from fishswarm.actors.session import SessionSettings, open_session
+from fishswarm.actors.zenoh_bus import ZenohBus
+from fishswarm.behaviors.core import FishParams
 from fishswarm.protocols.keys import KeySpace
 
 
@@ -30,7 +30,7 @@ class WorkerSpec:
     Attributes:
         index: the worker's number.
         fish_ids: the fish it hosts.
-        policy: what its fish do.
+        params: what its fish do.
         swarm: swarm name.
         connect: the router's endpoint.
         perception_timeout: the fish's safety watchdog, s.
@@ -41,7 +41,7 @@ class WorkerSpec:
 
     index: int
     fish_ids: tuple[int, ...]
-    policy: Policy
+    params: FishParams
     swarm: str
     connect: str
     perception_timeout: float = 5.0
@@ -82,11 +82,11 @@ def worker_main(spec: WorkerSpec, connection: Connection) -> None:
         connection.send(("statistics", statistics))
 
 
-async def _serve(spec: WorkerSpec, connection: Connection) -> dict[str, Any]:
+async def _serve(spec: WorkerSpec, connection: Connection) -> FishStatistics:
     fish = Fish(
         FishSettings(
             spec.fish_ids,
-            spec.policy,
+            spec.params,
             KeySpace(spec.swarm),
             perception_timeout=spec.perception_timeout,
             school=spec.school,
@@ -94,11 +94,11 @@ async def _serve(spec: WorkerSpec, connection: Connection) -> dict[str, Any]:
     )
     settings = SessionSettings(mode="client", connect=[spec.connect])
     async with open_session(settings) as session, trio.open_nursery() as nursery:
-        await nursery.start(fish.run, session)
+        await nursery.start(fish.run, ZenohBus(session))
         connection.send(("ready", spec.index))
         await trio.to_thread.run_sync(_wait_for_stop, connection, abandon_on_cancel=True)
         nursery.cancel_scope.cancel()
-    return dict(fish.statistics())
+    return fish.statistics()
 
 
 def _wait_for_stop(connection: Connection) -> None:
@@ -113,7 +113,7 @@ class Worker:
     spec: WorkerSpec
     process: multiprocessing.process.BaseProcess
     connection: Connection
-    statistics: dict[str, Any] | None = None
+    statistics: FishStatistics | None = None
     stopping: bool = False
 
     def exit_description(self) -> str:

@@ -1,41 +1,39 @@
-"""The world actor (simulation only): owns every fish's state, integrates, perceives.
+"""The world actor (simulation only): drives the simulated world over the Bus.
 
-Lockstep mode (DESIGN.md §3): at tick k the world publishes the snapshot and every live
-fish's perception, waits until every live fish has answered tick k (a fish that disappears
-from liveliness or misses ``command_timeout`` is marked lost), integrates one control period
-and moves on, as fast as the machine allows. Everything order-dependent is done in fish-id
-order, so the same seed gives bit-identical trajectories however the fish are spread over
-processes.
+The tick sequence itself is :class:`~fishswarm.sim.tick.WorldSim`'s, the same as the batch
+engine's; the actor adds what needs I/O and time. At each event it publishes the snapshot
+(and ends the run with the last one), then the perceptions of the fish that are due, waits
+for their commands, and hands their fins to the simulation:
+
+- **lockstep**: it waits until every live fish has answered (a fish that leaves liveliness
+  or misses ``command_timeout`` is lost); as fast as the machine allows; deterministic.
+- **realtime**: it waits until the tick's wall-clock end; a fish that has not answered by
+  then keeps the fins it holds (its last command).
+- **jitter**: events come from each fish's own clock; deterministic.
+
+Broadcasts (lockstep and realtime): a snapshot says how many each fish sent at the previous
+tick; the channel delivers them and reports how many deliveries each fish gets, which the
+world passes on in the perceptions so that each fish waits for all of them.
+Everything order-dependent is done in fish-id order, so the same seed gives bit-identical
+trajectories however the fish are spread over processes.
 """
 
 from __future__ import annotations
 
 import logging
+import secrets
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import trio
-import zenoh
 from numpy.typing import ArrayLike
 
-from fishswarm.actors.bridge import (
-    Inbox,
-    Put,
-    declare_subscriber,
-    open_alive_events,
-    open_queryable,
-    open_subscriber,
-    open_token,
-    publisher,
-    reply,
-)
+from fishswarm.actors.bus import Bus, Declared, open_alive_events, open_subscriber, open_token
+from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.actors.perceptions import perception_messages
-from fishswarm.bluebot.dynamics import State
-from fishswarm.bluebot.vision import Perceived
-from fishswarm.jitter import JitterSchedule, next_event
-from fishswarm.progress import ids_text
+from fishswarm.actors.roster import LostFish, Roster
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.messages import (
     ChannelReport,
@@ -45,15 +43,15 @@ from fishswarm.protocols.messages import (
     ControlRequest,
     Snapshot,
 )
-from fishswarm.scenario import Scenario
-from fishswarm.simulation import Stream, advance, observe, observe_landmarks, place, stream
+from fishswarm.sim.clocks import Event
+from fishswarm.sim.physics import WorldParams
+from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.tick import WorldSim
+from fishswarm.study.progress import ids_text
 
 log = logging.getLogger(__name__)
 
-NO_FINS = np.zeros(4)
-"""Fins of a fish that has not decided yet: off."""
-
-Event = tuple[str, str, bytes | bool]
+BusEvent = tuple[str, str, bytes | bool]
 
 
 class StartTimeout(RuntimeError):
@@ -70,7 +68,7 @@ class WorldSettings:
         start_timeout: longest wait for them, s.
         command_timeout: a fish that has not answered a tick within this is marked lost, s.
         channel_timeout: longest wait for the channel's report on a tick, s.
-        admit_delay: a fish that comes up is admitted at the first tick at least this long
+        admit_delay: a fish that comes up is admitted at the first event at least this long
             after the world subscribed to its commands, s (the subscription must reach the
             router first when the world runs as a client).
     """
@@ -83,372 +81,352 @@ class WorldSettings:
     admit_delay: float = 0.1
 
 
-@dataclass
-class LostFish:
-    """A fish that left the run.
+@dataclass(frozen=True)
+class WorldStatistics:
+    """Counters of a world's run.
 
     Attributes:
-        fish_id: which fish.
-        tick: the tick at which it was marked lost.
-        reason: why.
-        noticed_at: ``time.monotonic()`` when the world noticed.
+        ticks: snapshots after the first.
+        messages_in: messages accepted.
+        messages_out: messages published.
+        rejected: messages rejected, by kind (malformed, misaddressed, stale).
+        lost_fish: fish lost.
+        joined_fish: fish that joined after the start.
+        late_commands: realtime mode: commands that missed their tick.
+        live_fish: fish in the world now.
     """
 
-    fish_id: int
-    tick: int
-    reason: str
-    noticed_at: float = field(default_factory=time.monotonic)
+    ticks: int
+    messages_in: int
+    messages_out: int
+    rejected: dict[str, int]
+    lost_fish: int
+    joined_fish: int
+    late_commands: int
+    live_fish: int
+
+    @property
+    def rejected_total(self) -> int:
+        """Messages rejected, of any kind."""
+        return sum(self.rejected.values())
 
 
 @dataclass
 class _Tick:
-    """The commands of one tick as they come in, row by row in the order of the world's ids."""
+    """The commands of one event as they come in, row by row in the order of ``ids``."""
 
+    tick: int = -1
+    ids: list[int] = field(default_factory=list)
     rows: dict[int, int] = field(default_factory=dict)
     waiting: set[int] = field(default_factory=set)
     fins: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     broadcasts: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    report: ChannelReport | None = None
 
     @classmethod
-    def of(cls, ids: list[int], report: ChannelReport | None) -> _Tick:
-        """A tick waiting for a command of each of ``ids``."""
+    def of(cls, tick: int, ids: list[int]) -> _Tick:
+        """An event waiting for a command of each of ``ids`` answering ``tick``."""
         return cls(
+            tick,
+            ids,
             {fish_id: row for row, fish_id in enumerate(ids)},
             set(ids),
             np.zeros((len(ids), 4)),
             np.zeros(len(ids), dtype=np.int64),
-            report,
         )
+
+    def answered(self) -> list[int]:
+        """The fish that answered, ascending."""
+        return [fish_id for fish_id in self.ids if fish_id not in self.waiting]
 
 
 class World:
-    """The simulated world. ``await world.run(session)`` runs the scenario to its end."""
+    """The simulated world. ``await world.run(bus)`` runs the scenario to its end."""
 
     def __init__(self, settings: WorldSettings) -> None:
         self.settings = settings
         self.scenario = settings.scenario
+        self.params = WorldParams.of(settings.scenario)
         self.keys = settings.scenario.keys
         self.state_name = "waiting"
         self.tick = 0
-        self.lost: list[LostFish] = []
-        self.joined: list[tuple[int, int]] = []
         self.wall_time = 0.0
-        self._intake = Intake("world")
-        self._events: Inbox[Event]
-        self._alive_fish: set[int] = set()
-        self._session: zenoh.Session | None = None
-        # Command subscriptions by key, with the time each was declared; the command key of
-        # every fish (its own, or its school's).
-        self._command_subscribers: dict[str, tuple[zenoh.Subscriber[None], float]] = {}
-        self._command_key: dict[int, str] = {}
-        self._school_of: dict[int, str | None] = {}
-        self._channel_alive = 0
-        self._ids = np.zeros(0, dtype=np.int64)
-        self._state = place(self.scenario, self._ids)
-        self._broadcasts = np.zeros(0, dtype=np.int64)
-        self._vision_rngs: dict[int, np.random.Generator] = {}
-        self._departed: dict[int, State] = {}
+        self.late_commands = 0
+        """Realtime mode: commands that missed their tick's deadline (the fish kept its fins)."""
+        self.run_id = secrets.randbits(62)
+        """Names this run in every perception, so fish that served another start afresh."""
+        self.sim = WorldSim(self.params)
+        self.intake = Intake("world")
+        self._events: Inbox[BusEvent]  # made in run(): an inbox needs a running trio
+        self._bus: Bus | None = None
+        self.roster = Roster(self.keys, self._subscribe_commands)
+        self._leaving: set[int] = set()
+        self._broadcasts: dict[int, int] = {}
+        self._announced = 0
+        self._formation: str | None = None
+        """The formation an operator asked for (it overrides the scenario's switch)."""
+        self._report: ChannelReport | None = None
         self._resume = trio.Event()
         self._resume.set()
         self._stop_requested = False
         self._messages_out = 0
         self._current = _Tick()
-        self._answer_tick = 0
-        """The tick the commands now awaited must carry (the event number in jitter mode)."""
-        self._last_fins: dict[int, np.ndarray] = {}
-        self.late_commands = 0
-        """Realtime mode: commands that missed their tick's deadline (the fish kept its last)."""
+
+    @property
+    def lost(self) -> list[LostFish]:
+        """The fish that left the run."""
+        return self.roster.lost
+
+    @property
+    def joined(self) -> list[tuple[int, int]]:
+        """(fish id, tick) of every fish that joined after the start."""
+        return self.roster.joined
 
     @property
     def time(self) -> float:
-        """Simulated time now, s."""
+        """Simulated time of the last snapshot, s."""
         return self.tick * self.scenario.control_period
 
-    def statistics(self) -> dict[str, object]:
-        """Counters of the run so far."""
-        return {
-            "ticks": self.tick,
-            "messages_in": self._intake.accepted,
-            "messages_out": self._messages_out,
-            "rejected": self._intake.rejected_total,
-            "rejected_by_kind": dict(self._intake.rejected),
-            "lost_fish": len(self.lost),
-            "joined_fish": len(self.joined),
-            "late_commands": self.late_commands,
-            "live_fish": int(self._ids.size),
-        }
+    def statistics(self) -> WorldStatistics:
+        """The run's counters so far."""
+        return WorldStatistics(
+            ticks=self.tick,
+            messages_in=self.intake.accepted,
+            messages_out=self._messages_out,
+            rejected=dict(self.intake.rejected),
+            lost_fish=len(self.lost),
+            joined_fish=len(self.joined),
+            late_commands=self.late_commands,
+            live_fish=int(self.sim.ids.size),
+        )
 
     async def run(
-        self,
-        session: zenoh.Session,
-        *,
-        task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
+        self, bus: Bus, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
     ) -> None:
         """Run the scenario to its end (or a stop request); readiness once subscribed."""
-        self._events = Inbox()
+        self._events = events = Inbox[BusEvent]()
+        self._bus = bus
         keys = self.keys
-        put = publisher(session)
-        events = self._events
-        self._session = session
-        # One exact subscription per fish, not one on fish/*/command: a router matches a
-        # wildcard for every message (measured: 155 µs per command against 22 µs).
-        async with (
-            open_subscriber(
-                session, keys.channel_report, lambda k, p: events.push(("report", k, p))
-            ),
-            open_alive_events(
-                session, keys.alive_all(), lambda k, alive: events.push(("alive", k, alive))
-            ),
-            open_queryable(session, keys.control) as queries,
-            open_token(session, keys.alive("world", 0)),
-            trio.open_nursery() as nursery,
-        ):
-            nursery.start_soon(self._serve_control, queries)
-            task_status.started()
-            try:
+        try:
+            async with (
+                open_subscriber(
+                    bus, keys.channel_report, lambda k, p: events.push(("report", k, p))
+                ),
+                open_alive_events(
+                    bus, keys.alive_all(), lambda k, alive: events.push(("alive", k, alive))
+                ),
+                open_token(bus, keys.alive("world", 0)),
+            ):
+                task_status.started()
                 await self._wait_for_fish()
                 started = time.perf_counter()
                 self.state_name = "running"
                 try:
-                    await self._loop(put)
+                    await self._loop(bus)
                 finally:
                     self.wall_time = time.perf_counter() - started
-            finally:
-                for subscriber, _ in self._command_subscribers.values():
-                    subscriber.undeclare()
-                self._command_subscribers.clear()
-            self.state_name = "stopped" if self._stop_requested else "finished"
-            nursery.cancel_scope.cancel()
+        finally:
+            self.roster.close()
+        self.state_name = "stopped" if self._stop_requested else "finished"
+
+    def _subscribe_commands(self, key: str, kind: str) -> Declared:
+        # One exact subscription per fish or school, not one on fish/*/command: a router
+        # matches a wildcard for every message (measured: 155 µs per command against 22 µs).
+        assert self._bus is not None, "commands are subscribed only while the world runs"
+        events = self._events
+        return self._bus.subscribe(key, lambda k, payload: events.push((kind, k, payload)))
+
+    def control(self, request: ControlRequest) -> ControlReply:
+        """Answer a control request: status, pause, resume or stop (a run that has ended
+        only reports its status)."""
+        action = "status" if self.state_name in ("finished", "stopped") else request.action
+        if action == "pause":
+            if self._resume.is_set():  # pausing twice is pausing once
+                self._resume = trio.Event()
+            self.state_name = "paused"
+        elif action == "resume" and not self._resume.is_set():
+            self._resume.set()
+            self.state_name = "running"
+        elif action == "formation":
+            self._formation = request.formation
+        elif action == "stop":
+            self._stop_requested = True
+            self._resume.set()
+            self.state_name = "stopping"
+        return ControlReply(self.state_name, self.tick, self.time, len(self.roster.alive))
+
+    def control_payload(self, key: str, payload: bytes) -> bytes | None:
+        """Answer an encoded control request; None (counted and logged) if it is not one."""
+        try:
+            request = decode(payload, ControlRequest)
+        except MessageError as error:
+            self.intake.reject(key, "malformed", str(error))
+            return None
+        return encode(self.control(request))
 
     async def _wait_for_fish(self) -> None:
         expected = set(self.settings.expected_fish)
         with trio.move_on_after(self.settings.start_timeout):
-            while not expected <= self._alive_fish:
+            while not expected <= self.roster.alive:
                 self._handle(await self._events.receive())
-        missing = sorted(expected - self._alive_fish)
+        missing = sorted(expected - self.roster.alive)
         if missing:
             raise StartTimeout(
                 f"{len(missing)} of {len(expected)} fish did not come up within "
                 f"{self.settings.start_timeout:g} s (missing ids: {ids_text(missing)})"
             )
         await trio.sleep(self.settings.admit_delay)
-        self._drain()
-        self._admit_new_fish()
 
-    async def _loop(self, put: Put) -> None:
-        if self.scenario.time_mode == "jitter":
-            await self._loop_jitter(put)
-            return
+    async def _loop(self, bus: Bus) -> None:
         realtime = self.scenario.time_mode == "realtime"
+        period = self.scenario.control_period
         tick_start = trio.current_time()
         while True:
             self._drain()
-            self._drop_lost()
-            self._admit_new_fish()
-            perceived = self._observe()
-            if self._publish_snapshot(put, perceived):
-                return
-            await self._resume.wait()
-            if realtime and trio.current_time() - tick_start > self.scenario.control_period:
-                tick_start = trio.current_time()  # after a pause: pace from now on
-            inbox_counts = await self._inbox_counts()
-            self._current = _Tick.of(self._ids.tolist(), self._current.report)
-            landmarks = observe_landmarks(self.scenario, self._state)
-            self._answer_tick = self.tick
-            self._publish_perceptions(
-                put, perceived, landmarks, inbox_counts, tick=self.tick, time=self.time
-            )
-            if realtime:
-                tick_start += self.scenario.control_period
-                await self._collect_until(tick_start)
-            else:
-                await self._collect_commands()
-            self._drop_lost()
-            # Fish lost while the world waited have left self._ids; keep the others' rows.
-            rows = [self._current.rows[fish_id] for fish_id in self._ids.tolist()]
-            self._state = advance(self.scenario, self._state, self._current.fins[rows])
-            self._broadcasts = self._current.broadcasts[rows]
-            if realtime:
-                self._last_fins = dict(
-                    zip(self._ids.tolist(), self._current.fins[rows], strict=True)
+            self._leave()
+            event = self.sim.next_event()
+            self._admit(self.tick if event.snapshot is None else event.snapshot)
+            perceived = self.sim.sense()
+            if event.snapshot is not None:
+                self.tick = event.snapshot
+                ids = self.sim.ids
+                broadcasts = np.array([self._broadcasts.get(i, 0) for i in ids.tolist()])
+                # The channel delivers what the snapshot announces, and reports only then.
+                self._announced = int(broadcasts.sum())
+                snapshot = Snapshot(
+                    self.tick,
+                    event.time,
+                    ids,
+                    self.sim.state.position,
+                    self.sim.state.tank_velocity(),
+                    self.sim.state.yaw,
+                    perceived.counts,
+                    broadcasts.astype(np.int64),
+                    self.sim.effort,
                 )
-            self.tick += 1
-
-    async def _loop_jitter(self, put: Put) -> None:
-        """Jitter mode: event by event, each fish on its own clock (:mod:`fishswarm.jitter`).
-
-        The same events as :func:`fishswarm.jitter.run_jittered`: snapshots at whole control
-        periods, decisions of the due fish in between; perceptions carry the event number as
-        their tick. Broadcasts are not delivered in this mode.
-        """
-        schedule = JitterSchedule(self.scenario)
-        fins: dict[int, np.ndarray] = {}
-        now, event = 0.0, 0
-        while True:
-            self._drain()
-            self._drop_lost()
-            self._admit_new_fish()
-            live = self._ids.tolist()
-            for fish_id in set(schedule.next_time) - set(live):
-                schedule.remove(fish_id)
-            for fish_id in live:
-                if fish_id not in schedule.next_time:
-                    schedule.add(fish_id, now)
-            kind, at = next_event(schedule, self.tick * self.scenario.control_period)
-            held = np.array([fins.get(i, NO_FINS) for i in live]).reshape(-1, 4)
-            self._state = advance(self.scenario, self._state, held, duration=at - now)
-            now = at
-            perceived = self._observe()
-            if kind == "snapshot":
-                if self._publish_snapshot(put, perceived):
+                self._put(bus, self.keys.snapshot, encode(snapshot))
+                if event.last or self._stop_requested:
                     return
-                self.tick += 1
+            if not event.deciding:
                 continue
             await self._resume.wait()
-            due = schedule.due(now)
-            rows = [live.index(fish_id) for fish_id in due]
-            event += 1
-            self._answer_tick = event
-            self._current = _Tick.of(due, None)
-            landmarks = observe_landmarks(self.scenario, self._state)
-            inbox_counts = np.zeros(len(live), dtype=np.int64)
-            self._publish_perceptions(
-                put, perceived, landmarks, inbox_counts, tick=event, time=now, rows=rows
-            )
-            # A fish lost while the world waited keeps fins off; it leaves at the next event.
-            await self._collect_commands()
-            for fish_id in due:
-                fins[fish_id] = self._current.fins[self._current.rows[fish_id]]
-            schedule.decided(due)
+            if realtime and trio.current_time() - tick_start > period:
+                tick_start = trio.current_time()  # after a pause: pace from now on
+            inbox_counts = await self._inbox_counts(event)
+            # Fish lost while the world waited for the channel decide no more.
+            due, rows = self.sim.due()
+            keep = [n for n, fish_id in enumerate(due) if fish_id not in self._leaving]
+            due, rows = [due[n] for n in keep], rows[keep]
+            self._current = _Tick.of(event.number, due)
+            for key, message in perception_messages(
+                self.keys,
+                ids=self.sim.ids,
+                school_of=self.roster.school_of,
+                depth=self.sim.state.position[:, 2],
+                perceived=perceived,
+                landmarks=self.sim.sense_landmarks(),
+                inbox_counts=inbox_counts,
+                tick=event.number,
+                time=event.time,
+                run=self.run_id,
+                heading=self.sim.state.yaw,  # the simulated fish's compass
+                formation=self._formation or self.params.formation_at(event.time),
+                rows=rows.tolist(),
+            ):
+                self._put(bus, key, encode(message))
+            if realtime:
+                tick_start += period
+                await self._collect_until(tick_start)
+            else:
+                await self._collect()
+            self._hold()
 
-    def _publish_perceptions(
-        self,
-        put: Put,
-        perceived: Perceived,
-        landmarks: Perceived,
-        inbox_counts: np.ndarray,
-        *,
-        tick: int,
-        time: float,
-        rows: list[int] | None = None,
-    ) -> None:
-        """The perceptions of the fish at ``rows`` (default all live fish): one message per
-        school, one per fish on its own keys."""
-        for key, message in perception_messages(
-            self.keys,
-            ids=self._ids,
-            school_of=self._school_of,
-            depth=self._state.position[:, 2],
-            perceived=perceived,
-            landmarks=landmarks,
-            inbox_counts=inbox_counts,
-            tick=tick,
-            time=time,
-            rows=rows,
-        ):
-            put(key, encode(message))
-            self._messages_out += 1
+    def _hold(self) -> None:
+        """Hand the fins of the fish that answered (and are still here) to the simulation."""
+        current = self._current
+        present = set(self.sim.ids.tolist())
+        answered = [i for i in current.answered() if i in present and i not in self._leaving]
+        rows = [current.rows[i] for i in answered]
+        self.sim.hold(answered, current.fins[rows])
+        if self.scenario.time_mode == "jitter":
+            return  # broadcasts are not delivered in jitter mode: nothing to announce
+        self._broadcasts = {i: int(current.broadcasts[current.rows[i]]) for i in answered}
 
-    def _observe(self) -> Perceived:
-        """What every live fish sees now (each fish's own vision-noise stream)."""
-        rngs = [self._vision_rngs[fish_id] for fish_id in self._ids.tolist()]
-        return observe(self.scenario, self._state, rngs)
-
-    def _publish_snapshot(self, put: Put, perceived: Perceived) -> bool:
-        """Publish the snapshot of this tick; whether the run ends with it."""
-        put(self.keys.snapshot, encode(self._snapshot(perceived)))
+    def _put(self, bus: Bus, key: str, payload: bytes) -> None:
+        bus.put(key, payload)
         self._messages_out += 1
-        return self.tick >= self.scenario.ticks or self._stop_requested
 
-    def _snapshot(self, perceived: Perceived) -> Snapshot:
-        return Snapshot(
-            self.tick,
-            self.time,
-            self._ids,
-            self._state.position,
-            self._state.tank_velocity(),
-            self._state.yaw,
-            perceived.counts,
-            self._broadcasts,
-        )
-
-    async def _inbox_counts(self) -> np.ndarray:
-        counts = np.zeros(self._ids.size, dtype=np.int64)
-        if self.tick == 0 or int(self._broadcasts.sum()) == 0:
+    async def _inbox_counts(self, event: Event) -> np.ndarray:
+        """How many deliveries each fish in the world waits for at this event."""
+        counts = np.zeros(self.sim.ids.size, dtype=np.int64)
+        if event.snapshot in (None, 0) or not self._announced:
             return counts
-        if not self._channel_alive:
+        if not self.roster.channels:
             log.warning("broadcasts at tick %d but no channel is running: not delivered", self.tick)
             return counts
         with trio.move_on_after(self.settings.channel_timeout):
-            while self._current.report is None or self._current.report.tick != self.tick:
+            while self._report is None or self._report.tick != self.tick:
                 self._handle(await self._events.receive())
-        report = self._current.report
+        report = self._report
         if report is None or report.tick != self.tick:
             log.warning("no channel report for tick %d: deliveries not announced", self.tick)
             return counts
         by_id = dict(zip(report.ids.tolist(), report.inbox_counts.tolist(), strict=True))
-        return np.array([by_id.get(i, 0) for i in self._ids.tolist()], dtype=np.int64)
+        return np.array([by_id.get(i, 0) for i in self.sim.ids.tolist()], dtype=np.int64)
 
     async def _collect_until(self, deadline: float) -> None:
-        """Realtime mode: take commands until the tick's wall-clock end; a fish that has not
-        answered by then keeps its last command (fins off if it never sent one)."""
-        for fish_id in self._current.waiting:
-            last = self._last_fins.get(fish_id)
-            if last is not None:
-                self._current.fins[self._current.rows[fish_id]] = last
+        """Realtime mode: take commands until the tick's wall-clock end."""
         with trio.move_on_at(deadline):
             while True:
                 self._handle(await self._events.receive())
         self.late_commands += len(self._current.waiting)
 
-    def _late(self, tick: int) -> bool:
-        """Realtime mode: a command for a tick already integrated came late, which is normal
-        there (counted in ``late_commands`` when its tick closed), not bad input."""
-        return self.scenario.time_mode == "realtime" and tick < self._answer_tick
-
-    async def _collect_commands(self) -> None:
+    async def _collect(self) -> None:
         deadline = trio.current_time() + self.settings.command_timeout
         with trio.move_on_at(deadline):
             while self._current.waiting:
                 self._handle(await self._events.receive())
         for fish_id in sorted(self._current.waiting):
-            self._mark_lost(fish_id, f"no command within {self.settings.command_timeout:g} s")
+            self._lose(fish_id, f"no command within {self.settings.command_timeout:g} s")
 
     def _drain(self) -> None:
-        while (event := self._events.receive_nowait()) is not None:
+        for event in self._events.drain():
             self._handle(event)
 
-    def _handle(self, event: Event) -> None:
+    def _handle(self, event: BusEvent) -> None:
         kind, key, payload = event
         if kind == "alive":
             assert isinstance(payload, bool)
-            self._on_alive(key, payload)
+            left = self.roster.on_alive(key, payload, trio.current_time())
+            if left is not None and left in self.sim.ids:
+                self._lose(left, "left (liveliness token gone)")
             return
         assert isinstance(payload, bytes)
         if kind == "report":
-            report = self._intake.decode(key, payload, ChannelReport)
+            report = self.intake.decode(key, payload, ChannelReport)
             if report is not None:
-                self._current.report = report
-            return
-        if kind == "batch":
+                self._report = report
+        elif kind == "batch":
             self._take_batch(key, payload)
-            return
+        else:
+            self._take_command(key, payload)
+
+    def _take_command(self, key: str, payload: bytes) -> None:
         sender, _ = self.keys.member_of(key)
-        command = self._intake.decode_addressed(
+        command = self.intake.decode_addressed(
             key, payload, Command, field="fish_id", owner=int(sender)
         )
-        if command is None:
-            return
-        self._accept(key, command.tick, [command.fish_id], command.fins[None], [command.broadcasts])
+        if command is not None:
+            self._accept(
+                key, command.tick, [command.fish_id], command.fins[None], [command.broadcasts]
+            )
 
     def _take_batch(self, key: str, payload: bytes) -> None:
-        batch = self._intake.decode(key, payload, CommandBatch)
+        batch = self.intake.decode(key, payload, CommandBatch)
         if batch is None:
             return
         ids = batch.ids.tolist()
-        if any(self._command_key.get(fish_id) != key for fish_id in ids):
-            self._intake.reject(key, "misaddressed", f"fish {ids} are not all of this school")
+        if any(self.roster.command_key.get(fish_id) != key for fish_id in ids):
+            self.intake.reject(key, "misaddressed", f"fish {ids} are not all of this school")
             return
         self._accept(key, batch.tick, ids, batch.fins, batch.broadcasts)
 
@@ -457,127 +435,38 @@ class World:
     ) -> None:
         """Take the commands of fish ``ids`` for ``tick``, unless late or stale."""
         current = self._current
-        if self._late(tick):
+        if self.scenario.time_mode == "realtime" and tick < current.tick:
+            # A command for a tick already integrated came late: normal in realtime mode
+            # (counted in late_commands when its tick closed), not bad input.
             return
-        if tick != self._answer_tick or not current.waiting.issuperset(ids):
-            self._intake.reject(key, "stale", f"commands for tick {tick} at {self._answer_tick}")
+        if tick != current.tick or not current.waiting.issuperset(ids):
+            self.intake.reject(key, "stale", f"commands for tick {tick} at {current.tick}")
             return
         rows = [current.rows[fish_id] for fish_id in ids]
         current.fins[rows] = fins
         current.broadcasts[rows] = broadcasts
         current.waiting.difference_update(ids)
 
-    def _on_alive(self, key: str, alive: bool) -> None:
-        try:
-            member = self.keys.parse_alive(key)
-        except ValueError:
-            return
-        if member.role == "channel":
-            self._channel_alive += 1 if alive else -1
-            return
-        if member.role != "fish" or not member.member_id.isdigit():
-            return
-        fish_id = int(member.member_id)
-        if alive:
-            self._alive_fish.add(fish_id)
-            self._school_of[fish_id] = member.school
-            self._subscribe_commands(fish_id, member.school)
-        else:
-            self._alive_fish.discard(fish_id)
-            if fish_id in self._ids:
-                self._mark_lost(fish_id, "left (liveliness token gone)")
-
-    def _subscribe_commands(self, fish_id: int, school: str | None) -> None:
-        if self._session is None:
-            return
-        if school is None:
-            key, kind = self.keys.command(fish_id), "command"
-        else:
-            key, kind = self.keys.school_commands(school), "batch"
-        self._command_key[fish_id] = key
-        if key in self._command_subscribers:
-            return
-        events = self._events
-        subscriber = declare_subscriber(
-            self._session,
-            key,
-            lambda key, payload: events.push((kind, key, payload)),
-            exact=True,
-        )
-        self._command_subscribers[key] = (subscriber, trio.current_time())
-
-    def _mark_lost(self, fish_id: int, reason: str) -> None:
-        if any(f.fish_id == fish_id and f.tick == self.tick for f in self.lost):
-            return
-        log.warning("fish %d lost at tick %d: %s", fish_id, self.tick, reason)
-        self.lost.append(LostFish(fish_id, self.tick, reason))
-        self._alive_fish.discard(fish_id)
+    def _lose(self, fish_id: int, reason: str) -> None:
+        if self.roster.mark_lost(fish_id, self.tick, reason):
+            self._leaving.add(fish_id)
         self._current.waiting.discard(fish_id)
 
-    def _drop_lost(self) -> None:
-        gone = {f.fish_id for f in self.lost if f.tick == self.tick}
-        if not gone.intersection(self._ids.tolist()):
-            return
-        keep = np.array([i not in gone for i in self._ids.tolist()], dtype=bool)
-        for index in np.flatnonzero(~keep):
-            self._departed[int(self._ids[index])] = self._state.take(np.array([index]))
-        self._ids = self._ids[keep]
-        self._state = self._state.take(np.flatnonzero(keep))
-        self._broadcasts = self._broadcasts[keep]
+    def _leave(self) -> None:
+        """Lost fish leave the world."""
+        if self._leaving:
+            self.sim.leave(sorted(self._leaving))
+            self._leaving.clear()
 
-    def _admit_new_fish(self) -> None:
-        ready_since = trio.current_time() - self.settings.admit_delay
-        new = sorted(
-            fish_id
-            for fish_id in self._alive_fish - set(self._ids.tolist())
-            if self._command_subscribers[self._command_key[fish_id]][1] <= ready_since
-        )
+    def _admit(self, tick: int) -> None:
+        """Fish that came up (and whose commands are subscribed) enter the world now, at
+        ``tick``."""
+        present = set(self.sim.ids.tolist())
+        new = self.roster.ready(present, trio.current_time(), self.settings.admit_delay)
         if not new:
             return
-        for fish_id in new:
-            self._vision_rngs.setdefault(
-                fish_id, stream(self.scenario.seed, Stream.VISION, fish_id)
-            )
-            if self.tick > 0:
-                self.joined.append((fish_id, self.tick))
-                log.info("fish %d joined at tick %d", fish_id, self.tick)
-        parts = [self._state]
-        for fish_id in new:
-            parts.append(
-                self._departed.pop(fish_id)
-                if fish_id in self._departed
-                else place(self.scenario, np.array([fish_id], dtype=np.int64))
-            )
-        ids = np.concatenate([self._ids, np.array(new, dtype=np.int64)])
-        order = np.argsort(ids, kind="stable")
-        merged = State(
-            np.concatenate([p.position for p in parts])[order],
-            np.concatenate([p.yaw for p in parts])[order],
-            np.concatenate([p.body_velocity for p in parts])[order],
-            np.concatenate([p.yaw_rate for p in parts])[order],
-        )
-        self._broadcasts = np.concatenate([self._broadcasts, np.zeros(len(new), np.int64)])[order]
-        self._ids, self._state = ids[order], merged
-
-    async def _serve_control(self, queries: Inbox[zenoh.Query]) -> None:
-        async for query in queries:
-            try:
-                payload = b"" if query.payload is None else query.payload.to_bytes()
-                request = decode(payload, ControlRequest)
-            except MessageError as error:
-                self._intake.reject(str(query.key_expr), "malformed", str(error))
-                query.drop()
-                continue
-            if request.action == "pause":
-                self._resume = trio.Event()
-                self.state_name = "paused"
-            elif request.action == "resume" and not self._resume.is_set():
-                self._resume.set()
-                self.state_name = "running"
-            elif request.action == "stop":
-                self._stop_requested = True
-                self._resume.set()
-            reply_message = ControlReply(
-                self.state_name, self.tick, self.time, len(self._alive_fish)
-            )
-            reply(query, encode(reply_message))
+        if tick > 0:
+            for fish_id in new:
+                self.joined.append((fish_id, tick))
+                log.info("fish %d joined at tick %d", fish_id, tick)
+        self.sim.join(new)

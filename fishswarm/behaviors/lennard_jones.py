@@ -15,10 +15,23 @@ almost still (measured with the batch engine, 25 fish, 15 s, 3 seeds: mean pairw
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
-from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.behaviors.core import (
+    Behavior,
+    Inbox,
+    NoMemory,
+    Perception,
+    Steering,
+    no_memory,
+    steady,
+)
+from fishswarm.bluebot.parameters import BODY_LENGTH, Tank
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -90,6 +103,69 @@ def lennard_jones(
     count = np.add.reduce(mask, axis=1)
     # A running sum adds in neighbour order, so padding (zeros at the end) never changes a
     # result: a fish alone (batch of one) and the same fish in a padded batch agree exactly.
-    total = np.add.accumulate(contribution, axis=1)[:, -1]
+    # + 0.0 turns the −0.0 of a fish that sees nobody in a padded batch into +0.0, the
+    # zero a fish deciding alone gets: atan2(−0, −0) is −180°, and the fish would turn.
+    total = np.add.accumulate(contribution, axis=1)[:, -1] + 0.0
     result: FloatArray = total / np.maximum(count, 1)[:, None]
     return result
+
+
+@dataclass(frozen=True)
+class LennardJonesParams:
+    """Parameters of Lennard-Jones aggregation and dispersion.
+
+    Attributes:
+        target_distance: r_t, m.
+        epsilon: ε, m².
+    """
+
+    target_distance: float
+    epsilon: float = DEFAULT_EPSILON
+
+    def __post_init__(self) -> None:
+        if not self.target_distance > 0:
+            raise ValueError(f"target_distance must be positive, got {self.target_distance}")
+
+
+def steer_lennard_jones(
+    memory: NoMemory, perception: Perception, inbox: Inbox, *, params: LennardJonesParams
+) -> tuple[NoMemory, Steering]:
+    """Lennard-Jones steering: towards the potential's minimum among the visible neighbours."""
+    target = lennard_jones(
+        perception.neighbors,
+        perception.neighbor_mask,
+        target_distance=params.target_distance,
+        epsilon=params.epsilon,
+    )
+    return memory, steady(target)
+
+
+def aggregation_params(settings: Mapping[str, Any]) -> LennardJonesParams:
+    """r_t from the settings, 2 body lengths by default."""
+    given = settings.get("target_distance")
+    return LennardJonesParams(AGGREGATION_DISTANCE if given is None else float(given))
+
+
+def dispersion_params(settings: Mapping[str, Any]) -> LennardJonesParams:
+    """r_t from the settings, the tank diagonal by default."""
+    given = settings.get("target_distance")
+    diagonal = Tank(tuple(settings["tank"])).diagonal
+    return LennardJonesParams(diagonal if given is None else float(given))
+
+
+AGGREGATION = Behavior(
+    "aggregation",
+    "Lennard-Jones towards neighbours at 2 body lengths (target_distance)",
+    steer_lennard_jones,
+    no_memory,
+    aggregation_params,
+    spawn_radius=10 * BODY_LENGTH,
+)
+DISPERSION = Behavior(
+    "dispersion",
+    "Lennard-Jones with the target distance at the tank diagonal: spread out",
+    steer_lennard_jones,
+    no_memory,
+    dispersion_params,
+    spawn_radius=2 * BODY_LENGTH,
+)

@@ -24,9 +24,22 @@ vertical part holds the centre's depth. Before the centre is seen a fish swims s
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.behaviors.core import (
+    Behavior,
+    Inbox,
+    NoMemory,
+    Perception,
+    Steering,
+    no_memory,
+    steady,
+)
 from fishswarm.behaviors.lennard_jones import lennard_jones
 from fishswarm.bluebot.parameters import BODY_LENGTH
 
@@ -126,3 +139,86 @@ def milling(
     scale = np.where(length > radius, radius / np.maximum(length, 1e-300), 1.0)
     result: FloatArray = orbit(centre, seen, radius=radius) + push * scale[:, None]
     return result
+
+
+@dataclass(frozen=True)
+class OrbitParams:
+    """Parameters of orbit, milling and waltz.
+
+    Attributes:
+        radius: orbit radius R (orbit, milling) or the partner distance (waltz), m.
+    """
+
+    radius: float = ORBIT_RADIUS
+
+    def __post_init__(self) -> None:
+        if not self.radius > 0:
+            raise ValueError(f"orbit radius must be positive, got {self.radius}")
+
+
+def orbit_params(settings: Mapping[str, Any]) -> OrbitParams:
+    """R from the ``orbit_radius`` setting."""
+    return OrbitParams(float(settings.get("orbit_radius", ORBIT_RADIUS)))
+
+
+def _centre(perception: Perception) -> tuple[FloatArray, BoolArray]:
+    """The first visible landmark of each fish (its orbit centre), and whether it sees one."""
+    if perception.landmarks.shape[1] == 0:
+        count = perception.count
+        return np.zeros((count, 3)), np.zeros(count, dtype=np.bool_)
+    return perception.landmarks[:, 0], perception.landmark_mask[:, 0]
+
+
+def steer_orbit(
+    memory: NoMemory, perception: Perception, inbox: Inbox, *, params: OrbitParams
+) -> tuple[NoMemory, Steering]:
+    """Circle the landmark seen first (:func:`orbit`)."""
+    centre, seen = _centre(perception)
+    return memory, steady(orbit(centre, seen, radius=params.radius))
+
+
+def steer_milling(
+    memory: NoMemory, perception: Perception, inbox: Inbox, *, params: OrbitParams
+) -> tuple[NoMemory, Steering]:
+    """Circle the landmark together, pushing off close neighbours (:func:`milling`)."""
+    centre, seen = _centre(perception)
+    target = milling(
+        centre, seen, perception.neighbors, perception.neighbor_mask, radius=params.radius
+    )
+    return memory, steady(target)
+
+
+def steer_waltz(
+    memory: NoMemory, perception: Perception, inbox: Inbox, *, params: OrbitParams
+) -> tuple[NoMemory, Steering]:
+    """Circle the nearest neighbour (:func:`waltz`)."""
+    target = waltz(perception.neighbors, perception.neighbor_mask, radius=params.radius)
+    return memory, steady(target)
+
+
+ORBIT = Behavior(
+    "orbit",
+    "circle the post (landmark) at radius orbit_radius",
+    steer_orbit,
+    no_memory,
+    orbit_params,
+    spawn_radius=10 * BODY_LENGTH,
+    circles_landmark=True,
+)
+MILLING = Behavior(
+    "milling",
+    "circle the post together, pushing off close neighbours",
+    steer_milling,
+    no_memory,
+    orbit_params,
+    spawn_radius=10 * BODY_LENGTH,
+    circles_landmark=True,
+)
+WALTZ = Behavior(
+    "waltz",
+    "circle the nearest neighbour at the partner distance orbit_radius",
+    steer_waltz,
+    no_memory,
+    orbit_params,
+    spawn_radius=10 * BODY_LENGTH,
+)

@@ -10,11 +10,19 @@ planar desired motion. Depth is held at the depth of the first perception.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.behaviors.core import Behavior, Inbox, Perception, Steering, steady
+from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.learning.arena import Arena, cap_speed
-from fishswarm.learning.networks import replica_outputs
+from fishswarm.learning.networks import REPLICA_SIZE, replica_outputs
+from fishswarm.learning.replica_file import load_replica
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -53,11 +61,90 @@ def replica_motion(
     speed = outputs[..., 2] * arena.speed_cap
     contribution = direction * (speed * within)[..., None]
     # Summed in neighbour order (running sum) so padding never changes a fish's result.
+    # + 0.0: a padded batch's −0.0 becomes the +0.0 of a fish alone (see lennard_jones).
     total = (
-        np.cumsum(contribution, axis=1)[:, -1]
+        np.cumsum(contribution, axis=1)[:, -1] + 0.0
         if neighbors.shape[1]
         else np.zeros((neighbors.shape[0], 2))
     )
     velocity = cap_speed(total, arena.speed_cap)
     motion: FloatArray = velocity * period * scale
     return motion
+
+
+@dataclass(frozen=True)
+class ReplicaParams:
+    """Parameters of a learned replica on BlueBots.
+
+    Attributes:
+        weights: the replica network's 21 weights.
+        scale: metres per arena unit.
+        period: the arena step the replica was learned with, as a control period, s.
+    """
+
+    weights: tuple[float, ...]
+    scale: float = STUDY_SCALE
+    period: float = 1.0
+
+    def __post_init__(self) -> None:
+        if len(self.weights) != REPLICA_SIZE:
+            raise ValueError(
+                f"the replica behaviour needs the {REPLICA_SIZE} weights of a learned replica"
+            )
+
+
+@dataclass(frozen=True)
+class ReplicaMemory:
+    """What replica fish remember: the depth each holds, m (NaN before the first decision)."""
+
+    hold_depth: FloatArray
+
+
+def fresh_replica_memory(count: int) -> ReplicaMemory:
+    """Replica fish that hold no depth yet."""
+    return ReplicaMemory(np.full(count, np.nan))
+
+
+def replica_params(settings: Mapping[str, Any]) -> ReplicaParams:
+    """The weights of the model file named by the ``model`` setting.
+
+    Raises:
+        ValueError: no model is named, or the file is not a learned replica.
+    """
+    model = settings.get("model")
+    if model is None:
+        raise ValueError(
+            "the replica behavior needs a learned model: --model runs/learn/best_replica.npz "
+            "(make one with 'fishswarm learn')"
+        )
+    weights, _ = load_replica(Path(model))
+    return ReplicaParams(
+        tuple(float(w) for w in weights), period=float(settings.get("control_period", 1.0))
+    )
+
+
+def steer_replica(
+    memory: ReplicaMemory, perception: Perception, inbox: Inbox, *, params: ReplicaParams
+) -> tuple[ReplicaMemory, Steering]:
+    """The replica's planar motion, holding the depth of the first perception."""
+    depth = perception.depth
+    hold = np.where(np.isnan(memory.hold_depth), depth, memory.hold_depth)
+    planar = replica_motion(
+        perception.neighbors,
+        perception.neighbor_mask,
+        weights=np.asarray(params.weights),
+        scale=params.scale,
+        period=params.period,
+    )
+    target = np.concatenate([planar, (hold - depth)[:, None]], axis=1)
+    return ReplicaMemory(hold), steady(target)
+
+
+REPLICA = Behavior(
+    "replica",
+    "a replica learned by 'fishswarm learn' (needs model); depth held",
+    steer_replica,
+    fresh_replica_memory,
+    replica_params,
+    spawn_radius=10 * BODY_LENGTH,
+)

@@ -101,7 +101,7 @@ def pid(
     target: FloatArray,
     *,
     state: PidState,
-    period: float,
+    period: float | FloatArray,
     gains: PidGains = PidGains(),
     robot: BlueBot = BlueBot(),
 ) -> tuple[FloatArray, PidState]:
@@ -115,20 +115,21 @@ def pid(
     Args:
         target: (B, 3) target vectors in the body frame, m.
         state: the loops' memory.
-        period: control period, s.
+        period: time since each fish's last decision, s: one number or (B,).
         gains: loop gains.
         robot: the robot (for the buoyancy feed-forward).
 
     Returns:
         fins (B, 4) and the new state.
     """
-    if period <= 0:
+    step = np.broadcast_to(np.asarray(period, dtype=np.float64), target.shape[:1])[:, None]
+    if not (step > 0).all():
         raise ValueError(f"period must be positive, got {period}")
     planar = np.hypot(target[:, 0], target[:, 1])
     error = np.stack([target[:, 2], np.arctan2(target[:, 1], target[:, 0]), planar], axis=1)
-    integral = np.clip(state.integral + error * period, -gains.integral_limit, gains.integral_limit)
+    integral = np.clip(state.integral + error * step, -gains.integral_limit, gains.integral_limit)
     derivative = np.where(
-        np.isnan(state.previous_error), 0.0, (error - state.previous_error) / period
+        np.isnan(state.previous_error), 0.0, (error - state.previous_error) / step
     )
     k = np.array([gains.depth, gains.heading, gains.speed])
     output = k[:, 0] * error + k[:, 1] * integral + k[:, 2] * derivative

@@ -70,6 +70,21 @@ class BlueBot:
         return math.sqrt(self.caudal_force / (0.5 * self.water_density * self.drag_x * self.area_x))
 
 
+FIN_FREQUENCY_HZ = ((1.0, 3.0), (6.0, 6.0), (1.0, 10.0), (1.0, 10.0))
+"""The beat frequency of each fin (caudal, dorsal, pectoral left, pectoral right) from the
+smallest gain above 0 to gain 1, Hz (SPEC §6: caudal about 1–3 Hz, dorsal about 6 Hz,
+pectorals about 1–10 Hz); gain 0 is off."""
+
+
+def fin_frequencies(fins: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(B, 4) the beat frequency each fin runs at for gains (B, 4) in [0, 1], Hz: linear from
+    the low to the high frequency of :data:`FIN_FREQUENCY_HZ`, 0 for a gain of 0."""
+    low, high = np.array(FIN_FREQUENCY_HZ).T
+    gains = np.clip(fins, 0.0, 1.0)
+    frequency: NDArray[np.float64] = np.where(gains > 0.0, low + (high - low) * gains, 0.0)
+    return frequency
+
+
 @dataclass(frozen=True)
 class Tank:
     """The tank: a box with its origin at a corner, z down (SPEC.md preamble).

@@ -16,9 +16,7 @@ of the soft output (the classifier's probability) breaks ties.
 from __future__ import annotations
 
 import math
-import pickle
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import cma
@@ -166,7 +164,8 @@ def _stream(seed: int, role: int, *key: int) -> np.random.Generator:
 
 
 class PrivateNormal:
-    """Standard normal samples for pycma from a generator of our own (picklable)."""
+    """Standard normal samples for pycma from a generator of our own (so that a replay asks
+    for the same solutions)."""
 
     def __init__(self, rng: np.random.Generator) -> None:
         self.rng = rng
@@ -196,7 +195,8 @@ def _strategy(x0: FloatArray, popsize: int, rng: np.random.Generator) -> Any:
 
 
 class Coevolution:
-    """A learning run, one generation per :meth:`step`; pickle it to checkpoint."""
+    """A learning run, one generation per :meth:`step` (checkpoints:
+    :mod:`fishswarm.learning.checkpoint`)."""
 
     def __init__(self, settings: LearningSettings) -> None:
         self.settings = settings
@@ -217,6 +217,10 @@ class Coevolution:
         self.population: FloatArray = np.zeros((0, REPLICA_SIZE))
         self.classifier_population: FloatArray = np.zeros((0, 0))
         self.last_fitness: Fitness | None = None
+        self.told_models: list[FloatArray] = []
+        """The scores each generation told the model optimiser (what a replay needs)."""
+        self.told_classifiers: list[FloatArray] = []
+        """The scores each generation told the classifier optimiser."""
 
     def trial_start(self, generation: int, trials: int) -> FloatArray:
         """The start positions of a generation (shared by the ideal fish and every model)."""
@@ -262,8 +266,7 @@ class Coevolution:
         weight = settings.soft_weight
         model_score = result.models + weight * result.models_soft
         classifier_score = result.classifiers + weight * result.classifiers_soft
-        self._models.tell(list(models), list(-model_score))
-        self._classifiers.tell(list(classifiers), list(-classifier_score))
+        self._tell(models, classifiers, model_score, classifier_score)
         if settings.hall_of_fame:
             self.model_champions.append(models[int(np.argmax(model_score))])
             self.classifier_champions.append(classifiers[int(np.argmax(classifier_score))])
@@ -292,17 +295,30 @@ class Coevolution:
         """(C, R) radii of the last classifier population."""
         return radii_of(self.classifier_population, self.settings)
 
-    def save(self, path: Path) -> None:
-        """Write a checkpoint (atomically: a crash never leaves half a file)."""
-        path.parent.mkdir(parents=True, exist_ok=True)
-        partial = path.with_suffix(path.suffix + ".partial")
-        partial.write_bytes(pickle.dumps(self))
-        partial.replace(path)
+    def _tell(
+        self,
+        models: FloatArray,
+        classifiers: FloatArray,
+        model_score: FloatArray,
+        classifier_score: FloatArray,
+    ) -> None:
+        # pycma minimises: tell it the negated fitness.
+        self._models.tell(list(models), list(-model_score))
+        self._classifiers.tell(list(classifiers), list(-classifier_score))
+        self.told_models.append(model_score)
+        self.told_classifiers.append(classifier_score)
 
-    @staticmethod
-    def load(path: Path) -> Coevolution:
-        """Read a checkpoint written by :meth:`save`."""
-        loaded = pickle.loads(path.read_bytes())
-        if not isinstance(loaded, Coevolution):
-            raise ValueError(f"{path} is not a fishswarm learning checkpoint")
-        return loaded
+    def replay(self, told_models: FloatArray, told_classifiers: FloatArray) -> None:
+        """Bring a fresh run's optimisers to where a run stood after telling these scores:
+        (G, M) and (G, C), one row per generation. Nothing is simulated."""
+        if self.generation:
+            raise RuntimeError("only a fresh run can replay")
+        for model_score, classifier_score in zip(told_models, told_classifiers, strict=True):
+            models = np.array(self._models.ask())
+            classifiers = np.array(self._classifiers.ask())
+            if models.shape[0] != model_score.shape[0] or (
+                classifiers.shape[0] != classifier_score.shape[0]
+            ):
+                raise ValueError("the told scores do not match the population sizes")
+            self._tell(models, classifiers, model_score, classifier_score)
+            self.generation += 1

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import expit
 
 FloatArray = NDArray[np.float64]
 
@@ -27,8 +26,13 @@ CLASSIFIER_HIDDEN = 5
 
 
 def logistic(x: FloatArray) -> FloatArray:
-    """1 / (1 + e^−x), without overflow warnings for large |x|."""
-    result: FloatArray = expit(x)
+    """1 / (1 + e^−x); for x below about −709, e^−x overflows to inf and the result is 0.
+
+    Plain numpy, not scipy's ``expit``: a replica runs on a robot, which has no scipy
+    (DESIGN §7); the two differ in the last bit for about 2 % of inputs.
+    """
+    with np.errstate(over="ignore"):
+        result: FloatArray = 1.0 / (1.0 + np.exp(-x))
     return result
 
 

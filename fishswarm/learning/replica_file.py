@@ -7,6 +7,7 @@ dependencies (no CMA-ES).
 from __future__ import annotations
 
 import json
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -29,10 +30,11 @@ def load_replica(path: Path) -> tuple[FloatArray, dict[str, Any]]:
         ReplicaFileError: the file is missing or not a replica.
     """
     try:
-        with np.load(path) as data:
+        # Opened here, so that a file numpy refuses is still closed.
+        with path.open("rb") as stream, np.load(stream, allow_pickle=False) as data:
             weights = np.asarray(data["weights"], dtype=np.float64)
             settings = json.loads(str(data["settings"]))
-    except (OSError, KeyError, ValueError):
+    except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
         raise ReplicaFileError(
             f"{path} is not a learned replica (expected a best_replica.npz written by "
             "'fishswarm learn')"

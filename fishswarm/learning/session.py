@@ -2,7 +2,7 @@
 
 Everything a run writes goes to one folder:
 
-- ``checkpoint.pkl``: the whole state, every few generations; ``--resume`` continues from it
+- ``checkpoint.npz``: the whole state, every few generations; ``--resume`` continues from it
   exactly where it stopped (same results as a run that never stopped).
 - ``history.csv``: best and mean fitness of both populations per generation.
 - ``best_replica.npz``: the fittest model of the last generation (``weights``) with the
@@ -38,10 +38,11 @@ from fishswarm.learning.arena import (
     simulate,
     spacing_and_speed,
 )
+from fishswarm.learning.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from fishswarm.learning.coevolution import Coevolution, LearningSettings
 
 FloatArray = NDArray[np.float64]
-CHECKPOINT = "checkpoint.pkl"
+CHECKPOINT = "checkpoint.npz"
 
 
 class LearningError(RuntimeError):
@@ -102,7 +103,7 @@ def learn(
         generations: total number of generations, counting those already done.
         out: output folder.
         checkpoint_every: write a checkpoint every this many generations (and at the end).
-        resume: continue from ``out/checkpoint.pkl``.
+        resume: continue from ``out/checkpoint.npz``.
         on_generation: called after each generation with the run, its record and the wall
             time of the generation, s.
 
@@ -115,7 +116,10 @@ def learn(
     if resume:
         if not checkpoint.exists():
             raise LearningError(f"nothing to resume: {checkpoint} does not exist")
-        run = Coevolution.load(checkpoint)
+        try:
+            run = load_checkpoint(checkpoint)
+        except CheckpointError as error:
+            raise LearningError(str(error)) from None
     else:
         run = Coevolution(settings)
     while run.generation < generations:
@@ -124,7 +128,7 @@ def learn(
         if on_generation is not None:
             on_generation(run, record, time.perf_counter() - started)
         if run.generation % checkpoint_every == 0 or run.generation == generations:
-            run.save(checkpoint)
+            save_checkpoint(run, checkpoint)
     return write_results(run, out)
 
 

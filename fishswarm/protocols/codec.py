@@ -16,8 +16,8 @@ from typing import Any, TypeVar
 import msgpack
 import numpy as np
 
+from fishswarm.protocols.checks import MAX_ROWS
 from fishswarm.protocols.messages import (
-    MAX_ROWS,
     MESSAGE_TYPES,
     SCHEMA_VERSION,
     Message,

@@ -11,6 +11,14 @@ from dataclasses import dataclass
 
 ROOT = "fishswarm"
 _NAME = re.compile(r"^[A-Za-z0-9_\-]+$")
+_FISH_ID = re.compile(r"[0-9]{1,18}")
+MAX_FISH_ID = 10**18 - 1
+"""The largest fish id a key may name (ids fit in every message's integer fields)."""
+
+
+def fish_id_of(text: str) -> int | None:
+    """The fish id a key chunk names (ASCII digits, at most 18), or None if it names none."""
+    return int(text) if _FISH_ID.fullmatch(text) else None
 
 
 def _check_name(kind: str, value: str) -> str:

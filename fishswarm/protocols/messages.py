@@ -16,83 +16,52 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from numpy.typing import NDArray
+
+from fishswarm.protocols.checks import (
+    MAX_ROWS,
+    BoolArray,
+    FloatArray,
+    IntArray,
+    check_array,
+    check_counts,
+    check_float,
+    check_ids,
+    check_int,
+    check_text,
+)
 
 SCHEMA_VERSION = 1
-MAX_ROWS = 100_000
-MAX_TEXT = 64
-MAX_TICK = 2**62
 
 FIN_NAMES = ("caudal", "dorsal", "pectoral_left", "pectoral_right")
 """Order of the fin gains in :attr:`Command.fins` and everywhere else."""
 
-CONTROL_ACTIONS = ("status", "pause", "resume", "stop")
+CONTROL_ACTIONS = ("status", "pause", "resume", "stop", "formation")
 
-FloatArray = NDArray[np.float64]
-IntArray = NDArray[np.int64]
-BoolArray = NDArray[np.bool_]
+BROADCAST_KINDS = ("signal", "formation")
+"""What a broadcast can say; a fish's decision names its broadcast by the index in this tuple.
+``signal`` is a plain flag with numbers of the sender's choosing; ``formation`` a formation
+flag."""
 
+BROADCAST_WIDTH = 8
+"""Most numbers one broadcast carries."""
 
-def _set(obj: object, name: str, value: object) -> None:
-    object.__setattr__(obj, name, value)
-
-
-def _check_int(name: str, value: object, low: int = 0, high: int = MAX_TICK) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | np.integer):
-        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
-    if not low <= int(value) <= high:
-        raise ValueError(f"{name} must be in [{low}, {high}], got {value}")
-
-
-def _check_float(name: str, value: object, low: float = -math.inf, high: float = math.inf) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
-        raise TypeError(f"{name} must be a number, got {type(value).__name__}")
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be finite, got {value}")
-    if not low <= value <= high:
-        raise ValueError(f"{name} must be in [{low}, {high}], got {value}")
+FORMATION_SHAPES = (
+    "fibonacci",
+    "pyramid",
+    "column",
+    "tetrahedral-pyramid",
+    "diamond",
+    "phalanx",
+    "triangle",
+    "trigonal-planar",
+    "tetrahedron",
+)
+"""Every formation a flag can name: the global maps, then the local shapes."""
 
 
-def _check_text(name: str, value: object) -> None:
-    if not isinstance(value, str):
-        raise TypeError(f"{name} must be a string, got {type(value).__name__}")
-    if not 0 < len(value) <= MAX_TEXT:
-        raise ValueError(f"{name} must have 1 to {MAX_TEXT} characters, got {len(value)}")
-
-
-def _array(
-    obj: object, name: str, dtype: type[np.generic], columns: int | None, rows: int | None = None
-) -> None:
-    """Replace field ``name`` by a read-only array of ``dtype`` after checking its shape.
-
-    ``columns`` None means a 1-D array; otherwise 2-D with that many columns. ``rows`` fixes
-    the length when given; any length up to MAX_ROWS otherwise.
-    """
-    value = getattr(obj, name)
-    array = value if isinstance(value, np.ndarray) else np.asarray(value)
-    if array.dtype.kind not in "biuf":
-        raise TypeError(f"{name} must be a numeric array, got dtype {array.dtype}")
-    if dtype is np.int64 and array.dtype.kind == "f":
-        raise TypeError(f"{name} must be an integer array, got dtype {array.dtype}")
-    if (dtype is np.bool_) != (array.dtype.kind == "b") and array.size:
-        kind = "a boolean" if dtype is np.bool_ else "a numeric"
-        raise TypeError(f"{name} must be {kind} array, got dtype {array.dtype}")
-    expected_ndim = 1 if columns is None else 2
-    if array.ndim != expected_ndim or (columns is not None and array.shape[1] != columns):
-        want = "(n,)" if columns is None else f"(n, {columns})"
-        raise ValueError(f"{name} must have shape {want}, got {array.shape}")
-    if rows is not None and array.shape[0] != rows:
-        raise ValueError(f"{name} must have {rows} rows, got {array.shape[0]}")
-    if array.shape[0] > MAX_ROWS:
-        raise ValueError(f"{name} has {array.shape[0]} rows, more than the limit {MAX_ROWS}")
-    # Arrays decoded from the wire are read-only already and need no copy; anything the caller
-    # could still change is copied, so that a message never changes after construction.
-    if array.dtype != dtype or array.flags.writeable:
-        array = np.array(array, dtype=dtype, copy=True)
-        array.setflags(write=False)
-    if dtype is np.float64 and not np.isfinite(array).all():
-        raise ValueError(f"{name} must hold finite numbers only")
-    _set(obj, name, array)
+def _check_formation(formation: object) -> None:
+    if formation is not None and formation not in FORMATION_SHAPES:
+        raise ValueError(f"formation must be one of {FORMATION_SHAPES}, got {formation!r}")
 
 
 class Message:
@@ -128,6 +97,10 @@ class Perception(Message):
             cannot read them.
         landmarks: (L, 3) body-frame positions of visible landmarks (e.g. an orbit centre), m.
         inbox_count: how many inbox deliveries belong to this tick; the fish waits for them.
+        run: which run of the world this tick belongs to; a fish that sees a new run starts
+            afresh (ticks from the start, memory fresh).
+        heading: the fish's heading from a compass, rad in the tank frame; None without one.
+        formation: the shape an operator asked formation fish to take (None: as configured).
     """
 
     type_name: ClassVar[str] = "perception"
@@ -138,15 +111,22 @@ class Perception(Message):
     neighbors: FloatArray
     landmarks: FloatArray
     inbox_count: int = 0
+    run: int = 0
+    heading: float | None = None
+    formation: str | None = None
 
     def __post_init__(self) -> None:
-        _check_int("fish_id", self.fish_id)
-        _check_int("tick", self.tick)
-        _check_float("time", self.time, low=0.0)
-        _check_float("depth", self.depth)
-        _array(self, "neighbors", np.float64, 3)
-        _array(self, "landmarks", np.float64, 3)
-        _check_int("inbox_count", self.inbox_count, high=MAX_ROWS)
+        _check_formation(self.formation)
+        check_int("fish_id", self.fish_id)
+        check_int("tick", self.tick)
+        check_int("run", self.run)
+        if self.heading is not None:
+            check_float("heading", self.heading, low=-2 * math.pi, high=2 * math.pi)
+        check_float("time", self.time, low=0.0)
+        check_float("depth", self.depth)
+        check_array(self, "neighbors", np.float64, 3)
+        check_array(self, "landmarks", np.float64, 3)
+        check_int("inbox_count", self.inbox_count, high=MAX_ROWS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,28 +150,14 @@ class Command(Message):
     broadcasts: int = 0
 
     def __post_init__(self) -> None:
-        _check_int("fish_id", self.fish_id)
-        _check_int("tick", self.tick)
-        _array(self, "fins", np.float64, None, rows=len(FIN_NAMES))
+        check_int("fish_id", self.fish_id)
+        check_int("tick", self.tick)
+        check_array(self, "fins", np.float64, None, rows=len(FIN_NAMES))
         if (self.fins < 0.0).any() or (self.fins > 1.0).any():
             raise ValueError(f"fins must be gains in [0, 1], got {self.fins.tolist()}")
         if not isinstance(self.led, bool):
             raise TypeError(f"led must be a bool, got {type(self.led).__name__}")
-        _check_int("broadcasts", self.broadcasts, high=MAX_ROWS)
-
-
-def _check_ids(ids: IntArray) -> None:
-    if ids.shape[0] > 1 and (ids[1:] <= ids[:-1]).any():
-        raise ValueError("ids must be strictly ascending")
-    if ids.shape[0] and ids[0] < 0:  # ascending: the first is the least
-        raise ValueError("ids must be non-negative")
-
-
-def _check_counts(name: str, counts: IntArray, rows: int, what: str) -> None:
-    if (counts < 0).any():
-        raise ValueError(f"{name} must be non-negative")
-    if int(counts.sum()) != rows:
-        raise ValueError(f"{name} add up to {int(counts.sum())}, but {what} has {rows} rows")
+        check_int("broadcasts", self.broadcasts, high=MAX_ROWS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -211,6 +177,9 @@ class PerceptionBatch(Message):
         landmark_counts: (G,) visible landmarks of each fish.
         landmarks: (ΣL, 3) body-frame positions of the visible landmarks, m, fish by fish.
         inbox_counts: (G,) deliveries each fish waits for.
+        run: which run of the world this tick belongs to (as in :class:`Perception`).
+        heading: (G,) each fish's compass heading, rad in the tank frame; None without.
+        formation: as in :class:`Perception`.
     """
 
     type_name: ClassVar[str] = "perception_batch"
@@ -223,22 +192,31 @@ class PerceptionBatch(Message):
     landmark_counts: IntArray
     landmarks: FloatArray
     inbox_counts: IntArray
+    run: int = 0
+    heading: FloatArray | None = None
+    formation: str | None = None
 
     def __post_init__(self) -> None:
-        _check_int("tick", self.tick)
-        _check_float("time", self.time, low=0.0)
-        _array(self, "ids", np.int64, None)
+        _check_formation(self.formation)
+        check_int("tick", self.tick)
+        check_int("run", self.run)
+        check_float("time", self.time, low=0.0)
+        check_array(self, "ids", np.int64, None)
         count = self.ids.shape[0]
-        _check_ids(self.ids)
-        _array(self, "depth", np.float64, None, rows=count)
+        check_ids(self.ids)
+        check_array(self, "depth", np.float64, None, rows=count)
         for name, rows in (("neighbor", "neighbors"), ("landmark", "landmarks")):
-            _array(self, f"{name}_counts", np.int64, None, rows=count)
-            _array(self, rows, np.float64, 3)
+            check_array(self, f"{name}_counts", np.int64, None, rows=count)
+            check_array(self, rows, np.float64, 3)
             counts = getattr(self, f"{name}_counts")
-            _check_counts(f"{name}_counts", counts, getattr(self, rows).shape[0], rows)
-        _array(self, "inbox_counts", np.int64, None, rows=count)
+            check_counts(f"{name}_counts", counts, getattr(self, rows).shape[0], rows)
+        check_array(self, "inbox_counts", np.int64, None, rows=count)
         if (self.inbox_counts < 0).any() or (self.inbox_counts > MAX_ROWS).any():
             raise ValueError(f"inbox_counts must be in [0, {MAX_ROWS}]")
+        if self.heading is not None:
+            check_array(self, "heading", np.float64, None, rows=count)
+            if (np.abs(self.heading) > 2 * math.pi).any():
+                raise ValueError("heading must be in [-2π, 2π] rad")
 
 
 @dataclass(frozen=True, eq=False)
@@ -261,17 +239,28 @@ class CommandBatch(Message):
     broadcasts: IntArray
 
     def __post_init__(self) -> None:
-        _check_int("tick", self.tick)
-        _array(self, "ids", np.int64, None)
+        check_int("tick", self.tick)
+        check_array(self, "ids", np.int64, None)
         count = self.ids.shape[0]
-        _check_ids(self.ids)
-        _array(self, "fins", np.float64, len(FIN_NAMES), rows=count)
+        check_ids(self.ids)
+        check_array(self, "fins", np.float64, len(FIN_NAMES), rows=count)
         if (self.fins < 0.0).any() or (self.fins > 1.0).any():
             raise ValueError("fins must be gains in [0, 1]")
-        _array(self, "led", np.bool_, None, rows=count)
-        _array(self, "broadcasts", np.int64, None, rows=count)
+        check_array(self, "led", np.bool_, None, rows=count)
+        check_array(self, "broadcasts", np.int64, None, rows=count)
         if (self.broadcasts < 0).any() or (self.broadcasts > MAX_ROWS).any():
             raise ValueError(f"broadcasts must be in [0, {MAX_ROWS}]")
+
+
+def _check_broadcast(message: Broadcast | Delivery) -> None:
+    check_text("kind", message.kind)
+    if message.kind not in BROADCAST_KINDS:
+        raise ValueError(f"kind must be one of {BROADCAST_KINDS}, got {message.kind!r}")
+    check_array(message, "values", np.int64, None)
+    if message.values.shape[0] > BROADCAST_WIDTH:
+        raise ValueError(f"values hold at most {BROADCAST_WIDTH} numbers")
+    if message.kind == "formation":
+        FormationFlag.from_values(message.values)
 
 
 @dataclass(frozen=True, eq=False)
@@ -280,22 +269,21 @@ class Broadcast(Message):
 
     Attributes:
         sender_id: the sending fish.
-        tick: the tick it was sent at.
-        kind: what it says, e.g. ``"formation"`` for a formation flag.
-        value: the content, e.g. the sender's role in its shape.
+        tick: the tick it was decided at.
+        kind: what it says, one of :data:`BROADCAST_KINDS`.
+        values: (≤ :data:`BROADCAST_WIDTH`,) its numbers, e.g. a formation flag's slot.
     """
 
     type_name: ClassVar[str] = "broadcast"
     sender_id: int
     tick: int
     kind: str
-    value: int = 0
+    values: IntArray
 
     def __post_init__(self) -> None:
-        _check_int("sender_id", self.sender_id)
-        _check_int("tick", self.tick)
-        _check_text("kind", self.kind)
-        _check_int("value", self.value, low=-MAX_TICK)
+        check_int("sender_id", self.sender_id)
+        check_int("tick", self.tick)
+        _check_broadcast(self)
 
 
 @dataclass(frozen=True, eq=False)
@@ -306,7 +294,7 @@ class Delivery(Message):
         receiver_id: the receiving fish.
         tick: the tick at which the receiver acts on it.
         kind: as in :class:`Broadcast`.
-        value: as in :class:`Broadcast`.
+        values: as in :class:`Broadcast`.
         sender_position: (3,) where the sender is, in the receiver's body frame, m (situated,
             like an LED signal: there is no sender id).
     """
@@ -315,15 +303,67 @@ class Delivery(Message):
     receiver_id: int
     tick: int
     kind: str
-    value: int
+    values: IntArray
     sender_position: FloatArray
 
     def __post_init__(self) -> None:
-        _check_int("receiver_id", self.receiver_id)
-        _check_int("tick", self.tick)
-        _check_text("kind", self.kind)
-        _check_int("value", self.value, low=-MAX_TICK)
-        _array(self, "sender_position", np.float64, None, rows=3)
+        check_int("receiver_id", self.receiver_id)
+        check_int("tick", self.tick)
+        _check_broadcast(self)
+        check_array(self, "sender_position", np.float64, None, rows=3)
+
+
+@dataclass(frozen=True)
+class FormationFlag:
+    """A formation flag: what a fish in a shape tells the fish around it (SPEC §5). It
+    travels as the numbers of a ``formation`` :class:`Broadcast`.
+
+    Attributes:
+        shape: the formation, an index into :data:`FORMATION_SHAPES`.
+        slot: the slot (global map) or spot (local shape) the fish holds; −1 for none.
+        joined: whether the fish is in its slot, within the tolerance.
+        hops: hops from the leader (0: the leader itself).
+        heading_mdeg: the formation's orientation the sender follows, millidegrees in the
+            tank frame, in [−180 000, 180 000].
+        sequence: the sender's flag count, to tell a new flag from an old one.
+    """
+
+    shape: int
+    slot: int
+    joined: bool
+    hops: int
+    heading_mdeg: int
+    sequence: int
+
+    def __post_init__(self) -> None:
+        check_int("shape", self.shape, high=len(FORMATION_SHAPES) - 1)
+        check_int("slot", self.slot, low=-1, high=MAX_ROWS)
+        if not isinstance(self.joined, bool | np.bool_):
+            raise TypeError(f"joined must be a bool, got {type(self.joined).__name__}")
+        check_int("hops", self.hops, high=MAX_ROWS)
+        check_int("heading_mdeg", self.heading_mdeg, low=-180_000, high=180_000)
+        check_int("sequence", self.sequence)
+
+    def values(self) -> IntArray:
+        """The flag as a broadcast's numbers."""
+        return np.array(
+            [self.shape, self.slot, int(self.joined), self.hops, self.heading_mdeg, self.sequence],
+            dtype=np.int64,
+        )
+
+    @classmethod
+    def from_values(cls, values: IntArray) -> FormationFlag:
+        """The flag a broadcast's numbers carry.
+
+        Raises:
+            ValueError: the numbers are not a formation flag.
+        """
+        if values.shape[0] < 6:
+            raise ValueError(f"a formation flag has 6 numbers, got {values.shape[0]}")
+        shape, slot, joined, hops, heading, sequence = (int(v) for v in values[:6])
+        if joined not in (0, 1):
+            raise ValueError(f"joined must be 0 or 1, got {joined}")
+        return cls(shape, slot, bool(joined), hops, heading, sequence)
 
 
 @dataclass(frozen=True, eq=False)
@@ -339,6 +379,7 @@ class Snapshot(Message):
         yaw: (N,) yaw angles, rad.
         neighbors_seen: (N,) how many neighbours each fish saw at this tick.
         broadcasts: (N,) how many broadcasts each fish sent at the previous tick.
+        effort: (N,) each fish's effort so far, fin beats (None: not measured).
     """
 
     type_name: ClassVar[str] = "snapshot"
@@ -350,18 +391,23 @@ class Snapshot(Message):
     yaw: FloatArray
     neighbors_seen: IntArray
     broadcasts: IntArray
+    effort: FloatArray | None = None
 
     def __post_init__(self) -> None:
-        _check_int("tick", self.tick)
-        _check_float("time", self.time, low=0.0)
-        _array(self, "ids", np.int64, None)
+        check_int("tick", self.tick)
+        check_float("time", self.time, low=0.0)
+        check_array(self, "ids", np.int64, None)
         count = self.ids.shape[0]
-        _array(self, "position", np.float64, 3, rows=count)
-        _array(self, "velocity", np.float64, 3, rows=count)
-        _array(self, "yaw", np.float64, None, rows=count)
-        _array(self, "neighbors_seen", np.int64, None, rows=count)
-        _array(self, "broadcasts", np.int64, None, rows=count)
-        _check_ids(self.ids)
+        check_array(self, "position", np.float64, 3, rows=count)
+        check_array(self, "velocity", np.float64, 3, rows=count)
+        check_array(self, "yaw", np.float64, None, rows=count)
+        check_array(self, "neighbors_seen", np.int64, None, rows=count)
+        check_array(self, "broadcasts", np.int64, None, rows=count)
+        if self.effort is not None:
+            check_array(self, "effort", np.float64, None, rows=count)
+            if (self.effort < 0).any():
+                raise ValueError("effort must not be negative")
+        check_ids(self.ids)
 
 
 @dataclass(frozen=True, eq=False)
@@ -380,9 +426,12 @@ class ChannelReport(Message):
     inbox_counts: IntArray
 
     def __post_init__(self) -> None:
-        _check_int("tick", self.tick)
-        _array(self, "ids", np.int64, None)
-        _array(self, "inbox_counts", np.int64, None, rows=self.ids.shape[0])
+        check_int("tick", self.tick)
+        check_array(self, "ids", np.int64, None)
+        check_ids(self.ids)
+        check_array(self, "inbox_counts", np.int64, None, rows=self.ids.shape[0])
+        if (self.inbox_counts < 0).any() or (self.inbox_counts > MAX_ROWS).any():
+            raise ValueError(f"inbox_counts must be in [0, {MAX_ROWS}]")
 
 
 @dataclass(frozen=True, eq=False)
@@ -391,15 +440,22 @@ class ControlRequest(Message):
 
     Attributes:
         action: one of :data:`CONTROL_ACTIONS`.
+        formation: with ``formation``, the shape the school is to take from the next tick,
+            one of :data:`FORMATION_SHAPES`.
     """
 
     type_name: ClassVar[str] = "control_request"
     action: str
+    formation: str | None = None
 
     def __post_init__(self) -> None:
-        _check_text("action", self.action)
+        check_text("action", self.action)
         if self.action not in CONTROL_ACTIONS:
             raise ValueError(f"action must be one of {CONTROL_ACTIONS}, got {self.action!r}")
+        if (self.action == "formation") != (self.formation is not None):
+            raise ValueError("a formation request, and only one, names a formation")
+        if self.formation is not None and self.formation not in FORMATION_SHAPES:
+            raise ValueError(f"formation must be one of {FORMATION_SHAPES}, got {self.formation!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -407,7 +463,7 @@ class ControlReply(Message):
     """The world's answer to a :class:`ControlRequest`.
 
     Attributes:
-        state: waiting, running, paused, finished or stopped.
+        state: waiting, running, paused, stopping, finished or stopped.
         tick: the current tick.
         time: the current simulated time, s.
         live_fish: how many fish are live.
@@ -420,10 +476,10 @@ class ControlReply(Message):
     live_fish: int
 
     def __post_init__(self) -> None:
-        _check_text("state", self.state)
-        _check_int("tick", self.tick)
-        _check_float("time", self.time, low=0.0)
-        _check_int("live_fish", self.live_fish, high=MAX_ROWS)
+        check_text("state", self.state)
+        check_int("tick", self.tick)
+        check_float("time", self.time, low=0.0)
+        check_int("live_fish", self.live_fish, high=MAX_ROWS)
 
 
 MESSAGE_TYPES: dict[str, type[Message]] = {

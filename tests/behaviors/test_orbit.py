@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from fishswarm.behaviors.orbit import milling, orbit, waltz
-from fishswarm.scenario import Scenario
-from fishswarm.simulation import run_batch
+from fishswarm.sim.engine import run_batch
+from fishswarm.sim.scenario import Scenario
 
 
 def _heading_deg(target: np.ndarray) -> np.ndarray:

@@ -4,23 +4,24 @@ remote observer looks like, on 127.0.0.1."""
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 
-from fishswarm.recording import read_recording
-from tests.conftest import free_port
+from fishswarm.study.recording import read_recording
+from tests.conftest import free_port, wait_for_port
 
 pytestmark = pytest.mark.integration
 
-FISHSWARM = [sys.executable, "-m", "fishswarm.cli"]
+FISHSWARM = [sys.executable, "-m", "fishswarm"]
 
 
 def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: Path) -> None:
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
     record = tmp_path / "observed.mcap"
     processes: list[subprocess.Popen[str]] = []
 
@@ -33,36 +34,44 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
 
     try:
         start("router", "--listen", endpoint)
-        time.sleep(1.0)
+        wait_for_port(port)
         observer = start("observe", "--connect", endpoint, "--ticks", "6", "--record", str(record))
+        # Without --ticks an observer ends with the run: when the world leaves.
+        until_the_end = start("observe", "--connect", endpoint)
         start("fish", "--id", "0", "--id", "1", "--school", "pair", "--connect", endpoint)
         start("fish", "--id", "2", "--connect", endpoint)
         start("channel", "--connect", endpoint)
-        world = subprocess.run(
-            [
-                *FISHSWARM,
-                "world",
-                "--connect",
-                endpoint,
-                "--fish",
-                "3",
-                "--duration",
-                "6",
-                "--start-timeout",
-                "60",
-            ],
-            capture_output=True,
-            text=True,
-            timeout=120,
-            check=False,
-        )
-        assert world.returncode == 0, world.stderr
-        statistics = json.loads(world.stderr.strip().splitlines()[-1])
-        assert statistics["ticks"] == 6
-        assert statistics["lost_fish"] == 0
-        assert statistics["rejected"] == 0
+        # Three world runs in a row, served by the same fish processes: a fish that answered
+        # tick 6 of one run answers tick 0 of the next.
+        for duration in ("6", "4", "5"):
+            world = subprocess.run(
+                [
+                    *FISHSWARM,
+                    "world",
+                    "--connect",
+                    endpoint,
+                    "--fish",
+                    "3",
+                    "--duration",
+                    duration,
+                    "--start-timeout",
+                    "60",
+                ],
+                capture_output=True,
+                text=True,
+                timeout=120,
+                check=False,
+            )
+            assert world.returncode == 0, world.stderr
+            statistics = json.loads(world.stderr.strip().splitlines()[-1])
+            assert statistics["ticks"] == int(duration)
+            assert statistics["lost_fish"] == 0
+            assert statistics["rejected"] == {}
         _, observer_errors = observer.communicate(timeout=30)
         assert observer.returncode == 0, observer_errors
+        _, end_errors = until_the_end.communicate(timeout=30)
+        assert until_the_end.returncode == 0, end_errors
+        assert re.search(r"observed ticks \d+–6 \(\d+ snapshots\), 3 fish at the end", end_errors)
     finally:
         for process in processes:
             if process.poll() is None:

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fishswarm.learning.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from fishswarm.learning.coevolution import Coevolution, LearningSettings, fitness, radii_of
 
 SMALL = LearningSettings(models=6, classifiers=5, seed=3)
@@ -64,8 +65,8 @@ def test_same_seed_same_run_and_global_numpy_untouched() -> None:
 
 def _resumed(settings: LearningSettings, path: Path, *, before: int, after: int) -> Coevolution:
     """Run ``before`` generations, checkpoint, load, and run ``after`` more."""
-    _run(settings, before).save(path)
-    resumed = Coevolution.load(path)
+    save_checkpoint(_run(settings, before), path)
+    resumed = load_checkpoint(path)
     for _ in range(after):
         resumed.step()
     return resumed
@@ -73,7 +74,7 @@ def _resumed(settings: LearningSettings, path: Path, *, before: int, after: int)
 
 def test_resume_continues_exactly(tmp_path: Path) -> None:
     straight = _run(SMALL, 4)
-    resumed = _resumed(SMALL, tmp_path / "checkpoint.pkl", before=2, after=2)
+    resumed = _resumed(SMALL, tmp_path / "checkpoint.npz", before=2, after=2)
     assert resumed.history == straight.history
     np.testing.assert_array_equal(resumed.population, straight.population)
     np.testing.assert_array_equal(resumed.best_model(), straight.best_model())
@@ -101,6 +102,23 @@ def test_hall_of_fame_keeps_champions_and_resumes_exactly(tmp_path: Path) -> Non
     straight = _run(settings, 4)
     assert len(straight.model_champions) == 4
     assert straight.population.shape == (6, 21)
-    resumed = _resumed(settings, tmp_path / "checkpoint.pkl", before=2, after=2)
+    resumed = _resumed(settings, tmp_path / "checkpoint.npz", before=2, after=2)
     assert resumed.history == straight.history
     assert not np.array_equal(straight.population, _run(SMALL, 4).population)
+
+
+def test_a_checkpoint_is_plain_data_and_a_truncated_one_is_explained(tmp_path: Path) -> None:
+    path = tmp_path / "checkpoint.npz"
+    save_checkpoint(_run(SMALL, 2), path)
+    with np.load(path, allow_pickle=False) as data:  # no object arrays: nothing runs on load
+        assert {"meta", "told_models", "told_classifiers", "population"} <= set(data.files)
+        assert data["told_models"].shape == (2, SMALL.models)
+    whole = path.read_bytes()
+    path.write_bytes(whole[: len(whole) // 2])
+    with pytest.raises(CheckpointError, match="not a readable learning checkpoint"):
+        load_checkpoint(path)
+    path.write_bytes(b"\x80\x04K\x01.")  # a pickle is refused, not run
+    with pytest.raises(CheckpointError, match="not a readable learning checkpoint"):
+        load_checkpoint(path)
+    with pytest.raises(CheckpointError, match="does not exist"):
+        load_checkpoint(tmp_path / "missing.npz")

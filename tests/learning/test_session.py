@@ -19,7 +19,7 @@ def test_learn_writes_every_output(tmp_path: Path) -> None:
     settings = LearningSettings(models=6, classifiers=6, seed=2, inputs=("speed", "neighbors2"))
     summary = learn(settings, generations=3, out=tmp_path, checkpoint_every=2)
     for name in (
-        "checkpoint.pkl",
+        "checkpoint.npz",
         "history.csv",
         "best_replica.npz",
         "radii.md",
@@ -49,7 +49,7 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     base = [
         sys.executable,
         "-m",
-        "fishswarm.cli",
+        "fishswarm",
         "learn",
         "--models",
         "6",

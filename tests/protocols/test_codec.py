@@ -14,8 +14,8 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 from fishswarm.protocols import MessageError, decode, encode
+from fishswarm.protocols.checks import MAX_ROWS
 from fishswarm.protocols.messages import (
-    MAX_ROWS,
     Broadcast,
     ChannelReport,
     Command,
@@ -23,6 +23,7 @@ from fishswarm.protocols.messages import (
     ControlReply,
     ControlRequest,
     Delivery,
+    FormationFlag,
     Message,
     Perception,
     PerceptionBatch,
@@ -50,8 +51,9 @@ EXAMPLES: list[Message] = [
         np.array([True, False]),
         np.array([0, 1]),
     ),
-    Broadcast(3, 7, "formation", 2),
-    Delivery(4, 8, "formation", 2, np.array([0.3, -0.1, 0.0])),
+    Broadcast(3, 7, "signal", np.array([2, 0, -5])),
+    Broadcast(3, 7, "formation", FormationFlag(1, 4, True, 2, -90_000, 17).values()),
+    Delivery(4, 8, "signal", np.array([2]), np.array([0.3, -0.1, 0.0])),
     Snapshot(
         5,
         5.0,
@@ -171,11 +173,63 @@ def _perception_fields(**overrides: object) -> dict[str, object]:
             _raw("perception", _perception_fields(neighbors=np.zeros((MAX_ROWS + 1, 3)))),
             "exceeds",
         ),
+        (_raw("perception", _perception_fields(run=-3)), "run must be in"),
+        (
+            _raw(
+                "channel_report",
+                {"tick": 1, "ids": np.array([0, 1]), "inbox_counts": np.array([2, -1])},
+            ),
+            "inbox_counts must be in",
+        ),
+        (
+            _raw(
+                "channel_report",
+                {"tick": 1, "ids": np.array([1, 0]), "inbox_counts": np.array([0, 0])},
+            ),
+            "ascending",
+        ),
+        (
+            _raw("broadcast", {"sender_id": 1, "tick": 0, "kind": "gossip", "values": np.zeros(1)}),
+            "kind must be one of",
+        ),
+        (
+            _raw(
+                "broadcast",
+                {"sender_id": 1, "tick": 0, "kind": "signal", "values": np.zeros(9, np.int64)},
+            ),
+            "at most 8 numbers",
+        ),
+        (
+            _raw(
+                "broadcast",
+                {"sender_id": 1, "tick": 0, "kind": "signal", "values": np.array([0.5])},
+            ),
+            "integer array",
+        ),
+        (
+            _raw(
+                "broadcast",
+                {"sender_id": 1, "tick": 0, "kind": "formation", "values": np.array([1, 2])},
+            ),
+            "a formation flag has 6 numbers",
+        ),
+        (
+            _raw(
+                "broadcast",
+                {
+                    "sender_id": 1,
+                    "tick": 0,
+                    "kind": "formation",
+                    "values": np.array([99, 0, 1, 0, 0, 0]),
+                },
+            ),
+            "shape must be in",
+        ),
     ],
 )
 def test_malformed_input_is_rejected_with_reason(payload: bytes, reason: str) -> None:
     with pytest.raises(MessageError, match=reason):
-        decode(payload, Command if b"perception" not in payload else Perception)
+        decode(payload)
 
 
 def _perception_batch_fields(**overrides: object) -> dict[str, object]:
@@ -267,7 +321,7 @@ def test_truncated_array_is_rejected() -> None:
 
 def test_wrong_type_for_key_is_rejected() -> None:
     with pytest.raises(MessageError, match="expected a command message, got broadcast"):
-        decode(encode(Broadcast(1, 1, "formation")), Command)
+        decode(encode(Broadcast(1, 1, "signal", np.zeros(0, np.int64))), Command)
 
 
 def test_bad_messages_cannot_be_built() -> None:
@@ -286,3 +340,9 @@ def test_bad_messages_cannot_be_built() -> None:
         ControlRequest("explode")
     with pytest.raises(TypeError, match="integer array"):
         ChannelReport(0, np.array([0.5]), np.array([1]))
+
+
+def test_a_formation_flag_round_trips_through_a_broadcast() -> None:
+    flag = FormationFlag(7, -1, False, 3, 179_999, 2**40)
+    message = decode(encode(Broadcast(2, 5, "formation", flag.values())), Broadcast)
+    assert FormationFlag.from_values(message.values) == flag

@@ -1,0 +1,111 @@
+"""Who is in the swarm, as the world sees it: live fish, their schools and command keys, the
+channel, and the fish that joined late or were lost.
+
+Membership comes from liveliness tokens. A fish that comes up gets a command subscription
+(its own key, or its school's) and is admitted at the first event at least ``admit_delay``
+after that subscription was declared (through a router, a subscription takes a moment to
+reach the publishers). A fish whose token goes, or that misses a command deadline, is lost.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from fishswarm.actors.bus import Declared
+from fishswarm.protocols.keys import KeySpace, fish_id_of
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class LostFish:
+    """A fish that left the run.
+
+    Attributes:
+        fish_id: which fish.
+        tick: the tick at which it was marked lost.
+        reason: why.
+        noticed_at: ``time.monotonic()`` when the world noticed.
+    """
+
+    fish_id: int
+    tick: int
+    reason: str
+    noticed_at: float = field(default_factory=time.monotonic)
+
+
+class Roster:
+    """The world's membership bookkeeping.
+
+    Args:
+        keys: the swarm's key space.
+        subscribe_commands: declares a subscription to a command key (``kind`` is
+            ``command`` for a fish's own key or ``batch`` for a school's).
+    """
+
+    def __init__(self, keys: KeySpace, subscribe_commands: Callable[[str, str], Declared]) -> None:
+        self.keys = keys
+        self.alive: set[int] = set()
+        self.school_of: dict[int, str | None] = {}
+        self.command_key: dict[int, str] = {}
+        self.channels = 0
+        self.lost: list[LostFish] = []
+        self.joined: list[tuple[int, int]] = []
+        self._subscribe = subscribe_commands
+        self._subscriptions: dict[str, tuple[Declared, float]] = {}
+
+    def on_alive(self, key: str, alive: bool, now: float) -> int | None:
+        """A liveliness token came or went; the fish that left, if one did."""
+        try:
+            member = self.keys.parse_alive(key)
+        except ValueError:
+            return None
+        if member.role == "channel":
+            self.channels += 1 if alive else -1
+            return None
+        fish_id = fish_id_of(member.member_id)
+        if member.role != "fish" or fish_id is None:
+            return None
+        if not alive:
+            self.alive.discard(fish_id)
+            return fish_id
+        try:
+            if member.school is None:
+                command_key, kind = self.keys.command(fish_id), "command"
+            else:
+                command_key, kind = self.keys.school_commands(member.school), "batch"
+        except ValueError:  # a token naming a school that no key can name: not a fish of ours
+            log.warning("ignored the liveliness token %s: not a valid school name", key)
+            return None
+        self.alive.add(fish_id)
+        self.school_of[fish_id] = member.school
+        self.command_key[fish_id] = command_key
+        if command_key not in self._subscriptions:
+            self._subscriptions[command_key] = (self._subscribe(command_key, kind), now)
+        return None
+
+    def ready(self, present: set[int], now: float, admit_delay: float) -> list[int]:
+        """Live fish not yet in the world whose commands have been subscribed long enough."""
+        return sorted(
+            fish_id
+            for fish_id in self.alive - present
+            if self._subscriptions[self.command_key[fish_id]][1] <= now - admit_delay
+        )
+
+    def mark_lost(self, fish_id: int, tick: int, reason: str) -> bool:
+        """Record a fish as lost at ``tick`` (once per tick); whether it is news."""
+        if any(f.fish_id == fish_id and f.tick == tick for f in self.lost):
+            return False
+        log.warning("fish %d lost at tick %d: %s", fish_id, tick, reason)
+        self.lost.append(LostFish(fish_id, tick, reason))
+        self.alive.discard(fish_id)
+        return True
+
+    def close(self) -> None:
+        """Withdraw every command subscription."""
+        for declared, _ in self._subscriptions.values():
+            declared.undeclare()
+        self._subscriptions.clear()

@@ -1,0 +1,118 @@
+"""Zenoh sessions: settings, endpoint checks, and opening and closing them from trio.
+
+Sessions are opened and closed in worker threads and always closed, also on cancellation,
+because a session left open at interpreter exit hangs the process (DESIGN §4). Every
+session has explicit endpoints and multicast scouting off.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+from collections.abc import AsyncIterator, Sequence
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+import trio
+import zenoh
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+class ConnectError(RuntimeError):
+    """A session could not be opened (nothing listening, bad endpoint, port taken)."""
+
+
+@dataclass(frozen=True)
+class SessionSettings:
+    """How to open a Zenoh session.
+
+    Attributes:
+        mode: ``router`` (the launcher: routes for everybody), ``peer`` or ``client``.
+        listen: endpoints to listen on, e.g. ``tcp/127.0.0.1:7447``.
+        connect: endpoints to connect to.
+        connect_timeout: how long a client waits for its router, s (< 0: forever).
+        lease: link lease, s: how soon a frozen peer is noticed.
+    """
+
+    mode: str = "client"
+    listen: Sequence[str] = ()
+    connect: Sequence[str] = ()
+    connect_timeout: float = 10.0
+    lease: float = 3.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("router", "peer", "client"):
+            raise ValueError(f"session mode must be router, peer or client, got {self.mode!r}")
+        for endpoint in (*self.listen, *self.connect):
+            check_endpoint(endpoint)
+
+    def to_config(self) -> zenoh.Config:
+        """The Zenoh configuration: explicit endpoints, multicast scouting off."""
+        config = zenoh.Config()
+        config.insert_json5("mode", json.dumps(self.mode))
+        config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        timeout_ms = -1 if self.connect_timeout < 0 else int(self.connect_timeout * 1000)
+        config.insert_json5("connect/timeout_ms", json.dumps(timeout_ms))
+        config.insert_json5("scouting/multicast/enabled", "false")
+        config.insert_json5("scouting/gossip/enabled", "false")
+        config.insert_json5("transport/link/tx/lease", json.dumps(int(self.lease * 1000)))
+        for key, value in self.extra.items():
+            config.insert_json5(key, json.dumps(value))
+        return config
+
+
+def check_endpoint(endpoint: str) -> str:
+    """Check a Zenoh endpoint such as ``tcp/127.0.0.1:7447``.
+
+    Raises:
+        ValueError: with what is wrong and an example of a good one.
+    """
+    protocol, _, address = endpoint.partition("/")
+    host, _, port = address.rpartition(":")
+    if protocol not in ("tcp", "udp", "quic", "tls", "ws", "unixsock-stream") or (
+        protocol != "unixsock-stream" and (not host or not port.isdigit() or int(port) > 65535)
+    ):
+        raise ValueError(
+            f"endpoint {endpoint!r} is not valid: write PROTOCOL/HOST:PORT, "
+            "e.g. tcp/127.0.0.1:7447 or tcp/0.0.0.0:7447"
+        )
+    return endpoint
+
+
+def free_loopback_endpoint() -> str:
+    """``tcp/127.0.0.1:PORT`` with a port nothing listens on right now (for runs that must
+    not collide, e.g. experiments run side by side)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{probe.getsockname()[1]}"
+
+
+@asynccontextmanager
+async def open_session(settings: SessionSettings) -> AsyncIterator[zenoh.Session]:
+    """Open a Zenoh session and close it on exit, also when cancelled.
+
+    Raises:
+        ConnectError: the session could not be opened, with the reason.
+    """
+    config = settings.to_config()
+    try:
+        session = await trio.to_thread.run_sync(zenoh.open, config)
+    except zenoh.ZError as error:
+        where = ", ".join([*settings.listen, *settings.connect]) or "(no endpoint)"
+        hint = (
+            "is a fishswarm run or router listening there?"
+            if settings.connect
+            else "is another program using that port?"
+        )
+        raise ConnectError(
+            f"cannot open a {settings.mode} session on {where}: {hint} ({error})"
+        ) from None
+    try:
+        yield session
+    finally:
+        with trio.CancelScope(shield=True):
+            await trio.to_thread.run_sync(session.close)

@@ -1,0 +1,74 @@
+"""The behaviours fish can have, by name: the one table the command line, scenario files,
+experiments, the batch engine and the fish actor all read.
+
+A new behaviour family is a :class:`~fishswarm.behaviors.core.Behavior` (its steering, its
+memory, its parameters) added to :data:`BEHAVIORS` — or, for an experiment of one's own in
+one process, passed to :func:`register`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from fishswarm.behaviors.core import Behavior, FishParams
+from fishswarm.behaviors.formation import FORMATION
+from fishswarm.behaviors.lennard_jones import AGGREGATION, DISPERSION
+from fishswarm.behaviors.orbit import MILLING, ORBIT, WALTZ
+from fishswarm.behaviors.replica import REPLICA
+from fishswarm.bluebot.control import PidGains
+
+BEHAVIORS: dict[str, Behavior] = {
+    family.name: family
+    for family in (DISPERSION, AGGREGATION, ORBIT, MILLING, WALTZ, REPLICA, FORMATION)
+}
+"""Every behaviour by name, in the order ``--help`` lists them."""
+
+
+def names() -> tuple[str, ...]:
+    """The names of the registered behaviours."""
+    return tuple(BEHAVIORS)
+
+
+def behavior_named(name: str) -> Behavior:
+    """The behaviour called ``name``.
+
+    Raises:
+        ValueError: no such behaviour, with the names there are.
+    """
+    family = BEHAVIORS.get(name)
+    if family is None:
+        raise ValueError(f"behavior must be one of {', '.join(BEHAVIORS)}, got {name!r}")
+    return family
+
+
+def register(family: Behavior) -> None:
+    """Add a behaviour to the table (it is known in this process only).
+
+    Raises:
+        ValueError: the name is taken by another behaviour.
+    """
+    if BEHAVIORS.get(family.name, family) is not family:
+        raise ValueError(f"a behaviour called {family.name!r} is registered already")
+    BEHAVIORS[family.name] = family
+
+
+def fish_params(settings: Mapping[str, Any]) -> FishParams:
+    """The parameters of a fish's decision from a scenario's settings.
+
+    ``settings`` holds ``behavior``, ``controller``, ``control_period``, ``caudal_cap`` and
+    whatever the behaviour reads (e.g. ``target_distance``, ``tank``, ``orbit_radius``,
+    ``model``).
+
+    Raises:
+        ValueError: an unknown behaviour or a bad parameter, with what is wrong.
+    """
+    family = behavior_named(str(settings["behavior"]))
+    return FishParams(
+        family,
+        family.parameters(settings),
+        controller=str(settings.get("controller", "homing")),
+        control_period=float(settings.get("control_period", 1.0)),
+        caudal_cap=float(settings.get("caudal_cap", 1.0)),
+        pid_gains=family.pid_gains or PidGains(),
+    )

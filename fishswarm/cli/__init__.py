@@ -1,0 +1,51 @@
+"""The ``fishswarm`` command: parsers in :mod:`.parsers`, handlers in :mod:`.swarm`,
+:mod:`.study` and :mod:`.learn`."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from fishswarm.cli.parsers import build_parser, scenario_from
+from fishswarm.sim.scenario import ConfigError
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``fishswarm`` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=args.log_level, format="%(levelname)s %(name)s: %(message)s")
+    from fishswarm.cli import learn, study, swarm
+
+    handlers: dict[str, Any] = {
+        "run": swarm.run,
+        "fish": swarm.fish,
+        "world": swarm.world,
+        "channel": swarm.channel,
+        "observe": swarm.observe,
+        "router": swarm.router,
+        "formation": swarm.formation,
+        "export": swarm.export,
+        "learn": learn.learn_command,
+        "experiment": study.experiment,
+        "plot": study.plot,
+        "animate": study.animate,
+    }
+    try:
+        scenario = scenario_from(args) if hasattr(args, "config") else None
+        code = int(handlers[args.command](args, scenario))
+    except ConfigError as error:
+        parser.exit(2, f"fishswarm {args.command}: error: {error}\n")
+    except swarm.UserError as error:
+        print(f"fishswarm {args.command}: error: {error}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("fishswarm: interrupted", file=sys.stderr)
+        return 130
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

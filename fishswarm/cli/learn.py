@@ -1,0 +1,68 @@
+"""``fishswarm learn``: Turing learning from the command line, with a progress line."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from fishswarm.sim.scenario import ConfigError, Scenario
+from fishswarm.study.progress import ProgressLine, bar
+
+
+def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm learn``."""
+    from fishswarm.learning.coevolution import LearningSettings
+    from fishswarm.learning.session import LearningError, learn
+
+    try:
+        settings = LearningSettings(
+            behavior=args.behavior,
+            inputs=tuple(name.strip() for name in args.inputs.split(",") if name.strip()),
+            radii=args.radii,
+            models=args.models,
+            classifiers=args.classifiers,
+            seed=args.seed,
+            hall_of_fame=args.hall_of_fame,
+        )
+    except ValueError as error:
+        raise ConfigError(str(error)) from None
+    every = max(1, args.generations // 50)
+    output = ProgressLine()
+
+    def progress(run: Any, record: dict[str, float], seconds: float) -> None:
+        done = run.generation
+        if args.quiet or (done % every and done != args.generations):
+            return
+        left = (args.generations - done) * seconds
+        line = (
+            f"{bar(done, args.generations)} "
+            f"generation {done}/{args.generations}  models best {record['model_best']:.3f} "
+            f"mean {record['model_mean']:.3f}  classifiers best {record['classifier_best']:.3f} "
+            f"mean {record['classifier_mean']:.3f}  {seconds:.2f} s/gen  ~{left / 60:.1f} min left"
+        )
+        output.show(line)
+
+    try:
+        summary = learn(
+            settings,
+            generations=args.generations,
+            out=args.out,
+            checkpoint_every=args.checkpoint_every,
+            resume=args.resume,
+            on_generation=progress,
+        )
+    except LearningError as error:
+        raise ConfigError(str(error)) from None
+    if output.tty and not args.quiet:
+        sys.stderr.write("\n")
+    ideal, replica = summary["ideal"], summary["replica"]
+    print(
+        f"done: {summary['generations']} generations in {args.out}\n"
+        f"  final spacing  ideal {ideal['final_spacing']:.1f}  replica "
+        f"{replica['final_spacing']:.1f}\n"
+        f"  final speed    ideal {ideal['final_speed']:.2f}  replica {replica['final_speed']:.2f}\n"
+        f"  learned radii  mean {summary['radii']['mean']}  s.d. {summary['radii']['sd']}",
+        file=sys.stderr,
+    )
+    return 0

@@ -1,0 +1,323 @@
+"""The ``fishswarm`` command line: every parser, its flags and help, and the scenario built."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+from pathlib import Path
+
+from fishswarm import __version__
+from fishswarm.behaviors.registry import BEHAVIORS
+from fishswarm.cli.study import add_parsers as add_study_parsers
+from fishswarm.protocols.messages import FORMATION_SHAPES
+from fishswarm.sim.scenario import ConfigError, Scenario
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+_SCENARIO_FLAGS: dict[str, tuple[str, type, str]] = {
+    "fish": ("--fish", int, "number of fish (default 25)"),
+    "behavior": ("--behavior", str, f"one of {', '.join(BEHAVIORS)} (default dispersion)"),
+    "duration": ("--duration", float, "simulated seconds (default 15)"),
+    "seed": ("--seed", int, "master seed; the same seed gives the same run (default 0)"),
+    "control_period": ("--period", float, "control period in s (default 1: 1 Hz)"),
+    "controller": ("--controller", str, "homing (default, the research code's) or pid"),
+    "target_distance": (
+        "--target-distance",
+        float,
+        "Lennard-Jones target distance in m (default 0.26 for aggregation, "
+        "the tank diagonal for dispersion)",
+    ),
+    "blind_width": ("--blind-width", float, "blind-spot width in m (default 0.05)"),
+    "sphere_radius": ("--sphere-radius", float, "blocking-sphere radius in m (default 0.065)"),
+    "orbit_radius": (
+        "--orbit-radius",
+        float,
+        "orbit radius R of orbit and milling around the post at the tank centre, partner "
+        "distance of waltz, m (default 0.45)",
+    ),
+    "time_mode": (
+        "--time",
+        str,
+        "lockstep (default: as fast as possible, deterministic), jitter (each fish on its own "
+        "clock, periods drawn from N(period, --jitter); deterministic) or realtime (one tick "
+        "per control period of wall-clock time; late fish keep their last command)",
+    ),
+    "jitter": (
+        "--jitter",
+        float,
+        "with --time jitter: s.d. of each fish's control period, s (default 0.05)",
+    ),
+    "formation": (
+        "--formation",
+        str,
+        f"with --behavior formation: {', '.join(FORMATION_SHAPES)} (default pyramid)",
+    ),
+    "spacing": ("--spacing", float, "distance between places of a formation, m (default 0.3)"),
+    "flags": (
+        "--no-flags",
+        bool,
+        "with --behavior formation: fish neither send nor heed formation flags",
+    ),
+    "swarm": ("--swarm", str, "swarm name: several swarms can share a router (default default)"),
+    "model": (
+        "--model",
+        str,
+        "learned replica (best_replica.npz from 'fishswarm learn') for --behavior replica",
+    ),
+}
+
+
+def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -> None:
+    group = parser.add_argument_group("scenario (override the --config file)")
+    group.add_argument(
+        "--config",
+        type=Path,
+        metavar="TOML",
+        help="scenario file (TOML); its settings are listed in the README under 'Scenario files'",
+    )
+    for name in names:
+        flag, kind, text = _SCENARIO_FLAGS[name]
+        if kind is bool:  # a switch that turns a setting off
+            group.add_argument(flag, dest=name, action="store_const", const=False, help=text)
+        else:
+            group.add_argument(flag, dest=name, type=kind, default=None, help=text)
+
+
+def scenario_from(args: argparse.Namespace) -> Scenario:
+    base = Scenario.from_toml(args.config) if getattr(args, "config", None) else Scenario()
+    overrides = {name: getattr(args, name, None) for name in _SCENARIO_FLAGS}
+    try:
+        return base.replace(**overrides)
+    except TypeError as error:
+        raise ConfigError(str(error)) from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fishswarm",
+        description="Run BlueBot robot-fish swarms as async actors over Eclipse Zenoh.",
+        epilog="Run 'fishswarm COMMAND --help' for the options of a command.",
+    )
+    parser.add_argument(
+        "--log-level",
+        default="WARNING",
+        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+        help="default WARNING",
+    )
+    parser.add_argument("--version", action="version", version=f"fishswarm {__version__}")
+    commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    run = commands.add_parser(
+        "run",
+        help="run a whole simulated swarm with one command",
+        description="Start a router, the world, the channel and an observer, spawn the fish "
+        "over worker processes, run the scenario, and write a recording and a summary.",
+    )
+    _add_scenario_flags(run, list(_SCENARIO_FLAGS))
+    run.add_argument("--procs", type=int, default=1, help="fish worker processes (default 1)")
+    run.add_argument(
+        "--record",
+        type=Path,
+        default=Path("runs/latest.mcap"),
+        help="MCAP recording to write (default runs/latest.mcap)",
+    )
+    run.add_argument(
+        "--summary",
+        type=Path,
+        default=Path("runs/latest.json"),
+        help="JSON summary to write (default runs/latest.json)",
+    )
+    run.add_argument(
+        "--listen",
+        default=DEFAULT_ENDPOINT,
+        help=f"endpoint to listen on (default {DEFAULT_ENDPOINT}; "
+        "tcp/0.0.0.0:7447 lets observers on other machines attach)",
+    )
+    run.add_argument(
+        "--start-timeout",
+        type=float,
+        default=60.0,
+        help="longest wait for all fish to come up, s (default 60)",
+    )
+    run.add_argument("--quiet", action="store_true", help="no progress lines")
+
+    fish = commands.add_parser(
+        "fish",
+        help="run fish actors alone (what runs on a robot)",
+        description="Run one or more fish actors that connect to a router. The fish stop "
+        "their fins when perceptions stop arriving.",
+    )
+    fish.add_argument(
+        "--id",
+        dest="ids",
+        type=int,
+        action="append",
+        required=True,
+        help="fish id; repeat for several fish in one process",
+    )
+    _add_connect(fish)
+    _add_scenario_flags(
+        fish,
+        [
+            "behavior",
+            "target_distance",
+            "controller",
+            "control_period",
+            "orbit_radius",
+            "formation",
+            "spacing",
+            "flags",
+            "swarm",
+            "model",
+        ],
+    )
+    fish.add_argument(
+        "--perception-timeout",
+        type=float,
+        default=5.0,
+        help="fins off after this long without a perception, s (default 5)",
+    )
+    fish.add_argument(
+        "--school",
+        metavar="NAME",
+        help="serve the fish as one school: one perception batch and one command batch per "
+        "tick instead of a message per fish (for many simulated fish in one process; a robot "
+        "keeps its own keys)",
+    )
+
+    world = commands.add_parser(
+        "world",
+        help="run the world actor alone",
+        description="Run the simulated world; it waits for --fish fish "
+        "(ids 0..N-1) and then runs the scenario.",
+    )
+    _add_connect(world)
+    _add_scenario_flags(world, list(_SCENARIO_FLAGS))
+    world.add_argument(
+        "--start-timeout",
+        type=float,
+        default=60.0,
+        help="longest wait for the fish, s (default 60)",
+    )
+
+    world.add_argument("--quiet", action="store_true", help="no progress lines")
+
+    channel = commands.add_parser(
+        "channel",
+        help="run the channel actor alone",
+        description="Run the simulated broadcast medium: it delivers the fish's broadcasts "
+        "(formation flags) to the fish in range, situated and with the scenario's seeded "
+        "loss, and tells the world how many each fish gets.",
+    )
+    _add_connect(channel)
+    _add_scenario_flags(channel, ["seed", "swarm"])
+
+    observe = commands.add_parser(
+        "observe",
+        help="attach an observer to a running swarm",
+        description="Watch a swarm's snapshots and liveliness from this or another machine; "
+        "print progress and optionally record. Stops when the run ends (the world leaves), after "
+        "--ticks, or on Ctrl-C, and says what it saw.",
+    )
+    _add_connect(observe)
+    observe.add_argument("--swarm", default="default", help="swarm name (default default)")
+    observe.add_argument("--record", type=Path, help="MCAP recording to write")
+    observe.add_argument("--ticks", type=int, help="stop after the snapshot of this tick")
+
+    formation = commands.add_parser(
+        "formation",
+        help="switch a running school to another formation",
+        description="Ask the world of a running swarm to tell its formation fish to take "
+        "another shape from the next tick on; the school re-forms. Prints the world's reply.",
+    )
+    formation.add_argument("shape", choices=FORMATION_SHAPES, help="the new formation")
+    _add_connect(formation)
+    formation.add_argument("--swarm", default="default", help="swarm name (default default)")
+
+    router = commands.add_parser(
+        "router",
+        help="run a Zenoh router (e.g. on the base station)",
+        description="Run a Zenoh router that robots, simulation actors and observers connect "
+        "to as clients. Ctrl-C stops it.",
+    )
+    router.add_argument(
+        "--listen",
+        default="tcp/0.0.0.0:7447",
+        help="endpoint to listen on (default tcp/0.0.0.0:7447)",
+    )
+
+    learn = commands.add_parser(
+        "learn",
+        help="learn fish behaviour from observation (Turing learning with CMA-ES)",
+        description="Co-evolve replica fish and classifiers with CMA-ES until the replicas "
+        "behave like the ideal fish (SPEC §4). Writes checkpoints, the best replica, fitness "
+        "curves, spacing/speed and trajectory plots and the learned radii to --out.",
+    )
+    learn.add_argument(
+        "--behavior",
+        choices=["aggregation", "dispersion"],
+        default="aggregation",
+        help="what the ideal fish do (default aggregation)",
+    )
+    learn.add_argument(
+        "--inputs",
+        default="speed,neighbors",
+        help="classifier inputs, comma-separated, from speed, angular-speed, "
+        "neighbors (one learned radius), neighbors2 (two) (default "
+        "speed,neighbors)",
+    )
+    learn.add_argument(
+        "--radii",
+        choices=["bounded", "unbounded"],
+        default="bounded",
+        help="radii clipped to [0, 300] or free from a start in [-40, 300] (default bounded)",
+    )
+    learn.add_argument("--generations", type=int, default=500, help="default 500")
+    learn.add_argument("--models", type=int, default=100, help="replica population (100)")
+    learn.add_argument("--classifiers", type=int, default=100, help="classifier population (100)")
+    learn.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
+    learn.add_argument(
+        "--hall-of-fame",
+        type=int,
+        default=0,
+        help="past champions drawn into every generation (default 0: the study's method)",
+    )
+    learn.add_argument(
+        "--out", type=Path, default=Path("runs/learn"), help="output folder (default runs/learn)"
+    )
+    learn.add_argument(
+        "--checkpoint-every",
+        type=int,
+        default=10,
+        help="generations between checkpoints (default 10)",
+    )
+    learn.add_argument(
+        "--resume", action="store_true", help="continue from OUT/checkpoint.npz up to --generations"
+    )
+    learn.add_argument("--quiet", action="store_true", help="no progress lines")
+
+    export = commands.add_parser(
+        "export",
+        help="export a recording to NumPy or CSV",
+        description="Write arrays t (T,), pos (T,N,3), vel (T,N,3), "
+        "yaw (T,N), ids (N,) in SI units to .npz, and/or a flat CSV.",
+    )
+    export.add_argument("recording", type=Path, help="MCAP recording of a run")
+    export.add_argument("--npz", type=Path, help="NumPy archive to write")
+    export.add_argument("--csv", type=Path, help="CSV table to write")
+    add_study_parsers(commands)
+    return parser
+
+
+def _add_connect(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--connect",
+        default=DEFAULT_ENDPOINT,
+        help=f"router endpoint to connect to (default {DEFAULT_ENDPOINT})",
+    )
+    parser.add_argument(
+        "--connect-timeout",
+        type=float,
+        default=10.0,
+        help="longest wait for the router, s; negative waits forever (default 10)",
+    )

@@ -1,0 +1,243 @@
+"""``fishswarm experiment`` and ``fishswarm plot``: the study's experiments and pictures of runs."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from fishswarm.sim.scenario import ConfigError, Scenario
+
+if TYPE_CHECKING:
+    from fishswarm.study.recording import Recording
+    from fishswarm.study.sweep import Engine
+
+
+def add_parsers(commands: Any) -> None:
+    """Add the ``experiment`` and ``plot`` commands to the ``fishswarm`` parser."""
+    from fishswarm.study.experiment import ENGINES, available
+
+    names = ", ".join(available()) or "see experiments/"
+    experiment = commands.add_parser(
+        "experiment",
+        help="run one of the study's experiments (tables and plots)",
+        description="Run one of the study's simulator experiments: a scenario swept over a "
+        "parameter, several seeds per value, settings in parallel on the available cores. "
+        f"Experiments: {names} (the files in experiments/); or give the path of an experiment "
+        "TOML file to run a changed copy. Writes table.md, table.csv, runs.csv, summary.json "
+        "and plots (metrics vs parameter, metrics over time, tracks) to --out.",
+    )
+    experiment.add_argument("name", help=f"experiment name ({names}) or TOML file")
+    experiment.add_argument(
+        "--seeds", type=int, help="runs per value (default: the experiment's, 5 in the study)"
+    )
+    experiment.add_argument("--duration", type=float, help="simulated time per run, s")
+    experiment.add_argument(
+        "--engine",
+        choices=ENGINES,
+        default="actors",
+        help="actors: every run through the actor system over Zenoh (default); batch: the "
+        "in-process batch engine, same trajectories, much faster for large sweeps",
+    )
+    experiment.add_argument(
+        "--jobs", type=int, help="runs at a time in separate processes (default: one per core)"
+    )
+    experiment.add_argument(
+        "--out", type=Path, help="output folder (default runs/experiments/NAME)"
+    )
+    experiment.add_argument("--quiet", action="store_true", help="no progress lines")
+
+    plot = commands.add_parser(
+        "plot",
+        help="draw a recorded run: tracks from above and from the side, metrics over time",
+        description="Draw a recording made with 'fishswarm run --record' or 'fishswarm "
+        "observe --record': every fish's track seen from above and from the side, and the "
+        "three mean distances and the neighbours seen over time.",
+    )
+    plot.add_argument("recording", type=Path, help="MCAP recording of a run")
+    plot.add_argument(
+        "--out", type=Path, help="picture to write, .png/.svg/.pdf (default RECORDING.png)"
+    )
+
+    animate = commands.add_parser(
+        "animate",
+        help="animate a recorded run: arrows in the tank, and what one fish sees",
+        description="Animate a recording: the fish as arrows in the tank seen from above, "
+        "from the side and from a circling camera, and through one fish's eyes (only the "
+        "neighbours its vision model lets it see, at their bearing and elevation).",
+    )
+    animate.add_argument("recording", type=Path, help="MCAP recording of a run")
+    animate.add_argument(
+        "--out", type=Path, required=True, help="animation to write: FILE.gif or FILE.mp4"
+    )
+    animate.add_argument(
+        "--fish", type=int, default=0, help="whose eyes the fourth view shows (default 0)"
+    )
+    animate.add_argument("--fps", type=int, default=10, help="frames per second (default 10)")
+    animate.add_argument("--speed", type=float, default=2.0, help="times real time (default 2)")
+    animate.add_argument("--quiet", action="store_true", help="no progress line")
+
+
+def engine_named(name: str) -> Engine:
+    """The experiment engine ``--engine NAME`` stands for."""
+    if name == "actors":
+        from fishswarm.actors.runs import run_on_actors
+
+        return run_on_actors
+    from fishswarm.study.sweep import run_on_batch_engine
+
+    return run_on_batch_engine
+
+
+def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm experiment NAME``."""
+    from fishswarm.study.experiment import find
+    from fishswarm.study.progress import ProgressLine, bar
+    from fishswarm.study.report import write_report
+    from fishswarm.study.sweep import run_experiment
+
+    chosen = find(args.name)
+    if args.seeds is not None and args.seeds < 1:
+        raise ConfigError("--seeds must be at least 1")
+    if args.jobs is not None and args.jobs < 1:
+        raise ConfigError("--jobs must be at least 1")
+    chosen = chosen.with_changes(seeds=args.seeds, duration=args.duration)
+    out = args.out or Path("runs/experiments") / chosen.name
+    total = len(chosen.runs())
+    print(
+        f"fishswarm: {chosen.title}: {chosen.parameter} in "
+        f"{', '.join(f'{v:g}' for v in chosen.values)}, {chosen.seeds} seed(s) each, "
+        f"{total} runs, engine {args.engine}",
+        file=sys.stderr,
+    )
+    output = ProgressLine()
+    started = time.perf_counter()
+
+    def show(done: int, runs: int, outcome: Any) -> None:
+        if args.quiet:
+            return
+        elapsed = time.perf_counter() - started
+        left = elapsed / done * (runs - done)
+        output.show(
+            f"{bar(done, runs)} run {done}/{runs}  {chosen.parameter}={outcome.value:g} "
+            f"seed {outcome.seed}  {outcome.wall_time:.1f} s  ~{left:.0f} s left",
+            last=done == runs,
+        )
+
+    outcomes = run_experiment(chosen, engine=engine_named(args.engine), jobs=args.jobs, on_run=show)
+    wall_time = time.perf_counter() - started
+    paths = write_report(chosen, outcomes, out, engine=args.engine, wall_time=wall_time)
+    print((out / "table.md").read_text(encoding="utf-8"))
+    print(
+        f"{total} runs in {wall_time:.1f} s; wrote {', '.join(p.name for p in paths)} to {out}",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def _tank_of(settings: dict[str, Any], position: np.ndarray) -> list[float]:
+    """The recorded run's tank; for a recording that does not say (an observer's), the
+    study's tank, grown to hold every recorded position."""
+    if "tank" in settings:
+        return [float(v) for v in settings["tank"]]
+    from fishswarm.bluebot.parameters import Tank
+
+    reach = np.nanmax(position.reshape(-1, 3), axis=0) if position.size else np.zeros(3)
+    return [float(v) for v in np.maximum(np.asarray(Tank().size), reach)]
+
+
+def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm plot RECORDING``."""
+    from fishswarm.study.figures import FiguresUnavailable, run_figure
+    from fishswarm.study.metrics import METRIC_NAMES
+
+    out = args.out or args.recording.with_suffix(".png")
+    if out.suffix not in (".png", ".svg", ".pdf"):
+        raise ConfigError(f"--out must end in .png, .svg or .pdf, got {out.name}")
+    recording = _read(args.recording, at_least=1, purpose="draw")
+    arrays = recording.arrays()
+    metrics = {
+        name: np.array([m[name] for m in recording.metrics])
+        for name in (*METRIC_NAMES, "neighbors_seen")
+    }
+    settings = recording.scenario
+    title = (
+        f"{settings.get('fish', '?')} fish, {settings.get('behavior', '?')}, "
+        f"seed {settings.get('seed', '?')} ({args.recording.name})"
+    )
+    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        tank = _tank_of(settings, arrays["pos"])
+        figure = run_figure(arrays["t"], arrays["pos"], metrics, tank, title=title)
+        figure.savefig(out, dpi=110)
+    except FiguresUnavailable as error:
+        raise ConfigError(str(error)) from None
+    print(f"wrote {out}", file=sys.stderr)
+    return 0
+
+
+def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm animate RECORDING --out FILE``."""
+    from fishswarm.bluebot.vision import Vision
+    from fishswarm.study.animation import AnimationError, frames_per_step, interpolate
+    from fishswarm.study.animation import animate as make_animation
+    from fishswarm.study.progress import ProgressLine, bar
+
+    if args.fps < 1 or not args.speed > 0:
+        raise ConfigError("--fps must be at least 1 and --speed positive")
+    recording = _read(args.recording, at_least=2, purpose="animate")
+    arrays = recording.arrays()
+    settings = recording.scenario
+    period = float(settings.get("control_period", 1.0))
+    frames = interpolate(
+        arrays["t"],
+        arrays["pos"],
+        arrays["yaw"],
+        arrays["ids"],
+        per_step=frames_per_step(args.fps, period, args.speed),
+    )
+    vision = Vision(
+        float(settings.get("visual_range", 3.0)),
+        float(settings.get("blind_width", 0.05)),
+        float(settings.get("sphere_radius", 0.065)),
+    )
+    output = ProgressLine()
+
+    def show(done: int, total: int) -> None:
+        if not args.quiet and (done % 10 == 0 or done == total):
+            output.show(f"{bar(done, total)} frame {done}/{total}", last=done == total)
+
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        make_animation(
+            frames,
+            tank=_tank_of(settings, arrays["pos"]),
+            vision=vision,
+            viewer=args.fish,
+            out=args.out,
+            fps=args.fps,
+            title=f"{settings.get('fish', '?')} fish, {settings.get('behavior', '?')}",
+            on_frame=show,
+        )
+    except AnimationError as error:
+        raise ConfigError(str(error)) from None
+    print(f"wrote {args.out} ({frames.t.size} frames)", file=sys.stderr)
+    return 0
+
+
+def _read(path: Path, *, at_least: int, purpose: str) -> Recording:
+    """A recording with at least ``at_least`` snapshots, or a usage error saying why not."""
+    from fishswarm.study.recording import RecordingError, read_recording
+
+    try:
+        recording = read_recording(path)
+    except RecordingError as error:
+        raise ConfigError(str(error)) from None
+    if len(recording.snapshots) < at_least:
+        few = "no snapshots" if at_least == 1 else f"fewer than {at_least} snapshots"
+        raise ConfigError(f"{path} holds {few}: nothing to {purpose}")
+    return recording

@@ -1,0 +1,335 @@
+"""What each ``fishswarm`` command does: the actors run from the command line."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from collections.abc import Awaitable, Callable
+from typing import Any
+
+import trio
+
+from fishswarm.actors.channel import Channel
+from fishswarm.actors.control import serve_control
+from fishswarm.actors.fish import Fish, FishSettings
+from fishswarm.actors.launcher import EXIT_WORKER_DIED, LaunchSettings, WorkerFailed, run_swarm
+from fishswarm.actors.observer import Observer, Progress
+from fishswarm.actors.session import ConnectError, SessionSettings, check_endpoint, open_session
+from fishswarm.actors.world import StartTimeout, World, WorldSettings
+from fishswarm.actors.zenoh_bus import ZenohBus, query
+from fishswarm.protocols.codec import decode, encode
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.messages import ControlReply, ControlRequest
+from fishswarm.sim.scenario import ConfigError, Scenario
+from fishswarm.study.progress import ProgressLine, bar
+from fishswarm.study.recording import (
+    RecordingError,
+    export_csv,
+    export_npz,
+    open_recorder,
+    read_recording,
+)
+
+
+class UserError(RuntimeError):
+    """Something the user can fix: the message says what."""
+
+
+def _endpoint(value: str, flag: str) -> str:
+    try:
+        return check_endpoint(value)
+    except ValueError as error:
+        raise ConfigError(f"{flag}: {error}") from None
+
+
+def _client(args: argparse.Namespace) -> SessionSettings:
+    return SessionSettings(
+        mode="client",
+        connect=[_endpoint(args.connect, "--connect")],
+        connect_timeout=args.connect_timeout,
+    )
+
+
+USER_ERRORS = (ConnectError, StartTimeout, RecordingError, WorkerFailed, ConfigError)
+
+
+def _run_trio(main: Callable[[], Any]) -> Any:
+    """Run ``main`` under trio; errors a user can fix come out as one :class:`UserError`."""
+    try:
+        return trio.run(main)
+    except KeyboardInterrupt:
+        raise
+    except BaseExceptionGroup as group:
+        interrupted, _ = group.split(KeyboardInterrupt)
+        if interrupted is not None:
+            raise KeyboardInterrupt from None
+        matched, rest = group.split(USER_ERRORS)
+        if matched is not None and rest is None:
+            raise UserError(_first_message(matched)) from None
+        raise
+    except USER_ERRORS as error:
+        raise UserError(str(error)) from None
+
+
+def _first_message(error: BaseException) -> str:
+    while isinstance(error, BaseExceptionGroup):
+        error = error.exceptions[0]
+    return str(error)
+
+
+def progress_printer(ticks: int, stream: Any = sys.stderr) -> Callable[[Progress], None]:
+    """Print a progress line per snapshot (about 20 lines for long runs; one updating line on
+    a terminal)."""
+    every = max(1, ticks // 20)
+    output = ProgressLine(stream)
+
+    def show(progress: Progress) -> None:
+        if progress.tick % every and progress.tick != ticks:
+            return
+        m = progress.metrics
+        prefix = bar(progress.tick, ticks) + " " if ticks else ""
+        line = (
+            f"{prefix}tick {progress.tick:>{len(str(ticks))}}/{ticks}  t={progress.time:7.1f} s  "
+            f"fish {progress.fish}  centroid {m['centroid_distance']:.3f} m  "
+            f"pairwise {m['pairwise_distance']:.3f} m  "
+            f"nearest {m['nearest_neighbor_distance']:.3f} m"
+            f"  seen {m['neighbors_seen']:.1f}"
+        )
+        output.show(line, last=progress.tick >= ticks)
+
+    return show
+
+
+def run(args: argparse.Namespace, scenario: Scenario) -> int:
+    """``fishswarm run``."""
+    if args.procs < 1:
+        raise ConfigError(f"--procs must be at least 1, got {args.procs}")
+    scenario.fish_params()  # reads a replica model now: a bad one is a usage error, not a crash
+    for flag, path in (("--record", args.record), ("--summary", args.summary)):
+        if path is not None and (str(path) in ("", ".") or path.is_dir()):
+            raise ConfigError(
+                f"{flag} must name a file, e.g. {flag} runs/latest"
+                f"{'.mcap' if flag == '--record' else '.json'}; {str(path)!r} is a directory"
+            )
+    settings = LaunchSettings(
+        scenario=scenario,
+        procs=args.procs,
+        listen=_endpoint(args.listen, "--listen"),
+        record=args.record,
+        summary=args.summary,
+        start_timeout=args.start_timeout,
+        log_level=args.log_level,
+        handle_signals=True,
+    )
+    print(
+        f"fishswarm: {scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
+        f"{1 / scenario.control_period:g} Hz, seed {scenario.seed}, {args.procs} worker "
+        f"process(es), listening on {settings.listen}",
+        file=sys.stderr,
+    )
+    show = None if args.quiet else progress_printer(scenario.ticks)
+    result = _run_trio(lambda: run_swarm(settings, on_progress=show))
+    summary = result.summary
+    if summary["status"] == "interrupted":
+        print(
+            "\nfishswarm run: interrupted; recording and summary hold the run so far",
+            file=sys.stderr,
+        )
+    for line in summary["workers_died"]:
+        print(f"fishswarm run: error: {line}", file=sys.stderr)
+    print(_summary_text(summary), file=sys.stderr)
+    if result.exit_code == EXIT_WORKER_DIED:
+        print(
+            "fishswarm run: a worker process died; the run finished without its fish "
+            "(see 'lost' in the summary)",
+            file=sys.stderr,
+        )
+    return int(result.exit_code)
+
+
+def _summary_text(summary: dict[str, Any]) -> str:
+    lines = [f"status: {summary['status']}"]
+    for name, values in summary["metrics"].items():
+        change = values["change_percent"]
+        change_text = "" if change is None else f" ({change:+.1f} %)"
+        lines.append(f"  {name}: {values['initial']:.3f} → {values['final']:.3f}{change_text}")
+    formation = summary.get("formation")
+    if formation:
+        ninety = formation["time_to_90_percent_joined"]
+        lines.append(
+            f"  formation: shape error {formation['shape_error']:.3f} m, "
+            f"{100 * formation['joined_fraction']:.0f} % in their slots, "
+            f"90 % joined {'never' if ninety is None else f'at {ninety:g} s'}, "
+            f"lattice energy {formation['lattice_energy']:.3f}, "
+            f"collisions at most {formation['most_collisions']:.0f}"
+        )
+    effort = summary.get("effort")
+    if effort:
+        lines.append(
+            f"  effort: {effort['school']:.0f} fin beats in all, the busiest fish "
+            f"{effort['spread']:.2f}× the mean"
+        )
+    counts = summary["counts"]
+    rejected = sum(counts["rejected"].values())
+    rtf = summary["real_time_factor"]
+    lines.append(
+        f"  ticks {counts['ticks']}, messages {counts['messages']}, rejected {rejected}, "
+        f"lost fish {counts['lost_fish']}, broadcasts {counts['broadcasts']}, "
+        f"deliveries {counts['deliveries']}, wall {summary['wall_time']:.2f} s"
+        + (f", {rtf:.0f}× real time" if rtf else "")
+    )
+    if summary.get("recording"):
+        lines.append(f"  recording: {summary['recording']}")
+    return "\n".join(lines)
+
+
+def fish(args: argparse.Namespace, scenario: Scenario) -> int:
+    """``fishswarm fish``: fish actors alone, connected to a router."""
+    params = scenario.fish_params()
+    keys = scenario.keys
+
+    try:
+        settings = FishSettings(
+            tuple(args.ids),
+            params,
+            keys,
+            perception_timeout=args.perception_timeout,
+            school=args.school,
+        )
+    except ValueError as error:
+        raise ConfigError(str(error)) from None
+
+    async def main() -> None:
+        async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
+            await nursery.start(Fish(settings).run, ZenohBus(session))
+            print(f"fish {', '.join(map(str, args.ids))} up on {args.connect}", file=sys.stderr)
+
+    _run_trio(main)
+    return 0
+
+
+def world(args: argparse.Namespace, scenario: Scenario) -> int:
+    """``fishswarm world``: the world alone."""
+    actor = World(WorldSettings(scenario, tuple(range(scenario.fish)), args.start_timeout))
+    show = None if args.quiet else progress_printer(scenario.ticks)
+    observer = Observer(scenario.keys, on_progress=show, observer_id="world-cli")
+
+    async def main() -> None:
+        async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
+            bus = ZenohBus(session)
+            await nursery.start(observer.run, bus)
+            await nursery.start(serve_control, session, actor)
+            await actor.run(bus)
+            nursery.cancel_scope.cancel()
+
+    _run_trio(main)
+    print(json.dumps(dataclasses.asdict(actor.statistics())), file=sys.stderr)
+    return 0
+
+
+def channel(args: argparse.Namespace, scenario: Scenario) -> int:
+    """``fishswarm channel``: the channel alone."""
+
+    async def main() -> None:
+        async with open_session(_client(args)) as session:
+            await Channel(scenario).run(ZenohBus(session))
+
+    _run_trio(main)
+    return 0
+
+
+def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm observe``: watch a swarm from anywhere."""
+    keys = KeySpace(args.swarm)
+    ticks = args.ticks
+
+    async def main() -> None:
+        show = progress_printer(ticks or 0, sys.stderr)
+        recorder_context = open_recorder(args.record, {"observed": True}) if args.record else None
+        recorder = recorder_context.__enter__() if recorder_context else None
+        try:
+            observer = Observer(keys, recorder=recorder, on_progress=show, observer_id="cli")
+            async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
+                await nursery.start(observer.run, ZenohBus(session))
+                print(f"observing swarm {args.swarm!r} on {args.connect}", file=sys.stderr)
+                # Until the snapshot of --ticks, or the end of the run (the world leaves).
+                async with trio.open_nursery() as waiting:
+
+                    async def wait_then_stop(wait: Callable[[], Awaitable[None]]) -> None:
+                        await wait()
+                        waiting.cancel_scope.cancel()
+
+                    waiting.start_soon(wait_then_stop, observer.wait_for_world_end)
+                    if ticks is not None:
+                        waiting.start_soon(wait_then_stop, lambda: observer.wait_for_tick(ticks))
+                nursery.cancel_scope.cancel()
+            history[:] = observer.history
+        finally:
+            if recorder_context is not None:
+                recorder_context.__exit__(None, None, None)
+
+    history: list[Progress] = []
+    _run_trio(main)
+    if history:
+        last = history[-1]
+        print(
+            f"observed ticks {history[0].tick}–{last.tick} ({len(history)} snapshots), "
+            f"{last.fish} fish at the end",
+            file=sys.stderr,
+        )
+    return 0
+
+
+def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm formation SHAPE``: switch a running school's formation."""
+    keys = KeySpace(args.swarm)
+    request = encode(ControlRequest("formation", formation=args.shape))
+
+    async def main() -> list[bytes]:
+        async with open_session(_client(args)) as session:
+            return await query(session, keys.control, request, timeout=5.0)
+
+    replies = _run_trio(main)
+    if not replies:
+        raise UserError(
+            f"no world of swarm {args.swarm!r} answered on {args.connect}: is a run going?"
+        )
+    reply = decode(replies[0], ControlReply)
+    print(
+        f"formation {args.shape} from tick {reply.tick + 1} (world {reply.state}, "
+        f"{reply.live_fish} fish)",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def router(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm router``: a Zenoh router for robots and observers."""
+    settings = SessionSettings(mode="router", listen=[_endpoint(args.listen, "--listen")])
+
+    async def main() -> None:
+        async with open_session(settings):
+            print(f"router listening on {args.listen}; Ctrl-C stops it", file=sys.stderr)
+            await trio.sleep_forever()
+
+    _run_trio(main)
+    return 0
+
+
+def export(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm export``."""
+    if args.npz is None and args.csv is None:
+        raise ConfigError("say what to write: --npz OUT.npz and/or --csv OUT.csv")
+    try:
+        recording = read_recording(args.recording)
+    except RecordingError as error:
+        raise UserError(str(error)) from None
+    if args.npz is not None:
+        export_npz(recording, args.npz)
+        print(f"wrote {args.npz}", file=sys.stderr)
+    if args.csv is not None:
+        export_csv(recording, args.csv)
+        print(f"wrote {args.csv}", file=sys.stderr)
+    return 0

@@ -1,0 +1,159 @@
+"""Local shapes: the spots that complete a shape with a fish's k nearest visible neighbours.
+
+Each function takes, for B fish, the body-frame positions of their nearest neighbours and
+returns candidate spots (B, S, 3) in the same frame, with a mask of the spots that exist.
+A fish then picks one with :func:`fishswarm.formations.rules.choose_spot`. Spacing l is the
+shape's edge (SPEC §5):
+
+- **triangle** (k = 2): the two points at distance l from both neighbours, in the
+  horizontal plane through their mean depth — the apexes of the two triangles on their
+  segment (equilateral when the neighbours are l apart);
+- **trigonal planar** (k = 3): one centre and three around it at 120°, radius l, in the
+  horizontal plane: the spot opposite the bisector of two outer neighbours around the centre
+  (the neighbour nearest to the other two), or the centre itself (the neighbours' centroid);
+- **tetrahedron** (k = 3, 3-D): the two apexes of the regular tetrahedron on the triangle of
+  the three neighbours, on either side of its plane.
+
+Unlike the study's code (which built triangle spots for a triangle of side 2l and passed the
+first neighbour twice), the spots here are at distance l from the neighbours they complete.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+LOCAL_SHAPES = {"triangle": 2, "trigonal-planar": 3, "tetrahedron": 3}
+"""Every local shape and how many nearest neighbours it is made with (k)."""
+
+_TINY = 1e-9
+
+
+def nearest_neighbors(
+    neighbors: FloatArray, mask: BoolArray, k: int
+) -> tuple[FloatArray, BoolArray]:
+    """Each fish's k nearest visible neighbours, nearest first.
+
+    Args:
+        neighbors: (B, K, 3) visible neighbours in the body frame, m.
+        mask: (B, K) which rows are real.
+        k: how many.
+
+    Returns:
+        (B, k, 3) positions (zero where a fish sees fewer than k) and (B, k) which are real.
+    """
+    count = neighbors.shape[0]
+    if neighbors.shape[1] == 0:
+        return np.zeros((count, k, 3)), np.zeros((count, k), dtype=np.bool_)
+    distance = np.where(mask, np.einsum("bkd,bkd->bk", neighbors, neighbors), np.inf)
+    order = np.argsort(distance, axis=1, kind="stable")[:, :k]
+    rows = np.arange(count)[:, None]
+    chosen = neighbors[rows, order]
+    real = mask[rows, order]
+    if chosen.shape[1] < k:
+        pad = k - chosen.shape[1]
+        chosen = np.concatenate([chosen, np.zeros((count, pad, 3))], axis=1)
+        real = np.concatenate([real, np.zeros((count, pad), dtype=np.bool_)], axis=1)
+    chosen = np.where(real[..., None], chosen, 0.0)
+    return chosen, real
+
+
+def _horizontal_unit(vector: FloatArray) -> FloatArray:
+    """(B, 3) horizontal unit vectors; +y where a vector has no horizontal part."""
+    flat = vector.copy()
+    flat[:, 2] = 0.0
+    length = np.linalg.norm(flat, axis=1)
+    fallback = np.tile([0.0, 1.0, 0.0], (vector.shape[0], 1))
+    unit: FloatArray = np.where(
+        (length > _TINY)[:, None], flat / np.maximum(length, _TINY)[:, None], fallback
+    )
+    return unit
+
+
+def triangle_spots(first: FloatArray, second: FloatArray, *, spacing: float) -> FloatArray:
+    """(B, 2, 3) the two apexes at distance ``spacing`` from both neighbours (or, when the
+    neighbours are more than 2·spacing apart, their midpoint twice)."""
+    middle = (first + second) / 2
+    along = second - first
+    along[:, 2] = 0.0
+    half = np.linalg.norm(along, axis=1) / 2
+    across = _horizontal_unit(np.stack([-along[:, 1], along[:, 0], np.zeros(len(along))], axis=1))
+    height = np.sqrt(np.maximum(spacing**2 - half**2, 0.0))[:, None]
+    return np.stack([middle + height * across, middle - height * across], axis=1)
+
+
+def trigonal_planar_spots(
+    first: FloatArray, second: FloatArray, third: FloatArray, *, spacing: float
+) -> tuple[FloatArray, BoolArray]:
+    """(B, 2, 3) the outer spot that completes a trigonal-planar shape around the centre
+    neighbour, and the centre spot (the neighbours' centroid at their mean depth), with
+    (B, 2) which applies: the outer spot when the neighbour nearest to the other two sees
+    them more than 90° apart (it is a centre), the centre spot otherwise."""
+    group = np.stack([first, second, third], axis=1)
+    pairwise = np.linalg.norm(group[:, :, None, :] - group[:, None, :, :], axis=3)
+    centre_index = np.argmin(pairwise.sum(axis=2), axis=1)
+    rows = np.arange(group.shape[0])
+    centre = group[rows, centre_index]
+    outer_index = np.array([[1, 2], [0, 2], [0, 1]])[centre_index]
+    outer = group[rows[:, None], outer_index]
+    bisector = _horizontal_unit(outer[:, 0] - centre) + _horizontal_unit(outer[:, 1] - centre)
+    direction = _horizontal_unit(-bisector)
+    outer_spot = centre + spacing * direction
+    outer_spot[:, 2] = group[:, :, 2].mean(axis=1)
+    centre_spot = group.mean(axis=1)
+    apart = np.einsum("bd,bd->b", outer[:, 0] - centre, outer[:, 1] - centre) < 0.0
+    return np.stack([outer_spot, centre_spot], axis=1), np.stack([apart, ~apart], axis=1)
+
+
+def tetrahedron_spots(
+    first: FloatArray, second: FloatArray, third: FloatArray, *, spacing: float
+) -> FloatArray:
+    """(B, 2, 3) the apexes of the regular tetrahedron on the neighbours' triangle, above
+    and below its plane, ``spacing``·√(2/3) from its centroid."""
+    centroid = (first + second + third) / 3
+    normal = np.cross(second - first, third - first)
+    length = np.linalg.norm(normal, axis=1)
+    # Neighbours in a line have no plane: stand the apex straight up and down.
+    fallback = np.tile([0.0, 0.0, 1.0], (first.shape[0], 1))
+    unit = np.where(
+        (length > _TINY)[:, None], normal / np.maximum(length, _TINY)[:, None], fallback
+    )
+    height = spacing * math.sqrt(2.0 / 3.0)
+    return np.stack([centroid + height * unit, centroid - height * unit], axis=1)
+
+
+def local_spots(
+    shape: str, neighbors: FloatArray, mask: BoolArray, *, spacing: float
+) -> tuple[FloatArray, BoolArray]:
+    """The candidate spots of B fish for a local shape.
+
+    Args:
+        shape: one of :data:`LOCAL_SHAPES`.
+        neighbors: (B, K, 3) visible neighbours in the body frame, m.
+        mask: (B, K) which rows are real.
+        spacing: the shape's edge, m.
+
+    Returns:
+        (B, 2, 3) spots in the body frame and (B, 2) which exist (a fish that sees fewer
+        than k neighbours has none). The k neighbours the spots complete are its k nearest
+        (:func:`nearest_neighbors`): they are the shape, not rivals for its spots.
+    """
+    k = LOCAL_SHAPES.get(shape)
+    if k is None:
+        raise ValueError(f"local shape must be one of {', '.join(LOCAL_SHAPES)}, got {shape!r}")
+    near, real = nearest_neighbors(neighbors, mask, k)
+    enough: BoolArray = np.logical_and.reduce(real, axis=1)
+    parts = [near[:, n] for n in range(k)]
+    applies = np.ones((near.shape[0], 2), dtype=np.bool_)
+    if shape == "triangle":
+        spots = triangle_spots(parts[0], parts[1], spacing=spacing)
+    elif shape == "trigonal-planar":
+        spots, applies = trigonal_planar_spots(parts[0], parts[1], parts[2], spacing=spacing)
+    else:
+        spots = tetrahedron_spots(parts[0], parts[1], parts[2], spacing=spacing)
+    return spots, applies & enough[:, None]

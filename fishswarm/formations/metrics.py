@@ -1,0 +1,165 @@
+"""How good a formation is, from the fish's true positions (metrics that need no eyes).
+
+- the study's fish fitness F = C + min D (SPEC §5), and the school's, its sum;
+- the RMS position error after the best rigid alignment of the school to the target and the
+  best assignment of fish to slots (rotation by Kabsch/Procrustes, assignment by the
+  Hungarian method, alternated from several starting turns), and the fraction of fish then
+  within a tolerance of their slot ("joined");
+- the deviation energy of an α-lattice (Olfati-Saber 2006): mean squared deviation of the
+  distances between neighbours (pairs closer than 1.2 spacings) from the spacing;
+- collisions: pairs closer than one body length.
+
+Base station only (scipy): nothing a robot runs imports this module.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.linalg import orthogonal_procrustes
+from scipy.optimize import linear_sum_assignment
+from scipy.spatial.distance import cdist, pdist
+
+from fishswarm.bluebot.parameters import BODY_LENGTH
+
+FloatArray = NDArray[np.float64]
+
+LATTICE_RANGE = 1.2
+"""Pairs closer than this many spacings are neighbours in the α-lattice energy."""
+
+
+def fish_fitness(
+    position: FloatArray, targets: FloatArray, *, tolerance: float, crowding_radius: float
+) -> FloatArray:
+    """The study's fitness F = C + min D of each of N fish (lower is better).
+
+    C = tolerance × the number of other fish within ``crowding_radius`` (two fish on one
+    spot are penalised); D = the distance to the nearest free target (no other fish within
+    ``tolerance`` of it), or ``tolerance`` when none is free.
+
+    Args:
+        position: (N, 3) the fish, m.
+        targets: (T, 3) the targets, m (a global map's slots, placed in the tank).
+        tolerance: m.
+        crowding_radius: m.
+
+    Returns:
+        (N,) F of each fish, m.
+    """
+    apart = cdist(position, position)
+    np.fill_diagonal(apart, np.inf)
+    crowding = tolerance * (apart < crowding_radius).sum(axis=1)
+    reach = cdist(position, targets)  # (N, T)
+    count = position.shape[0]
+    # A target is free for fish i when no *other* fish is within tolerance of it.
+    near = reach < tolerance
+    others_near = near.sum(axis=0)[None, :] - near
+    free = others_near == 0
+    nearest_free = (
+        np.where(free, reach, np.inf).min(axis=1) if targets.size else np.full(count, np.inf)
+    )
+    distance = np.where(np.isfinite(nearest_free), nearest_free, tolerance)
+    result: FloatArray = crowding + distance
+    return result
+
+
+def _kabsch(moving: FloatArray, fixed: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Rotation R and translation t with moving @ R + t closest to ``fixed`` (no mirror)."""
+    moving_centre, fixed_centre = moving.mean(axis=0), fixed.mean(axis=0)
+    rotation, _ = orthogonal_procrustes(moving - moving_centre, fixed - fixed_centre)
+    if np.linalg.det(rotation) < 0:  # a mirror image is not the same formation
+        u, _, vt = np.linalg.svd((moving - moving_centre).T @ (fixed - fixed_centre))
+        flip = np.diag([1.0, 1.0, -1.0])
+        rotation = u @ flip @ vt
+    return rotation, fixed_centre - moving_centre @ rotation
+
+
+def shape_error(
+    position: FloatArray, target: FloatArray, *, tolerance: float, starts: int = 12
+) -> tuple[float, float]:
+    """RMS distance of N fish from N slots after the best rigid motion and assignment, and
+    the fraction of fish then within ``tolerance`` of their slot.
+
+    Args:
+        position: (N, 3) the fish, m.
+        target: (N, 3) the target shape in any frame, m.
+        tolerance: a fish this close to its slot has joined, m.
+        starts: starting turns about the vertical tried (the alignment is iterated from
+            each; the best result counts).
+    """
+    count = position.shape[0]
+    if count != target.shape[0]:
+        raise ValueError(f"{count} fish against a target of {target.shape[0]} slots")
+    if count == 1:
+        return 0.0, 1.0
+    best = (math.inf, 0.0)
+    centred = target - target.mean(axis=0)
+    for turn in np.linspace(0.0, 2 * math.pi, starts, endpoint=False):
+        c, s = math.cos(turn), math.sin(turn)
+        moved = centred @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        moved = moved + position.mean(axis=0)
+        for _ in range(20):
+            rows, columns = linear_sum_assignment(cdist(position, moved))
+            rotation, shift = _kabsch(moved[columns], position[rows])
+            aligned = moved @ rotation + shift
+            if np.allclose(aligned, moved, atol=1e-12):
+                break
+            moved = aligned
+        rows, columns = linear_sum_assignment(cdist(position, moved))
+        gaps = np.linalg.norm(position[rows] - moved[columns], axis=1)
+        rms = float(np.sqrt(np.mean(gaps**2)))
+        if rms < best[0]:
+            best = (rms, float(np.mean(gaps <= tolerance)))
+    return best
+
+
+def ideal_local_shape(shape: str, *, spacing: float) -> FloatArray:
+    """(k + 1, 3) the points of a local shape: an equilateral triangle, a trigonal-planar
+    star (centre and three arms at 120°), or a regular tetrahedron, edges (arms) ``spacing``."""
+    if shape == "triangle":
+        return spacing * np.array([[0.0, 0, 0], [1.0, 0, 0], [0.5, math.sqrt(3) / 2, 0]])
+    if shape == "trigonal-planar":
+        arms = [[math.cos(a), math.sin(a), 0.0] for a in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)]
+        return spacing * np.array([[0.0, 0.0, 0.0], *arms])
+    if shape == "tetrahedron":
+        corners = [[1.0, 1, 1], [1.0, -1, -1], [-1.0, 1, -1], [-1.0, -1, 1]]
+        return spacing / (2 * math.sqrt(2)) * np.array(corners)
+    raise ValueError(f"no local shape {shape!r}")
+
+
+def local_shape_error(
+    position: FloatArray, shape: str, *, spacing: float, tolerance: float
+) -> tuple[float, float]:
+    """How well every fish completes its local shape with its nearest neighbours: the mean
+    over fish of the RMS error of the group (the fish and its k nearest) after the best
+    rigid alignment to the ideal shape, and the fraction of fish whose group is within
+    ``tolerance`` (RMS)."""
+    ideal = ideal_local_shape(shape, spacing=spacing)
+    k = ideal.shape[0] - 1
+    count = position.shape[0]
+    if count <= k:
+        return math.nan, 0.0
+    apart = cdist(position, position)
+    nearest = np.argsort(apart, axis=1, kind="stable")[:, : k + 1]  # itself first
+    errors = np.array(
+        [shape_error(position[group], ideal, tolerance=tolerance, starts=4)[0] for group in nearest]
+    )
+    return float(errors.mean()), float(np.mean(errors <= tolerance))
+
+
+def deviation_energy(position: FloatArray, *, spacing: float) -> float:
+    """Olfati-Saber's α-lattice deviation energy, normalised by spacing²: the mean squared
+    relative deviation of neighbour distances (pairs within 1.2 spacings) from the spacing;
+    0 for a perfect lattice; 1 when no pair is near (nobody has a neighbour)."""
+    distances = pdist(position)
+    near = distances < LATTICE_RANGE * spacing
+    if not near.any():
+        return 1.0
+    return float(np.mean(((distances[near] - spacing) / spacing) ** 2))
+
+
+def collisions(position: FloatArray, *, distance: float = BODY_LENGTH) -> int:
+    """Pairs of fish closer than ``distance`` (one body length by default)."""
+    return int((pdist(position) < distance).sum()) if position.shape[0] > 1 else 0

@@ -1,0 +1,100 @@
+"""The checks every message runs on construction: integers, finite numbers, short texts,
+arrays of a dtype and shape, ascending ids, counts that add up.
+
+Each raises TypeError or ValueError with what is wrong; the codec turns either into its one
+error type. Arrays are stored read-only, so a message never changes after construction.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+MAX_ROWS = 100_000
+"""Most rows an array of a message may have."""
+MAX_TEXT = 64
+"""Most characters of a text field."""
+MAX_TICK = 2**62
+"""Largest tick (and other counter) a message may carry."""
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
+
+
+def _set(obj: object, name: str, value: object) -> None:
+    object.__setattr__(obj, name, value)
+
+
+def check_int(name: str, value: object, low: int = 0, high: int = MAX_TICK) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
+    if not low <= int(value) <= high:
+        raise ValueError(f"{name} must be in [{low}, {high}], got {value}")
+
+
+def check_float(name: str, value: object, low: float = -math.inf, high: float = math.inf) -> None:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
+        raise TypeError(f"{name} must be a number, got {type(value).__name__}")
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value}")
+    if not low <= value <= high:
+        raise ValueError(f"{name} must be in [{low}, {high}], got {value}")
+
+
+def check_text(name: str, value: object) -> None:
+    if not isinstance(value, str):
+        raise TypeError(f"{name} must be a string, got {type(value).__name__}")
+    if not 0 < len(value) <= MAX_TEXT:
+        raise ValueError(f"{name} must have 1 to {MAX_TEXT} characters, got {len(value)}")
+
+
+def check_array(
+    obj: object, name: str, dtype: type[np.generic], columns: int | None, rows: int | None = None
+) -> None:
+    """Replace field ``name`` by a read-only array of ``dtype`` after checking its shape.
+
+    ``columns`` None means a 1-D array; otherwise 2-D with that many columns. ``rows`` fixes
+    the length when given; any length up to MAX_ROWS otherwise.
+    """
+    value = getattr(obj, name)
+    array = value if isinstance(value, np.ndarray) else np.asarray(value)
+    if array.dtype.kind not in "biuf":
+        raise TypeError(f"{name} must be a numeric array, got dtype {array.dtype}")
+    if dtype is np.int64 and array.dtype.kind == "f":
+        raise TypeError(f"{name} must be an integer array, got dtype {array.dtype}")
+    if (dtype is np.bool_) != (array.dtype.kind == "b") and array.size:
+        kind = "a boolean" if dtype is np.bool_ else "a numeric"
+        raise TypeError(f"{name} must be {kind} array, got dtype {array.dtype}")
+    expected_ndim = 1 if columns is None else 2
+    if array.ndim != expected_ndim or (columns is not None and array.shape[1] != columns):
+        want = "(n,)" if columns is None else f"(n, {columns})"
+        raise ValueError(f"{name} must have shape {want}, got {array.shape}")
+    if rows is not None and array.shape[0] != rows:
+        raise ValueError(f"{name} must have {rows} rows, got {array.shape[0]}")
+    if array.shape[0] > MAX_ROWS:
+        raise ValueError(f"{name} has {array.shape[0]} rows, more than the limit {MAX_ROWS}")
+    # Arrays decoded from the wire are read-only already and need no copy; anything the caller
+    # could still change is copied, so that a message never changes after construction.
+    if array.dtype != dtype or array.flags.writeable:
+        array = np.array(array, dtype=dtype, copy=True)
+        array.setflags(write=False)
+    if dtype is np.float64 and not np.isfinite(array).all():
+        raise ValueError(f"{name} must hold finite numbers only")
+    _set(obj, name, array)
+
+
+def check_ids(ids: IntArray) -> None:
+    if ids.shape[0] > 1 and (ids[1:] <= ids[:-1]).any():
+        raise ValueError("ids must be strictly ascending")
+    if ids.shape[0] and ids[0] < 0:  # ascending: the first is the least
+        raise ValueError("ids must be non-negative")
+
+
+def check_counts(name: str, counts: IntArray, rows: int, what: str) -> None:
+    if (counts < 0).any():
+        raise ValueError(f"{name} must be non-negative")
+    if int(counts.sum()) != rows:
+        raise ValueError(f"{name} add up to {int(counts.sum())}, but {what} has {rows} rows")

@@ -1,0 +1,1 @@
+"""The simulated world as pure functions: scenario, placement, one tick, perception, medium."""

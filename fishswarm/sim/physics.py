@@ -1,0 +1,131 @@
+"""The simulated world's parameters, compiled once from a scenario, and its pure steps:
+place fish, see, move.
+
+This is the physics and vision the world actor and the batch engine wrap (like Gymnasium's
+pure ``FuncEnv`` with thin stateful wrappers). A scenario is read once into
+:class:`WorldParams`; nothing re-reads it tick by tick.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fishswarm.bluebot.dynamics import State, rest_state, step
+from fishswarm.bluebot.parameters import BlueBot, Tank
+from fishswarm.bluebot.vision import Perceived, Vision, perceive, perceive_landmarks
+from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.streams import Stream, stream
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class WorldParams:
+    """What the world needs of a scenario, read once.
+
+    Attributes:
+        seed: master seed of every random stream.
+        tank: the tank.
+        vision: the vision model.
+        landmarks: (L, 3) fixed landmarks in the tank frame, m (the orbit centre first).
+        control_period: nominal time between decisions, s.
+        ticks: snapshots after the first (the run's length in control periods).
+        time_mode: ``lockstep``, ``jitter`` or ``realtime``.
+        jitter: s.d. of a fish's control period in jitter mode, s.
+        spawn_region: ``ball`` or ``tank``.
+        spawn_radius: radius of the ``ball`` fish start in, m.
+        channel_range: how far a broadcast carries, m.
+        channel_loss: probability that one delivery is lost.
+        switch_formation: a formation the fish are told to switch to, or None.
+        switch_at: when, s.
+        robot: the BlueBot's parameters.
+    """
+
+    seed: int
+    tank: Tank
+    vision: Vision
+    landmarks: FloatArray
+    control_period: float
+    ticks: int
+    time_mode: str
+    jitter: float
+    spawn_region: str
+    spawn_radius: float
+    channel_range: float
+    channel_loss: float
+    switch_formation: str | None = None
+    switch_at: float = 0.0
+    robot: BlueBot = BlueBot()
+
+    @classmethod
+    def of(cls, scenario: Scenario) -> WorldParams:
+        """The world parameters of ``scenario``."""
+        return cls(
+            seed=scenario.seed,
+            tank=scenario.the_tank(),
+            vision=scenario.vision(),
+            landmarks=scenario.landmarks(),
+            control_period=scenario.control_period,
+            ticks=scenario.ticks,
+            time_mode=scenario.time_mode,
+            jitter=scenario.jitter,
+            spawn_region=scenario.spawn_region,
+            spawn_radius=scenario.resolved_spawn_radius(),
+            channel_range=scenario.channel_range,
+            channel_loss=scenario.channel_loss,
+            switch_formation=scenario.switch_formation,
+            switch_at=scenario.switch_at,
+        )
+
+    def formation_at(self, time: float) -> str | None:
+        """The formation fish are told to take at ``time`` by the scenario's switch (None:
+        as configured)."""
+        if self.switch_formation is not None and time >= self.switch_at:
+            return self.switch_formation
+        return None
+
+
+def spawn_pose(params: WorldParams, fish_id: int) -> tuple[FloatArray, float]:
+    """Initial position (3,) and yaw of one fish from its own stream: uniform in a ball
+    around the tank centre (clipped into the tank) or in the whole tank; uniform yaw."""
+    rng = stream(params.seed, Stream.SPAWN, fish_id)
+    tank = params.tank
+    if params.spawn_region == "tank":
+        position = rng.uniform(0.0, 1.0, 3) * np.asarray(tank.size)
+        return position, float(rng.uniform(-np.pi, np.pi))
+    direction = rng.normal(size=3)
+    direction /= max(float(np.linalg.norm(direction)), 1e-12)
+    radius = params.spawn_radius * rng.uniform() ** (1 / 3)
+    position = np.clip(tank.center + radius * direction, 0.0, np.asarray(tank.size))
+    yaw = float(rng.uniform(-np.pi, np.pi))
+    return position, yaw
+
+
+def place(params: WorldParams, ids: IntArray) -> State:
+    """Fish ``ids`` at rest at their spawn poses."""
+    poses = [spawn_pose(params, int(i)) for i in ids]
+    position = np.array([p for p, _ in poses]).reshape(-1, 3)
+    yaw = np.array([y for _, y in poses])
+    return rest_state(position, yaw)
+
+
+def observe(
+    params: WorldParams, state: State, rngs: list[np.random.Generator] | None = None
+) -> Perceived:
+    """What every fish sees of the others now (SPEC §1.2), each with its own noise stream."""
+    vision = params.vision
+    return perceive(state.position, state.yaw, vision=vision, rngs=rngs if vision.noise else None)
+
+
+def observe_landmarks(params: WorldParams, state: State) -> Perceived:
+    """Which landmarks every fish sees now, in its body frame."""
+    return perceive_landmarks(state.position, state.yaw, params.landmarks, vision=params.vision)
+
+
+def advance(params: WorldParams, state: State, fins: FloatArray, duration: float) -> State:
+    """Every fish swims ``duration`` s with its fins held."""
+    return step(state, fins, duration=duration, robot=params.robot, tank=params.tank)

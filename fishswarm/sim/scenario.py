@@ -1,0 +1,384 @@
+"""A scenario: everything that defines a run, with defaults from SPEC.md and TOML loading.
+
+Settings come from defaults, then an optional TOML file, then command-line overrides. Every
+value is checked when the scenario is built; a bad one raises :class:`ConfigError` that says
+which setting is wrong and what would be right.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fishswarm.behaviors.core import FishParams
+from fishswarm.behaviors.lennard_jones import LennardJonesParams, steer_lennard_jones
+from fishswarm.behaviors.registry import behavior_named, fish_params, names
+from fishswarm.bluebot.control import CONTROLLERS
+from fishswarm.bluebot.parameters import Tank
+from fishswarm.bluebot.vision import Vision
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.messages import FORMATION_SHAPES
+
+SPAWN_REGIONS = ("ball", "tank")
+TIME_MODES = ("lockstep", "jitter", "realtime")
+
+FloatArray = NDArray[np.float64]
+
+
+class ConfigError(ValueError):
+    """A scenario setting is missing, unknown or out of range; the message says how to fix it."""
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """The settings of one run.
+
+    Attributes:
+        fish: number of fish.
+        behavior: ``dispersion``, ``aggregation`` or ``replica`` (a learned replica, see
+            ``fishswarm learn``; needs ``model``).
+        duration: simulated time, s.
+        control_period: time between two decisions of a fish, s (1 Hz in the study).
+        seed: master seed; every random stream derives from (seed, role, id).
+        controller: ``homing`` (the research code's) or ``pid``.
+        caudal_cap: largest caudal gain the homing controller uses.
+        target_distance: Lennard-Jones r_t, m; default 0.26 for aggregation, the tank
+            diagonal for dispersion.
+        spawn_radius: fish start uniformly within this distance of the tank centre, m; default
+            2 body lengths for dispersion, 10 for aggregation (the study's set-ups).
+        spawn_region: ``ball`` (within ``spawn_radius`` of the centre, clipped to the tank) or
+            ``tank`` (uniform over the whole tank).
+        tank: tank size (x, y, z), m.
+        visual_range, blind_width, sphere_radius, vision_noise: the vision model (SPEC §1.2).
+        channel_range: how far a broadcast carries, m.
+        channel_loss: probability that one delivery is lost, in [0, 1).
+        swarm: swarm name in the key space.
+        model: a learned replica (``best_replica.npz``) for the ``replica`` behaviour.
+        orbit_radius: R of ``orbit`` and ``milling``; the partner distance of ``waltz``, m.
+        landmark: position (x, y, z) of a fixed, visible landmark in the tank, m; the orbit
+            centre. Default for ``orbit`` and ``milling``: the tank centre; otherwise none.
+        time_mode: ``lockstep`` (every tick waits for every live fish: as fast as the machine
+            allows, deterministic), ``jitter`` (each fish decides on its own clock, periods
+            drawn from N(control_period, jitter); simulated time goes event by event;
+            deterministic) or ``realtime`` (one tick per control period of wall-clock time; a
+            fish that misses its deadline keeps its last command, as on hardware).
+        jitter: standard deviation of a fish's control period in ``jitter`` mode, s.
+        formation: the ``formation`` behaviour's shape: a global map (fibonacci, pyramid,
+            column, tetrahedral-pyramid, diamond, phalanx) or a local shape (triangle,
+            trigonal-planar, tetrahedron); default pyramid.
+        spacing: distance between neighbouring places of a formation, m (default 0.3).
+        tolerance: a formation fish this close to its place has joined, m (default
+            spacing / 4).
+        formation_heading_deg: the direction a formation faces, degrees in the tank frame.
+        flags: whether formation fish broadcast and heed formation flags.
+        slot_rule: how formation fish pick slots of a global map: ``share`` (default) or
+            ``study`` (the study's rank rule).
+        switch_formation: a shape formation fish switch to during the run (as an operator
+            would with ``fishswarm formation``), at ``switch_at`` s.
+        switch_at: when the switch happens, s of simulated time.
+    """
+
+    fish: int = 25
+    behavior: str = "dispersion"
+    duration: float = 15.0
+    control_period: float = 1.0
+    seed: int = 0
+    controller: str = "homing"
+    caudal_cap: float = 1.0
+    target_distance: float | None = None
+    spawn_radius: float | None = None
+    spawn_region: str = "ball"
+    tank: tuple[float, float, float] = Tank().size
+    visual_range: float = 3.0
+    blind_width: float = 0.05
+    sphere_radius: float = 0.065
+    vision_noise: float = 0.0
+    channel_range: float = 3.0
+    channel_loss: float = 0.0
+    swarm: str = "default"
+    model: str | None = None
+    orbit_radius: float = 0.45
+    landmark: tuple[float, float, float] | None = None
+    time_mode: str = "lockstep"
+    jitter: float = 0.05
+    formation: str | None = None
+    spacing: float | None = None
+    tolerance: float | None = None
+    formation_heading_deg: float = 0.0
+    flags: bool = True
+    slot_rule: str = "share"
+    switch_formation: str | None = None
+    switch_at: float = 0.0
+
+    def __post_init__(self) -> None:
+        def need(ok: bool, message: str) -> None:
+            if not ok:
+                raise ConfigError(message)
+
+        need(
+            isinstance(self.fish, int) and 1 <= self.fish <= 100_000,
+            f"fish must be a whole number from 1 to 100000, got {self.fish!r}",
+        )
+        need(
+            self.behavior in names(),
+            f"behavior must be one of {', '.join(names())}, got {self.behavior!r}",
+        )
+        need(
+            self.controller in CONTROLLERS,
+            f"controller must be one of {', '.join(CONTROLLERS)}, got {self.controller!r}",
+        )
+        need(
+            self.behavior != "replica" or self.model is not None,
+            "the replica behavior needs a learned model: --model runs/learn/best_replica.npz "
+            "(make one with 'fishswarm learn')",
+        )
+        need(
+            self.model is None or Path(self.model).is_file(),
+            f"model file {self.model} does not exist",
+        )
+        need(
+            self.spawn_region in SPAWN_REGIONS,
+            f"spawn_region must be one of {', '.join(SPAWN_REGIONS)}, got {self.spawn_region!r}",
+        )
+        for name in ("duration", "control_period"):
+            value = getattr(self, name)
+            need(_positive(value), f"{name} must be a positive number of seconds, got {value!r}")
+        need(
+            isinstance(self.seed, int) and self.seed >= 0,
+            f"seed must be a non-negative integer, got {self.seed!r}",
+        )
+        need(
+            _positive(self.caudal_cap) and self.caudal_cap <= 1,
+            f"caudal_cap must be in (0, 1], got {self.caudal_cap!r}",
+        )
+        for name in ("target_distance", "spawn_radius"):
+            value = getattr(self, name)
+            need(
+                value is None or _positive(value), f"{name} must be positive metres, got {value!r}"
+            )
+        try:
+            Tank(tuple(self.tank))  # type: ignore[arg-type]
+            self.vision()
+            KeySpace(self.swarm)
+        except ValueError as error:
+            raise ConfigError(str(error)) from None
+        need(_positive(self.orbit_radius), "orbit_radius must be positive metres")
+        need(
+            isinstance(self.jitter, int | float)
+            and math.isfinite(self.jitter)
+            and self.jitter >= 0,
+            f"jitter must be a non-negative standard deviation, s, got {self.jitter!r}",
+        )
+        # Settings checked together, naming both (the user may have set only one of them).
+        need(
+            self.time_mode != "jitter" or self.jitter <= self.control_period,
+            f"jitter ({self.jitter:g} s) must not exceed the control period "
+            f"({self.control_period:g} s) in jitter mode: lower --jitter or raise --period",
+        )
+        need(
+            self.duration >= self.control_period,
+            f"duration ({self.duration:g} s) is shorter than one control period "
+            f"({self.control_period:g} s): nothing would happen; lengthen --duration or "
+            "shorten --period",
+        )
+        half_side = min(self.tank[0], self.tank[1]) / 2
+        need(
+            self.behavior not in ("orbit", "milling") or self.orbit_radius < half_side,
+            f"orbit_radius ({self.orbit_radius:g} m) does not fit in the tank "
+            f"({self.tank[0]:g} × {self.tank[1]:g} m): keep it below {half_side:g} m",
+        )
+        need(
+            self.time_mode in TIME_MODES,
+            f"time_mode must be one of {', '.join(TIME_MODES)}, got {self.time_mode!r}",
+        )
+        if self.landmark is not None:
+            size = self.tank
+            need(
+                len(self.landmark) == 3
+                and all(0 <= v <= s for v, s in zip(self.landmark, size, strict=True)),
+                f"landmark must be a point (x, y, z) inside the tank {tuple(size)}, "
+                f"got {self.landmark!r}",
+            )
+        need(_positive(self.channel_range), "channel_range must be positive metres")
+        need(
+            isinstance(self.channel_loss, int | float) and 0 <= self.channel_loss < 1,
+            f"channel_loss must be a probability in [0, 1), got {self.channel_loss!r}",
+        )
+        need(
+            self.switch_formation is None or self.switch_formation in FORMATION_SHAPES,
+            f"switch_formation must be one of {', '.join(FORMATION_SHAPES)}, "
+            f"got {self.switch_formation!r}",
+        )
+        need(
+            isinstance(self.switch_at, int | float) and 0 <= self.switch_at <= self.duration,
+            f"switch_at must be a time within the run, [0, duration] s, got {self.switch_at!r}",
+        )
+
+    @property
+    def ticks(self) -> int:
+        """Number of control periods in the run."""
+        return max(1, round(self.duration / self.control_period))
+
+    @property
+    def keys(self) -> KeySpace:
+        """The key space of this scenario's swarm."""
+        return KeySpace(self.swarm)
+
+    def the_tank(self) -> Tank:
+        """The tank as a :class:`Tank`."""
+        return Tank(tuple(self.tank))  # type: ignore[arg-type]
+
+    @classmethod
+    def crowded(cls, fish: int, *, neighbors: float = 25.0, **settings: Any) -> Scenario:
+        """A scenario whose tank grows with the swarm so that each fish has about
+        ``neighbors`` others within visual range (for benchmarks of large swarms).
+
+        The study's tank is kept up to 25 fish. Beyond, the horizontal area is chosen so that
+        a disc of visual range holds ``neighbors`` fish on average; fish start uniformly over
+        the whole tank.
+        """
+        base = cls(**settings)
+        if fish <= 25:
+            return base.replace(fish=fish)
+        area = fish * math.pi * base.visual_range**2 / neighbors
+        side = math.sqrt(area)
+        return base.replace(fish=fish, tank=(side, side, base.tank[2]), spawn_region="tank")
+
+    def vision(self) -> Vision:
+        """The vision model."""
+        return Vision(self.visual_range, self.blind_width, self.sphere_radius, self.vision_noise)
+
+    def fish_params(self) -> FishParams:
+        """What the fish's decisions depend on: behaviour, controller and their parameters
+        (reads a replica's model file).
+
+        Raises:
+            ConfigError: a parameter the behaviour cannot take, or an unreadable model.
+        """
+        try:
+            return fish_params(dataclasses.asdict(self))
+        except ValueError as error:
+            raise ConfigError(str(error)) from None
+
+    def resolved_target_distance(self) -> float | None:
+        """Lennard-Jones r_t after defaults: 0.26 m for aggregation, the tank diagonal for
+        dispersion; None for behaviours that have none."""
+        family = behavior_named(self.behavior)
+        if self.target_distance is not None or family.steer is not steer_lennard_jones:
+            return self.target_distance
+        params: LennardJonesParams = family.parameters(dataclasses.asdict(self))
+        return params.target_distance
+
+    def landmarks(self) -> FloatArray:
+        """(L, 3) positions of the fixed landmarks in the tank, m (the orbit centre first)."""
+        if self.landmark is not None:
+            return np.array([self.landmark], dtype=np.float64)
+        if behavior_named(self.behavior).circles_landmark:
+            return np.array([self.the_tank().center], dtype=np.float64)
+        return np.zeros((0, 3))
+
+    def resolved_spawn_radius(self) -> float:
+        """Spawn radius after defaults: 2 body lengths (dispersion) or 10 (aggregation and
+        replica)."""
+        if self.spawn_radius is not None:
+            return self.spawn_radius
+        return behavior_named(self.behavior).spawn_radius
+
+    def replace(self, **changes: Any) -> Scenario:
+        """A copy with some settings changed (``None`` values are ignored)."""
+        return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
+
+    def to_dict(self) -> dict[str, Any]:
+        """The settings as plain data (for the summary and the recording)."""
+        data = dataclasses.asdict(self)
+        data["tank"] = list(self.tank)
+        data["target_distance"] = self.resolved_target_distance()
+        data["spawn_radius"] = self.resolved_spawn_radius()
+        return data
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, Any], *, source: str = "scenario") -> Scenario:
+        """Build from a mapping (a parsed TOML table), rejecting unknown keys."""
+        known = {f.name: f for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - set(known))
+        if unknown:
+            raise ConfigError(
+                f"{source}: unknown setting(s) {', '.join(unknown)}; known settings are "
+                f"{', '.join(sorted(known))}"
+            )
+        values = dict(data)
+        for point in ("tank", "landmark"):
+            if point in values:
+                given = values[point]
+                if not isinstance(given, list | tuple) or len(given) != 3:
+                    raise ConfigError(
+                        f"{source}: {point} must be a list of three lengths, got {given!r}"
+                    )
+                values[point] = tuple(float(v) for v in given)
+        for name in (
+            "duration",
+            "control_period",
+            "caudal_cap",
+            "target_distance",
+            "spawn_radius",
+            "visual_range",
+            "blind_width",
+            "sphere_radius",
+            "vision_noise",
+            "channel_range",
+            "channel_loss",
+            "orbit_radius",
+            "jitter",
+            "spacing",
+            "tolerance",
+            "formation_heading_deg",
+            "switch_at",
+        ):
+            if isinstance(values.get(name), int) and not isinstance(values[name], bool):
+                values[name] = float(values[name])
+        try:
+            return cls(**values)
+        except ConfigError as error:
+            raise ConfigError(f"{source}: {error}") from None
+        except TypeError as error:
+            raise ConfigError(f"{source}: {error}") from None
+
+    @classmethod
+    def from_toml(cls, path: Path) -> Scenario:
+        """Load a scenario from a TOML file (keys as the attribute names; all optional)."""
+        data = read_toml(path, "scenario")
+        table = data.get("scenario", data)
+        if not isinstance(table, dict):
+            raise ConfigError(f"{path}: [scenario] must be a table")
+        return cls.from_mapping(table, source=str(path))
+
+
+def read_toml(path: Path, kind: str) -> dict[str, Any]:
+    """Parse a settings file.
+
+    Raises:
+        ConfigError: the ``kind`` file (e.g. "scenario") is missing or not valid TOML.
+    """
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ConfigError(f"{kind} file {path} does not exist") from None
+    except tomllib.TOMLDecodeError as error:
+        raise ConfigError(f"{path} is not valid TOML: {error}") from None
+
+
+def _positive(value: object) -> bool:
+    return (
+        isinstance(value, int | float)
+        and not isinstance(value, bool)
+        and math.isfinite(value)
+        and value > 0
+    )

@@ -1,0 +1,1 @@
+"""The study: experiments, summaries, reports, figures, animations, metrics, recordings."""

@@ -1,0 +1,377 @@
+"""The study's simulator experiments: one scenario swept over a parameter, several seeds each.
+
+An experiment is a TOML file (``experiments/<name>.toml``): an ``[experiment]`` table naming
+the scenario setting to sweep, its values and the number of seeds, and a ``[scenario]``
+table with the study's set-up. This module defines experiments and turns their runs into
+tables and pictures; :mod:`fishswarm.study.sweep` runs them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.sim.scenario import ConfigError, Scenario, read_toml
+from fishswarm.study.metrics import (
+    FORMATION_METRIC_NAMES,
+    ORBIT_METRIC_NAMES,
+    formation_target_of,
+    orbit_metrics,
+    swarm_metrics,
+)
+
+FloatArray = NDArray[np.float64]
+
+log = logging.getLogger(__name__)
+
+METRICS = ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance", "neighbors_seen")
+"""Columns of a swarm run's metric series: the three mean distances (m) of SPEC §3 and
+neighbours seen."""
+
+ORBIT_BEHAVIORS = ("orbit", "milling", "waltz")
+"""Behaviours whose experiments measure circling (radius, revolutions, speed, collisions)."""
+
+ENGINES = ("actors", "batch")
+"""How an experiment's runs go: through the actor system, or the in-process batch engine."""
+
+METRIC_LABELS = {
+    "centroid_distance": "distance to centroid of others (m)",
+    "pairwise_distance": "mean pairwise distance (m)",
+    "nearest_neighbor_distance": "nearest-neighbour distance (m)",
+    "neighbors_seen": "neighbours seen",
+    "radius": "radius (m)",
+    "revolutions": "revolutions",
+    "speed": "speed (m/s)",
+    "collisions": "colliding pairs",
+    "shape_error": "shape error (m)",
+    "joined_fraction": "fraction in their slots",
+    "lattice_energy": "lattice energy",
+}
+
+
+def change_percent(series: FloatArray) -> float:
+    """Change of a metric from its first to its last value, per cent of the first."""
+    first, last = float(series[0]), float(series[-1])
+    return math.nan if first == 0 else 100.0 * (last - first) / first
+
+
+def _first(series: FloatArray) -> float:
+    return float(series[0])
+
+
+def _last(series: FloatArray) -> float:
+    return float(series[-1])
+
+
+def _second_half(series: FloatArray) -> FloatArray:
+    return series[len(series) // 2 :]
+
+
+def _late_mean(series: FloatArray) -> float:
+    return float(_second_half(series).mean())
+
+
+def _late_sd(series: FloatArray) -> float:
+    return float(_second_half(series).std())
+
+
+def _total(series: FloatArray) -> float:
+    return float(series.sum())
+
+
+@dataclass(frozen=True)
+class Summary:
+    """One column of an experiment's table: a number per run, then mean ± s.d. over seeds.
+
+    Attributes:
+        key: column name in table.csv.
+        label: column heading in table.md and on plots.
+        metric: the metric series it reduces.
+        reduce: series (T,) → the number of one run.
+        digits: decimals shown in table.md.
+    """
+
+    key: str
+    label: str
+    metric: str
+    reduce: Callable[[FloatArray], float]
+    digits: int
+
+
+SWARM_SUMMARIES = (
+    Summary(
+        "centroid_distance_change_percent",
+        "centroid distance change (%)",
+        "centroid_distance",
+        change_percent,
+        1,
+    ),
+    Summary(
+        "pairwise_distance_change_percent",
+        "pairwise distance change (%)",
+        "pairwise_distance",
+        change_percent,
+        1,
+    ),
+    Summary(
+        "nearest_neighbor_distance_change_percent",
+        "nearest-neighbour distance change (%)",
+        "nearest_neighbor_distance",
+        change_percent,
+        1,
+    ),
+    Summary("neighbors_seen_initial", "neighbours seen, initial", "neighbors_seen", _first, 1),
+    Summary("neighbors_seen_final", "neighbours seen, final", "neighbors_seen", _last, 1),
+)
+
+ORBIT_SUMMARIES = (
+    Summary("radius", "radius, 2nd half (m)", "radius", _late_mean, 3),
+    Summary("radius_wobble", "radius s.d. in time, 2nd half (m)", "radius", _late_sd, 3),
+    Summary("revolutions", "revolutions", "revolutions", _last, 2),
+    Summary("speed", "speed, 2nd half (m/s)", "speed", _late_mean, 3),
+    Summary("collisions", "collisions (pair-ticks)", "collisions", _total, 1),
+)
+
+
+def _late_mean_percent(series: FloatArray) -> float:
+    return 100.0 * _late_mean(series)
+
+
+def _last_percent(series: FloatArray) -> float:
+    return 100.0 * _last(series)
+
+
+FORMATION_SUMMARIES = (
+    Summary("shape_error", "shape error, end (m)", "shape_error", _last, 3),
+    Summary("shape_error_late", "shape error, 2nd half (m)", "shape_error", _late_mean, 3),
+    Summary("joined", "in their slots, end (%)", "joined_fraction", _last_percent, 0),
+    Summary(
+        "joined_late", "in their slots, 2nd half (%)", "joined_fraction", _late_mean_percent, 0
+    ),
+    Summary("lattice_energy", "lattice energy, end", "lattice_energy", _last, 3),
+    Summary("collisions", "collisions (pair-snapshots)", "collisions", _total, 0),
+)
+
+SWEEPABLE = (
+    "blind_width",
+    "sphere_radius",
+    "visual_range",
+    "target_distance",
+    "fish",
+    "orbit_radius",
+    "tolerance",
+    "spacing",
+    "channel_loss",
+)
+EXPERIMENTS_FOLDER = Path(__file__).resolve().parent / "experiments"
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One experiment of the study.
+
+    Attributes:
+        name: short name, e.g. ``blindspot``.
+        title: what it shows, for tables and plots.
+        parameter: the scenario setting swept (e.g. ``blind_width``).
+        label: the parameter as an axis label, with its unit.
+        values: the settings of the parameter.
+        seeds: runs per value (seeds 0 … seeds−1).
+        scenario: the set-up every run starts from.
+    """
+
+    name: str
+    title: str
+    parameter: str
+    label: str
+    values: tuple[float, ...]
+    seeds: int
+    scenario: Scenario
+
+    def __post_init__(self) -> None:
+        if self.parameter not in SWEEPABLE:
+            raise ConfigError(
+                f"experiment {self.name}: parameter must be one of {', '.join(SWEEPABLE)}, "
+                f"got {self.parameter!r}"
+            )
+        if not self.values:
+            raise ConfigError(f"experiment {self.name}: values must not be empty")
+        if not isinstance(self.seeds, int) or self.seeds < 1:
+            raise ConfigError(f"experiment {self.name}: seeds must be at least 1")
+        for value in self.values:
+            self.scenario_for(value, 0)  # every setting must make a valid scenario
+
+    @property
+    def orbiting(self) -> bool:
+        """Whether the fish orbit (orbit, milling, waltz) rather than aggregate or disperse."""
+        return self.scenario.behavior in ORBIT_BEHAVIORS
+
+    @property
+    def forming(self) -> bool:
+        """Whether the fish take places in a formation."""
+        return self.scenario.behavior == "formation"
+
+    @property
+    def metric_names(self) -> tuple[str, ...]:
+        """The columns of each run's metric series."""
+        if self.forming:
+            return FORMATION_METRIC_NAMES
+        return ORBIT_METRIC_NAMES if self.orbiting else METRICS
+
+    @property
+    def summaries(self) -> tuple[Summary, ...]:
+        """The columns of the experiment's table."""
+        if self.forming:
+            return FORMATION_SUMMARIES
+        return ORBIT_SUMMARIES if self.orbiting else SWARM_SUMMARIES
+
+    def metrics_of(
+        self, scenario: Scenario, position: FloatArray, seen: NDArray[np.int64]
+    ) -> FloatArray:
+        """(T, M) the metric series of one run from its positions (T, N, 3) and the
+        neighbours each fish saw (T, N)."""
+        if self.forming:
+            target = formation_target_of(scenario)
+            assert target is not None  # a formation scenario always has one
+            return np.array(
+                [[target.metrics(p)[name] for name in FORMATION_METRIC_NAMES] for p in position]
+            )
+        if self.orbiting:
+            landmarks = scenario.landmarks()
+            return orbit_metrics(
+                position,
+                centre=landmarks[0] if landmarks.shape[0] else None,
+                period=scenario.control_period,
+                contact=BODY_LENGTH,
+            )
+        return np.array(
+            [
+                [swarm_metrics(p, s)[name] for name in METRICS]
+                for p, s in zip(position, seen, strict=True)
+            ]
+        )
+
+    def scenario_for(self, value: float, seed: int) -> Scenario:
+        """The scenario of one run."""
+        kind = int if self.parameter == "fish" else float
+        return self.scenario.replace(**{self.parameter: kind(value), "seed": seed})
+
+    def runs(self) -> list[tuple[float, int]]:
+        """Every (value, seed) pair, value by value."""
+        return [(value, seed) for value in self.values for seed in range(self.seeds)]
+
+    def with_changes(
+        self,
+        *,
+        seeds: int | None = None,
+        duration: float | None = None,
+        values: tuple[float, ...] | None = None,
+    ) -> Experiment:
+        """A copy with fewer seeds, a shorter duration or other values (None: unchanged)."""
+        return dataclasses.replace(
+            self,
+            values=self.values if values is None else values,
+            seeds=self.seeds if seeds is None else seeds,
+            scenario=self.scenario.replace(duration=duration),
+        )
+
+    @classmethod
+    def from_toml(cls, path: Path) -> Experiment:
+        """Load an experiment file.
+
+        Raises:
+            ConfigError: the file is missing, not TOML, or a setting is wrong (with which).
+        """
+        data = read_toml(path, "experiment")
+        table = data.get("experiment")
+        if not isinstance(table, dict):
+            raise ConfigError(f"{path}: needs an [experiment] table (name, parameter, values)")
+        known = {"name", "title", "parameter", "label", "values", "seeds"}
+        unknown = sorted(set(table) - known)
+        if unknown:
+            raise ConfigError(
+                f"{path}: unknown [experiment] setting(s) {', '.join(unknown)}; known: "
+                f"{', '.join(sorted(known))}"
+            )
+        missing = sorted({"name", "parameter", "values"} - set(table))
+        if missing:
+            raise ConfigError(f"{path}: [experiment] needs {', '.join(missing)}")
+        values = table["values"]
+        if not isinstance(values, list) or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) for v in values
+        ):
+            raise ConfigError(f"{path}: values must be a list of numbers, got {values!r}")
+        scenario_table = data.get("scenario", {})
+        if not isinstance(scenario_table, Mapping):
+            raise ConfigError(f"{path}: [scenario] must be a table")
+        scenario = Scenario.from_mapping(scenario_table, source=str(path))
+        name = str(table["name"])
+        return cls(
+            name,
+            str(table.get("title", name)),
+            str(table["parameter"]),
+            str(table.get("label", table["parameter"])),
+            tuple(float(v) for v in values),
+            table.get("seeds", 5),
+            scenario,
+        )
+
+
+def available() -> list[str]:
+    """Names of the experiments shipped with fishswarm (``fishswarm/study/experiments/``)."""
+    if not EXPERIMENTS_FOLDER.is_dir():
+        return []
+    return sorted(
+        path.stem
+        for path in EXPERIMENTS_FOLDER.glob("*.toml")
+        if "experiment" in tomllib.loads(path.read_text(encoding="utf-8"))
+    )
+
+
+def find(name_or_path: str) -> Experiment:
+    """An experiment by name (``experiments/<name>.toml``) or by the path of its file.
+
+    Raises:
+        ConfigError: no such experiment, with the names there are.
+    """
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        return Experiment.from_toml(path)
+    candidate = EXPERIMENTS_FOLDER / f"{name_or_path}.toml"
+    if not candidate.is_file():
+        names = ", ".join(available()) or "(none found)"
+        raise ConfigError(
+            f"no experiment named {name_or_path!r}: choose one of {names}, or give the path "
+            "of an experiment TOML file"
+        )
+    return Experiment.from_toml(candidate)
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    """The result of one run.
+
+    Attributes:
+        value: the parameter's value.
+        seed: the seed.
+        t: (T,) times, s.
+        metrics: (T, M) the experiment's metric series (:attr:`Experiment.metric_names`).
+        position: (T, N, 3) every fish's position, m.
+        wall_time: how long the run took, s.
+    """
+
+    value: float
+    seed: int
+    t: FloatArray
+    metrics: FloatArray
+    position: FloatArray
+    wall_time: float

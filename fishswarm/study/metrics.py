@@ -1,0 +1,187 @@
+"""Swarm metrics on positions: the three mean distances of SPEC.md §3, neighbours seen, the
+orbit metrics, and a formation's metrics against its target shape."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+from scipy.spatial.distance import pdist
+
+from fishswarm.behaviors.formation import FormationParams
+from fishswarm.formations.maps import target_map
+from fishswarm.formations.metrics import (
+    collisions,
+    deviation_energy,
+    local_shape_error,
+    shape_error,
+)
+from fishswarm.sim.scenario import Scenario
+
+FloatArray = NDArray[np.float64]
+
+METRIC_NAMES = ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance")
+
+
+def centroid_distance(position: FloatArray) -> float:
+    """Distance of each fish to the centroid of the others, averaged over fish, m.
+
+    What the research code printed as "mean inter-robot distance".
+    """
+    count = position.shape[0]
+    if count < 2:
+        return 0.0
+    others = (position.sum(axis=0)[None, :] - position) / (count - 1)
+    return float(np.linalg.norm(position - others, axis=1).mean())
+
+
+def pairwise_distance(position: FloatArray) -> float:
+    """Mean distance over all pairs of fish, m."""
+    if position.shape[0] < 2:
+        return 0.0
+    return float(pdist(position).mean())
+
+
+def nearest_neighbor_distance(position: FloatArray) -> float:
+    """Distance of each fish to its nearest other fish, averaged over fish, m."""
+    if position.shape[0] < 2:
+        return 0.0
+    distance, _ = cKDTree(position).query(position, k=2)
+    return float(distance[:, 1].mean())
+
+
+def swarm_metrics(
+    position: FloatArray, neighbors_seen: NDArray[np.int64], effort: FloatArray | None = None
+) -> dict[str, float]:
+    """All metrics of one snapshot: the three distances (m), mean neighbours seen and, when
+    the fish's efforts are known, the school's effort (fin beats) and its spread (the most
+    a fish spent over the mean)."""
+    metrics = {
+        "centroid_distance": centroid_distance(position),
+        "pairwise_distance": pairwise_distance(position),
+        "nearest_neighbor_distance": nearest_neighbor_distance(position),
+        "neighbors_seen": float(neighbors_seen.mean()) if neighbors_seen.size else 0.0,
+    }
+    if effort is not None and effort.size:
+        mean = float(effort.mean())
+        metrics["effort"] = float(effort.sum())
+        metrics["effort_spread"] = float(effort.max()) / mean if mean > 0 else 1.0
+    return metrics
+
+
+ORBIT_METRIC_NAMES = ("radius", "revolutions", "speed", "collisions")
+
+
+def orbit_metrics(
+    position: FloatArray, *, centre: FloatArray | None, period: float, contact: float
+) -> FloatArray:
+    """Metrics of orbiting fish at every tick, from their positions.
+
+    Args:
+        position: (T, N, 3) positions, m.
+        centre: (3,) the orbit centre, m; None for fish orbiting each other (waltz), whose
+            centre is their barycentre at each tick.
+        period: time between ticks, s.
+        contact: two fish closer than this collide, m (one body length).
+
+    Returns:
+        (T, 4) columns: mean planar distance to the centre (m); revolutions so far (mean over
+        fish of the unwrapped angle around the centre / 2π, positive in the direction the
+        fish orbit: clockwise in overhead plots); mean planar speed over the last period
+        (m/s, 0 at the first tick); colliding pairs.
+    """
+    steps, count = position.shape[:2]
+    middle = (
+        position.mean(axis=1, keepdims=True)
+        if centre is None
+        else np.broadcast_to(np.asarray(centre, dtype=np.float64), (steps, 1, 3))
+    )
+    offset = position[..., :2] - middle[..., :2]
+    radius = np.hypot(offset[..., 0], offset[..., 1]).mean(axis=1)
+    angle = np.unwrap(np.arctan2(offset[..., 1], offset[..., 0]), axis=0)
+    # The fish keep the centre on their left with z down: clockwise in overhead plots (y up),
+    # the direction of decreasing atan2(y, x); counted positive.
+    revolutions = ((angle[0] - angle) / (2 * np.pi)).mean(axis=1)
+    speed = np.zeros(steps)
+    if steps > 1:
+        moved = np.hypot(*np.moveaxis(np.diff(position[..., :2], axis=0), -1, 0))
+        speed[1:] = moved.mean(axis=1) / period
+    collisions = np.zeros(steps)
+    if count > 1:
+        for tick in range(steps):
+            collisions[tick] = float((pdist(position[tick]) < contact).sum())
+    return np.stack([radius, revolutions, speed, collisions], axis=1)
+
+
+FORMATION_METRIC_NAMES = ("shape_error", "joined_fraction", "lattice_energy", "collisions")
+"""A formation's metrics per snapshot: RMS error after the best rigid alignment and
+assignment (m), the fraction of fish within the tolerance of their slot, the α-lattice
+deviation energy, and pairs closer than a body length."""
+
+
+@dataclass(frozen=True)
+class FormationTarget:
+    """The shape a formation run is measured against.
+
+    Attributes:
+        slots: (N, 3) the target map in its own frame, m; None for a local shape.
+        spacing: distance between neighbouring places, m.
+        tolerance: a fish this close to its slot has joined, m.
+        local_shape: the local shape measured around every fish (None for a global map).
+    """
+
+    slots: FloatArray | None
+    spacing: float
+    tolerance: float
+    local_shape: str | None = None
+
+    def metrics(self, position: FloatArray) -> dict[str, float]:
+        """The formation metrics of one snapshot. A global map: the school against its
+        first N slots. A local shape: every fish's group (it and its nearest neighbours)
+        against the ideal shape, errors averaged over fish; joined when within tolerance."""
+        count = position.shape[0]
+        if self.local_shape is not None:
+            rms, joined = local_shape_error(
+                position, self.local_shape, spacing=self.spacing, tolerance=self.tolerance
+            )
+        else:
+            assert self.slots is not None
+            slots = self.slots[:count]
+            if slots.shape[0] < count:
+                return dict.fromkeys(FORMATION_METRIC_NAMES, math.nan)
+            rms, joined = shape_error(position, slots, tolerance=self.tolerance, starts=6)
+        return {
+            "shape_error": rms,
+            "joined_fraction": joined,
+            "lattice_energy": deviation_energy(position, spacing=self.spacing),
+            "collisions": float(collisions(position)),
+        }
+
+
+def formation_target_of(scenario: Scenario) -> FormationTarget | None:
+    """The target of a formation run (None for other runs)."""
+    if scenario.behavior != "formation":
+        return None
+    params = scenario.fish_params().steering
+    if not isinstance(params, FormationParams):
+        return None
+    if params.is_local:
+        return FormationTarget(None, params.spacing, params.tolerance, params.shape)
+    slots = target_map(params.shape, scenario.fish, spacing=params.spacing)
+    return FormationTarget(slots, params.spacing, params.tolerance)
+
+
+def formation_summary(times: list[float], series: list[dict[str, float]]) -> dict[str, Any]:
+    """A formation run in a few numbers: the final metrics, the first time 90 % of the fish
+    were in their slots (None if never), and the most colliding pairs at once."""
+    final = {name: series[-1][name] for name in FORMATION_METRIC_NAMES}
+    joined = [t for t, m in zip(times, series, strict=True) if m["joined_fraction"] >= 0.9]
+    return {
+        **final,
+        "time_to_90_percent_joined": joined[0] if joined else None,
+        "most_collisions": max(m["collisions"] for m in series),
+    }

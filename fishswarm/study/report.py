@@ -1,0 +1,135 @@
+"""An experiment's report: tables (Markdown, CSV), per-run data, a JSON summary, pictures."""
+
+from __future__ import annotations
+
+import csv
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fishswarm.study.experiment import Experiment, RunOutcome
+from fishswarm.study.figures import FiguresUnavailable, experiment_figures
+
+log = logging.getLogger(__name__)
+
+
+def table_rows(experiment: Experiment, outcomes: list[RunOutcome]) -> list[dict[str, Any]]:
+    """One row per value: each of the experiment's summaries, mean and s.d. over seeds."""
+    rows = []
+    for value in experiment.values:
+        mine = [o for o in outcomes if o.value == value]
+        row: dict[str, Any] = {experiment.parameter: value, "runs": len(mine)}
+        for summary in experiment.summaries:
+            column = experiment.metric_names.index(summary.metric)
+            values = np.array([summary.reduce(o.metrics[:, column]) for o in mine])
+            row[f"{summary.key}_mean"] = float(values.mean())
+            row[f"{summary.key}_sd"] = float(values.std(ddof=1)) if values.size > 1 else 0.0
+        row["wall_time_mean"] = float(np.mean([o.wall_time for o in mine]))
+        rows.append(row)
+    return rows
+
+
+def write_report(
+    experiment: Experiment,
+    outcomes: list[RunOutcome],
+    folder: Path,
+    *,
+    engine: str,
+    wall_time: float,
+) -> list[Path]:
+    """Write the experiment's tables, per-run data and pictures into ``folder``.
+
+    Files: ``table.md`` and ``table.csv`` (mean ± s.d. per value), ``runs.csv`` (one row
+    per run), ``summary.json`` (settings, rows, timing) and, with matplotlib, the pictures of
+    :func:`fishswarm.study.figures.experiment_figures`.
+
+    Returns:
+        The paths written.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = table_rows(experiment, outcomes)
+    paths = [folder / "table.md", folder / "table.csv", folder / "runs.csv"]
+    paths[0].write_text(markdown_table(experiment, rows), encoding="utf-8")
+    with paths[1].open("w", newline="", encoding="utf-8") as stream:
+        table = csv.DictWriter(stream, fieldnames=list(rows[0]))
+        table.writeheader()
+        table.writerows(rows)
+    with paths[2].open("w", newline="", encoding="utf-8") as stream:
+        writer = csv.writer(stream)
+        writer.writerow(
+            [
+                experiment.parameter,
+                "seed",
+                *(f"{m}_initial" for m in experiment.metric_names),
+                *(f"{m}_final" for m in experiment.metric_names),
+                "wall_time",
+            ]
+        )
+        for outcome in outcomes:
+            writer.writerow(
+                [
+                    outcome.value,
+                    outcome.seed,
+                    *outcome.metrics[0].tolist(),
+                    *outcome.metrics[-1].tolist(),
+                    round(outcome.wall_time, 3),
+                ]
+            )
+    summary = {
+        "experiment": experiment.name,
+        "title": experiment.title,
+        "parameter": experiment.parameter,
+        "values": list(experiment.values),
+        "seeds": experiment.seeds,
+        "engine": engine,
+        "scenario": experiment.scenario.to_dict(),
+        "rows": rows,
+        "wall_time": wall_time,
+    }
+    summary_path = folder / "summary.json"
+    summary_path.write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    paths.append(summary_path)
+    try:
+        paths += experiment_figures(experiment, outcomes, rows, folder)
+    except FiguresUnavailable as error:
+        log.warning("tables written, no pictures: %s", error)
+    return paths
+
+
+def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
+    """The table of an experiment in Markdown, mean ± s.d. over seeds."""
+    scenario = experiment.scenario
+    if experiment.forming:
+        explain = (
+            "Shape error: RMS distance of the fish from the target map after the best rigid "
+            "alignment and assignment; in their slots: within the tolerance of their slot; "
+            "lattice energy: mean squared relative deviation of neighbour distances from the "
+            "spacing; collisions: pairs closer than one body length, summed over snapshots."
+        )
+    elif experiment.orbiting:
+        explain = (
+            "Radius, speed: means over the second half of each run; revolutions: at the end; "
+            "collisions: pairs closer than one body length, summed over ticks."
+        )
+    else:
+        explain = "Changes are from the first to the last tick, per cent of the first."
+    lines = [
+        f"# {experiment.title}",
+        "",
+        f"{scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
+        f"{1 / scenario.control_period:g} Hz; {experiment.seeds} seeds per value; mean ± s.d. "
+        f"over seeds. {explain}",
+        "",
+        "| " + " | ".join([experiment.label, *(s.label for s in experiment.summaries)]) + " |",
+        "|" + "---:|" * (1 + len(experiment.summaries)),
+    ]
+    for row in rows:
+        cells = [f"{row[experiment.parameter]:g}"]
+        for summary in experiment.summaries:
+            mean, sd = row[f"{summary.key}_mean"], row[f"{summary.key}_sd"]
+            cells.append(f"{mean:.{summary.digits}f} ± {sd:.{summary.digits}f}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

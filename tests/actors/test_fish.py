@@ -1,0 +1,249 @@
+"""The fish actor on the in-memory Bus with trio's MockClock: decisions, schools, the safety
+watchdog, deliveries, broadcasts, LEDs and new runs — each in simulated seconds."""
+
+from __future__ import annotations
+
+import numpy as np
+import trio
+
+from fishswarm.actors.bus import MemoryBus
+from fishswarm.actors.fish import Fish, FishSettings, FishStatistics
+from fishswarm.actors.inbox import Inbox
+from fishswarm.behaviors.core import FishMemory, Perception, decide, pad_rows
+from fishswarm.behaviors.core import Inbox as CoreInbox
+from fishswarm.protocols.codec import decode, encode
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.messages import (
+    Broadcast,
+    Command,
+    CommandBatch,
+    Delivery,
+    PerceptionBatch,
+)
+from fishswarm.protocols.messages import Perception as PerceptionMessage
+from fishswarm.sim.scenario import Scenario
+from tests.behaviors.signal_behavior import registered
+from tests.conftest import run_mock, subscription
+
+KEYS = KeySpace()
+AHEAD = np.array([[1.0, -0.1, 0.0]])
+
+
+def _perception(fish_id: int, tick: int, **changes: object) -> bytes:
+    fields: dict[str, object] = {
+        "fish_id": fish_id,
+        "tick": tick,
+        "time": float(tick),
+        "depth": 0.5,
+        "neighbors": AHEAD,
+        "landmarks": np.zeros((0, 3)),
+        **changes,
+    }
+    return encode(PerceptionMessage(**fields))  # type: ignore[arg-type]
+
+
+def test_watchdog_stops_the_fins_after_the_timeout_and_a_perception_resumes() -> None:
+    settings = FishSettings((3,), Scenario().fish_params(), KEYS, perception_timeout=5.0)
+
+    async def main() -> tuple[list[tuple[float, Command]], FishStatistics]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        got: list[tuple[float, Command]] = []
+        async with subscription(bus, KEYS.command(3)) as commands, trio.open_nursery() as nursery:
+            await nursery.start(fish.run, bus)
+            started = trio.current_time()
+
+            async def next_command() -> None:
+                _, payload = await commands.receive()
+                got.append((trio.current_time() - started, decode(payload, Command)))
+
+            await next_command()  # the watchdog, 5 s after start
+            await trio.sleep(1.0)
+            bus.put(KEYS.perception(3), _perception(3, 1))
+            await next_command()  # the answer, at once
+            await next_command()  # the watchdog again, 5 s after the perception
+            nursery.cancel_scope.cancel()
+        return got, fish.statistics()
+
+    got, statistics = run_mock(main)
+    (stop_at, stop), (answer_at, answer), (again_at, again) = got
+    assert (stop_at, answer_at, again_at) == (5.0, 6.0, 11.0)
+    assert stop.fins.tolist() == [0.0, 0.0, 0.0, 0.0] and stop.led is False
+    # Dispersing from a neighbour ahead and a little left: turn away with the left pectoral.
+    assert answer.tick == 1 and answer.fins.tolist() == [0.0, 0.0, 1.0, 0.0] and answer.led
+    assert again.tick == 1 and again.fins.tolist() == [0.0, 0.0, 0.0, 0.0]
+    assert statistics.watchdog_stops == 2 and statistics.commands == 3
+    assert statistics.perceptions == 1 and statistics.rejected == 0
+
+
+def test_school_answers_a_batch_as_each_fish_would_alone() -> None:
+    params = Scenario().fish_params()
+    settings = FishSettings((5, 2), params, KEYS, school="pond")
+    near = np.array([[0.3, 0.0, 0.0]])
+    far = np.array([[1.0, -0.1, 0.0], [-0.5, 0.5, 0.1]])
+    batch = PerceptionBatch(
+        4,
+        4.0,
+        np.array([2, 5]),
+        np.array([0.5, 0.2]),
+        np.array([1, 2]),
+        np.concatenate([near, far]),
+        np.zeros(2, dtype=np.int64),
+        np.zeros((0, 3)),
+        np.zeros(2, dtype=np.int64),
+    )
+    stranger = PerceptionBatch(
+        5,
+        5.0,
+        np.array([2, 7]),
+        np.zeros(2),
+        np.zeros(2, dtype=np.int64),
+        np.zeros((0, 3)),
+        np.zeros(2, dtype=np.int64),
+        np.zeros((0, 3)),
+        np.zeros(2, dtype=np.int64),
+    )
+
+    async def main() -> tuple[CommandBatch, FishStatistics]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        async with (
+            subscription(bus, KEYS.school_commands("pond")) as commands,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(fish.run, bus)
+            bus.put(KEYS.school_perceptions("pond"), encode(stranger))
+            bus.put(KEYS.school_perceptions("pond"), encode(batch))
+            answer = decode((await commands.receive())[1], CommandBatch)
+            nursery.cancel_scope.cancel()
+        return answer, fish.statistics()
+
+    answer, statistics = run_mock(main)
+    assert answer.tick == 4 and answer.ids.tolist() == [2, 5]
+    for row, (neighbors, depth) in enumerate(((near, 0.5), (far, 0.2))):
+        rows, mask = pad_rows(np.array([len(neighbors)]), neighbors)
+        alone = Perception(
+            np.array([4.0]),
+            np.array([depth]),
+            rows,
+            mask,
+            np.zeros((1, 0, 3)),
+            np.zeros((1, 0), bool),
+        )
+        _, decision = decide(FishMemory.fresh(params, 1), alone, CoreInbox.empty(1), params=params)
+        np.testing.assert_array_equal(answer.fins[row], decision.fins[0])
+    assert answer.led.tolist() == [True, True]
+    assert statistics.rejected == 1  # the batch naming fish 7, which the school lacks
+    assert statistics.perceptions == 2 and statistics.commands == 2
+
+
+def test_fish_waits_for_announced_deliveries_then_broadcasts_before_its_command() -> None:
+    params = Scenario(behavior=registered().name).fish_params()
+    settings = FishSettings((4,), params, KEYS, inbox_timeout=2.0)
+
+    async def main() -> tuple[list[tuple[float, str, bytes]], FishStatistics]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        order: list[tuple[float, str, bytes]] = []
+        seen: Inbox[None] = Inbox()
+
+        def note(key: str, payload: bytes) -> None:
+            order.append((trio.current_time(), key, payload))
+            seen.push(None)
+
+        bus.subscribe(f"{KEYS.prefix}/fish/4/*", note)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(fish.run, bus)
+            bus.put(KEYS.perception(4), _perception(4, 2, inbox_count=2))
+            await trio.sleep(1.0)  # one delivery only: the fish waits
+            delivery = Delivery(4, 2, "signal", np.array([3]), np.array([0.2, 0.1, 0.0]))
+            bus.put(KEYS.inbox(4), encode(delivery))
+            await trio.sleep(0.5)
+            bus.put(KEYS.inbox(4), encode(delivery))
+            while sum(key.endswith("/command") for _, key, _ in order) < 1:
+                await seen.receive()
+            # A perception announcing one delivery that never comes: decided at the timeout.
+            bus.put(KEYS.perception(4), _perception(4, 3, inbox_count=1))
+            while sum(key.endswith("/command") for _, key, _ in order) < 2:
+                await seen.receive()
+            nursery.cancel_scope.cancel()
+        return order, fish.statistics()
+
+    order, statistics = run_mock(main)
+    sent = [
+        (at, key.rsplit("/", 1)[1])
+        for at, key, _ in order
+        if not key.endswith(("perception", "inbox"))
+    ]
+    assert sent == [(1.5, "outbox"), (1.5, "command"), (3.5, "outbox"), (3.5, "command")]
+    outputs = [payload for _, key, payload in order if key.endswith(("outbox", "command"))]
+    broadcast, command = decode(outputs[0], Broadcast), decode(outputs[1], Command)
+    # It heard two signals, from (0.2, 0.1, 0): it swims there, LEDs lit, and says so.
+    assert broadcast.tick == 2 and broadcast.values[:2].tolist() == [2, 0]
+    assert command.broadcasts == 1 and command.led is True
+    late = decode(outputs[3], Command)
+    assert late.led is False  # heard nothing in time
+    assert statistics.deliveries == 2 and statistics.deliveries_missed == 1
+    assert statistics.broadcasts == 2
+
+
+def test_a_new_run_starts_the_fish_afresh() -> None:
+    settings = FishSettings((1,), Scenario().fish_params(), KEYS)
+
+    async def main() -> tuple[list[int], FishStatistics]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        ticks: list[int] = []
+        async with subscription(bus, KEYS.command(1)) as commands, trio.open_nursery() as nursery:
+            await nursery.start(fish.run, bus)
+            for run, tick in ((7, 0), (7, 1), (7, 1), (8, 0), (8, 1)):
+                bus.put(KEYS.perception(1), _perception(1, tick, run=run))
+                with trio.move_on_after(0.5):
+                    ticks.append(decode((await commands.receive())[1], Command).tick)
+            nursery.cancel_scope.cancel()
+        return ticks, fish.statistics()
+
+    ticks, statistics = run_mock(main)
+    assert ticks == [0, 1, 0, 1]  # the repeated tick 1 of run 7 is stale; run 8 starts at 0
+    assert statistics.rejected == 1 and statistics.runs == 1
+
+
+def test_a_new_run_frees_every_fish_of_a_batch_it_drops() -> None:
+    settings = FishSettings((1, 2), Scenario().fish_params(), KEYS, school="pair")
+
+    def batch(run: int, tick: int, ids: list[int], inbox: list[int]) -> bytes:
+        count = len(ids)
+        return encode(
+            PerceptionBatch(
+                tick, float(tick), np.array(ids), np.full(count, 0.5),
+                np.zeros(count, dtype=np.int64), np.zeros((0, 3)),
+                np.zeros(count, dtype=np.int64), np.zeros((0, 3)), np.array(inbox), run,
+            )
+        )  # fmt: skip
+
+    async def main() -> tuple[list[list[int]], FishStatistics]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        answered: list[list[int]] = []
+        async with (
+            subscription(bus, KEYS.school_commands("pair")) as commands,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(fish.run, bus)
+            # Run 5: both fish wait for a delivery that never comes...
+            bus.put(KEYS.school_perceptions("pair"), batch(5, 3, [1, 2], [1, 1]))
+            await trio.sleep(1.0)
+            # ... when run 6 starts with fish 1 alone, then fish 2 (jitter-style subsets).
+            bus.put(KEYS.school_perceptions("pair"), batch(6, 1, [1], [0]))
+            bus.put(KEYS.school_perceptions("pair"), batch(6, 1, [2], [0]))
+            for _ in range(2):
+                with trio.fail_after(1.0):
+                    answered.append(
+                        decode((await commands.receive())[1], CommandBatch).ids.tolist()
+                    )
+            nursery.cancel_scope.cancel()
+        return answered, fish.statistics()
+
+    answered, statistics = run_mock(main)
+    assert sorted(answered) == [[1], [2]]
+    assert statistics.rejected == 0 and statistics.runs == 1

@@ -1,0 +1,394 @@
+"""The world actor with fish, channel and observer on the in-memory Bus under trio's
+MockClock: the tick barrier, lost and late fish, control, realtime pacing, broadcasts —
+and the same trajectories as the batch engine."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trio
+
+from fishswarm.actors.bus import MemoryBus, open_token
+from fishswarm.actors.channel import Channel
+from fishswarm.actors.fish import Fish, FishSettings
+from fishswarm.actors.observer import Observer
+from fishswarm.actors.world import World, WorldSettings
+from fishswarm.protocols.codec import decode, encode
+from fishswarm.protocols.messages import (
+    FORMATION_SHAPES,
+    Broadcast,
+    Command,
+    ControlRequest,
+    Delivery,
+    FormationFlag,
+    Perception,
+    Snapshot,
+)
+from fishswarm.sim.engine import run_batch
+from fishswarm.sim.scenario import Scenario
+from tests.behaviors.signal_behavior import registered
+from tests.conftest import run_mock, subscription
+
+
+async def _swarm(scenario: Scenario, *, schools: int) -> tuple[World, list[Snapshot]]:
+    """Run a whole swarm in this process on a MemoryBus to the end of its scenario: the
+    world, the channel, and the fish spread over ``schools`` fish actors (a school each, or
+    a fish on its own keys)."""
+    bus = MemoryBus()
+    world = World(WorldSettings(scenario, expected_fish=tuple(range(scenario.fish))))
+    params = scenario.fish_params()
+    ids = list(range(scenario.fish))
+    async with (
+        subscription(bus, scenario.keys.snapshot) as snapshots,
+        trio.open_nursery() as nursery,
+    ):
+        await nursery.start(Channel(scenario).run, bus)
+        for n in range(min(schools, len(ids))):
+            group = tuple(ids[n::schools])
+            school = f"s{n}" if len(group) > 1 else None
+            fish = Fish(FishSettings(group, params, scenario.keys, school=school))
+            await nursery.start(fish.run, bus)
+        await world.run(bus)
+        nursery.cancel_scope.cancel()
+    return world, [decode(payload, Snapshot) for _, payload in snapshots.drain()]
+
+
+@pytest.mark.parametrize(
+    "changes",
+    [
+        {"behavior": "aggregation"},
+        {"behavior": "milling", "controller": "pid"},
+        {"behavior": "waltz", "fish": 2},
+        {"behavior": "dispersion", "time_mode": "jitter", "vision_noise": 0.05},
+        {
+            "behavior": "formation",
+            "formation": "pyramid",
+            "switch_formation": "diamond",
+            "switch_at": 3.0,
+            "controller": "pid",
+            "spawn_radius": 0.4,
+            "spacing": 0.25,
+        },
+    ],
+)
+def test_the_actors_give_the_batch_engines_trajectory(changes: dict[str, object]) -> None:
+    scenario = Scenario(fish=7, duration=6.0, seed=5).replace(**changes)
+    world, snapshots = run_mock(lambda: _swarm(scenario, schools=3))
+    assert world.state_name == "finished" and world.lost == []
+    reference = run_batch(scenario)
+    np.testing.assert_array_equal(np.array([s.position for s in snapshots]), reference.position)
+    np.testing.assert_array_equal(np.array([s.yaw for s in snapshots]), reference.yaw)
+
+
+def test_broadcasts_decided_at_a_tick_are_heard_at_the_next_and_match_the_batch_engine() -> None:
+    behavior = registered().name
+    scenario = Scenario(fish=5, duration=5.0, seed=2, behavior=behavior, channel_loss=0.3)
+
+    async def main() -> tuple[list[Snapshot], list[Delivery], World, Channel]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=tuple(range(5))))
+        medium = Channel(scenario)
+        params = scenario.fish_params()
+        async with (
+            subscription(bus, scenario.keys.snapshot) as snapshots,
+            subscription(bus, f"{scenario.keys.prefix}/fish/*/inbox") as inboxes,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(medium.run, bus)
+            await nursery.start(
+                Fish(FishSettings((0, 1, 2), params, scenario.keys, school="a")).run, bus
+            )
+            for fish_id in (3, 4):
+                await nursery.start(Fish(FishSettings((fish_id,), params, scenario.keys)).run, bus)
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return (
+            [decode(p, Snapshot) for _, p in snapshots.drain()],
+            [decode(p, Delivery) for _, p in inboxes.drain()],
+            world,
+            medium,
+        )
+
+    snapshots, deliveries, world, medium = run_mock(main)
+    positions = np.array([s.position for s in snapshots])
+    np.testing.assert_array_equal(positions, run_batch(scenario).position)
+    # Every fish broadcasts at every decision (ticks 0–4); each is heard at the next tick.
+    assert [s.broadcasts.tolist() for s in snapshots] == [[0] * 5] + [[1] * 5] * 5
+    # The channel delivers at every snapshot after one with broadcasts; the last one (tick 5,
+    # which nobody acts on) only if it gets to it before the run is torn down.
+    acted_on = [d for d in deliveries if d.tick < 5]
+    assert sorted({d.tick for d in acted_on}) == [1, 2, 3, 4]
+    assert all(d.values[1] == d.tick - 1 for d in deliveries)  # sent at the tick before
+    # 5 senders × 4 others × 4 ticks, all in range, about 30 % lost (seeded).
+    assert 40 <= len(acted_on) < 80
+    assert medium.statistics().delivered == len(deliveries)
+    assert medium.statistics().missing_broadcasts == 0
+    assert world.statistics().rejected_total == 0
+
+
+def test_the_world_waits_for_a_slow_fish_at_every_tick() -> None:
+    scenario = Scenario(fish=1, duration=3.0, seed=1)
+    keys = scenario.keys
+
+    async def main() -> list[float]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0))
+        started = trio.current_time()
+        snapshot_times: list[float] = []
+        bus.subscribe(keys.snapshot, lambda k, p: snapshot_times.append(trio.current_time()))
+        async with (
+            subscription(bus, keys.perception(0)) as perceptions,
+            open_token(bus, keys.alive("fish", 0)),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(world.run, bus)
+            for _ in range(3):
+                perception = decode((await perceptions.receive())[1], Perception)
+                await trio.sleep(4.0)  # a fish that takes 4 s to decide
+                command = Command(0, perception.tick, np.array([1.0, 0.0, 0.0, 0.0]))
+                bus.put(keys.command(0), encode(command))
+        return [at - started for at in snapshot_times]
+
+    # Snapshots were taken as the world moved on: tick k+1 only after the answer to tick k.
+    assert run_mock(main) == [0.0, 4.0, 8.0, 12.0]
+
+
+def test_silent_and_departed_fish_are_lost_and_the_run_goes_on() -> None:
+    scenario = Scenario(fish=3, duration=20.0, seed=1)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2), command_timeout=10.0))
+        observer = Observer(keys)
+        params = scenario.fish_params()
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(Fish(FishSettings((0,), params, keys)).run, bus)
+            departing = trio.CancelScope()
+
+            async def fish_that_leaves() -> None:
+                with departing:
+                    await Fish(FishSettings((1,), params, keys)).run(bus)
+
+            nursery.start_soon(fish_that_leaves)
+            silent = bus.declare_token(keys.alive("fish", 2))  # alive, never answers
+            nursery.start_soon(world.run, bus)
+            await observer.wait_for_tick(5)  # fish 2 was lost at tick 0, 10 s in
+            departing.cancel()
+            while world.state_name != "finished":
+                await trio.sleep(1.0)
+            silent.undeclare()
+            nursery.cancel_scope.cancel()
+        return world
+
+    world = run_mock(main)
+    assert world.tick == 20
+    lost = {f.fish_id: (f.tick, f.reason) for f in world.lost}
+    assert lost[2] == (0, "no command within 10 s")
+    # It left after the observer saw tick 5, while the world was at tick 5 or 6.
+    assert lost[1][0] in (5, 6) and lost[1][1] == "left (liveliness token gone)"
+    assert world.statistics().live_fish == 1
+
+
+def test_a_late_fish_joins_at_a_later_tick() -> None:
+    scenario = Scenario(fish=3, duration=8.0, seed=4)
+    keys = scenario.keys
+
+    async def main() -> tuple[World, list[int]]:
+        bus = MemoryBus()
+        # In lockstep on a MockClock no time passes between ticks: admit at once.
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2), admit_delay=0.0))
+        observer = Observer(keys)
+        params = scenario.fish_params()
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(Fish(FishSettings((0, 1, 2), params, keys, school="t")).run, bus)
+            nursery.start_soon(world.run, bus)
+            await observer.wait_for_tick(3)
+            await nursery.start(Fish(FishSettings((9,), params, keys)).run, bus)
+            await observer.wait_for_tick(8)
+            nursery.cancel_scope.cancel()
+        return world, [p.fish for p in observer.history]
+
+    world, counts = run_mock(main)
+    # It came up after the observer saw tick 3, while the world was at tick 3 or 4 (trio
+    # schedules ready tasks in no fixed order): it enters at the next snapshot.
+    assert len(world.joined) == 1 and world.joined[0][0] == 9
+    joined_tick = world.joined[0][1]
+    assert joined_tick in (4, 5)
+    assert counts[:joined_tick] == [3] * joined_tick
+    assert counts[joined_tick:] == [4] * (9 - joined_tick)  # in the snapshot it joined at
+
+
+def test_control_pauses_resumes_and_stops_the_world() -> None:
+    scenario = Scenario(fish=2, duration=1000.0)
+
+    async def main() -> list[tuple[str, int]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
+        observer = Observer(scenario.keys)
+        params = scenario.fish_params()
+        answers = []
+
+        def ask(action: str) -> None:
+            reply = world.control(ControlRequest(action))
+            answers.append((reply.state, reply.tick))
+
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(Fish(FishSettings((0, 1), params, scenario.keys)).run, bus)
+            nursery.start_soon(world.run, bus)
+            await observer.wait_for_tick(2)
+            ask("pause")
+            await trio.sleep(100.0)  # paused: no tick goes by, however long
+            ask("status")
+            ask("resume")
+            await observer.wait_for_tick(5)
+            ask("stop")
+            while world.state_name != "stopped":
+                await trio.sleep(0.01)
+            ask("status")
+            nursery.cancel_scope.cancel()
+        return answers
+
+    # Asked during tick 2, after its perceptions went out: tick 2 completes, then the world
+    # holds after the snapshot of tick 3, for as long as it is paused; a stop takes effect at
+    # the next snapshot.
+    assert run_mock(main) == [
+        ("paused", 2),
+        ("paused", 3),
+        ("running", 3),
+        ("stopping", 5),
+        ("stopped", 6),
+    ]
+
+
+def test_realtime_keeps_wall_clock_pace_and_a_silent_fish_keeps_its_last_command() -> None:
+    # One fish answered by hand: full caudal for ticks 0 and 1, then silence. In realtime
+    # mode the world goes on at one tick per 0.1 s, the silent fish keeps swimming on its
+    # last command, and nobody is lost.
+    scenario = Scenario(fish=1, duration=1.2, control_period=0.1, time_mode="realtime", seed=3)
+    keys = scenario.keys
+
+    async def main() -> tuple[World, list[Snapshot], float]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.05))
+        async with (
+            subscription(bus, keys.perception(0)) as perceptions,
+            subscription(bus, keys.snapshot) as snapshot_inbox,
+            open_token(bus, keys.alive("fish", 0)),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(world.run, bus)
+            for _ in range(2):
+                perception = decode((await perceptions.receive())[1], Perception)
+                command = Command(0, perception.tick, np.array([1.0, 0.0, 0.0, 0.0]))
+                bus.put(keys.command(0), encode(command))
+            started = trio.current_time()
+            while world.state_name != "finished":
+                await trio.sleep(0.01)
+            elapsed = trio.current_time() - started
+            snapshots = [decode(p, Snapshot) for _, p in snapshot_inbox.drain()]
+            nursery.cancel_scope.cancel()
+        return world, snapshots, elapsed
+
+    world, snapshots, elapsed = run_mock(main)
+    assert world.tick == 12 and world.lost == []
+    assert world.late_commands == 10  # ticks 2–11 had no answer
+    assert elapsed == pytest.approx(1.1, abs=0.011)  # 11 periods after the answer to tick 1
+    speeds = [float(np.linalg.norm(s.velocity[0, :2])) for s in snapshots]
+    assert speeds[-1] > speeds[2] > 0  # still accelerating on the last command: caudal on
+
+
+def test_pausing_twice_is_pausing_once_and_a_finished_run_only_reports() -> None:
+    scenario = Scenario(fish=1, duration=6.0)
+
+    async def main() -> tuple[list[tuple[str, int]], str]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,)))
+        observer = Observer(scenario.keys)
+        answers = []
+
+        def ask(action: str) -> None:
+            reply = world.control(ControlRequest(action))
+            answers.append((reply.state, reply.tick))
+
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(
+                Fish(FishSettings((0,), scenario.fish_params(), scenario.keys)).run, bus
+            )
+            nursery.start_soon(world.run, bus)
+            await observer.wait_for_tick(1)
+            ask("pause")
+            ask("pause")
+            await trio.sleep(50.0)
+            ask("resume")
+            await observer.wait_for_tick(6)
+            while world.state_name != "finished":
+                await trio.sleep(0.01)
+            ask("pause")  # too late: the run is over
+            nursery.cancel_scope.cancel()
+        return answers, world.state_name
+
+    answers, state = run_mock(main)
+    assert [a[0] for a in answers] == ["paused", "paused", "running", "finished"]
+    assert answers[-1][1] == 6 and state == "finished"
+
+
+def test_liveliness_tokens_no_fish_could_have_leave_the_world_running() -> None:
+    scenario = Scenario(fish=1, duration=3.0)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,)))
+        for token in ("fish/²", "fish/3/bad.name", "fish/12345678901234567890", "fish/-4"):
+            bus.declare_token(f"{keys.prefix}/alive/{token}")
+        async with trio.open_nursery() as nursery:
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return world
+
+    world = run_mock(main)
+    assert world.state_name == "finished" and world.tick == 3
+    assert world.roster.alive == {0} and world.lost == []
+
+
+def test_an_operators_formation_switch_reaches_every_fish() -> None:
+    scenario = Scenario(fish=4, duration=20.0, behavior="formation", formation="pyramid")
+    keys = scenario.keys
+
+    async def main() -> dict[int, set[int]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2, 3)))
+        observer = Observer(keys)
+        shapes: dict[int, set[int]] = {}
+
+        def note(key: str, payload: bytes) -> None:
+            broadcast = decode(payload, Broadcast)
+            flag = FormationFlag.from_values(broadcast.values)
+            shapes.setdefault(broadcast.tick, set()).add(flag.shape)
+
+        bus.subscribe(f"{keys.prefix}/fish/*/outbox", note)
+        params = scenario.fish_params()
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(Fish(FishSettings((0, 1), params, keys, school="a")).run, bus)
+            await nursery.start(Fish(FishSettings((2, 3), params, keys, school="b")).run, bus)
+            nursery.start_soon(world.run, bus)
+            await observer.wait_for_tick(5)
+            reply = world.control(ControlRequest("formation", formation="diamond"))
+            assert reply.state == "running"
+            await observer.wait_for_tick(12)
+            nursery.cancel_scope.cancel()
+        return shapes
+
+    shapes = run_mock(main)
+    pyramid, diamond = FORMATION_SHAPES.index("pyramid"), FORMATION_SHAPES.index("diamond")
+    assert shapes[0] == {pyramid}
+    assert shapes[11] == {diamond}  # every fish, in both schools
+    switched = min(tick for tick, seen in shapes.items() if diamond in seen)
+    assert 5 <= switched <= 7 and all(shapes[t] == {diamond} for t in shapes if t > switched)

@@ -1,0 +1,136 @@
+"""Single actors over real Zenoh on 127.0.0.1: the channel's situated deliveries, and the
+world's control queryable."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import trio
+
+from fishswarm.actors.channel import Channel
+from fishswarm.actors.control import serve_control
+from fishswarm.actors.fish import Fish, FishSettings
+from fishswarm.actors.session import SessionSettings, open_session
+from fishswarm.actors.world import World, WorldSettings
+from fishswarm.actors.zenoh_bus import ZenohBus, query
+from fishswarm.protocols.codec import decode, encode
+from fishswarm.protocols.messages import (
+    Broadcast,
+    ChannelReport,
+    ControlReply,
+    ControlRequest,
+    Delivery,
+    Snapshot,
+)
+from fishswarm.sim.scenario import Scenario
+from tests.conftest import run_trio, subscription
+
+pytestmark = pytest.mark.integration
+
+
+def _snapshot(
+    tick: int, position: list[list[float]], yaw: list[float], sent: list[int]
+) -> Snapshot:
+    count = len(position)
+    return Snapshot(
+        tick,
+        float(tick),
+        np.arange(count),
+        np.array(position),
+        np.zeros((count, 3)),
+        np.array(yaw),
+        np.zeros(count, dtype=np.int64),
+        np.array(sent),
+    )
+
+
+def test_channel_delivers_in_range_with_sender_position_in_receiver_frame(endpoint: str) -> None:
+    scenario = Scenario(fish=4, channel_range=1.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[list[Delivery], ChannelReport, int]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        channel = Channel(scenario)
+        async with open_session(router) as session:
+            bus = ZenohBus(session)
+            async with (
+                subscription(bus, f"{keys.prefix}/fish/*/inbox") as inboxes,
+                subscription(bus, keys.channel_report) as reports,
+                trio.open_nursery() as nursery,
+            ):
+                await nursery.start(channel.run, bus)
+                # A key whose fish id is not a number: rejected, and the channel goes on.
+                bus.put(f"{keys.prefix}/fish/abc/outbox", b"\x00")
+                bus.put(f"{keys.prefix}/fish/²/outbox", b"\x00")
+                # Fish 0 at (1, 1) sends at tick 0; fish 1 (0.5 m ahead of 0, facing +y) and
+                # fish 2 (right behind 0) are in range; fish 3 is 1.5 m away.
+                bus.put(keys.outbox(0), encode(Broadcast(0, 0, "signal", np.array([7]))))
+                snapshot = _snapshot(
+                    1,
+                    [[1.0, 1.0, 0.5], [1.5, 1.0, 0.5], [0.8, 1.0, 0.5], [2.5, 1.0, 0.5]],
+                    [0.0, math.pi / 2, 0.0, 0.0],
+                    [1, 0, 0, 0],
+                )
+                bus.put(keys.snapshot, encode(snapshot))
+                with trio.fail_after(10):
+                    report = decode((await reports.receive())[1], ChannelReport)
+                    deliveries = [decode((await inboxes.receive())[1], Delivery) for _ in range(2)]
+                nursery.cancel_scope.cancel()
+        return deliveries, report, channel.statistics().rejected
+
+    deliveries, report, rejected = run_trio(main)
+    assert rejected == 2
+    assert report.tick == 1
+    assert report.inbox_counts.tolist() == [0, 1, 1, 0]
+    by_receiver = {d.receiver_id: d for d in deliveries}
+    assert set(by_receiver) == {1, 2}
+    assert by_receiver[1].kind == "signal" and by_receiver[1].values.tolist() == [7]
+    # Fish 1 faces +y; with z down its right side points to −x of the tank, where the sender
+    # is, 0.5 m away: body (0, +0.5, 0).
+    np.testing.assert_allclose(by_receiver[1].sender_position, [0.0, 0.5, 0.0], atol=1e-12)
+    np.testing.assert_allclose(by_receiver[2].sender_position, [0.2, 0.0, 0.0], atol=1e-12)
+
+
+def test_world_answers_control_queries_over_zenoh(endpoint: str) -> None:
+    scenario = Scenario(fish=2, duration=100_000.0)
+
+    async def main() -> tuple[list[ControlReply], int]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        client = SessionSettings(mode="client", connect=[endpoint])
+        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
+        params = scenario.fish_params()
+        answers: list[ControlReply] = []
+        async with (
+            open_session(router) as hub,
+            open_session(client) as other,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(
+                Fish(FishSettings((0, 1), params, scenario.keys)).run, ZenohBus(other)
+            )
+            await nursery.start(serve_control, hub, world)
+            nursery.start_soon(world.run, ZenohBus(hub))
+
+            async def ask(payload: bytes) -> list[bytes]:
+                with trio.fail_after(10):
+                    while True:  # until the queryable is known to the asker's router
+                        replies = await query(other, scenario.keys.control, payload, timeout=1.0)
+                        if replies or payload == b"garbage":
+                            return replies
+
+            for action in ("pause", "status", "stop"):
+                (answer,) = await ask(encode(ControlRequest(action)))
+                answers.append(decode(answer, ControlReply))
+            assert await ask(b"garbage") == []
+            with trio.fail_after(10):
+                while world.state_name != "stopped":
+                    await trio.sleep(0.01)
+            nursery.cancel_scope.cancel()
+        return answers, world.statistics().rejected["malformed"]
+
+    (pause, status, stop), malformed = run_trio(main)
+    assert (pause.state, status.state, stop.state) == ("paused", "paused", "stopping")
+    assert status.live_fish == 2 and status.tick in (pause.tick, pause.tick + 1)
+    assert malformed == 1

@@ -1,0 +1,139 @@
+"""The Zenoh Bus and sessions over real sessions on 127.0.0.1, and the trio inbox."""
+
+from __future__ import annotations
+
+import threading
+
+import pytest
+import trio
+
+from fishswarm.actors.bus import open_alive_events, open_token
+from fishswarm.actors.inbox import Inbox
+from fishswarm.actors.session import ConnectError, SessionSettings, check_endpoint, open_session
+from fishswarm.actors.zenoh_bus import ZenohBus, open_queryable, query, reply
+from tests.conftest import free_port, run_trio, subscription, wait_until_routed
+
+pytestmark = pytest.mark.integration
+
+
+def test_inbox_keeps_order_across_threads() -> None:
+    async def main() -> list[int]:
+        inbox: Inbox[int] = Inbox()
+
+        def produce() -> None:
+            for n in range(10_000):
+                inbox.push(n)
+
+        thread = threading.Thread(target=produce)
+        thread.start()
+        received = [await inbox.receive() for _ in range(10_000)]
+        thread.join()
+        return received
+
+    assert run_trio(main) == list(range(10_000))
+
+
+def test_inbox_receive_nowait_raises_would_block_when_empty() -> None:
+    async def main() -> tuple[int, list[int]]:
+        inbox: Inbox[int] = Inbox()
+        with pytest.raises(trio.WouldBlock):
+            inbox.receive_nowait()
+        for n in (4, 5, 6):
+            inbox.push(n)
+        first = inbox.receive_nowait()
+        return first, inbox.drain()
+
+    assert run_trio(main) == (4, [5, 6])
+
+
+def test_put_reaches_subscriber_through_router(endpoint: str) -> None:
+    async def main() -> list[tuple[str, bytes]]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        client = SessionSettings(mode="client", connect=[endpoint])
+        async with (
+            open_session(router),
+            open_session(client) as a,
+            open_session(client) as b,
+            subscription(ZenohBus(b), "test/**") as inbox,
+        ):
+            sender = ZenohBus(a)
+            await wait_until_routed(sender, inbox, "test/probe")
+            for n in range(3):
+                sender.put(f"test/{n}", bytes([n]))
+            got = [await inbox.receive() for _ in range(3)]
+            return got
+
+    assert run_trio(main) == [("test/0", b"\x00"), ("test/1", b"\x01"), ("test/2", b"\x02")]
+
+
+def test_liveliness_tokens_come_and_go(endpoint: str) -> None:
+    async def main() -> list[tuple[str, bool]]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        client = SessionSettings(mode="client", connect=[endpoint])
+        events: Inbox[tuple[str, bool]] = Inbox()
+        async with (
+            open_session(router) as hub,
+            open_alive_events(ZenohBus(hub), "alive/**", lambda k, a: events.push((k, a))),
+        ):
+            async with open_session(client) as member:
+                async with open_token(ZenohBus(member), "alive/fish/7"):
+                    first = await events.receive()
+                second = await events.receive()
+            return [first, second]
+
+    assert run_trio(main) == [("alive/fish/7", True), ("alive/fish/7", False)]
+
+
+def test_queryable_answers_from_trio(endpoint: str) -> None:
+    async def main() -> list[bytes]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        client = SessionSettings(mode="client", connect=[endpoint])
+        async with (
+            open_session(router) as hub,
+            open_session(client) as asker,
+            open_queryable(hub, "ctl") as queries,
+            trio.open_nursery() as nursery,
+        ):
+
+            async def serve() -> None:
+                request = await queries.receive()
+                assert request.payload is not None
+                reply(request, b"pong:" + request.payload.to_bytes())
+
+            nursery.start_soon(serve)
+            # The queryable may take a moment to reach the asker's router: ask until answered.
+            with trio.fail_after(10):
+                while not (answers := await query(asker, "ctl", b"ping", timeout=0.5)):
+                    pass
+            return answers
+
+    assert run_trio(main) == [b"pong:ping"]
+
+
+def test_connecting_to_nothing_fails_clearly() -> None:
+    settings = SessionSettings(
+        mode="client", connect=[f"tcp/127.0.0.1:{free_port()}"], connect_timeout=0.5
+    )
+
+    async def main() -> None:
+        async with open_session(settings):
+            pass
+
+    with pytest.raises(ConnectError, match="is a fishswarm run or router listening there"):
+        run_trio(main)
+
+
+def test_port_in_use_fails_clearly(endpoint: str) -> None:
+    async def main() -> None:
+        settings = SessionSettings(mode="router", listen=[endpoint])
+        async with open_session(settings), open_session(settings):
+            pass
+
+    with pytest.raises(ConnectError, match="another program using that port"):
+        run_trio(main)
+
+
+@pytest.mark.parametrize("bad", ["127.0.0.1:7447", "tcp/127.0.0.1", "tcp/:7447", "xyz/a:1"])
+def test_bad_endpoints_are_explained(bad: str) -> None:
+    with pytest.raises(ValueError, match="PROTOCOL/HOST:PORT"):
+        check_endpoint(bad)

@@ -1,0 +1,250 @@
+"""The fish core: one decision shape for every behaviour, batch == loop of single fish."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fishswarm.behaviors.core import (
+    FishMemory,
+    FishParams,
+    Inbox,
+    Perception,
+    decide,
+    inbox_of,
+    pad_rows,
+    put_rows,
+    take_rows,
+)
+from fishswarm.behaviors.registry import BEHAVIORS, behavior_named, fish_params, register
+from fishswarm.behaviors.replica import STUDY_SCALE, replica_motion
+from fishswarm.protocols.messages import BROADCAST_WIDTH
+from tests.behaviors.signal_behavior import SIGNAL, registered
+
+TANK = (1.78, 1.78, 1.17)
+
+
+def _settings(behavior: str, controller: str, model: Path) -> dict[str, object]:
+    return {
+        "behavior": behavior,
+        "controller": controller,
+        "tank": TANK,
+        "target_distance": None,
+        "orbit_radius": 0.45,
+        "model": str(model),
+        "control_period": 1.0,
+    }
+
+
+def _perception(rng: np.random.Generator, count: int, time: float) -> Perception:
+    width = 6
+    neighbors = rng.normal(0, 0.5, (count, width, 3))
+    seen = rng.integers(0, width + 1, count)
+    mask = np.arange(width)[None, :] < seen[:, None]
+    neighbors[~mask] = 0.0
+    landmarks = rng.normal(0, 0.6, (count, 1, 3))
+    landmark_mask = rng.uniform(size=(count, 1)) < 0.8
+    landmarks[~landmark_mask] = 0.0
+    return Perception(
+        np.full(count, time),
+        rng.uniform(0.2, 1.0, count),
+        neighbors,
+        mask,
+        landmarks,
+        landmark_mask,
+    )
+
+
+def _inbox(rng: np.random.Generator, count: int) -> Inbox:
+    heard = [
+        [
+            (0, rng.integers(-5, 5, BROADCAST_WIDTH), rng.normal(0, 0.4, 3))
+            for _ in range(int(rng.integers(0, 3)))
+        ]
+        for _ in range(count)
+    ]
+    return inbox_of(heard)
+
+
+def _alone(perception: Perception, inbox: Inbox, row: int) -> tuple[Perception, Inbox]:
+    """One fish's perception and inbox, its padding cut to what it really has."""
+    seen = int(perception.neighbor_mask[row].sum())
+    heard = int(inbox.mask[row].sum())
+    rows = np.array([row])
+    own = take_rows(perception, rows)
+    own_inbox = take_rows(inbox, rows)
+    return (
+        Perception(
+            own.time,
+            own.depth,
+            own.neighbors[:, :seen],
+            own.neighbor_mask[:, :seen],
+            own.landmarks,
+            own.landmark_mask,
+        ),
+        Inbox(
+            own_inbox.kind[:, :heard],
+            own_inbox.values[:, :heard],
+            own_inbox.sender[:, :heard],
+            own_inbox.mask[:, :heard],
+        ),
+    )
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("model") / "best_replica.npz"
+    weights = np.random.default_rng(0).normal(0, 1, 21)
+    np.savez(path, weights=weights, settings='{"behavior": "aggregation"}')
+    return path
+
+
+@pytest.mark.parametrize("controller", ["homing", "pid"])
+@pytest.mark.parametrize("behavior", [*BEHAVIORS, SIGNAL.name])
+def test_batch_equals_loop_of_single_fish(controller: str, behavior: str, model: Path) -> None:
+    registered()
+    params = fish_params(_settings(behavior, controller, model))
+    rng = np.random.default_rng(8)
+    count = 9
+    memory = FishMemory.fresh(params, count)
+    for step in range(3):
+        # Jittered decision times, so the pid loops integrate over uneven periods.
+        perception = _perception(rng, count, 1.0 + step + rng.uniform(-0.2, 0.2))
+        inbox = _inbox(rng, count)
+        next_memory, decision = decide(memory, perception, inbox, params=params)
+        for i in range(count):
+            own, own_inbox = _alone(perception, inbox, i)
+            single_memory, single = decide(
+                take_rows(memory, np.array([i])), own, own_inbox, params=params
+            )
+            np.testing.assert_array_equal(single.fins[0], decision.fins[i])
+            assert single.led[0] == decision.led[i]
+            np.testing.assert_array_equal(single.outbox.values[0], decision.outbox.values[i])
+            assert single.outbox.mask[0] == decision.outbox.mask[i]
+            np.testing.assert_array_equal(
+                single_memory.last_time, take_rows(next_memory, np.array([i])).last_time
+            )
+        memory = next_memory
+
+
+def test_pid_integrates_over_the_real_elapsed_time() -> None:
+    params = fish_params({"behavior": "aggregation", "controller": "pid", "tank": TANK})
+    ahead = Perception(
+        np.array([0.0]),
+        np.array([0.5]),
+        np.array([[[1.0, 0.0, 0.1]]]),
+        np.ones((1, 1), bool),
+        np.zeros((1, 0, 3)),
+        np.zeros((1, 0), bool),
+    )
+    first, _ = decide(FishMemory.fresh(params, 1), ahead, Inbox.empty(1), params=params)
+    # The first decision counts one nominal period (1 s); the depth error integrates to
+    # error × 1 s. A second decision 0.25 s later adds error × 0.25 s, not × 1 s.
+    depth_error = first.pid.previous_error[0, 0]
+    assert first.pid.integral[0, 0] == pytest.approx(depth_error * 1.0)
+    later = Perception(np.array([0.25]), *[getattr(ahead, f) for f in ("depth", "neighbors",
+        "neighbor_mask", "landmarks", "landmark_mask")])  # fmt: skip
+    second, _ = decide(first, later, Inbox.empty(1), params=params)
+    assert second.pid.integral[0, 0] == pytest.approx(depth_error * 1.25)
+    assert second.last_time.tolist() == [0.25]
+
+
+def test_dispersing_fish_turns_away_from_a_neighbour_ahead() -> None:
+    # A neighbour 1 m ahead, 0.1 m left: dispersion pushes the target behind to the right
+    # (bearing ≈ 174°), so the homing controller turns with the left pectoral at
+    # min(1, 0.6 + 174/180) = 1 and keeps the caudal off; LEDs lit, nothing broadcast.
+    params = fish_params({"behavior": "dispersion", "tank": TANK})
+    perception = Perception(
+        np.array([1.0]),
+        np.array([0.5]),
+        np.array([[[1.0, -0.1, 0.0]]]),
+        np.ones((1, 1), bool),
+        np.zeros((1, 0, 3)),
+        np.zeros((1, 0), bool),
+    )
+    _, decision = decide(FishMemory.fresh(params, 1), perception, Inbox.empty(1), params=params)
+    assert decision.fins.tolist() == [[0.0, 0.0, 1.0, 0.0]]
+    assert decision.led.tolist() == [True]
+    assert not decision.outbox.mask.any()
+
+
+def test_replica_holds_its_first_depth(model: Path) -> None:
+    params = fish_params({"behavior": "replica", "model": str(model), "tank": TANK})
+    alone = Perception(
+        np.array([0.0]),
+        np.array([0.5]),
+        np.zeros((1, 0, 3)),
+        np.zeros((1, 0), bool),
+        np.zeros((1, 0, 3)),
+        np.zeros((1, 0), bool),
+    )
+    memory, _ = decide(FishMemory.fresh(params, 1), alone, Inbox.empty(1), params=params)
+    assert memory.behavior.hold_depth.tolist() == [0.5]
+    # Now 5 cm shallower: the target points down (z > 0), so the dorsal fin comes on.
+    shallower = Perception(np.array([1.0]), np.array([0.45]), *[getattr(alone, f) for f in (
+        "neighbors", "neighbor_mask", "landmarks", "landmark_mask")])  # fmt: skip
+    memory, decision = decide(memory, shallower, Inbox.empty(1), params=params)
+    assert decision.fins[0, 1] == 1.0
+    assert memory.behavior.hold_depth.tolist() == [0.5]
+
+
+def test_replica_motion_by_hand() -> None:
+    # Hidden weights 0 → hidden 0.5; output biases +50, 0, +50 → outputs (1, 0.5, 1):
+    # direction (+1, 0), speed 9 per neighbour; two neighbours sum to 18, capped at 9 units/s:
+    # 9 × 1 s × 1.78/300 m = 0.0534 m straight ahead.
+    weights = np.zeros(21)
+    weights[18:21] = [50.0, 0.0, 50.0]
+    neighbors = np.array([[[0.3, 0.1, 0.0], [-0.2, 0.2, 0.1], [9.0, 9.0, 0.0]]])
+    mask = np.array([[True, True, False]])
+    motion = replica_motion(neighbors, mask, weights=weights)
+    np.testing.assert_allclose(motion, [[9 * STUDY_SCALE, 0.0]], atol=1e-15)
+    far = replica_motion(np.array([[[0.7, 0.0, 0.0]]]), np.ones((1, 1), bool), weights=weights)
+    np.testing.assert_array_equal(far, [[0.0, 0.0]])
+
+
+def test_bad_behaviours_and_parameters_are_explained(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="behavior must be one of dispersion, aggregation"):
+        behavior_named("schooling")
+    with pytest.raises(ValueError, match="needs a learned model"):
+        fish_params({"behavior": "replica", "tank": TANK})
+    with pytest.raises(ValueError, match="orbit radius must be positive"):
+        fish_params({"behavior": "orbit", "orbit_radius": -1.0, "tank": TANK})
+    with pytest.raises(ValueError, match="controller must be one of"):
+        FishParams(behavior_named("orbit"), None, controller="bang-bang")
+    with pytest.raises(ValueError, match="registered already"):
+        register(SIGNAL.__class__(**{**SIGNAL.__dict__, "name": "orbit"}))
+
+
+def test_rows_are_taken_and_put_back_through_nested_memory() -> None:
+    params = fish_params({"behavior": "aggregation", "controller": "pid", "tank": TANK})
+    memory = FishMemory.fresh(params, 4)
+    rows = np.array([1, 3])
+    part = take_rows(memory, rows)
+    assert part.dorsal_on.shape == (2,) and part.pid.integral.shape == (2, 3)
+    changed = FishMemory(part.behavior, np.array([True, True]), part.pid, np.array([7.0, 8.0]))
+    whole = put_rows(memory, rows, changed)
+    assert whole.dorsal_on.tolist() == [False, True, False, True]
+    np.testing.assert_array_equal(whole.last_time, [np.nan, 7.0, np.nan, 8.0])
+    assert np.isnan(memory.last_time).all()  # the original is untouched
+
+
+def test_pad_rows_unstacks_fish_after_fish() -> None:
+    stacked = np.arange(9.0).reshape(3, 3)
+    neighbors, mask = pad_rows(np.array([2, 0, 1]), stacked)
+    assert neighbors.shape == (3, 2, 3)
+    assert mask.tolist() == [[True, True], [False, False], [True, False]]
+    np.testing.assert_array_equal(neighbors[0], stacked[:2])
+    np.testing.assert_array_equal(neighbors[1], np.zeros((2, 3)))
+    np.testing.assert_array_equal(neighbors[2], [stacked[2], [0.0, 0.0, 0.0]])
+    empty, empty_mask = pad_rows(np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+    assert empty.shape == (0, 0, 3) and empty_mask.shape == (0, 0)
+
+
+def test_inbox_of_pads_what_each_fish_heard() -> None:
+    inbox = inbox_of([[(1, np.array([4, 5]), np.array([0.1, 0.2, 0.3]))], []])
+    assert inbox.mask.tolist() == [[True], [False]]
+    assert inbox.values[0, 0].tolist() == [4, 5, 0, 0, 0, 0, 0, 0]
+    assert inbox.kind.tolist() == [[1], [0]]
+    np.testing.assert_array_equal(inbox.sender[0, 0], [0.1, 0.2, 0.3])

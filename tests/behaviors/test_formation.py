@@ -1,0 +1,156 @@
+"""The formation behaviour: flags out and in, the agreed leader, and fish that form."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fishswarm.behaviors.core import FishMemory, Inbox, Perception, decide, inbox_of, take_rows
+from fishswarm.behaviors.formation import FormationParams, fresh_formation_memory, steer_formation
+from fishswarm.behaviors.registry import fish_params
+from fishswarm.protocols.messages import BROADCAST_KINDS, FORMATION_SHAPES, FormationFlag
+from fishswarm.sim.engine import run_batch
+from fishswarm.sim.scenario import Scenario
+
+FLAG = BROADCAST_KINDS.index("formation")
+
+
+def _perception(*neighbors: tuple[float, float, float], heading: float = 0.0) -> Perception:
+    rows = np.array([neighbors], dtype=np.float64).reshape(1, -1, 3)
+    return Perception(
+        np.array([1.0]),
+        np.array([0.5]),
+        rows,
+        np.ones(rows.shape[:2], dtype=np.bool_),
+        np.zeros((1, 0, 3)),
+        np.zeros((1, 0), dtype=np.bool_),
+        np.array([heading]),
+    )
+
+
+def test_a_leader_holds_slot_0_and_flags_it() -> None:
+    params = FormationParams("column", count=3)
+    # Both neighbours behind the fish (the formation faces +x of the tank, the fish too).
+    memory, steering = steer_formation(
+        fresh_formation_memory(1), _perception((-0.5, 0.0, 0.0), (-0.4, 0.3, 0.0)),
+        Inbox.empty(1), params=params,
+    )  # fmt: skip
+    assert memory.place.tolist() == [0] and memory.joined.tolist() == [True]
+    np.testing.assert_array_equal(steering.target, [[0.0, 0.0, 0.0]])
+    assert steering.outbox.mask.tolist() == [True] and steering.led.tolist() == [True]
+    flag = FormationFlag.from_values(steering.outbox.values[0])
+    assert flag == FormationFlag(FORMATION_SHAPES.index("column"), 0, True, 0, 0, 1)
+    # Without flags: nothing is broadcast.
+    silent = FormationParams("column", count=3, flags=False)
+    _, quiet = steer_formation(
+        fresh_formation_memory(1), _perception((-0.5, 0.0, 0.0)), Inbox.empty(1), params=silent
+    )
+    assert not quiet.outbox.mask.any()
+
+
+def test_a_follower_heads_for_a_slot_behind_the_flagged_leader() -> None:
+    params = FormationParams("column", count=3, spacing=0.3, rule="study")
+    # The fish faces the tank's +y (heading 90°): the formation's forward (+x of the tank)
+    # is to its left (−y in its body frame). The leader, flagged, is 1 m to its left.
+    leader_flag = FormationFlag(FORMATION_SHAPES.index("column"), 0, True, 0, 0, 4)
+    inbox = inbox_of([[(FLAG, leader_flag.values(), np.array([0.0, -1.0, 0.0]))]])
+    perception = _perception((0.0, -1.0, 0.0), heading=math.pi / 2)
+    memory, steering = steer_formation(fresh_formation_memory(1), perception, inbox, params=params)
+    # Slot 1 is 0.3 m behind the leader along the formation's forward: 0.7 m to the left.
+    assert memory.place.tolist() == [1] and memory.joined.tolist() == [False]
+    np.testing.assert_allclose(steering.target, [[0.0, -0.7, 0.0]], atol=1e-12)
+    # Not there yet: its flag says which slot it seeks, not joined, one hop from the leader;
+    # its LEDs stay dark.
+    assert steering.outbox.mask.tolist() == [True] and steering.led.tolist() == [False]
+    sought = FormationFlag.from_values(steering.outbox.values[0])
+    assert sought == FormationFlag(FORMATION_SHAPES.index("column"), 1, False, 1, 0, 1)
+    # Sharing the free slots instead: the nearest free slot is the last one, 0.6 m behind
+    # the leader, 0.4 m to the fish's left.
+    shared = FormationParams("column", count=3, spacing=0.3, rule="share")
+    memory, steering = steer_formation(fresh_formation_memory(1), perception, inbox, params=shared)
+    assert memory.place.tolist() == [2]
+    np.testing.assert_allclose(steering.target, [[0.0, -0.4, 0.0]], atol=1e-12)
+
+
+def test_a_flagged_slot_is_left_to_its_holder() -> None:
+    params = FormationParams("column", count=3, spacing=0.3)
+    flags = [
+        (FLAG, FormationFlag(2, 0, True, 0, 0, 1).values(), np.array([1.0, 0.0, 0.0])),
+        (FLAG, FormationFlag(2, 1, True, 1, 0, 1).values(), np.array([0.7, 0.0, 0.0])),
+    ]
+    perception = _perception((1.0, 0.0, 0.0), (0.7, 0.0, 0.0))
+    memory, steering = steer_formation(
+        fresh_formation_memory(1), perception, inbox_of([flags]), params=params
+    )
+    assert memory.place.tolist() == [2]
+    np.testing.assert_allclose(steering.target, [[0.4, 0.0, 0.0]], atol=1e-12)
+
+
+def test_two_fish_form_a_column_in_the_batch_engine() -> None:
+    # From 1.4 m apart: within 30 s the follower holds its slot 0.3 m behind the leader
+    # (within the tolerance, 0.075 m, give or take the 1 Hz controller's overshoot).
+    scenario = Scenario(
+        fish=2, behavior="formation", formation="column", duration=40, seed=1,
+        spawn_region="tank", controller="pid", control_period=0.5,
+    )  # fmt: skip
+    trajectory = run_batch(scenario)
+    gap = np.linalg.norm(trajectory.position[:, 0] - trajectory.position[:, 1], axis=1)
+    late = gap[trajectory.t >= 30.0]
+    assert gap[0] > 1.0
+    assert np.abs(late - 0.3).max() < 0.075
+
+
+@pytest.mark.parametrize("shape", ["pyramid", "triangle", "tetrahedron"])
+def test_formation_fish_decide_alone_as_in_a_school(shape: str) -> None:
+    params = fish_params(
+        {"behavior": "formation", "formation": shape, "fish": 6, "tank": (1.78, 1.78, 1.17)}
+    )
+    rng = np.random.default_rng(3)
+    neighbors = rng.normal(0, 0.5, (4, 5, 3))
+    mask = np.ones((4, 5), dtype=np.bool_)
+    perception = Perception(
+        np.ones(4), np.full(4, 0.5), neighbors, mask, np.zeros((4, 0, 3)),
+        np.zeros((4, 0), bool), rng.uniform(-3, 3, 4),
+    )  # fmt: skip
+    memory = FishMemory.fresh(params, 4)
+    _, together = decide(memory, perception, Inbox.empty(4), params=params)
+    for fish in range(4):
+        alone = take_rows(perception, np.array([fish]))
+        _, single = decide(FishMemory.fresh(params, 1), alone, Inbox.empty(1), params=params)
+        np.testing.assert_array_equal(single.fins[0], together.fins[fish])
+        np.testing.assert_array_equal(single.outbox.values[0], together.outbox.values[fish])
+
+
+def test_a_school_switched_to_another_shape_re_forms() -> None:
+    from fishswarm.formations.maps import target_map
+    from fishswarm.formations.metrics import shape_error
+
+    # A pyramid for 30 s, then a diamond (as an operator would ask) for 30 s more.
+    scenario = Scenario(
+        fish=15, behavior="formation", formation="pyramid", duration=60, seed=1,
+        spawn_radius=0.4, spacing=0.25, controller="pid", control_period=0.5,
+        switch_formation="diamond", switch_at=30.0,
+    )  # fmt: skip
+    trajectory = run_batch(scenario)
+
+    def error(tick: int, shape: str) -> float:
+        target = target_map(shape, 15, spacing=0.25)
+        return shape_error(trajectory.position[tick], target, tolerance=0.0625)[0]
+
+    assert error(60, "pyramid") < 0.5 * error(60, "diamond")  # formed as asked first
+    assert error(120, "diamond") < 0.5 * error(120, "pyramid")  # then re-formed
+    assert error(120, "diamond") < 0.0625
+
+
+def test_with_formation_leaves_other_behaviours_alone() -> None:
+    from fishswarm.behaviors.formation import with_formation
+
+    other = fish_params({"behavior": "aggregation", "tank": (1.78, 1.78, 1.17)})
+    assert with_formation(other, "diamond") is other
+    formation = fish_params(
+        {"behavior": "formation", "formation": "pyramid", "tank": (1.78, 1.78, 1.17)}
+    )
+    assert with_formation(formation, "pyramid") is formation
+    assert with_formation(formation, "diamond").steering.shape == "diamond"

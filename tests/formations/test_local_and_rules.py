@@ -1,0 +1,136 @@
+"""Local shapes and the study's rules, on cases drawn on paper (body frame: x forward,
+y right, z down; the fish at the origin)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fishswarm.formations.local import LOCAL_SHAPES, local_spots, nearest_neighbors
+from fishswarm.formations.maps import target_map
+from fishswarm.formations.rules import STAY, choose_spot, leader_and_rank, place_map
+
+L = 0.3
+H = L * math.sqrt(3) / 2  # height of an equilateral triangle of side L
+
+
+def _one(*points: tuple[float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    neighbors = np.array([points], dtype=np.float64).reshape(1, -1, 3)
+    return neighbors, np.ones(neighbors.shape[:2], dtype=np.bool_)
+
+
+def test_a_fish_with_two_neighbours_takes_the_near_apex_of_their_triangle() -> None:
+    # Two neighbours side by side 0.3 m ahead, 0.3 m apart: the apexes of the equilateral
+    # triangles on them are on the x axis, at 0.3 ± H; the fish takes the near one.
+    neighbors, mask = _one((0.3, -0.15, 0.0), (0.3, 0.15, 0.0))
+    spots, valid = local_spots("triangle", neighbors, mask, spacing=L)
+    assert valid.tolist() == [[True, True]]
+    assert sorted(spots[0, :, 0].round(12).tolist()) == [round(0.3 - H, 12), round(0.3 + H, 12)]
+    np.testing.assert_allclose(spots[0, :, 1:], 0.0, atol=1e-12)
+    rivals = np.zeros_like(mask)  # the pair is the shape, not rivals
+    choice = choose_spot(spots, valid, neighbors, mask, tolerance=0.25 * L, rivals=rivals)
+    np.testing.assert_allclose(spots[0, choice[0]], [0.3 - H, 0.0, 0.0], atol=1e-12)
+
+
+def test_an_occupied_spot_and_a_nearer_rival_send_a_fish_on_or_keep_it_still() -> None:
+    # As above, plus a third fish right on the near apex: occupied. The far apex has a rival
+    # (that third fish) nearer to it than our fish: taken too. No spot left: stay.
+    pair, pair_mask = _one((0.3, -0.15, 0.0), (0.3, 0.15, 0.0))
+    spots, valid = local_spots("triangle", pair, pair_mask, spacing=L)
+    neighbors, mask = _one((0.3, -0.15, 0.0), (0.3, 0.15, 0.0), (0.3 - H + 0.01, 0.0, 0.0))
+    rivals = np.array([[False, False, True]])
+    assert choose_spot(spots, valid, neighbors, mask, tolerance=0.25 * L, rivals=rivals) == [STAY]
+    # Moved off the near apex by more than the tolerance, but still nearer to it than our
+    # fish: our fish goes for the far apex only if it is nearer to it than that rival.
+    neighbors[0, 2] = [0.3 + H + 0.2, 0.0, 0.0]
+    choice = choose_spot(spots, valid, neighbors, mask, tolerance=0.25 * L, rivals=rivals)
+    np.testing.assert_allclose(spots[0, choice[0]], [0.3 - H, 0.0, 0.0], atol=1e-12)
+    # A flag claims the near apex: the fish takes the far one if no rival is nearer to it.
+    neighbors[0, 2] = [-1.0, 0.0, 0.0]
+    claimed = np.isclose(spots[:, :, 0], 0.3 - H)
+    choice = choose_spot(
+        spots, valid, neighbors, mask, tolerance=0.25 * L, rivals=rivals, claimed=claimed
+    )
+    np.testing.assert_allclose(spots[0, choice[0]], [0.3 + H, 0.0, 0.0], atol=1e-12)
+
+
+def test_trigonal_planar_completes_the_star_around_its_centre() -> None:
+    # A centre 0.5 m ahead with two arms at 90° and 210°: the missing arm is at 330°.
+    centre = np.array([0.5, 0.0, 0.0])
+    arm = [
+        centre + L * np.array([math.cos(a), math.sin(a), 0.0]) for a in map(math.radians, (90, 210))
+    ]
+    neighbors, mask = _one(tuple(arm[0]), tuple(centre), tuple(arm[1]))
+    spots, valid = local_spots("trigonal-planar", neighbors, mask, spacing=L)
+    assert valid.tolist() == [[True, False]]
+    missing = centre + L * np.array([math.cos(math.radians(330)), math.sin(math.radians(330)), 0])
+    np.testing.assert_allclose(spots[0, 0], missing, atol=1e-12)
+    # Three arms without their centre: the fish's spot is the centre.
+    ring = [
+        centre + L * np.array([math.cos(a), math.sin(a), 0.0])
+        for a in map(math.radians, (90, 210, 330))
+    ]
+    neighbors, mask = _one(*(tuple(p) for p in ring))
+    spots, valid = local_spots("trigonal-planar", neighbors, mask, spacing=L)
+    assert valid.tolist() == [[False, True]]
+    np.testing.assert_allclose(spots[0, 1], centre, atol=1e-12)
+
+
+def test_tetrahedron_apexes_stand_above_and_below_the_triangle() -> None:
+    # An equilateral triangle of side L at depth 0.5, 1 m ahead: apexes at its centroid
+    # ± L·√(2/3) in depth, each L from the three corners.
+    corners = [(1.0 + L / math.sqrt(3) * math.cos(a), L / math.sqrt(3) * math.sin(a), 0.5)
+               for a in (0, 2 * math.pi / 3, 4 * math.pi / 3)]  # fmt: skip
+    neighbors, mask = _one(*corners)
+    spots, valid = local_spots("tetrahedron", neighbors, mask, spacing=L)
+    assert valid.all()
+    np.testing.assert_allclose(
+        sorted(spots[0, :, 2]), [0.5 - L * math.sqrt(2 / 3), 0.5 + L * math.sqrt(2 / 3)]
+    )
+    for spot in spots[0]:
+        np.testing.assert_allclose(np.linalg.norm(neighbors[0] - spot, axis=1), [L] * 3)
+
+
+def test_too_few_neighbours_means_no_spot_and_a_fish_stays() -> None:
+    neighbors, mask = _one((0.3, 0.0, 0.0))
+    for shape in LOCAL_SHAPES:
+        spots, valid = local_spots(shape, neighbors, mask, spacing=L)
+        assert not valid.any()
+        assert choose_spot(spots, valid, neighbors, mask, tolerance=0.1) == [STAY]
+    with pytest.raises(ValueError, match="local shape must be one of"):
+        local_spots("hexagon", neighbors, mask, spacing=L)
+
+
+def test_nearest_neighbours_in_order_with_padding() -> None:
+    neighbors = np.array(
+        [[[2.0, 0, 0], [0.5, 0, 0], [1.0, 0, 0]], [[0.2, 0, 0], [0, 0, 0], [0, 0, 0]]]
+    )
+    mask = np.array([[True, True, True], [True, False, False]])
+    near, real = nearest_neighbors(neighbors, mask, 2)
+    assert near[0, :, 0].tolist() == [0.5, 1.0] and real[0].tolist() == [True, True]
+    assert near[1, :, 0].tolist() == [0.2, 0.0] and real[1].tolist() == [True, False]
+
+
+def test_leader_is_furthest_along_the_orientation_and_the_map_hangs_from_it() -> None:
+    # Orientation +y in the fish's body frame (the school heads to the fish's right).
+    neighbors, mask = _one((1.0, 0.2, 0.0), (0.0, 0.8, 0.1), (-0.5, -0.3, 0.0))
+    orientation = np.array([[0.0, 1.0, 0.0]])
+    leader, rank = leader_and_rank(neighbors, mask, orientation)
+    np.testing.assert_array_equal(leader[0], [0.0, 0.8, 0.1])
+    assert rank.tolist() == [2]  # two neighbours are further along +y than the fish
+    slots = place_map(leader, orientation, target_map("column", 3, spacing=L))
+    # A column behind the leader along −y (x forward → +y, so behind → −y).
+    np.testing.assert_allclose(slots[0], [[0, 0.8, 0.1], [0, 0.8 - L, 0.1], [0, 0.8 - 2 * L, 0.1]])
+    # The fish wants slot 2 (its rank); slot 2 is free and nobody is nearer: it takes it.
+    choice = choose_spot(
+        slots, np.ones((1, 3), bool), neighbors, mask, tolerance=0.25 * L, first=rank
+    )
+    assert choice.tolist() == [2]
+
+
+def test_a_fish_ahead_of_all_it_sees_leads_from_where_it_is() -> None:
+    neighbors, mask = _one((-1.0, 0.0, 0.0), (-0.5, 0.5, 0.0))
+    leader, rank = leader_and_rank(neighbors, mask, np.array([[1.0, 0.0, 0.0]]))
+    assert leader.tolist() == [[0.0, 0.0, 0.0]] and rank.tolist() == [0]

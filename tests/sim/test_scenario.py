@@ -1,0 +1,79 @@
+"""Scenario settings: defaults from the study, TOML loading, clear errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fishswarm.sim.scenario import ConfigError, Scenario
+from fishswarm.study.experiment import EXPERIMENTS_FOLDER
+
+
+def test_defaults_follow_the_study() -> None:
+    dispersion = Scenario()
+    assert (dispersion.fish, dispersion.duration, dispersion.control_period) == (25, 15.0, 1.0)
+    assert dispersion.ticks == 15
+    assert dispersion.resolved_target_distance() == pytest.approx(2.517, abs=1e-3)
+    assert dispersion.resolved_spawn_radius() == pytest.approx(0.26)
+    aggregation = Scenario(behavior="aggregation")
+    assert aggregation.resolved_target_distance() == pytest.approx(0.26)
+    assert aggregation.resolved_spawn_radius() == pytest.approx(1.3)
+
+
+def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text("[scenario]\nfish = 10\ntank = [3, 3, 1]\nblind_width = 0\n")
+    scenario = Scenario.from_toml(path)
+    assert scenario.fish == 10 and scenario.tank == (3.0, 3.0, 1.0)
+    assert scenario.blind_width == 0.0
+    path.write_text("fsh = 3\n")
+    with pytest.raises(ConfigError, match=r"unknown setting\(s\) fsh; known settings are"):
+        Scenario.from_toml(path)
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"fish": 0}, "fish must be a whole number"),
+        ({"controller": "ai"}, "controller must be one of homing, pid"),
+        ({"tank": (1.0, -1.0, 1.0)}, "tank size must be three positive lengths"),
+        ({"blind_width": -0.1}, "blind_width must be a finite non-negative number"),
+        ({"channel_loss": 1.0}, "channel_loss must be a probability"),
+        ({"swarm": "a b"}, "letters, digits"),
+        ({"seed": -1}, "seed must be a non-negative integer"),
+    ],
+)
+def test_bad_settings_say_what_is_wrong(changes: dict[str, object], message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        Scenario().replace(**changes)
+
+
+SHIPPED = sorted(EXPERIMENTS_FOLDER.glob("*.toml"))
+
+
+@pytest.mark.parametrize(
+    "path", [p for p in SHIPPED if "[experiment]" not in p.read_text(encoding="utf-8")]
+)
+def test_shipped_scenario_files_load(path: Path) -> None:
+    scenario = Scenario.from_toml(path)
+    assert scenario.behavior == path.stem
+
+
+def test_settings_are_checked_together_and_name_what_the_user_set() -> None:
+    # A short period no longer trips over the default jitter, which only jitter mode uses.
+    assert Scenario(control_period=0.01).ticks == 1500
+    with pytest.raises(
+        ConfigError, match=r"jitter \(0.05 s\) must not exceed the control period \(0.01 s\)"
+    ):
+        Scenario(control_period=0.01, time_mode="jitter")
+    with pytest.raises(
+        ConfigError, match=r"duration \(10 s\) is shorter than one control period \(100 s\)"
+    ):
+        Scenario(duration=10.0, control_period=100.0)
+    with pytest.raises(
+        ConfigError,
+        match=r"orbit_radius \(5 m\) does not fit in the tank \(1.78 × 1.78 m\): keep it below",
+    ):
+        Scenario(behavior="orbit", orbit_radius=5.0)
+    assert Scenario(behavior="waltz", orbit_radius=1.0).orbit_radius == 1.0  # a partner distance

@@ -1,0 +1,124 @@
+"""Experiment definitions, their TOML files and the tables made from runs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fishswarm.sim.scenario import ConfigError
+from fishswarm.study.experiment import (
+    METRICS,
+    Experiment,
+    RunOutcome,
+    available,
+    change_percent,
+    find,
+)
+from fishswarm.study.report import markdown_table, table_rows
+
+
+def test_the_studys_experiments_are_defined_as_in_spec() -> None:
+    assert {"blindspot", "blockingsphere", "orbit", "milling", "waltz"} <= set(available())
+    blindspot = find("blindspot")
+    assert blindspot.parameter == "blind_width"
+    assert blindspot.values == (0.0, 0.05, 0.25, 2.517)
+    assert blindspot.seeds == 5
+    assert blindspot.scenario.behavior == "dispersion"
+    assert blindspot.scenario.resolved_spawn_radius() == pytest.approx(0.26)
+    sphere = find("blockingsphere")
+    assert sphere.values == (0.0, 0.065, 0.13, 0.195, 0.39, 0.52, 1.04)
+    assert sphere.scenario.behavior == "aggregation"
+    assert sphere.scenario.resolved_spawn_radius() == pytest.approx(1.3)
+    assert sphere.scenario_for(0.39, 3).sphere_radius == 0.39
+    assert sphere.scenario_for(0.39, 3).seed == 3
+
+
+def test_unknown_experiment_lists_the_known_ones() -> None:
+    with pytest.raises(ConfigError, match=r"no experiment named 'blindpsot': choose one of .*"):
+        find("blindpsot")
+
+
+@pytest.mark.parametrize(
+    ("text", "reason"),
+    [
+        ("[scenario]\nfish = 3\n", r"needs an \[experiment\] table"),
+        ('[experiment]\nname = "x"\nparameter = "colour"\nvalues = [1]\n', "parameter must be"),
+        ('[experiment]\nname = "x"\nparameter = "blind_width"\nvalues = []\n', "must not be empty"),
+        (
+            '[experiment]\nname = "x"\nparameter = "blind_width"\nvalues = ["a"]\n',
+            "list of numbers",
+        ),
+        ('[experiment]\nname = "x"\nparameter = "blind_width"\n', "needs values"),
+        (
+            '[experiment]\nname = "x"\nparameter = "blind_width"\nvalues = [-1]\n',
+            "blind_width",
+        ),
+        ('[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\nspeed = 3\n', "unknown"),
+        ("[experiment\n", "not valid TOML"),
+    ],
+)
+def test_bad_experiment_files_are_explained(tmp_path: Path, text: str, reason: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(ConfigError, match=reason):
+        Experiment.from_toml(path)
+
+
+def _outcome(value: float, seed: int, first: float, last: float) -> RunOutcome:
+    metrics = np.array([[first, first, first, 4.0], [last, last, last, 2.0]])
+    return RunOutcome(value, seed, np.array([0.0, 1.0]), metrics, np.zeros((2, 1, 3)), 1.0)
+
+
+def test_table_gives_mean_and_sd_of_the_change_over_seeds() -> None:
+    experiment = find("blindspot").with_changes(values=(0.0, 0.05), seeds=2)
+    outcomes = [
+        _outcome(0.0, 0, 1.0, 1.5),  # +50 %
+        _outcome(0.0, 1, 2.0, 2.2),  # +10 %
+        _outcome(0.05, 0, 1.0, 0.5),  # −50 %
+        _outcome(0.05, 1, 1.0, 0.5),
+    ]
+    rows = table_rows(experiment, outcomes)
+    assert [row["blind_width"] for row in rows] == [0.0, 0.05]
+    assert rows[0]["pairwise_distance_change_percent_mean"] == pytest.approx(30.0)
+    # Sample standard deviation of 50 and 10: √((20² + 20²) / 1) ≈ 28.28.
+    assert rows[0]["pairwise_distance_change_percent_sd"] == pytest.approx(28.2842712)
+    assert rows[1]["centroid_distance_change_percent_mean"] == pytest.approx(-50.0)
+    assert rows[1]["centroid_distance_change_percent_sd"] == 0.0
+    assert rows[0]["neighbors_seen_final_mean"] == 2.0
+    assert rows[0]["neighbors_seen_initial_mean"] == 4.0
+    table = markdown_table(experiment, rows)
+    assert "| 0 | 30.0 ± 28.3 | 30.0 ± 28.3 | 30.0 ± 28.3 | 4.0 ± 0.0 | 2.0 ± 0.0 |" in table
+    assert len(METRICS) == 4
+
+
+def test_change_percent_of_a_series() -> None:
+    assert change_percent(np.array([2.0, 5.0, 3.0])) == pytest.approx(50.0)
+    assert np.isnan(change_percent(np.array([0.0, 1.0])))
+
+
+def test_orbit_experiments_summarise_radius_revolutions_speed_and_collisions() -> None:
+    for name, fish in (("orbit", 1), ("milling", 25), ("waltz", 2)):
+        experiment = find(name)
+        assert experiment.orbiting and experiment.scenario.fish == fish
+        assert experiment.metric_names == ("radius", "revolutions", "speed", "collisions")
+    orbit = find("orbit").with_changes(values=(0.45,), seeds=1)
+    t = np.arange(5.0)
+    metrics = np.array(
+        [
+            [0.9, 0, 0, 0],
+            [0.5, 0.1, 0.2, 1],
+            [0.44, 0.2, 0.1, 0],
+            [0.46, 0.3, 0.1, 2],
+            [0.45, 0.4, 0.1, 0],
+        ]
+    )
+    rows = table_rows(orbit, [RunOutcome(0.45, 0, t, metrics, np.zeros((5, 1, 3)), 1.0)])
+    # The second half is ticks 2–4: radius mean 0.45, speed 0.1; revolutions at the end 0.4;
+    # collisions summed over the run 3.
+    assert rows[0]["radius_mean"] == pytest.approx(0.45)
+    assert rows[0]["radius_wobble_mean"] == pytest.approx(np.std([0.44, 0.46, 0.45]))
+    assert rows[0]["revolutions_mean"] == pytest.approx(0.4)
+    assert rows[0]["speed_mean"] == pytest.approx(0.1)
+    assert rows[0]["collisions_mean"] == 3.0

@@ -1,0 +1,108 @@
+"""The three mean distances on arrangements worked out by hand."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.distance import pdist
+
+from fishswarm.study.metrics import (
+    centroid_distance,
+    nearest_neighbor_distance,
+    orbit_metrics,
+    pairwise_distance,
+    swarm_metrics,
+)
+
+# A unit square: 4 pairs at 1 m and 2 at √2 m; every nearest neighbour at 1 m.
+SQUARE = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
+
+
+def test_pairwise_and_nearest_on_a_square() -> None:
+    assert pairwise_distance(SQUARE) == pytest.approx((4 + 2 * math.sqrt(2)) / 6)
+    assert nearest_neighbor_distance(SQUARE) == pytest.approx(1.0)
+
+
+def test_centroid_of_the_others_on_a_square() -> None:
+    # For (0,0): others' centroid is (2/3, 2/3), at distance (2/3)·√2; same for every corner.
+    assert centroid_distance(SQUARE) == pytest.approx(2 / 3 * math.sqrt(2))
+
+
+def test_single_fish_and_neighbors_seen() -> None:
+    values = swarm_metrics(SQUARE[:1], np.array([0]))
+    assert values == {
+        "centroid_distance": 0.0,
+        "pairwise_distance": 0.0,
+        "nearest_neighbor_distance": 0.0,
+        "neighbors_seen": 0.0,
+    }
+    assert swarm_metrics(SQUARE, np.array([3, 2, 1, 2]))["neighbors_seen"] == 2.0
+
+
+def test_orbit_metrics_of_a_fish_on_a_circle_by_hand() -> None:
+    # Eight ticks of 1 s, one eighth of a turn each, clockwise in an overhead plot (the angle
+    # atan2(y, x) decreases), radius 0.5 m around (1, 1).
+    angle = -np.arange(9) * np.pi / 4
+    track = np.stack([1 + 0.5 * np.cos(angle), 1 + 0.5 * np.sin(angle), np.full(9, 0.5)], -1)
+    metrics = orbit_metrics(
+        track[:, None], centre=np.array([1.0, 1.0, 0.5]), period=1.0, contact=0.13
+    )
+    np.testing.assert_allclose(metrics[:, 0], 0.5)
+    np.testing.assert_allclose(metrics[:, 1], np.arange(9) / 8)
+    # Chord of an eighth of a circle: 2 · 0.5 · sin(π/8).
+    np.testing.assert_allclose(metrics[1:, 2], 2 * 0.5 * math.sin(math.pi / 8))
+    assert metrics[0, 2] == 0.0
+    assert metrics[:, 3].tolist() == [0.0] * 9
+
+
+def test_orbit_metrics_of_a_pair_use_the_barycentre_and_count_contacts() -> None:
+    # Two fish 0.1 m apart (closer than a body length), then 0.4 m.
+    position = np.array([[[1.0, 1.0, 0.5], [1.1, 1.0, 0.5]], [[1.0, 1.0, 0.5], [1.4, 1.0, 0.5]]])
+    metrics = orbit_metrics(position, centre=None, period=1.0, contact=0.13)
+    np.testing.assert_allclose(metrics[:, 0], [0.05, 0.2])
+    assert metrics[:, 3].tolist() == [1.0, 0.0]
+
+
+def test_formation_metrics_against_the_target_and_their_summary() -> None:
+    from fishswarm.formations.maps import target_map
+    from fishswarm.sim.scenario import Scenario
+    from fishswarm.study.metrics import FormationTarget, formation_summary, formation_target_of
+
+    target = formation_target_of(Scenario(fish=6, behavior="formation", formation="pyramid"))
+    assert isinstance(target, FormationTarget) and target.slots is not None
+    slots = target.slots
+    np.testing.assert_array_equal(slots, target_map("pyramid", 6, spacing=0.3))
+    local = formation_target_of(Scenario(behavior="formation", formation="triangle"))
+    assert local is not None and local.local_shape == "triangle" and local.slots is None
+    assert formation_target_of(Scenario()) is None
+    in_shape = target.metrics(slots + np.array([1.0, 0.9, 0.5]))
+    assert in_shape["shape_error"] < 1e-9 and in_shape["joined_fraction"] == 1.0
+    assert in_shape["collisions"] == 0.0 and in_shape["lattice_energy"] < 1e-20
+    apart = target.metrics(slots * 2 + np.array([0.5, 0.5, 0.5]))
+    assert apart["joined_fraction"] < 1.0 and apart["shape_error"] > 0.05
+    summary = formation_summary([0.0, 1.0, 2.0], [apart, in_shape, in_shape])
+    assert summary["time_to_90_percent_joined"] == 1.0
+    assert summary["joined_fraction"] == 1.0 and summary["most_collisions"] == 0.0
+
+
+def test_local_shape_error_around_every_fish() -> None:
+    import math
+
+    from fishswarm.formations.metrics import ideal_local_shape, local_shape_error
+
+    # A strip of equilateral triangles (side 0.3): every fish and its two nearest form one.
+    h = 0.3 * math.sqrt(3) / 2
+    strip = np.array([[0, 0, 0], [0.3, 0, 0], [0.15, h, 0], [0.45, h, 0]], dtype=np.float64)
+    error, joined = local_shape_error(strip, "triangle", spacing=0.3, tolerance=0.02)
+    assert error < 1e-9 and joined == 1.0
+    # Four fish in a row 0.3 apart: no triangles; each group's error is the same number.
+    row = np.array([[0.3 * n, 0.0, 0.0] for n in range(4)])
+    error, joined = local_shape_error(row, "triangle", spacing=0.3, tolerance=0.02)
+    assert error > 0.05 and joined == 0.0
+    for shape in ("trigonal-planar", "tetrahedron"):
+        ideal = ideal_local_shape(shape, spacing=0.3)
+        assert local_shape_error(ideal, shape, spacing=0.3, tolerance=0.01)[0] < 1e-9
+    tetrahedron = ideal_local_shape("tetrahedron", spacing=0.3)
+    np.testing.assert_allclose(pdist(tetrahedron), 0.3)

@@ -1,0 +1,55 @@
+"""Recordings: what is written reads back exactly; absent fish become NaN on export."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fishswarm.protocols.codec import encode
+from fishswarm.protocols.messages import Snapshot
+from fishswarm.study.recording import RecordingError, export_npz, open_recorder, read_recording
+
+
+def _snapshot(tick: int, ids: list[int]) -> Snapshot:
+    count = len(ids)
+    position = np.arange(count * 3, dtype=float).reshape(count, 3) + tick
+    return Snapshot(
+        tick,
+        float(tick),
+        np.array(ids),
+        position,
+        -position,
+        np.full(count, 0.1 * tick),
+        np.ones(count, dtype=np.int64),
+        np.zeros(count, dtype=np.int64),
+    )
+
+
+def test_round_trip_with_a_fish_that_joins_and_one_that_leaves(tmp_path: Path) -> None:
+    path = tmp_path / "r.mcap"
+    snapshots = [_snapshot(0, [0, 1]), _snapshot(1, [0, 1, 5]), _snapshot(2, [1, 5])]
+    with open_recorder(path, {"fish": 2}) as recorder:
+        for snapshot in snapshots:
+            recorder.snapshot(snapshot.time, encode(snapshot))
+            recorder.metrics(snapshot.time, {"tick": snapshot.tick})
+        recorder.event(1.0, {"event": "joined", "id": "5"})
+    recording = read_recording(path)
+    assert recording.scenario == {"fish": 2}
+    assert recording.snapshots == snapshots
+    assert [m["tick"] for m in recording.metrics] == [0, 1, 2]
+    assert recording.events == [{"event": "joined", "id": "5"}]
+    arrays = recording.arrays()
+    assert arrays["ids"].tolist() == [0, 1, 5]
+    assert np.isnan(arrays["pos"][0, 2]).all()
+    assert np.isnan(arrays["pos"][2, 0]).all()
+    np.testing.assert_array_equal(arrays["pos"][1], snapshots[1].position)
+    np.testing.assert_array_equal(arrays["vel"][2, 1:], snapshots[2].velocity)
+    export_npz(recording, tmp_path / "out.npz")
+    assert np.load(tmp_path / "out.npz")["t"].tolist() == [0.0, 1.0, 2.0]
+
+
+def test_missing_file_is_a_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(RecordingError, match="cannot open recording"):
+        read_recording(tmp_path / "none.mcap")
