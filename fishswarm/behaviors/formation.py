@@ -8,7 +8,9 @@ Each decision, for B fish at once:
    nearest neighbours (:mod:`fishswarm.formations`);
 2. what the inbox says: a neighbour that flagged itself joined holds its slot (global) or
    the spot where it stands (local) — the fish does not contend for it;
-3. the study's rule picks a place (or none: stay), the fish steers to it;
+3. the study's rule picks a place (or none: stay), the fish steers to it — aiming short of
+   it by the drift it predicts from its own velocity relative to the place (the lead), so
+   that it brakes before it arrives;
 4. a fish within the tolerance of its place has joined; with flags on it broadcasts a
    :class:`~fishswarm.protocols.messages.FormationFlag` (shape, slot, joined, hops from the
    leader, the orientation it follows, a sequence number) and lights its LEDs — on a robot
@@ -40,6 +42,7 @@ from fishswarm.behaviors.core import (
     Steering,
 )
 from fishswarm.bluebot.control import PidGains
+from fishswarm.bluebot.dynamics import rotate_to_tank
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.formations.local import LOCAL_SHAPES, local_spots
 from fishswarm.formations.maps import target_map
@@ -63,6 +66,8 @@ BoolArray = NDArray[np.bool_]
 
 DEFAULT_SPACING = 0.3
 """Default distance between neighbouring places, m (about 2.3 body lengths)."""
+DEFAULT_LEAD = 2.5
+"""Default lead, s: how far ahead a fish predicts its drift when it aims at its place."""
 
 FORMATION_KIND = BROADCAST_KINDS.index("formation")
 NO_HOPS = 10_000
@@ -86,6 +91,10 @@ class FormationParams:
             or the next one that is free and that its nearest neighbour is not nearer to)
             or ``share`` (the free slots shared out among itself and the neighbours that
             hold none, nearest pairs first — fish that see the same fish agree).
+        lead: a fish aims at its place minus ``lead`` times its velocity relative to the
+            place, s; 0 aims at the place itself. A BlueBot cannot swim backwards and
+            its drag is quadratic, so it glides far at low speed: without a lead it circles
+            its place instead of stopping on it.
     """
 
     shape: str
@@ -95,6 +104,7 @@ class FormationParams:
     orientation: float = 0.0
     flags: bool = True
     rule: str = "share"
+    lead: float = DEFAULT_LEAD
 
     def __post_init__(self) -> None:
         if self.rule not in SLOT_RULES:
@@ -105,6 +115,8 @@ class FormationParams:
             )
         if not self.spacing > 0 or not self.tolerance > 0:
             raise ValueError("formation spacing and tolerance must be positive lengths")
+        if not 0 <= self.lead < math.inf:
+            raise ValueError(f"formation lead must be a time of 0 s or more, got {self.lead!r}")
 
     @property
     def is_local(self) -> bool:
@@ -115,11 +127,14 @@ class FormationParams:
 @dataclass(frozen=True)
 class FormationMemory:
     """What formation fish remember: (B,) their last place (−1: none), whether they had
-    joined, and how many flags each has sent."""
+    joined, how many flags each has sent, and where their place was at their last
+    decision — (B, 3) in the tank's orientation, m (NaN: unknown) — and when (B,) s."""
 
     place: IntArray
     joined: BoolArray
     sequence: IntArray
+    place_vector: FloatArray
+    place_time: FloatArray
 
 
 def fresh_formation_memory(count: int) -> FormationMemory:
@@ -128,6 +143,8 @@ def fresh_formation_memory(count: int) -> FormationMemory:
         np.full(count, STAY, dtype=np.int64),
         np.zeros(count, dtype=np.bool_),
         np.zeros(count, dtype=np.int64),
+        np.full((count, 3), np.nan),
+        np.full(count, np.nan),
     )
 
 
@@ -145,6 +162,7 @@ def formation_params(settings: Mapping[str, Any]) -> FormationParams:
         orientation=math.radians(float(settings.get("formation_heading_deg", 0.0))),
         flags=bool(settings.get("flags", True)),
         rule=str(settings.get("slot_rule") or "share"),
+        lead=float(settings.get("formation_lead", DEFAULT_LEAD)),
     )
 
 
@@ -240,6 +258,45 @@ def _settled(places: FloatArray, neighbors: FloatArray, params: FormationParams)
     return settled
 
 
+def lead_aim(
+    target: FloatArray,
+    *,
+    heading: FloatArray,
+    previous: FloatArray,
+    elapsed: FloatArray,
+    same_place: BoolArray,
+    lead: float,
+) -> tuple[FloatArray, FloatArray]:
+    """Where B fish aim to stop on their places: each place minus ``lead`` times the fish's
+    velocity relative to it, estimated from how the place moved since the last decision.
+
+    The estimate needs the fish's compass heading (to compare the two body frames) and the
+    same place at both decisions; other fish aim at the place itself.
+
+    Args:
+        target: (B, 3) each fish's place in its body frame, m.
+        heading: (B,) compass headings, rad (NaN: none).
+        previous: (B, 3) the place at the last decision in the tank's orientation, m (NaN:
+            none).
+        elapsed: (B,) time since the last decision, s.
+        same_place: (B,) the fish seeks the place it sought at the last decision.
+        lead: s.
+
+    Returns:
+        (B, 3) the aim in the body frame, m, and (B, 3) the place in the tank's
+        orientation (the next decision's ``previous``; NaN without a heading), m.
+    """
+    has_heading = ~np.isnan(heading)
+    yaw = np.where(has_heading, heading, 0.0)
+    place = np.where(has_heading[:, None], rotate_to_tank(target, yaw), np.nan)
+    known = same_place & has_heading & (elapsed > 0) & ~np.isnan(previous).any(axis=1)
+    step = np.where(known, elapsed, 1.0)[:, None]
+    # The place stands still in the tank, so it moves against the fish: v = −Δplace / Δt.
+    velocity = np.where(known[:, None], (previous - place) / step, 0.0)
+    aim = rotate_to_tank(place - lead * velocity, -yaw)  # back into the body frame
+    return np.where(known[:, None], aim, target), place
+
+
 def steer_formation(
     memory: FormationMemory, perception: Perception, inbox: Inbox, *, params: FormationParams
 ) -> tuple[FormationMemory, Steering]:
@@ -283,6 +340,15 @@ def steer_formation(
     has_place = chosen != STAY
     target = np.where(has_place[:, None], places[np.arange(count), np.maximum(chosen, 0)], 0.0)
     joined = has_place & (np.linalg.norm(target, axis=1) <= params.tolerance)
+    heading = np.full(count, np.nan) if perception.heading is None else perception.heading
+    aim, place_vector = lead_aim(
+        target,
+        heading=heading,
+        previous=memory.place_vector,
+        elapsed=perception.time - memory.place_time,
+        same_place=has_place & (chosen == memory.place),
+        lead=params.lead,
+    )
     hops = np.where(rank == 0, 0, np.minimum(heard.fewest_hops + 1, NO_HOPS))
     if not params.is_local:
         hops = np.where(has_place & (chosen == 0), 0, hops)
@@ -303,9 +369,15 @@ def steer_formation(
         )
         values[row, :6] = flag.values()
     outbox = Outbox(np.full(count, FORMATION_KIND, dtype=np.int64), values, sending)
-    after = FormationMemory(chosen.astype(np.int64), joined, sequence.astype(np.int64))
+    after = FormationMemory(
+        chosen.astype(np.int64),
+        joined,
+        sequence.astype(np.int64),
+        place_vector,
+        perception.time.astype(np.float64),
+    )
     # LEDs lit while the fish is in its place: on a robot, the flag is the LED signal.
-    return after, Steering(target, joined | ~np.bool_(params.flags), outbox)
+    return after, Steering(aim, joined | ~np.bool_(params.flags), outbox)
 
 
 FORMATION = Behavior(
@@ -316,7 +388,8 @@ FORMATION = Behavior(
     formation_params,
     spawn_radius=10 * BODY_LENGTH,
     # A derivative on the distance to go brakes a fish nearing its slot: measured with 15
-    # fish (pyramid, 2 Hz, seeds 0–4) RMS error 0.045–0.070 m against 0.048–0.074 m.
+    # fish (pyramid, 2 Hz, seeds 0–4, lead 2.5 s) 5 of 5 seeds 90 % joined within 30 s,
+    # against 4 of 5 without it.
     pid_gains=PidGains(speed=(2.0, 0.0, 1.0)),
 )
 

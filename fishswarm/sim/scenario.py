@@ -78,6 +78,8 @@ class Scenario:
         tolerance: a formation fish this close to its place has joined, m (default
             spacing / 4).
         formation_heading_deg: the direction a formation faces, degrees in the tank frame.
+        formation_lead: a formation fish aims short of its place by the drift it predicts
+            over this time from its velocity relative to the place, s (0: at the place).
         flags: whether formation fish broadcast and heed formation flags.
         slot_rule: how formation fish pick slots of a global map: ``share`` (default) or
             ``study`` (the study's rank rule).
@@ -113,6 +115,7 @@ class Scenario:
     spacing: float | None = None
     tolerance: float | None = None
     formation_heading_deg: float = 0.0
+    formation_lead: float = 2.5
     flags: bool = True
     slot_rule: str = "share"
     switch_formation: str | None = None
@@ -216,6 +219,10 @@ class Scenario:
             self.switch_formation is None or self.switch_formation in FORMATION_SHAPES,
             f"switch_formation must be one of {', '.join(FORMATION_SHAPES)}, "
             f"got {self.switch_formation!r}",
+        )
+        need(
+            isinstance(self.formation_lead, int | float) and 0 <= self.formation_lead < 60,
+            f"formation_lead must be a time in [0, 60) s, got {self.formation_lead!r}",
         )
         need(
             isinstance(self.switch_at, int | float) and 0 <= self.switch_at <= self.duration,
@@ -340,6 +347,7 @@ class Scenario:
             "spacing",
             "tolerance",
             "formation_heading_deg",
+            "formation_lead",
             "switch_at",
         ):
             if isinstance(values.get(name), int) and not isinstance(values[name], bool):
