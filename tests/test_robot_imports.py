@@ -1,6 +1,7 @@
 """What runs on a robot — the fish actor, the fish core and its behaviours, the Bus, the
-wire — imports nothing beyond numpy, trio, msgpack and eclipse-zenoh (DESIGN §7: a Pi Zero W
-cannot pip-install scipy)."""
+wire, the hardware ports and drivers — imports nothing beyond numpy, trio, msgpack and
+eclipse-zenoh, plus gpiozero and smbus2 for the hardware (DESIGN §7: a Pi Zero W cannot
+pip-install scipy)."""
 
 from __future__ import annotations
 
@@ -16,8 +17,11 @@ ROBOT_MODULES = (
     "fishswarm.actors.session",
     "fishswarm.behaviors.registry",
     "fishswarm.protocols.codec",
+    "fishswarm.bluebot.ports",
+    "fishswarm.bluebot.gpio",
+    "fishswarm.bluebot.pressure",
 )
-ALLOWED = {"numpy", "trio", "msgpack", "zenoh"}
+ALLOWED = {"numpy", "trio", "msgpack", "zenoh", "gpiozero", "smbus2"}
 BLOCKED = ("scipy", "mcap", "matplotlib", "cma", "imageio_ffmpeg")
 
 

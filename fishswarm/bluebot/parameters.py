@@ -116,3 +116,39 @@ class Tank:
         base = cls()
         factor = math.sqrt(max(fish, reference_fish) / reference_fish)
         return cls((base.size[0] * factor, base.size[1] * factor, base.size[2]))
+
+
+@dataclass(frozen=True)
+class Wiring:
+    """Where a BlueBot's parts are connected on its Raspberry Pi (SPEC §6, from the robot
+    code of the public ``fberlinger/blueswarm`` repository).
+
+    Attributes:
+        fin_pins: the H-bridge pin pair of each fin (caudal, dorsal, pectoral left, pectoral
+            right), BCM numbers.
+        led_pin: the switch of all three LEDs, BCM.
+        camera_select_pin: the pin that switches the multiplexer between the two fisheye
+            cameras, BCM (the SoC's GPIO 40).
+        camera_right_level: the select pin's level for the right camera (one robot of the
+            study, BB01, was wired the other way round).
+        depth_bus: the I²C bus of the pressure sensor.
+        depth_address: the pressure sensor's I²C address.
+    """
+
+    fin_pins: tuple[tuple[int, int], ...] = ((20, 21), (19, 26), (18, 23), (4, 17))
+    led_pin: int = 13
+    camera_select_pin: int = 40
+    camera_right_level: bool = True
+    depth_bus: int = 1
+    depth_address: int = 0x77
+
+
+CAMERA_RESOLUTION = (256, 192)
+"""Width and height of the images the robot's camera captures, pixels (SPEC §6)."""
+LED_SPACING = 0.086
+"""Distance between a BlueBot's two rear LEDs (one above the other) and from the upper one to
+the front LED along the heading, m (SPEC §6)."""
+LED_FLASH_HZ = 15.0
+"""The rate at which the research code flashed the LEDs as a signal, Hz (SPEC §6)."""
+GRAVITY = 9.81
+"""Gravitational acceleration, m/s² (for depth from pressure)."""

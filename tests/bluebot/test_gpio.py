@@ -1,0 +1,103 @@
+"""Fins and LEDs on gpiozero's mock pins: each fin's pin pair switches in opposite polarity
+every half period of the frequency its gain maps to."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+gpiozero_mock = pytest.importorskip("gpiozero.pins.mock")
+
+from fishswarm.bluebot.gpio import GpioFins, GpioLeds  # noqa: E402
+from fishswarm.bluebot.parameters import Wiring  # noqa: E402
+
+
+@pytest.fixture
+def factory() -> Iterator[object]:
+    factory = gpiozero_mock.MockFactory()
+    yield factory
+    factory.reset()
+
+
+def test_a_fins_pin_pair_switches_in_opposite_polarity_at_its_frequency(factory: object) -> None:
+    fins = GpioFins(pin_factory=factory)
+    caudal = [factory.pin(n) for n in Wiring().fin_pins[0]]  # type: ignore[attr-defined]
+    try:
+        for pin in caudal:
+            pin.clear_states()
+        # Gain 0.5 maps the caudal fin to 2 Hz (1–3 Hz over gains 0–1): a switch every 0.25 s.
+        fins.set_gains(np.array([0.5, 0.0, 0.0, 0.0]))
+        time.sleep(1.1)
+        assert caudal[0].state != caudal[1].state
+    finally:
+        fins.close()
+    first, second = caudal
+    first.assert_states_and_times(
+        [(0.0, False), (0.0, True), (0.25, False), (0.25, True), (0.25, False), (0.25, True)]
+    )
+    second.assert_states_and_times(
+        [(0.0, False), (0.25, True), (0.25, False), (0.25, True), (0.25, False)]
+    )
+    # Closing switched both sides off.
+    assert not first.state and not second.state
+
+
+def test_gains_map_to_each_fins_frequency_and_zero_is_off(factory: object) -> None:
+    fins = GpioFins(pin_factory=factory)
+    try:
+        fins.set_gains(np.array([0.5, 1.0, 0.0, 0.25]))
+        # Caudal 1–3 Hz, dorsal 6 Hz, pectorals 1–10 Hz (SPEC §6).
+        assert fins.frequencies == (2.0, 6.0, 0.0, 3.25)
+        pectoral = [factory.pin(n) for n in Wiring().fin_pins[2]]  # type: ignore[attr-defined]
+        time.sleep(0.2)
+        assert [p.state for p in pectoral] == [False, False]
+        with pytest.raises(ValueError, match="4 finite numbers"):
+            fins.set_gains(np.array([0.5, np.nan, 0.0, 0.0]))
+    finally:
+        fins.close()
+
+
+def test_stop_switches_every_fin_off_and_keeps_it_off(factory: object) -> None:
+    fins = GpioFins(pin_factory=factory)
+    pins = [factory.pin(n) for pair in Wiring().fin_pins for n in pair]  # type: ignore[attr-defined]
+    try:
+        fins.set_gains(np.ones(4))
+        time.sleep(0.15)
+        fins.stop()
+        assert fins.frequencies == (0.0, 0.0, 0.0, 0.0)
+        assert not any(pin.state for pin in pins)
+        for pin in pins:
+            pin.clear_states()
+        time.sleep(0.3)
+        assert all(len(pin.states) == 1 for pin in pins)  # no switch after the stop
+    finally:
+        fins.close()
+
+
+def test_a_fins_new_rate_takes_over_from_its_next_half_period(factory: object) -> None:
+    fins = GpioFins(pin_factory=factory)
+    pin = factory.pin(Wiring().fin_pins[0][0])  # type: ignore[attr-defined]
+    try:
+        pin.clear_states()
+        fins.set_gains(np.array([0.0 + 1e-9, 0.0, 0.0, 0.0]))  # the lowest gain: 1 Hz
+        time.sleep(0.1)
+        fins.set_gains(np.array([1.0, 0.0, 0.0, 0.0]))  # 3 Hz: a switch every 1/6 s
+        time.sleep(0.45)
+    finally:
+        fins.close()
+    pin.assert_states_and_times([(0.0, False), (0.0, True), (0.267, False), (0.167, True)])
+
+
+def test_leds_follow_commands(factory: object) -> None:
+    leds = GpioLeds(pin_factory=factory)
+    pin = factory.pin(Wiring().led_pin)  # type: ignore[attr-defined]
+    leds.set_lit(True)
+    assert pin.state and leds.lit
+    leds.set_lit(False)
+    assert not pin.state and not leds.lit
+    leds.set_lit(True)
+    leds.close()
+    assert not pin.state

@@ -1,0 +1,138 @@
+"""The MS5803 depth sensor: the datasheet's arithmetic, the command sequence on the bus, and
+depth from pressure."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from fishswarm.bluebot.pressure import (
+    ADC_READ,
+    CONVERT_PRESSURE,
+    CONVERT_TEMPERATURE,
+    RESET,
+    Ms5803,
+    PressureDepth,
+    Reading,
+    SensorError,
+    compensate,
+    depth_of,
+)
+
+# The worked example of TE's 2-bar sensors' datasheets (MS5803-02BA, MS5607-02BA03 p. 8).
+EXAMPLE_CALIBRATION = (46372, 43981, 29059, 27842, 31553, 28165)
+EXAMPLE_D1, EXAMPLE_D2 = 6465444, 8077636
+
+
+def test_the_datasheets_worked_example() -> None:
+    # dT = 68, TEMP = 2000 (20.00 °C), OFF = 5 764 707 214, SENS = 3 039 050 829,
+    # P = 110 002 (1100.02 mbar).
+    reading = compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, EXAMPLE_D2, model="02BA")
+    assert reading == Reading(110002.0, 20.0)
+    # At exactly 20 °C the second-order correction changes nothing.
+    assert compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, EXAMPLE_D2, second_order=True) == reading
+
+
+def test_the_one_bar_models_scaling_by_hand() -> None:
+    # 01BA: OFF = C2·2^16 + C4·dT/2^7 = 2 882 338 816 + 14 791 = 2 882 353 607;
+    # SENS = C1·2^15 + C3·dT/2^8 = 1 519 517 696 + 7 718 = 1 519 525 414;
+    # D1·SENS/2^21 = 4 684 642 062; P = (4 684 642 062 − OFF)/2^15 = 55 001 (550.01 mbar).
+    reading = compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, EXAMPLE_D2, model="01BA")
+    assert reading == Reading(55001.0, 20.0)
+
+
+def test_cold_water_gets_the_second_order_correction() -> None:
+    # dT = −297 841: TEMP = 2000 + dT·C6/2^23 = 999 (9.99 °C).
+    d2 = (31553 << 8) - 297841
+    first = compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, d2, model="02BA")
+    assert first == Reading(107594.0, 9.99)
+    # T2 = dT²/2^31 = 41; OFF2 = 61·1001²/16 = 3 820 128; SENS2 = 2·1001² = 2 004 002;
+    # P falls by (D1·SENS2/2^21 − OFF2)/2^15 = (6 178 178 − 3 820 128)/32 768 ≈ 72.
+    second = compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, d2, model="02BA", second_order=True)
+    assert second == Reading(107522.0, 9.58)
+
+
+def test_bad_models_and_calibrations_are_refused() -> None:
+    with pytest.raises(ValueError, match="01BA, 02BA"):
+        compensate(EXAMPLE_CALIBRATION, 1, 1, model="14BA")
+    with pytest.raises(ValueError, match="six calibration words"):
+        compensate(EXAMPLE_CALIBRATION[:5], 1, 1)
+
+
+@given(st.floats(0.0, 10.0), st.floats(90_000.0, 110_000.0))
+def test_depth_is_the_hydrostatic_pressure_difference(depth: float, surface: float) -> None:
+    pressure = surface + 998.0 * 9.81 * depth
+    assert depth_of(pressure, surface, density=998.0) == pytest.approx(depth, abs=1e-9)
+
+
+class SimulatedChip:
+    """An MS5803 as its I²C bus sees it: PROM words, conversions on command, the ADC read
+    back once a conversion has finished."""
+
+    def __init__(self, calibration: tuple[int, ...], d1: int, d2: int, address: int = 0x77):
+        self.prom = {0xA2 + 2 * n: word for n, word in enumerate(calibration)}
+        self.raw = {CONVERT_PRESSURE: d1, CONVERT_TEMPERATURE: d2}
+        self.address = address
+        self.adc = 0
+        self.commands: list[int] = []
+        self.closed = False
+
+    def write_byte(self, i2c_addr: int, value: int) -> None:
+        if i2c_addr != self.address:
+            return  # not for this chip
+        self.commands.append(value)
+        self.adc = self.raw.get(value, 0)
+
+    def read_i2c_block_data(self, i2c_addr: int, register: int, length: int) -> list[int]:
+        if i2c_addr != self.address:
+            return [0xFF] * length  # nobody answers: the bus floats high
+        if register == ADC_READ:
+            value, self.adc = self.adc, 0  # read once, as the chip does
+            return [(value >> 16) & 0xFF, (value >> 8) & 0xFF, value & 0xFF][:length]
+        word = self.prom[register]
+        return [word >> 8, word & 0xFF][:length]
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_the_driver_reads_the_chip_in_the_datasheets_order() -> None:
+    chip = SimulatedChip(EXAMPLE_CALIBRATION, EXAMPLE_D1, EXAMPLE_D2)
+    waits: list[float] = []
+    sensor = Ms5803(chip, model="02BA", sleep=waits.append)
+    assert sensor.calibration == EXAMPLE_CALIBRATION
+    assert sensor.read() == Reading(110002.0, 20.0)
+    assert chip.commands == [RESET, CONVERT_PRESSURE, CONVERT_TEMPERATURE]
+    assert waits[0] >= 0.0028 and all(w >= 0.0006 for w in waits[1:])
+    sensor.close()
+    assert chip.closed
+
+
+def test_a_missing_sensor_is_named() -> None:
+    chip = SimulatedChip(EXAMPLE_CALIBRATION, EXAMPLE_D1, EXAMPLE_D2, address=0x76)
+    with pytest.raises(SensorError, match="no MS5803 answers at I2C address 0x77"):
+        Ms5803(chip, sleep=lambda _: None)  # the chip answers at 0x76, we ask 0x77
+
+
+class StepPressure:
+    """A pressure sensor whose readings follow a list."""
+
+    def __init__(self, pressures: list[float]) -> None:
+        self.pressures = iter(pressures)
+
+    def read(self) -> Reading:
+        return Reading(next(self.pressures), 20.0)
+
+    def close(self) -> None:
+        pass
+
+
+def test_depth_is_measured_from_the_surface_pressure_taken_at_start() -> None:
+    rho_g = 998.0 * 9.81
+    # Five readings at the surface (mean 100 000 Pa), then 0.5 m down.
+    sensor = StepPressure([99_990.0, 100_010.0, 100_000.0, 99_995.0, 100_005.0,
+                           100_000.0 + 0.5 * rho_g])  # fmt: skip
+    depth = PressureDepth(sensor, density=998.0)
+    assert depth.surface_pressure == 100_000.0
+    assert depth.read_depth() == pytest.approx(0.5)
