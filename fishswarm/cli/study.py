@@ -29,7 +29,8 @@ def add_parsers(commands: Any) -> None:
         "parameter, several seeds per value, settings in parallel on the available cores. "
         f"Experiments: {names} (the files in experiments/); or give the path of an experiment "
         "TOML file to run a changed copy. Writes table.md, table.csv, runs.csv, summary.json "
-        "and plots (metrics vs parameter, metrics over time, tracks) to --out.",
+        "and plots (metrics vs parameter, metrics over time, tracks) to --out. Ctrl-C stops "
+        "the sweep and writes the runs that finished, marked incomplete (exit 130).",
     )
     experiment.add_argument("name", help=f"experiment name ({names}) or TOML file")
     experiment.add_argument(
@@ -98,7 +99,7 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
     from fishswarm.study.experiment import find
     from fishswarm.study.progress import ProgressLine, bar
     from fishswarm.study.report import write_report
-    from fishswarm.study.sweep import run_experiment
+    from fishswarm.study.sweep import SweepInterrupted, run_experiment
 
     chosen = find(args.name)
     if args.seeds is not None and args.seeds < 1:
@@ -128,7 +129,27 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
             last=done == runs,
         )
 
-    outcomes = run_experiment(chosen, engine=engine_named(args.engine), jobs=args.jobs, on_run=show)
+    try:
+        outcomes = run_experiment(
+            chosen, engine=engine_named(args.engine), jobs=args.jobs, on_run=show
+        )
+    except SweepInterrupted as stop:
+        output.close()
+        if not stop.outcomes:
+            print("fishswarm: interrupted before the first run finished; nothing written",
+                  file=sys.stderr)  # fmt: skip
+            return 130
+        values = tuple(v for v in chosen.values if any(o.value == v for o in stop.outcomes))
+        write_report(
+            chosen.with_changes(values=values), stop.outcomes, out, engine=args.engine,
+            wall_time=time.perf_counter() - started, runs_total=stop.total,
+        )  # fmt: skip
+        print(
+            f"fishswarm: interrupted after {len(stop.outcomes)} of {stop.total} runs; wrote "
+            f"what finished to {out} (marked incomplete in table.md and summary.json)",
+            file=sys.stderr,
+        )
+        return 130
     wall_time = time.perf_counter() - started
     paths = write_report(chosen, outcomes, out, engine=args.engine, wall_time=wall_time)
     print((out / "table.md").read_text(encoding="utf-8"))

@@ -32,6 +32,12 @@ class ProgressLine:
             self.stream.write(line + "\n")
         self.stream.flush()
 
+    def close(self) -> None:
+        """End an updating line on a terminal (before other output, e.g. after Ctrl-C)."""
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
 
 def ids_text(ids: list[int], limit: int = 20) -> str:
     """``0, 1, 2 …``: at most ``limit`` ids, for messages."""

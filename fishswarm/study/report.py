@@ -39,12 +39,18 @@ def write_report(
     *,
     engine: str,
     wall_time: float,
+    runs_total: int | None = None,
 ) -> list[Path]:
     """Write the experiment's tables, per-run data and pictures into ``folder``.
 
     Files: ``table.md`` and ``table.csv`` (mean ± s.d. per value), ``runs.csv`` (one row
-    per run), ``summary.json`` (settings, rows, timing) and, with matplotlib, the pictures of
-    :func:`fishswarm.study.figures.experiment_figures`.
+    per run), ``summary.json`` (settings, rows, timing, whether complete) and, with
+    matplotlib, the pictures of :func:`fishswarm.study.figures.experiment_figures`.
+
+    Args:
+        runs_total: the runs the sweep had, when it was interrupted before all of them
+            finished (``outcomes`` then holds those that did, ``experiment`` their values):
+            the table and summary say so.
 
     Returns:
         The paths written.
@@ -52,7 +58,14 @@ def write_report(
     folder.mkdir(parents=True, exist_ok=True)
     rows = table_rows(experiment, outcomes)
     paths = [folder / "table.md", folder / "table.csv", folder / "runs.csv"]
-    paths[0].write_text(markdown_table(experiment, rows), encoding="utf-8")
+    missing = 0 if runs_total is None else runs_total - len(outcomes)
+    text = markdown_table(experiment, rows)
+    if missing:
+        text += (
+            f"\n**Incomplete**: interrupted after {len(outcomes)} of {runs_total} runs; each "
+            f"row holds the runs of its value that finished (`runs` in table.csv).\n"
+        )
+    paths[0].write_text(text, encoding="utf-8")
     with paths[1].open("w", newline="", encoding="utf-8") as stream:
         table = csv.DictWriter(stream, fieldnames=list(rows[0]))
         table.writeheader()
@@ -88,6 +101,9 @@ def write_report(
         "scenario": experiment.scenario.to_dict(),
         "rows": rows,
         "wall_time": wall_time,
+        "complete": missing == 0,
+        "runs_done": len(outcomes),
+        "runs_total": len(outcomes) + missing,
     }
     summary_path = folder / "summary.json"
     summary_path.write_text(json.dumps(summary, indent=2), encoding="utf-8")

@@ -5,7 +5,9 @@ An engine turns a scenario into its recorded run: the in-process batch engine
 router, world, channel, observer and a worker process over Zenoh on 127.0.0.1), which gives
 the same trajectories bit for bit (tested). The command line picks the engine; this module
 does not know the actors. Runs are spread over processes started with ``spawn``, one per
-core by default.
+core by default. Ctrl-C stops a sweep between runs (the runs in progress finish, the others
+do not start): the runs done come back in :class:`SweepInterrupted`, so that their report
+can still be written.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import concurrent.futures
 import multiprocessing
 import os
+import signal
 import time
 from collections.abc import Callable
 
@@ -51,6 +54,21 @@ def run_one(experiment: Experiment, value: float, seed: int, engine: Engine) -> 
 Progress = Callable[[int, int, RunOutcome], None]
 
 
+class SweepInterrupted(KeyboardInterrupt):
+    """Ctrl-C stopped a sweep; ``outcomes`` holds the runs finished before it, in the order
+    of :meth:`Experiment.runs`, and ``total`` the runs the sweep had."""
+
+    def __init__(self, outcomes: list[RunOutcome], total: int) -> None:
+        super().__init__(f"interrupted after {len(outcomes)} of {total} runs")
+        self.outcomes = outcomes
+        self.total = total
+
+
+def _ignore_interrupts() -> None:
+    """A worker leaves Ctrl-C to the sweep, which stops it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def run_experiment(
     experiment: Experiment,
     *,
@@ -68,6 +86,9 @@ def run_experiment(
 
     Returns:
         The outcomes in the order of :meth:`Experiment.runs`.
+
+    Raises:
+        SweepInterrupted: Ctrl-C; the runs still going are stopped, those done come with it.
     """
     pairs = experiment.runs()
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(pairs)))
@@ -78,13 +99,46 @@ def run_experiment(
         if on_run is not None:
             on_run(len(outcomes), len(pairs), outcome)
 
-    if jobs == 1:
-        for value, seed in pairs:
-            done(run_one(experiment, value, seed, engine))
-    else:
-        context = multiprocessing.get_context("spawn")
-        with concurrent.futures.ProcessPoolExecutor(jobs, mp_context=context) as pool:
-            futures = [pool.submit(run_one, experiment, v, s, engine) for v, s in pairs]
-            for future in concurrent.futures.as_completed(futures):
-                done(future.result())
+    try:
+        if jobs == 1:
+            for value, seed in pairs:
+                done(run_one(experiment, value, seed, engine))
+        else:
+            _run_in_processes(experiment, pairs, engine, jobs, done)
+    except KeyboardInterrupt:
+        finished = [outcomes[pair] for pair in pairs if pair in outcomes]
+        raise SweepInterrupted(finished, len(pairs)) from None
     return [outcomes[pair] for pair in pairs]
+
+
+def _run_in_processes(
+    experiment: Experiment,
+    pairs: list[tuple[float, int]],
+    engine: Engine,
+    jobs: int,
+    done: Callable[[RunOutcome], None],
+) -> None:
+    """Run the pairs in ``jobs`` spawned processes, handing each outcome to ``done``.
+
+    The processes ignore Ctrl-C; on Ctrl-C here, the runs in progress finish (each is
+    bounded), are handed over too, and the interrupt goes on up.
+    """
+    context = multiprocessing.get_context("spawn")
+    pool = concurrent.futures.ProcessPoolExecutor(
+        jobs, mp_context=context, initializer=_ignore_interrupts
+    )
+    futures = [pool.submit(run_one, experiment, value, seed, engine) for value, seed in pairs]
+    handed: set[concurrent.futures.Future[RunOutcome]] = set()
+    try:
+        for future in concurrent.futures.as_completed(futures):
+            handed.add(future)
+            done(future.result())
+    except KeyboardInterrupt:
+        pool.shutdown(wait=True, cancel_futures=True)
+        for future in futures:
+            if future in handed or future.cancelled() or future.exception() is not None:
+                continue
+            done(future.result())
+        raise
+    finally:
+        pool.shutdown(wait=True)

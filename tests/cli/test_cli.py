@@ -335,3 +335,30 @@ def test_version_descriptions_and_quiet_world() -> None:
         text = _run(command, "--help").stdout
         assert words in " ".join(text.split()), text
     assert "--quiet" in _run("world", "--help").stdout
+
+
+def test_an_experiment_stopped_with_ctrl_c_keeps_what_finished(tmp_path: Path) -> None:
+    out = tmp_path / "blindspot"
+    sweep = subprocess.Popen(
+        [*FISHSWARM, "experiment", "blindspot", "--engine", "batch", "--jobs", "2",
+         "--duration", "5", "--out", str(out)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert sweep.stderr is not None
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # until the first runs have finished
+            line = sweep.stderr.readline()
+            if " run 2/" in line or not line:
+                break
+        sweep.send_signal(signal.SIGINT)
+        _, errors = sweep.communicate(timeout=60)
+    finally:
+        sweep.kill()
+    assert sweep.returncode == 130, errors
+    assert "interrupted after" in errors and "marked incomplete" in errors
+    assert "Traceback" not in errors
+    summary = json.loads((out / "summary.json").read_text())
+    assert not summary["complete"] and 2 <= summary["runs_done"] < summary["runs_total"] == 20
+    assert "**Incomplete**" in (out / "table.md").read_text()
+    assert (out / "metrics_vs_parameter.png").stat().st_size > 0

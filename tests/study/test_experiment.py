@@ -122,3 +122,33 @@ def test_orbit_experiments_summarise_radius_revolutions_speed_and_collisions() -
     assert rows[0]["revolutions_mean"] == pytest.approx(0.4)
     assert rows[0]["speed_mean"] == pytest.approx(0.1)
     assert rows[0]["collisions_mean"] == 3.0
+
+
+def test_ctrl_c_in_a_sweep_returns_the_runs_that_finished(tmp_path: Path) -> None:
+    import json
+
+    from fishswarm.sim.scenario import Scenario
+    from fishswarm.study.report import write_report
+    from fishswarm.study.sweep import SweepInterrupted, run_experiment, run_on_batch_engine
+
+    experiment = find("blindspot").with_changes(seeds=2, duration=2.0)
+    calls = []
+
+    def interrupted_at_the_third_run(scenario: Scenario) -> tuple[np.ndarray, ...]:
+        calls.append(scenario.seed)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return run_on_batch_engine(scenario)
+
+    with pytest.raises(SweepInterrupted) as stop:
+        run_experiment(experiment, engine=interrupted_at_the_third_run, jobs=1)  # type: ignore[arg-type]
+    assert [(o.value, o.seed) for o in stop.value.outcomes] == experiment.runs()[:2]
+    assert stop.value.total == len(experiment.runs()) == 2 * len(experiment.values)
+    # What finished is reported, marked incomplete.
+    first = experiment.with_changes(values=experiment.values[:1])
+    write_report(first, stop.value.outcomes, tmp_path, engine="batch", wall_time=1.0,
+                 runs_total=stop.value.total)  # fmt: skip
+    assert "**Incomplete**: interrupted after 2 of 8 runs" in (tmp_path / "table.md").read_text()
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert (summary["complete"], summary["runs_done"], summary["runs_total"]) == (False, 2, 8)
+    assert [row["runs"] for row in summary["rows"]] == [2]
