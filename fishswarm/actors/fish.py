@@ -49,7 +49,7 @@ from fishswarm.behaviors.core import (
     put_rows,
     take_rows,
 )
-from fishswarm.behaviors.formation import switch_memory, with_formation
+from fishswarm.behaviors.formation import apply_directive
 from fishswarm.bluebot.control import stop_fins
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
@@ -397,12 +397,10 @@ class Fish:
             return
         self._pending = waiting
         directive = next((p.formation for p in ready if p.formation is not None), None)
-        if directive is not None:
-            switched = with_formation(self._params, directive)
-            if switched is not self._params:
-                log.info("fish %s switch to formation %s", _span(self.settings.fish_ids), directive)
-                self._params = switched
-                self._memory = switch_memory(self._memory, switched)
+        switched, self._memory = apply_directive(self._params, self._memory, directive)
+        if switched is not self._params:
+            log.info("fish %s switch to formation %s", _span(self.settings.fish_ids), directive)
+            self._params = switched
         rows = np.concatenate([p.rows for p in ready]) if len(ready) > 1 else ready[0].rows
         whole = rows.size == self._ids.size and bool((rows == self._all_rows).all())
         memory = self._memory if whole else take_rows(self._memory, rows)

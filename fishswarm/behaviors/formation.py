@@ -216,19 +216,18 @@ def _with_senders(
         to hold their place (joined flags).
     """
     senders = heard.flag
-    if neighbors.shape[1] and senders.shape[1]:
-        gaps = np.linalg.norm(inbox.sender[:, :, None, :] - neighbors[:, None, :, :], axis=3)
-        seen = (np.where(mask[:, None, :], gaps, np.inf) < params.tolerance / 2).any(axis=2)
-        senders = senders & ~seen
+    both = bool(neighbors.shape[1] and senders.shape[1])
+    if both:
+        # (B, K, M) how far each seen fish is from where each flag's sender appears.
+        gaps = np.linalg.norm(neighbors[:, :, None, :] - inbox.sender[:, None, :, :], axis=3)
+        near = gaps < params.tolerance / 2
+        senders = senders & ~(near & mask[:, :, None]).any(axis=1)
     known = np.concatenate([neighbors, inbox.sender], axis=1)
     real = np.concatenate([mask, senders], axis=1)
     holding = np.concatenate([np.zeros_like(mask), heard.joined & senders], axis=1)
-    if neighbors.shape[1] and heard.flag.shape[1]:
+    if both:
         # A seen fish whose flag says it holds its place holds it too.
-        gaps = np.linalg.norm(neighbors[:, :, None, :] - inbox.sender[:, None, :, :], axis=3)
-        holding[:, : mask.shape[1]] = (
-            np.where(heard.joined[:, None, :], gaps, np.inf) < params.tolerance / 2
-        ).any(axis=2)
+        holding[:, : mask.shape[1]] = (near & heard.joined[:, None, :]).any(axis=2)
     return known, real, holding
 
 
@@ -407,6 +406,19 @@ def with_formation(params: FishParams, shape: str) -> FishParams:
     if steering.shape == shape:
         return params
     return dataclasses.replace(params, steering=dataclasses.replace(steering, shape=shape))
+
+
+def apply_directive(
+    params: FishParams, memory: FishMemory, shape: str | None
+) -> tuple[FishParams, FishMemory]:
+    """The fish's parameters and memory after a formation directive (None: none): a new
+    shape forgets the places; anything else leaves both as they are (the same objects)."""
+    if shape is None:
+        return params, memory
+    switched = with_formation(params, shape)
+    if switched is params:
+        return params, memory
+    return switched, switch_memory(memory, switched)
 
 
 def switch_memory(memory: FishMemory, params: FishParams) -> FishMemory:

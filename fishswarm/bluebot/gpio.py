@@ -20,8 +20,6 @@ from numpy.typing import NDArray
 
 from fishswarm.bluebot.parameters import Wiring, fin_frequencies
 
-FIN_NAMES = ("caudal", "dorsal", "pectoral left", "pectoral right")
-
 
 def _output_device(pin: int, pin_factory: Any) -> Any:
     try:

@@ -18,6 +18,7 @@ file).
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Callable, Iterator
@@ -148,8 +149,10 @@ THREE_D = ("tetrahedral-pyramid", "diamond", "phalanx")
 """The maps that use depth."""
 
 
+@functools.lru_cache(maxsize=64)
 def target_map(name: str, count: int, *, spacing: float) -> FloatArray:
-    """The map ``name`` for ``count`` fish, ``spacing`` m between nearest slots.
+    """The map ``name`` for ``count`` fish, ``spacing`` m between nearest slots (read-only,
+    made once per name, count and spacing: fish ask for it at every decision).
 
     Raises:
         ValueError: an unknown map, a count out of [1, MAX_FISH] or a spacing not positive.

@@ -22,7 +22,7 @@ from fishswarm.behaviors.core import (
     put_rows,
     take_rows,
 )
-from fishswarm.behaviors.formation import switch_memory, with_formation
+from fishswarm.behaviors.formation import apply_directive
 from fishswarm.bluebot.vision import Perceived
 from fishswarm.sim.medium import deliver
 from fishswarm.sim.physics import WorldParams
@@ -127,10 +127,7 @@ def run_batch(scenario: Scenario) -> Trajectory:
                 sent = None
         if not event.deciding:
             continue
-        directive = params.formation_at(event.time)
-        if directive is not None and with_formation(fish, directive) is not fish:
-            fish = with_formation(fish, directive)
-            memory = switch_memory(memory, fish)
+        fish, memory = apply_directive(fish, memory, params.formation_at(event.time))
         due, rows = world.due()
         everyone = len(due) == ids.size
         perception = perception_of(world, perceived, rows, event.time)

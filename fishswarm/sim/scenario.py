@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.behaviors.core import FishParams
+from fishswarm.behaviors.formation import DEFAULT_LEAD
 from fishswarm.behaviors.lennard_jones import LennardJonesParams, steer_lennard_jones
 from fishswarm.behaviors.registry import behavior_named, fish_params, names
 from fishswarm.bluebot.control import CONTROLLERS
@@ -115,7 +116,7 @@ class Scenario:
     spacing: float | None = None
     tolerance: float | None = None
     formation_heading_deg: float = 0.0
-    formation_lead: float = 2.5
+    formation_lead: float = DEFAULT_LEAD
     flags: bool = True
     slot_rule: str = "share"
     switch_formation: str | None = None

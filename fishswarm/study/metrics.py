@@ -94,7 +94,7 @@ def orbit_metrics(
         fish orbit: clockwise in overhead plots); mean planar speed over the last period
         (m/s, 0 at the first tick); colliding pairs.
     """
-    steps, count = position.shape[:2]
+    steps = position.shape[0]
     middle = (
         position.mean(axis=1, keepdims=True)
         if centre is None
@@ -110,11 +110,8 @@ def orbit_metrics(
     if steps > 1:
         moved = np.hypot(*np.moveaxis(np.diff(position[..., :2], axis=0), -1, 0))
         speed[1:] = moved.mean(axis=1) / period
-    collisions = np.zeros(steps)
-    if count > 1:
-        for tick in range(steps):
-            collisions[tick] = float((pdist(position[tick]) < contact).sum())
-    return np.stack([radius, revolutions, speed, collisions], axis=1)
+    close = np.array([collisions(position[tick], distance=contact) for tick in range(steps)])
+    return np.stack([radius, revolutions, speed, close.astype(np.float64)], axis=1)
 
 
 FORMATION_METRIC_NAMES = ("shape_error", "joined_fraction", "lattice_energy", "collisions")
