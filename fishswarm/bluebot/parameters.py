@@ -152,3 +152,58 @@ LED_FLASH_HZ = 15.0
 """The rate at which the research code flashed the LEDs as a signal, Hz (SPEC §6)."""
 GRAVITY = 9.81
 """Gravitational acceleration, m/s² (for depth from pressure)."""
+
+
+@dataclass(frozen=True)
+class FisheyeCalibration:
+    """The BlueBot camera's calibration in Scaramuzza's omnidirectional polynomial model
+    (OCamCalib), made at the sensor's full resolution (values from the robot code of the
+    public ``fberlinger/blueswarm`` repository, ``fishfood/lib_utils.py``).
+
+    A point on the sensor at (row, column) ``p`` comes from the sensor-plane point
+    ``q = A⁻¹ (p − center)`` with ``A = [[c, d], [e, 1]]``; the ray through it is
+    ``(q_row, q_column, −f(ρ))`` with ``ρ = |q|`` and ``f(ρ) = a0 + a1 ρ + a2 ρ² + …``.
+
+    Attributes:
+        center: the image centre (row, column) at full resolution, px.
+        affine: (c, d, e) of the stretch matrix A.
+        polynomial: a0, a1, … of f(ρ), ascending powers, px.
+        full_width: width of the calibration images, px (the images the robot captures are
+            scaled down from them by ``full_width / CAMERA_RESOLUTION[0]``).
+        half_angle_deg: the widest angle from the optical axis that reaches the sensor, deg
+            (our model's lens edge: at 100° the two cameras' fields meet in a blind strip
+            behind the body as wide as the cameras are apart).
+    """
+
+    center: tuple[float, float] = (989.0661037168528, 1240.887736413883)
+    affine: tuple[float, float, float] = (
+        1.000095457005999,
+        1.348821585691861e-04,
+        -2.766447240107194e-05,
+    )
+    polynomial: tuple[float, ...] = (
+        -550.6324725325824,
+        0.0,
+        4.199699653e-04,
+        -3.65763e-08,
+        2.906e-10,
+    )
+    full_width: int = 2592
+    half_angle_deg: float = 100.0
+
+
+CAMERA_AXIS_DEG = 80.0
+"""Azimuth of the right camera's optical axis from the heading, deg: the cameras look sideways,
+turned 10° towards the front (the left camera at −80°; blueswarm ``U_CAM_ALPHA``)."""
+CAMERA_OFFSET = (0.025, 0.020, 0.0)
+"""Where the right camera sits in the body frame, m (the left one at y = −0.020; blueswarm
+``U_CAM_DX``, ``U_CAM_DY``)."""
+LED_POSITIONS = (
+    (0.0, 0.0, -LED_SPACING / 2),
+    (0.0, 0.0, LED_SPACING / 2),
+    (LED_SPACING, 0.0, -LED_SPACING / 2),
+)
+"""Where a BlueBot's three LEDs sit in its body frame, m: LED1 and LED2 one above the other
+on the robot's vertical axis (the pair whose midpoint the study's perception, and ours, takes
+as the robot's position), LED3 ahead of LED1 at the nose (SPEC §6). They sit proud of the
+hull: a robot's own body does not hide them, other robots' bodies do."""

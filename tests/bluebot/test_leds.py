@@ -1,0 +1,127 @@
+"""The LED pipeline: blobs, vertical pairs, mirror images, both cameras."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fishswarm.bluebot.leds import LedVision, find_blobs, pair_leds
+from fishswarm.bluebot.parameters import LED_SPACING
+
+VISION = LedVision()
+
+
+def spots(centres: list[tuple[float, float]], peak: float, sigma: float = 0.5) -> np.ndarray:
+    """A 40×40 blue channel with Gaussian spots, over a level of 10."""
+    rows, columns = np.mgrid[0:40, 0:40]
+    light = np.zeros((40, 40))
+    for row, column in centres:
+        light += peak * np.exp(-((rows - row) ** 2 + (columns - column) ** 2) / (2 * sigma**2))
+    return np.clip(np.rint(10 + light), 0, 255).astype(np.uint8)
+
+
+def test_two_spots_three_pixels_apart_are_two_blobs_at_their_centres() -> None:
+    blobs = find_blobs(spots([(10.0, 20.0), (13.0, 20.0)], 200.0), threshold=40, saddle_ratio=0.7)
+    order = np.argsort(blobs.centroids[:, 0])
+    np.testing.assert_allclose(blobs.centroids[order], [[10.0, 20.0], [13.0, 20.0]], atol=0.05)
+
+
+def test_a_saturated_noisy_spot_is_one_blob() -> None:
+    image = spots([(20.0, 20.0)], 5000.0, sigma=1.5).astype(np.int64)
+    image += np.random.default_rng(0).integers(-3, 4, image.shape)
+    blobs = find_blobs(np.clip(image, 0, 255).astype(np.uint8), threshold=40, saddle_ratio=0.7)
+    assert blobs.centroids.shape == (1, 2)
+    np.testing.assert_allclose(blobs.centroids[0], [20.0, 20.0], atol=0.1)
+    assert blobs.peaks[0] == 255 and blobs.sizes[0] > 20
+
+
+def test_a_dark_image_has_no_blobs() -> None:
+    blobs = find_blobs(np.full((30, 40), 39, dtype=np.uint8), threshold=40, saddle_ratio=0.7)
+    assert blobs.centroids.shape == (0, 2) and blobs.fluxes.size == 0
+
+
+def rays_to(origin: np.ndarray, points: list[np.ndarray]) -> np.ndarray:
+    offsets = np.array(points) - origin
+    rays: np.ndarray = offsets / np.linalg.norm(offsets, axis=1, keepdims=True)
+    return rays
+
+
+def pair_at(middle: np.ndarray) -> list[np.ndarray]:
+    half = np.array([0.0, 0.0, LED_SPACING / 2])
+    return [middle + half, middle - half]
+
+
+def mirrored(point: np.ndarray, depth: float) -> np.ndarray:
+    # The surface lies at z = −depth in the frame of a fish at ``depth``.
+    return np.array([point[0], point[1], -2.0 * depth - point[2]])
+
+
+def test_a_vertical_pair_gives_its_midpoint() -> None:
+    origin = np.array([0.025, 0.02, 0.0])
+    middle = np.array([0.4, 0.9, 0.15])
+    rays = rays_to(origin, pair_at(middle))
+    found = pair_leds(origin, rays, np.ones(2), depth=0.5, vision=VISION)
+    np.testing.assert_allclose(found, [middle], atol=1e-9)
+
+
+def test_mirror_images_and_the_front_led_are_not_fish() -> None:
+    origin = np.zeros(3)
+    depth = 0.4
+    middle = np.array([1.2, 0.3, -0.25])  # 0.15 m below the surface
+    lower, upper = pair_at(middle)
+    front = upper + np.array([LED_SPACING * np.cos(0.7), LED_SPACING * np.sin(0.7), 0.0])
+    points = [lower, upper, front, mirrored(lower, depth), mirrored(upper, depth)]
+    points.append(mirrored(front, depth))
+    rays = rays_to(origin, points)
+    found = pair_leds(origin, rays, np.ones(len(points)), depth=depth, vision=VISION)
+    np.testing.assert_allclose(found, [middle], atol=1e-9)
+
+
+def test_a_robot_just_below_the_surface_is_not_paired_with_its_mirror_image() -> None:
+    # Its upper LED lies 0.03 m below the surface, so its mirror image is nearer to it (0.06 m)
+    # than its lower LED is (0.086 m).
+    origin = np.zeros(3)
+    depth = 0.6
+    middle = np.array([1.1, 0.75, -0.6 + 0.073])
+    lower, upper = pair_at(middle)
+    points = [lower, upper, mirrored(upper, depth), mirrored(lower, depth)]
+    rays = rays_to(origin, points)
+    found = pair_leds(origin, rays, np.ones(4), depth=depth, vision=VISION)
+    np.testing.assert_allclose(found, [middle], atol=1e-9)
+
+
+def test_mirror_images_alone_are_nothing() -> None:
+    origin = np.zeros(3)
+    depth = 0.3
+    lower, upper = pair_at(np.array([0.8, -0.4, 0.1]))
+    rays = rays_to(origin, [mirrored(lower, depth), mirrored(upper, depth)])
+    assert pair_leds(origin, rays, np.ones(2), depth=depth, vision=VISION).shape == (0, 3)
+
+
+def test_blobs_of_very_different_brightness_are_not_a_pair() -> None:
+    origin = np.zeros(3)
+    rays = rays_to(origin, pair_at(np.array([1.0, 0.0, 0.0])))
+    assert pair_leds(origin, rays, np.array([100.0, 400.0]), depth=1.0, vision=VISION).size == 0
+    found = pair_leds(origin, rays, np.array([100.0, 250.0]), depth=1.0, vision=VISION)
+    assert found.shape == (1, 3)
+
+
+def test_pairs_beyond_the_range_or_nearer_than_a_body_are_dropped() -> None:
+    origin = np.zeros(3)
+    far = rays_to(origin, pair_at(np.array([3.5, 0.0, 0.0])))
+    near = rays_to(origin, pair_at(np.array([0.06, 0.0, 0.0])))
+    for rays in (far, near):
+        assert pair_leds(origin, rays, np.ones(2), depth=1.0, vision=VISION).size == 0
+
+
+def test_rays_off_a_vertical_line_are_not_a_pair() -> None:
+    origin = np.zeros(3)
+    lower, upper = pair_at(np.array([1.0, 0.0, 0.0]))
+    rays = rays_to(origin, [lower, upper + np.array([0.0, 0.05, 0.0])])  # 2.9° aside
+    assert pair_leds(origin, rays, np.ones(2), depth=1.0, vision=VISION).size == 0
+
+
+@pytest.mark.parametrize("name", ["threshold", "saddle_ratio", "visual_range", "flux_ratio"])
+def test_settings_out_of_range_are_refused(name: str) -> None:
+    with pytest.raises(ValueError, match=name):
+        LedVision(**{name: -1})
