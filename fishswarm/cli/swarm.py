@@ -240,6 +240,10 @@ def channel(args: argparse.Namespace, scenario: Scenario) -> int:
     return 0
 
 
+WORLD_END_GRACE = 1.0
+"""How long an observer keeps listening after the world has left, s."""
+
+
 def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm observe``: watch a swarm from anywhere."""
     keys = KeySpace(args.swarm)
@@ -261,7 +265,16 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                         await wait()
                         waiting.cancel_scope.cancel()
 
-                    waiting.start_soon(wait_then_stop, observer.wait_for_world_end)
+                    async def until_the_world_ends() -> None:
+                        await observer.wait_for_world_end()
+                        # The world's last snapshots travel apart from its liveliness token
+                        # and may arrive just after the token is gone: let them in.
+                        with trio.move_on_after(WORLD_END_GRACE):
+                            if ticks is None:
+                                await trio.sleep_forever()
+                            await observer.wait_for_tick(ticks)
+
+                    waiting.start_soon(wait_then_stop, until_the_world_ends)
                     if ticks is not None:
                         waiting.start_soon(wait_then_stop, lambda: observer.wait_for_tick(ticks))
                 nursery.cancel_scope.cancel()
