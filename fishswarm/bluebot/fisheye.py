@@ -65,6 +65,11 @@ class Fisheye:
         """Full-resolution pixels per captured pixel."""
         return self.calibration.full_width / self.width
 
+    @property
+    def pixels_per_radian(self) -> float:
+        """Captured pixels per radian off the optical axis, near the axis (−a0 / scale)."""
+        return -self.calibration.polynomial[0] / self.scale
+
     def _f(self, rho: FloatArray) -> FloatArray:
         value = np.polynomial.polynomial.polyval(rho, self.calibration.polynomial)
         return np.asarray(value, dtype=np.float64)

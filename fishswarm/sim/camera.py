@@ -28,7 +28,6 @@ FloatArray = NDArray[np.float64]
 
 SIDES: tuple[CameraSide, CameraSide] = ("left", "right")
 _WATER_INDEX = 1.333
-_PIXELS_PER_RADIAN = 54.4  # the fisheye's scale near its axis at 256 px wide (f(0)/10.125)
 
 
 @dataclass(frozen=True)
@@ -139,7 +138,6 @@ def render_views(
         position[others, None, :] + np.einsum("nij,lj->nli", rotation[others], leds)
     ).reshape(-1, 3)
     owners = np.repeat(np.arange(others.size), leds.shape[0])
-    gain = np.ones(sources.shape[0])
     semi_axes = np.array([robot.length, robot.width, robot.height]) / 2
     inverse = np.transpose(rotation[others], (0, 2, 1)) / semi_axes[None, :, None]
     centres = position[others]
@@ -149,14 +147,13 @@ def render_views(
         centres = np.concatenate([centres, centres * mirror])
         inverse = np.concatenate([inverse, inverse * mirror[None, None, :]])
         sources = np.concatenate([sources, mirrored])
-        gain = np.concatenate([gain, np.ones(mirrored.shape[0])])
         owners = np.concatenate([owners, owners + others.size])
     images: dict[CameraSide, NDArray[np.uint8]] = {}
     for side in SIDES:
         camera = position[viewer] + rotation[viewer] @ camera_position(side)
         offsets = sources - camera
         distance = np.linalg.norm(offsets, axis=1)
-        strength = gain * optics.led_brightness * np.exp(-optics.absorption * distance)
+        strength = optics.led_brightness * np.exp(-optics.absorption * distance)
         if optics.reflections:
             half = sources.shape[0] // 2
             strength[half:] *= fresnel_reflectance(offsets[half:, 2] / distance[half:])
@@ -167,7 +164,7 @@ def render_views(
         images[side] = _expose(
             pixels[inside],
             strength[inside] / distance[inside] ** 2,
-            optics.led_radius / distance[inside] * _PIXELS_PER_RADIAN,
+            optics.led_radius / distance[inside] * fisheye.pixels_per_radian,
             fisheye,
             optics,
             rng,
