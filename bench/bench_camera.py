@@ -3,7 +3,10 @@
 For swarms of 10 and 25 fish placed at random in the study's tank, times, in one run,
 (a) the geometric vision model for the whole swarm (``perceive``), (b) rendering both camera
 images of every fish, and (c) the LED pipeline on those images, and reports (b) and (c) per
-fish and as multiples of (a). With ``--picture PATH`` it also draws one fish's two images
+fish and as multiples of (a); then whole runs of the study's dispersion set-up (15 s at
+1 Hz) in the batch engine with ``vision_model = "camera"`` against the same runs with
+geometric vision (what ``fishswarm run --vision camera`` costs the world). With
+``--picture PATH`` it also draws one fish's two images
 with the blobs the pipeline found.
 
 Usage:
@@ -22,6 +25,8 @@ from fishswarm.bluebot.leds import LedVision, find_blobs, perceive_leds
 from fishswarm.bluebot.parameters import BlueBot, Tank
 from fishswarm.bluebot.vision import Vision, perceive
 from fishswarm.sim.camera import SIDES, Optics, render_views
+from fishswarm.sim.engine import run_batch
+from fishswarm.sim.scenario import Scenario
 
 
 def swarm(count: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
@@ -55,6 +60,21 @@ def measure(count: int, repeats: int) -> dict[str, float]:
         "render_ms_per_fish": 1e3 * render / (ticks * count),
         "pipeline_ms_per_fish": 1e3 * pipeline / (ticks * count),
         "camera_over_geometric": (render + pipeline) / geometric,
+    }
+
+
+def measure_runs(count: int) -> dict[str, float]:
+    """Seconds for one dispersion run of ``count`` fish with each vision model, and the ratio."""
+    seconds = {}
+    for model in ("geometric", "camera"):
+        scenario = Scenario(fish=count, behavior="dispersion", seed=1, vision_model=model)
+        start = time.perf_counter()
+        run_batch(scenario)
+        seconds[model] = time.perf_counter() - start
+    return {
+        "geometric_run_s": seconds["geometric"],
+        "camera_run_s": seconds["camera"],
+        "camera_run_over_geometric": seconds["camera"] / seconds["geometric"],
     }
 
 
@@ -95,7 +115,7 @@ def main() -> None:
     parser.add_argument("--picture", help="also draw one fish's two images to this PNG")
     args = parser.parse_args()
     for count in (10, 25):
-        result = measure(count, args.repeats)
+        result = measure(count, args.repeats) | measure_runs(count)
         print(f"{count} fish: " + ", ".join(f"{k} {v:.3g}" for k, v in result.items()))
     if args.picture:
         picture(args.picture)

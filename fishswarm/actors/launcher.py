@@ -279,6 +279,7 @@ def _summary(
             "deliveries": channel_stats.delivered,
             "broadcasts": fish_totals.get("broadcasts", 0),
         },
+        "vision": world.sim.sight.summary() if world.params.cameras is not None else None,
         "lost": [{"id": f.fish_id, "tick": f.tick, "reason": f.reason} for f in world.lost],
         "workers_died": died,
         "fish": fish_totals,

@@ -29,6 +29,13 @@ _SCENARIO_FLAGS: dict[str, tuple[str, type, str]] = {
     ),
     "blind_width": ("--blind-width", float, "blind-spot width in m (default 0.05)"),
     "sphere_radius": ("--sphere-radius", float, "blocking-sphere radius in m (default 0.065)"),
+    "vision_model": (
+        "--vision",
+        str,
+        "geometric (default: the vision model of the study) or camera (every fish renders its "
+        "two camera images and finds its neighbours with the robot's LED pipeline; slower, "
+        "with the robot's misses and range errors; see docs/camera.md)",
+    ),
     "orbit_radius": (
         "--orbit-radius",
         float,

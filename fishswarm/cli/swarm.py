@@ -171,6 +171,17 @@ def _summary_text(summary: dict[str, Any]) -> str:
             f"  effort: {effort['school']:.0f} fin beats in all, the busiest fish "
             f"{effort['spread']:.2f}× the mean"
         )
+    sight = summary.get("vision")
+    if sight and sight["recall"] is not None:
+        lines.append(
+            f"  camera vision: found {sight['recall']:.0%} of the neighbours the geometric "
+            f"model sees, {sight['false']} false detections of {sight['detected']}"
+            + (
+                f", range error {sight['mean_range_error']:.1%} on average"
+                if sight["mean_range_error"] is not None
+                else ""
+            )
+        )
     counts = summary["counts"]
     rejected = sum(counts["rejected"].values())
     rtf = summary["real_time_factor"]

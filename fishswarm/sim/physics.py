@@ -17,6 +17,7 @@ from fishswarm.bluebot.dynamics import State, rest_state, step
 from fishswarm.bluebot.parameters import BlueBot, Tank
 from fishswarm.bluebot.vision import Perceived, Vision, perceive, perceive_landmarks
 from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.sight import Cameras, perceive_through_cameras
 from fishswarm.sim.streams import Stream, stream
 
 FloatArray = NDArray[np.float64]
@@ -31,6 +32,8 @@ class WorldParams:
         seed: master seed of every random stream.
         tank: the tank.
         vision: the vision model.
+        cameras: with camera vision, the cameras and LED pipeline every fish sees through
+            (None: the geometric vision model).
         landmarks: (L, 3) fixed landmarks in the tank frame, m (the orbit centre first).
         control_period: nominal time between decisions, s.
         ticks: snapshots after the first (the run's length in control periods).
@@ -48,6 +51,7 @@ class WorldParams:
     seed: int
     tank: Tank
     vision: Vision
+    cameras: Cameras | None
     landmarks: FloatArray
     control_period: float
     ticks: int
@@ -68,6 +72,7 @@ class WorldParams:
             seed=scenario.seed,
             tank=scenario.the_tank(),
             vision=scenario.vision(),
+            cameras=Cameras() if scenario.vision_model == "camera" else None,
             landmarks=scenario.landmarks(),
             control_period=scenario.control_period,
             ticks=scenario.ticks,
@@ -116,7 +121,14 @@ def place(params: WorldParams, ids: IntArray) -> State:
 def observe(
     params: WorldParams, state: State, rngs: list[np.random.Generator] | None = None
 ) -> Perceived:
-    """What every fish sees of the others now (SPEC §1.2), each with its own noise stream."""
+    """What every fish sees of the others now (SPEC §1.2, or through its cameras), each with
+    its own noise stream."""
+    if params.cameras is not None:
+        if rngs is None:
+            raise ValueError("camera vision needs one random generator per fish")
+        return perceive_through_cameras(
+            state.position, state.yaw, cameras=params.cameras, rngs=rngs
+        )
     vision = params.vision
     return perceive(state.position, state.yaw, vision=vision, rngs=rngs if vision.noise else None)
 

@@ -30,6 +30,7 @@ from fishswarm.protocols.messages import FORMATION_SHAPES
 
 SPAWN_REGIONS = ("ball", "tank")
 TIME_MODES = ("lockstep", "jitter", "realtime")
+VISION_MODELS = ("geometric", "camera")
 
 FloatArray = NDArray[np.float64]
 
@@ -59,6 +60,10 @@ class Scenario:
             ``tank`` (uniform over the whole tank).
         tank: tank size (x, y, z), m.
         visual_range, blind_width, sphere_radius, vision_noise: the vision model (SPEC §1.2).
+        vision_model: ``geometric`` (who is in range, outside the blind strip and not behind
+            another's blocking sphere is seen exactly, plus ``vision_noise``) or ``camera``
+            (both camera images of every fish rendered and read by the robot's LED pipeline:
+            misses, false pairs and range errors as on a BlueBot; docs/camera.md).
         channel_range: how far a broadcast carries, m.
         channel_loss: probability that one delivery is lost, in [0, 1).
         swarm: swarm name in the key space.
@@ -104,6 +109,7 @@ class Scenario:
     blind_width: float = 0.05
     sphere_radius: float = 0.065
     vision_noise: float = 0.0
+    vision_model: str = "geometric"
     channel_range: float = 3.0
     channel_loss: float = 0.0
     swarm: str = "default"
@@ -198,6 +204,10 @@ class Scenario:
             self.behavior not in ("orbit", "milling") or self.orbit_radius < half_side,
             f"orbit_radius ({self.orbit_radius:g} m) does not fit in the tank "
             f"({self.tank[0]:g} × {self.tank[1]:g} m): keep it below {half_side:g} m",
+        )
+        need(
+            self.vision_model in VISION_MODELS,
+            f"vision_model must be one of {', '.join(VISION_MODELS)}, got {self.vision_model!r}",
         )
         need(
             self.time_mode in TIME_MODES,

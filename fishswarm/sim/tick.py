@@ -23,9 +23,10 @@ from numpy.typing import NDArray
 
 from fishswarm.bluebot.dynamics import State
 from fishswarm.bluebot.parameters import fin_frequencies
-from fishswarm.bluebot.vision import Perceived
+from fishswarm.bluebot.vision import Perceived, perceive
 from fishswarm.sim.clocks import Clock, Event, clock_for
 from fishswarm.sim.physics import WorldParams, advance, observe, observe_landmarks, place
+from fishswarm.sim.sight import SightCounts, score_sight
 from fishswarm.sim.streams import Stream, stream
 
 FloatArray = NDArray[np.float64]
@@ -64,6 +65,8 @@ class WorldSim:
         self.effort = np.zeros(0)
         self.now = 0.0
         self._vision_rngs: dict[int, np.random.Generator] = {}
+        self.sight = SightCounts()
+        """With camera vision: its detections against the geometric model's, so far."""
         self._departed: dict[int, tuple[State, float]] = {}
 
     def next_event(self) -> Event:
@@ -130,7 +133,11 @@ class WorldSim:
     def sense(self) -> Perceived:
         """What every fish sees of the others now (each with its own vision-noise stream)."""
         rngs = [self._vision_rngs[fish_id] for fish_id in self.ids.tolist()]
-        return observe(self.params, self.state, rngs)
+        perceived = observe(self.params, self.state, rngs)
+        if self.params.cameras is not None:
+            truth = perceive(self.state.position, self.state.yaw, vision=self.params.vision)
+            self.sight = self.sight + score_sight(perceived, truth, self.state.position)
+        return perceived
 
     def sense_landmarks(self) -> Perceived:
         """Which landmarks every fish sees now."""

@@ -48,6 +48,22 @@ def test_25_fish_run_moves_the_mean_distance_the_right_way(
     assert (tmp_path / "run.json").exists()
 
 
+def test_camera_vision_runs_the_same_over_zenoh_as_in_the_batch_engine(
+    endpoint: str, tmp_path: Path
+) -> None:
+    scenario = Scenario(fish=8, duration=4.0, seed=2, vision_model="camera")
+    reference = run_batch(scenario)
+    path = tmp_path / "camera.mcap"
+    result = _launch(scenario, endpoint, path, procs=2)
+    assert result.exit_code == 0
+    np.testing.assert_array_equal(read_recording(path).arrays()["pos"], reference.position)
+    sight = result.summary["vision"]
+    # Every snapshot's neighbours-seen count is the camera's detections, ticks 0–4.
+    assert sight["detected"] == int(reference.neighbors_seen.sum())
+    assert 0 < sight["found"] <= sight["visible"]
+    assert 0.5 < sight["recall"] <= 1.0
+
+
 @pytest.mark.parametrize("time_mode", ["lockstep", "jitter"])
 def test_same_seed_same_trajectory_across_processes_and_batch_engine(
     endpoint: str, tmp_path: Path, time_mode: str

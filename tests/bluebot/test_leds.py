@@ -46,6 +46,13 @@ def rays_to(origin: np.ndarray, points: list[np.ndarray]) -> np.ndarray:
     return rays
 
 
+def lit(origin: np.ndarray, points: list[np.ndarray]) -> np.ndarray:
+    """Each LED's blob brightness as the calibration expects it at its distance."""
+    distance = np.linalg.norm(np.array(points) - origin, axis=1)
+    fluxes: np.ndarray = VISION.flux_range / distance
+    return fluxes
+
+
 def pair_at(middle: np.ndarray) -> list[np.ndarray]:
     half = np.array([0.0, 0.0, LED_SPACING / 2])
     return [middle + half, middle - half]
@@ -60,7 +67,7 @@ def test_a_vertical_pair_gives_its_midpoint() -> None:
     origin = np.array([0.025, 0.02, 0.0])
     middle = np.array([0.4, 0.9, 0.15])
     rays = rays_to(origin, pair_at(middle))
-    found = pair_leds(origin, rays, np.ones(2), depth=0.5, vision=VISION)
+    found = pair_leds(origin, rays, lit(origin, pair_at(middle)), depth=0.5, vision=VISION)
     np.testing.assert_allclose(found, [middle], atol=1e-9)
 
 
@@ -73,7 +80,7 @@ def test_mirror_images_and_the_front_led_are_not_fish() -> None:
     points = [lower, upper, front, mirrored(lower, depth), mirrored(upper, depth)]
     points.append(mirrored(front, depth))
     rays = rays_to(origin, points)
-    found = pair_leds(origin, rays, np.ones(len(points)), depth=depth, vision=VISION)
+    found = pair_leds(origin, rays, lit(origin, points), depth=depth, vision=VISION)
     np.testing.assert_allclose(found, [middle], atol=1e-9)
 
 
@@ -86,7 +93,7 @@ def test_a_robot_just_below_the_surface_is_not_paired_with_its_mirror_image() ->
     lower, upper = pair_at(middle)
     points = [lower, upper, mirrored(upper, depth), mirrored(lower, depth)]
     rays = rays_to(origin, points)
-    found = pair_leds(origin, rays, np.ones(4), depth=depth, vision=VISION)
+    found = pair_leds(origin, rays, lit(origin, points), depth=depth, vision=VISION)
     np.testing.assert_allclose(found, [middle], atol=1e-9)
 
 
@@ -94,34 +101,54 @@ def test_mirror_images_alone_are_nothing() -> None:
     origin = np.zeros(3)
     depth = 0.3
     lower, upper = pair_at(np.array([0.8, -0.4, 0.1]))
-    rays = rays_to(origin, [mirrored(lower, depth), mirrored(upper, depth)])
-    assert pair_leds(origin, rays, np.ones(2), depth=depth, vision=VISION).shape == (0, 3)
+    images = [mirrored(lower, depth), mirrored(upper, depth)]
+    rays = rays_to(origin, images)
+    found = pair_leds(origin, rays, lit(origin, images), depth=depth, vision=VISION)
+    assert found.shape == (0, 3)
 
 
 def test_blobs_of_very_different_brightness_are_not_a_pair() -> None:
     origin = np.zeros(3)
     rays = rays_to(origin, pair_at(np.array([1.0, 0.0, 0.0])))
-    assert pair_leds(origin, rays, np.array([100.0, 400.0]), depth=1.0, vision=VISION).size == 0
-    found = pair_leds(origin, rays, np.array([100.0, 250.0]), depth=1.0, vision=VISION)
+    # At 1 m both should shine about 1200 (flux_range / range); 4× apart is two robots.
+    uneven = np.array([800.0, 3200.0])
+    assert pair_leds(origin, rays, uneven, depth=1.0, vision=VISION).size == 0
+    found = pair_leds(origin, rays, np.array([800.0, 2000.0]), depth=1.0, vision=VISION)
     assert found.shape == (1, 3)
+
+
+def test_faint_far_leds_in_line_are_not_a_near_robot() -> None:
+    # Two LEDs 0.2 m away as seen, but as faint as LEDs 2 m away: two far robots' LEDs that
+    # happen to line up, not one near robot.
+    origin = np.zeros(3)
+    points = pair_at(np.array([0.2, 0.0, 0.0]))
+    rays = rays_to(origin, points)
+    far = np.full(2, VISION.flux_range / 2.0)
+    assert pair_leds(origin, rays, far, depth=1.0, vision=VISION).size == 0
+    found = pair_leds(origin, rays, lit(origin, points), depth=1.0, vision=VISION)
+    np.testing.assert_allclose(found, [[0.2, 0.0, 0.0]], atol=1e-9)
 
 
 def test_pairs_beyond_the_range_or_nearer_than_a_body_are_dropped() -> None:
     origin = np.zeros(3)
-    far = rays_to(origin, pair_at(np.array([3.5, 0.0, 0.0])))
-    near = rays_to(origin, pair_at(np.array([0.06, 0.0, 0.0])))
-    for rays in (far, near):
-        assert pair_leds(origin, rays, np.ones(2), depth=1.0, vision=VISION).size == 0
+    for distance in (3.5, 0.06):
+        # Brightness as for a robot at that distance: only the range refuses it.
+        points = pair_at(np.array([distance, 0.0, 0.0]))
+        rays = rays_to(origin, points)
+        assert pair_leds(origin, rays, lit(origin, points), depth=1.0, vision=VISION).size == 0
 
 
 def test_rays_off_a_vertical_line_are_not_a_pair() -> None:
     origin = np.zeros(3)
     lower, upper = pair_at(np.array([1.0, 0.0, 0.0]))
-    rays = rays_to(origin, [lower, upper + np.array([0.0, 0.05, 0.0])])  # 2.9° aside
-    assert pair_leds(origin, rays, np.ones(2), depth=1.0, vision=VISION).size == 0
+    points = [lower, upper + np.array([0.0, 0.05, 0.0])]  # 2.9° aside
+    rays = rays_to(origin, points)
+    assert pair_leds(origin, rays, lit(origin, points), depth=1.0, vision=VISION).size == 0
 
 
-@pytest.mark.parametrize("name", ["threshold", "saddle_ratio", "visual_range", "flux_ratio"])
+@pytest.mark.parametrize(
+    "name", ["threshold", "saddle_ratio", "visual_range", "flux_ratio", "flux_range"]
+)
 def test_settings_out_of_range_are_refused(name: str) -> None:
     with pytest.raises(ValueError, match=name):
         LedVision(**{name: -1})
