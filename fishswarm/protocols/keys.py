@@ -105,6 +105,19 @@ class KeySpace:
         """Channel → world: how many broadcasts each fish will find in its inbox at a tick."""
         return f"{self.prefix}/channel/report"
 
+    def robot_status(self, robot_id: int | str) -> str:
+        """Robot driver → base station: the robot's :class:`RobotStatus`."""
+        return f"{self.prefix}/robot/{robot_id}/status"
+
+    def robot_statuses(self) -> str:
+        """Key expression matching every robot's status key."""
+        return self.robot_status("*")
+
+    @property
+    def robot_order(self) -> str:
+        """Operator → every robot's driver: stop or resume."""
+        return f"{self.prefix}/robots/order"
+
     def alive(self, role: str, member_id: int | str, school: str | None = None) -> str:
         """Liveliness token of one member (``role`` is fish, world, channel or observer).
 

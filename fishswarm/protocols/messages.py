@@ -482,6 +482,91 @@ class ControlReply(Message):
         check_int("live_fish", self.live_fish, high=MAX_ROWS)
 
 
+ROBOT_STATES = ("swimming", "waiting", "failsafe", "stranded", "stopped")
+"""What a robot's driver is doing: swimming (commands arrive), waiting (no perception yet),
+failsafe (no command for too long: fins off), stranded (link to the base station lost for
+too long: fins off until it returns), stopped (an operator's order: fins off until resumed)."""
+ROBOT_ORDERS = ("stop", "resume")
+
+
+@dataclass(frozen=True, eq=False)
+class RobotStatus(Message):
+    """How a robot is: its driver → the base station, a few times a second.
+
+    Attributes:
+        robot_id: the robot (its fish's id).
+        version: the fishswarm version it runs.
+        behavior: the behaviour its fish actor runs.
+        state: one of :data:`ROBOT_STATES`.
+        depth: its depth from the pressure sensor, m.
+        fin_frequencies: (4,) the frequency each fin beats at now, Hz.
+        link: whether its Zenoh session reaches a router.
+        cpu_temperature: the Pi's SoC temperature, °C; None where it cannot be read.
+        uptime: time since the driver started, s.
+        perceptions: perceptions its driver made.
+        commands: commands it obeyed.
+        failsafe_stops: times its fins were stopped for lack of commands.
+    """
+
+    type_name: ClassVar[str] = "robot_status"
+    robot_id: int
+    version: str
+    behavior: str
+    state: str
+    depth: float
+    fin_frequencies: FloatArray
+    link: bool
+    cpu_temperature: float | None
+    uptime: float
+    perceptions: int = 0
+    commands: int = 0
+    failsafe_stops: int = 0
+
+    def __post_init__(self) -> None:
+        check_int("robot_id", self.robot_id)
+        check_text("version", self.version)
+        check_text("behavior", self.behavior)
+        check_text("state", self.state)
+        if self.state not in ROBOT_STATES:
+            raise ValueError(f"state must be one of {ROBOT_STATES}, got {self.state!r}")
+        check_float("depth", self.depth)
+        check_array(self, "fin_frequencies", np.float64, None, rows=len(FIN_NAMES))
+        if (self.fin_frequencies < 0).any():
+            raise ValueError("fin_frequencies must not be negative")
+        if not isinstance(self.link, bool):
+            raise TypeError(f"link must be a bool, got {type(self.link).__name__}")
+        if self.cpu_temperature is not None:
+            check_float("cpu_temperature", self.cpu_temperature, low=-100.0, high=200.0)
+        check_float("uptime", self.uptime, low=0.0)
+        for name in ("perceptions", "commands", "failsafe_stops"):
+            check_int(name, getattr(self, name))
+
+
+@dataclass(frozen=True, eq=False)
+class RobotOrder(Message):
+    """An operator's order to robots: base station → every robot's driver.
+
+    Attributes:
+        action: ``stop`` (fins off, LEDs off, commands ignored) or ``resume``.
+        robot_ids: the robots it is for, ascending; empty: every robot.
+    """
+
+    type_name: ClassVar[str] = "robot_order"
+    action: str
+    robot_ids: IntArray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+    def __post_init__(self) -> None:
+        check_text("action", self.action)
+        if self.action not in ROBOT_ORDERS:
+            raise ValueError(f"action must be one of {ROBOT_ORDERS}, got {self.action!r}")
+        check_array(self, "robot_ids", np.int64, None)
+        check_ids(self.robot_ids)
+
+    def addresses(self, robot_id: int) -> bool:
+        """Whether the order is for robot ``robot_id``."""
+        return self.robot_ids.size == 0 or bool(np.isin(robot_id, self.robot_ids))
+
+
 MESSAGE_TYPES: dict[str, type[Message]] = {
     cls.type_name: cls
     for cls in (
@@ -495,6 +580,8 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         ChannelReport,
         ControlRequest,
         ControlReply,
+        RobotStatus,
+        RobotOrder,
     )
 }
 

@@ -27,6 +27,8 @@ from fishswarm.protocols.messages import (
     Message,
     Perception,
     PerceptionBatch,
+    RobotOrder,
+    RobotStatus,
     Snapshot,
 )
 
@@ -67,6 +69,12 @@ EXAMPLES: list[Message] = [
     ChannelReport(8, np.array([0, 1]), np.array([1, 0])),
     ControlRequest("status"),
     ControlReply("running", 4, 4.0, 25),
+    RobotStatus(
+        3, "0.4.0", "dispersion", "swimming", 0.42, np.array([2.0, 0.0, 1.5, 0.0]), True, 51.5, 9.0
+    ),
+    RobotStatus(4, "0.4.0", "formation", "stranded", 0.1, np.zeros(4), False, None, 0.0, 5, 4, 1),
+    RobotOrder("stop"),
+    RobotOrder("resume", np.array([2, 5])),
 ]
 
 
@@ -340,6 +348,20 @@ def test_bad_messages_cannot_be_built() -> None:
         ControlRequest("explode")
     with pytest.raises(TypeError, match="integer array"):
         ChannelReport(0, np.array([0.5]), np.array([1]))
+    with pytest.raises(ValueError, match="state must be one of"):
+        RobotStatus(1, "0.4.0", "dispersion", "dancing", 0.0, np.zeros(4), True, None, 0.0)
+    with pytest.raises(ValueError, match="fin_frequencies must have 4 rows"):
+        RobotStatus(1, "0.4.0", "dispersion", "swimming", 0.0, np.zeros(3), True, None, 0.0)
+    with pytest.raises(ValueError, match="action must be one of"):
+        RobotOrder("explode")
+    with pytest.raises(ValueError, match="ascending"):
+        RobotOrder("stop", np.array([3, 1]))
+
+
+def test_a_robot_order_addresses_its_robots_or_all() -> None:
+    assert RobotOrder("stop").addresses(7)
+    assert RobotOrder("stop", np.array([2, 7])).addresses(7)
+    assert not RobotOrder("stop", np.array([2, 8])).addresses(7)
 
 
 def test_a_formation_flag_round_trips_through_a_broadcast() -> None:

@@ -1,0 +1,449 @@
+"""The robot driver: a BlueBot's sensors and actuators as an actor beside its fish actor.
+
+On a robot the driver and the unchanged fish actor share one process and talk over an
+in-memory Bus (``local``): the driver reads both cameras and the depth sensor, runs the LED
+pipeline (:func:`~fishswarm.bluebot.leds.perceive_leds`) and hands the fish a
+:class:`Perception`; the fish answers with a :class:`Command`, which the driver writes to
+fins and LEDs. Only what must leave the robot crosses the Zenoh link (``remote``): the
+fish's broadcasts and deliveries, the robot's status and liveliness token, and operators'
+orders. So the fins' safety never depends on Wi-Fi:
+
+- **failsafe**: no command for ``command_timeout`` → fins off, whatever the network does;
+- **link loss**: the fish swims on its own perception for at most ``link_timeout``, then the
+  fins stop until the link returns;
+- **operator's stop**: fins and LEDs off at once, commands ignored until ``resume``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import secrets
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import trio
+from numpy.typing import NDArray
+
+from fishswarm import __version__
+from fishswarm.actors.bus import Bus, open_subscriber, open_token
+from fishswarm.actors.inbox import Inbox
+from fishswarm.actors.intake import Intake
+from fishswarm.bluebot.fisheye import Fisheye
+from fishswarm.bluebot.leds import LedVision, perceive_leds
+from fishswarm.bluebot.parameters import fin_frequencies
+from fishswarm.bluebot.ports import Camera, DepthSensor, Fins, Leds
+from fishswarm.protocols.codec import encode
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.messages import (
+    Command,
+    Delivery,
+    Perception,
+    RobotOrder,
+    RobotStatus,
+)
+
+log = logging.getLogger(__name__)
+
+FloatArray = NDArray[np.float64]
+Look = tuple[float, FloatArray]
+"""What the sensors give in one period: depth, m, and (K, 3) body-frame neighbours, m."""
+
+CPU_TEMPERATURE = Path("/sys/class/thermal/thermal_zone0/temp")
+"""Where Linux on a Raspberry Pi reports the SoC's temperature, in m°C."""
+
+
+class SensorUnavailable(RuntimeError):
+    """A camera frame or depth reading could not be had this period (the driver skips it)."""
+
+
+@dataclass
+class Hardware:
+    """A robot's ports, whatever drives them (gpiozero and picamera2, or mocks).
+
+    Attributes:
+        fins, leds, camera, depth: the four ports the driver reads and writes.
+    """
+
+    fins: Fins
+    leds: Leds
+    camera: Camera
+    depth: DepthSensor
+
+    def close(self) -> None:
+        """Fins off and every port released (each tried even if another fails)."""
+        for port in (self.fins, self.leds, self.camera, self.depth):
+            try:
+                port.close()
+            except Exception:  # release the others whatever one does
+                log.exception("closing %s failed", type(port).__name__)
+
+
+@dataclass(frozen=True)
+class DriverSettings:
+    """How a robot's driver runs.
+
+    Attributes:
+        robot_id: the robot, and its fish's id.
+        behavior: the behaviour its fish actor runs (for the status).
+        keys: the swarm's key space.
+        control_period: time between perceptions, s.
+        command_timeout: fins off when no command arrives for this long, s.
+        link_timeout: with the link to the base station lost, the fish swims on its own
+            perception for this long, then the fins stop until the link returns, s.
+        status_period: time between status messages, s.
+        leds: the LED pipeline's settings.
+        fisheye: the cameras' projection.
+    """
+
+    robot_id: int
+    behavior: str
+    keys: KeySpace = KeySpace()
+    control_period: float = 0.5
+    command_timeout: float = 1.0
+    link_timeout: float = 10.0
+    status_period: float = 0.5
+    leds: LedVision = field(default_factory=LedVision)
+    fisheye: Fisheye = field(default_factory=Fisheye)
+
+    def __post_init__(self) -> None:
+        for name in ("control_period", "command_timeout", "link_timeout", "status_period"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number of seconds, got {value}")
+        if self.command_timeout <= self.control_period:
+            raise ValueError(
+                f"command_timeout ({self.command_timeout:g} s) must exceed the control period "
+                f"({self.control_period:g} s), or the fins would stop between two commands"
+            )
+
+
+@dataclass(frozen=True)
+class DriverStatistics:
+    """Counters of a driver.
+
+    Attributes:
+        perceptions: perceptions handed to the fish.
+        frames_missed: periods without a usable camera frame or depth reading.
+        commands: commands written to fins and LEDs.
+        failsafe_stops: times the fins stopped for lack of commands.
+        link_losses: times the link to the base station went down.
+        stranded_stops: times the fins stopped because the link stayed down too long.
+        orders: operators' orders obeyed.
+        deliveries: deliveries passed from the link to the fish.
+        broadcasts: the fish's broadcasts passed to the link.
+        rejected: messages rejected (malformed, misaddressed).
+    """
+
+    perceptions: int
+    frames_missed: int
+    commands: int
+    failsafe_stops: int
+    link_losses: int
+    stranded_stops: int
+    orders: int
+    deliveries: int
+    broadcasts: int
+    rejected: int
+
+
+def cpu_temperature(path: Path = CPU_TEMPERATURE) -> float | None:
+    """The SoC's temperature, °C, or None where the board does not report one."""
+    try:
+        return int(path.read_text().strip()) / 1000.0
+    except (OSError, ValueError):
+        return None
+
+
+class Driver:
+    """A robot's driver. ``await nursery.start(driver.run, local, remote)`` serves until
+    cancelled, with the fins off and the LEDs dark when it ends.
+
+    Args:
+        settings: how it runs.
+        hardware: the robot's ports.
+        link_up: whether the Zenoh session reaches a router now (polled).
+        run_blocking: how the blocking sensor reads and the LED pipeline are run (by default
+            in a worker thread, so the failsafe keeps its time; tests under trio's MockClock
+            run them inline, where a thread would let the mock clock jump meanwhile).
+    """
+
+    def __init__(
+        self,
+        settings: DriverSettings,
+        hardware: Hardware,
+        *,
+        link_up: Callable[[], bool],
+        run_blocking: Callable[[Callable[[], Look]], Awaitable[Look]] = trio.to_thread.run_sync,
+    ) -> None:
+        self.settings = settings
+        self.hardware = hardware
+        self._run_blocking = run_blocking
+        self.state = "waiting"
+        self._link_up = link_up
+        self.link = True
+        self._run_id = secrets.randbits(62)
+        self._intake = Intake(f"driver {settings.robot_id}")
+        self._counts = dict.fromkeys(
+            (
+                "perceptions",
+                "frames_missed",
+                "commands",
+                "failsafe_stops",
+                "link_losses",
+                "stranded_stops",
+                "orders",
+                "deliveries",
+                "broadcasts",
+            ),
+            0,
+        )
+        self._tick = 0
+        self._started = 0.0
+        self._last_command = -math.inf
+        self._link_lost_at: float | None = None
+        self._gains = np.zeros(4)
+        self._depth = 0.0
+        self._unannounced = 0
+        self._changed = trio.Event()
+
+    def statistics(self) -> DriverStatistics:
+        """The driver's counters so far."""
+        return DriverStatistics(rejected=self._intake.rejected_total, **self._counts)
+
+    def status(self) -> RobotStatus:
+        """The robot's status now."""
+        return RobotStatus(
+            robot_id=self.settings.robot_id,
+            version=__version__,
+            behavior=self.settings.behavior,
+            state=self.state,
+            depth=self._depth,
+            fin_frequencies=np.asarray(fin_frequencies(self._gains), dtype=np.float64),
+            link=self.link,
+            cpu_temperature=cpu_temperature(),
+            uptime=max(0.0, trio.current_time() - self._started),
+            perceptions=self._counts["perceptions"],
+            commands=self._counts["commands"],
+            failsafe_stops=self._counts["failsafe_stops"],
+        )
+
+    async def run(
+        self,
+        local: Bus,
+        remote: Bus,
+        *,
+        task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
+    ) -> None:
+        """Drive the robot until cancelled; ready once subscribed and alive on the link."""
+        keys, robot_id = self.settings.keys, self.settings.robot_id
+        commands: Inbox[tuple[str, bytes]] = Inbox()
+        orders: Inbox[tuple[str, bytes]] = Inbox()
+        self._started = trio.current_time()
+        try:
+            async with contextlib.AsyncExitStack() as stack:
+                for bus, key, inbox in (
+                    (local, keys.command(robot_id), commands),
+                    (remote, keys.robot_order, orders),
+                ):
+                    await stack.enter_async_context(open_subscriber(bus, key, _into(inbox)))
+                # The bridge: the fish's broadcasts out, deliveries to it in.
+                broadcasts: Inbox[tuple[str, bytes]] = Inbox()
+                deliveries: Inbox[tuple[str, bytes]] = Inbox()
+                for bus, key, inbox in (
+                    (local, keys.outbox(robot_id), broadcasts),
+                    (remote, keys.inbox(robot_id), deliveries),
+                ):
+                    await stack.enter_async_context(open_subscriber(bus, key, _into(inbox)))
+                await stack.enter_async_context(open_token(remote, keys.alive("robot", robot_id)))
+                async with trio.open_nursery() as nursery:
+                    nursery.start_soon(self._obey, commands)
+                    nursery.start_soon(self._take_orders, orders)
+                    nursery.start_soon(self._pass_deliveries, deliveries, local)
+                    nursery.start_soon(self._pass_broadcasts, broadcasts, remote)
+                    nursery.start_soon(self._guard)
+                    nursery.start_soon(self._report, remote)
+                    nursery.start_soon(self._sense, local)
+                    task_status.started()
+        finally:
+            self.hardware.fins.stop()
+            self.hardware.leds.set_lit(False)
+
+    # Sensing ----------------------------------------------------------------------------
+
+    async def _sense(self, local: Bus) -> None:
+        """Every control period: both images and the depth → neighbours → a perception."""
+        period = self.settings.control_period
+        deadline = trio.current_time()
+        while True:
+            deadline += period
+            if self.state not in ("stopped", "stranded"):
+                try:
+                    depth, neighbors = await self._run_blocking(self._look)
+                except SensorUnavailable as error:
+                    self._counts["frames_missed"] += 1
+                    log.debug("robot %d: %s", self.settings.robot_id, error)
+                else:
+                    self._depth = depth
+                    self._perceive(local, depth, neighbors)
+            # A slow frame does not pile up periods: the next starts from now.
+            deadline = max(deadline, trio.current_time())
+            await trio.sleep_until(deadline)
+
+    def _look(self) -> Look:
+        """Depth and neighbours from the sensors (runs in a worker thread)."""
+        camera = self.hardware.camera
+        depth = self.hardware.depth.read_depth()
+        images = {side: camera.capture(side) for side in ("left", "right")}
+        neighbors = perceive_leds(
+            images,  # type: ignore[arg-type]
+            depth=depth,
+            fisheye=self.settings.fisheye,
+            vision=self.settings.leds,
+        )
+        return depth, neighbors
+
+    def _perceive(self, local: Bus, depth: float, neighbors: FloatArray) -> None:
+        message = Perception(
+            fish_id=self.settings.robot_id,
+            tick=self._tick,
+            time=max(0.0, trio.current_time() - self._started),
+            depth=depth,
+            neighbors=neighbors,
+            landmarks=np.zeros((0, 3)),
+            inbox_count=self._unannounced,
+            run=self._run_id,
+        )
+        self._unannounced = 0
+        self._tick += 1
+        self._counts["perceptions"] += 1
+        local.put(self.settings.keys.perception(self.settings.robot_id), encode(message))
+
+    # Acting -----------------------------------------------------------------------------
+
+    async def _obey(self, commands: Inbox[tuple[str, bytes]]) -> None:
+        """Write each command to fins and LEDs, unless stopped or stranded."""
+        robot_id = self.settings.robot_id
+        async for key, payload in commands:
+            command = self._intake.decode_addressed(
+                key, payload, Command, field="fish_id", owner=robot_id
+            )
+            if command is None or self.state in ("stopped", "stranded"):
+                continue
+            self._set_fins(command.fins)
+            self.hardware.leds.set_lit(command.led)
+            self._last_command = trio.current_time()
+            self._counts["commands"] += 1
+            self.state = "swimming"
+            self._wake()
+
+    def _set_fins(self, gains: FloatArray) -> None:
+        self._gains = np.asarray(gains, dtype=np.float64).copy()
+        if self._gains.any():
+            self.hardware.fins.set_gains(self._gains)
+        else:
+            self.hardware.fins.stop()
+
+    def _stop(self, state: str) -> None:
+        self._gains = np.zeros(4)
+        self.hardware.fins.stop()
+        self.state = state
+
+    async def _guard(self) -> None:
+        """The failsafe and the link: fins off when commands stop or the link stays down."""
+        settings = self.settings
+        poll = min(0.1, settings.command_timeout / 4)
+        while True:
+            now = trio.current_time()
+            up = self._link_up()
+            if up != self.link:
+                self.link = up
+                if up:
+                    self._link_lost_at = None
+                    log.warning("robot %d: link to the base station back", settings.robot_id)
+                    if self.state == "stranded":
+                        self.state = "waiting"
+                else:
+                    self._link_lost_at = now
+                    self._counts["link_losses"] += 1
+                    log.warning(
+                        "robot %d: link to the base station lost; swimming on for at most %g s",
+                        settings.robot_id,
+                        settings.link_timeout,
+                    )
+            if (
+                self._link_lost_at is not None
+                and now - self._link_lost_at >= settings.link_timeout
+                and self.state not in ("stranded", "stopped")
+            ):
+                self._stop("stranded")
+                self._counts["stranded_stops"] += 1
+                log.warning("robot %d: link down too long, fins off", settings.robot_id)
+            if self.state == "swimming" and now - self._last_command >= settings.command_timeout:
+                self._stop("failsafe")
+                self._counts["failsafe_stops"] += 1
+                log.warning(
+                    "robot %d: no command for %g s, fins off",
+                    settings.robot_id,
+                    settings.command_timeout,
+                )
+            await trio.sleep(poll)
+
+    async def _take_orders(self, orders: Inbox[tuple[str, bytes]]) -> None:
+        async for key, payload in orders:
+            order = self._intake.decode(key, payload, RobotOrder)
+            if order is None or not order.addresses(self.settings.robot_id):
+                continue
+            self._counts["orders"] += 1
+            if order.action == "stop":
+                self._stop("stopped")
+                self.hardware.leds.set_lit(False)
+                log.warning("robot %d: stopped by an operator", self.settings.robot_id)
+            elif self.state == "stopped":
+                self.state = "waiting"
+                log.warning("robot %d: resumed by an operator", self.settings.robot_id)
+            self._wake()
+
+    # The link ---------------------------------------------------------------------------
+
+    async def _pass_broadcasts(self, broadcasts: Inbox[tuple[str, bytes]], remote: Bus) -> None:
+        """The fish's broadcasts onto the link, as they are."""
+        async for key, payload in broadcasts:
+            remote.put(key, payload)
+            self._counts["broadcasts"] += 1
+
+    async def _pass_deliveries(self, deliveries: Inbox[tuple[str, bytes]], local: Bus) -> None:
+        robot_id = self.settings.robot_id
+        async for key, payload in deliveries:
+            delivery = self._intake.decode_addressed(
+                key, payload, Delivery, field="receiver_id", owner=robot_id
+            )
+            if delivery is None:
+                continue
+            local.put(key, payload)
+            self._unannounced += 1
+            self._counts["deliveries"] += 1
+
+    async def _report(self, remote: Bus) -> None:
+        """The status on the link every status period, and at once on a change of state."""
+        key = self.settings.keys.robot_status(self.settings.robot_id)
+        while True:
+            remote.put(key, encode(self.status()))
+            self._changed = trio.Event()
+            with trio.move_on_after(self.settings.status_period):
+                await self._changed.wait()
+
+    def _wake(self) -> None:
+        self._changed.set()
+
+
+def _into(inbox: Inbox[tuple[str, bytes]]) -> Callable[[str, bytes], None]:
+    """A subscriber callback that hands (key, payload) to ``inbox``."""
+
+    def push(key: str, payload: bytes) -> None:
+        inbox.push((key, payload))
+
+    return push

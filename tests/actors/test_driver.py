@@ -1,0 +1,316 @@
+"""The robot driver beside the unchanged fish actor, on in-memory Buses under trio's MockClock:
+perceptions from rendered camera images, fins on gpiozero's mock pins, the failsafe, link
+loss, operators' orders and the bridge."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pytest
+import trio
+
+gpiozero_mock = pytest.importorskip("gpiozero.pins.mock")
+
+from fishswarm.actors.bus import MemoryBus  # noqa: E402
+from fishswarm.actors.driver import (  # noqa: E402
+    Driver,
+    DriverSettings,
+    Hardware,
+    Look,
+    SensorUnavailable,
+)
+from fishswarm.actors.fish import Fish, FishSettings  # noqa: E402
+from fishswarm.bluebot.fisheye import Fisheye  # noqa: E402
+from fishswarm.bluebot.gpio import GpioFins, GpioLeds  # noqa: E402
+from fishswarm.bluebot.parameters import BlueBot, Wiring  # noqa: E402
+from fishswarm.bluebot.ports import CameraSide  # noqa: E402
+from fishswarm.bluebot.vision import to_body  # noqa: E402
+from fishswarm.protocols.codec import decode, encode  # noqa: E402
+from fishswarm.protocols.keys import KeySpace  # noqa: E402
+from fishswarm.protocols.messages import (  # noqa: E402
+    Broadcast,
+    Command,
+    Delivery,
+    Perception,
+    RobotOrder,
+    RobotStatus,
+)
+from fishswarm.sim.camera import Optics, render_views  # noqa: E402
+from fishswarm.sim.scenario import Scenario  # noqa: E402
+from tests.conftest import run_mock, subscription  # noqa: E402
+
+KEYS = KeySpace("drv")
+ROBOT = 4
+# The robot at 0.5 m depth facing +x; a neighbour 0.6 m ahead and 0.2 m to its right.
+POSITION = np.array([[0.8, 0.8, 0.5], [1.4, 1.0, 0.5]])
+YAW = np.array([0.0, 1.0])
+
+
+class SceneCamera:
+    """Both cameras seeing a fixed scene, rendered (a stand-in for picamera2)."""
+
+    def __init__(self) -> None:
+        self.images = render_views(
+            POSITION,
+            YAW,
+            0,
+            fisheye=Fisheye(),
+            optics=Optics(),
+            robot=BlueBot(),
+            rng=np.random.default_rng(0),
+        )
+        self.working = True
+
+    def capture(self, side: CameraSide) -> np.ndarray:
+        if not self.working:
+            raise SensorUnavailable("no frame")
+        return self.images[side]
+
+    def close(self) -> None:
+        pass
+
+
+class FixedDepth:
+    def read_depth(self) -> float:
+        return 0.5
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.fixture
+def factory() -> Iterator[object]:
+    factory = gpiozero_mock.MockFactory()
+    yield factory
+    factory.reset()
+
+
+@pytest.fixture
+def hardware(factory: object) -> Iterator[Hardware]:
+    ports = Hardware(
+        GpioFins(pin_factory=factory), GpioLeds(pin_factory=factory), SceneCamera(), FixedDepth()
+    )
+    yield ports
+    ports.close()
+
+
+async def inline(function: Callable[[], Look]) -> Look:
+    return function()
+
+
+def make_driver(hardware: Hardware, link: list[bool], *, command_timeout: float = 1.0) -> Driver:
+    settings = DriverSettings(
+        ROBOT,
+        "dispersion",
+        KEYS,
+        control_period=0.5,
+        command_timeout=command_timeout,
+        link_timeout=3.0,
+    )
+    return Driver(settings, hardware, link_up=lambda: link[0], run_blocking=inline)
+
+
+def command(fins: list[float], led: bool = True) -> bytes:
+    return encode(Command(ROBOT, 0, np.array(fins), led=led))
+
+
+def test_the_fish_decides_on_what_the_cameras_see_and_its_fins_beat(
+    hardware: Hardware, factory: object
+) -> None:
+    beating: list[tuple[float, ...]] = []
+
+    async def main() -> tuple[Perception, RobotStatus]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True])
+        fish = Fish(FishSettings((ROBOT,), Scenario().fish_params(), KEYS))
+        async with (
+            subscription(local, KEYS.perception(ROBOT)) as perceptions,
+            subscription(remote, KEYS.robot_status(ROBOT)) as statuses,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(fish.run, local)
+            await nursery.start(driver.run, local, remote)
+            _, payload = await perceptions.receive()
+            await trio.sleep(0.1)
+            status = decode(statuses.drain()[-1][1], RobotStatus)
+            beating.append(hardware.fins.frequencies)  # type: ignore[attr-defined]
+            nursery.cancel_scope.cancel()
+        return decode(payload, Perception), status
+
+    perception, status = run_mock(main)
+    truth = to_body((POSITION[1:] - POSITION[0])[None], YAW[:1])[0]
+    assert perception.fish_id == ROBOT and perception.depth == 0.5
+    np.testing.assert_allclose(perception.neighbors, truth, rtol=0.02, atol=0.01)
+    # A neighbour ahead and to the right: the dispersing fish turns away, left, with its
+    # right pectoral fin, at the frequency of gain 1 (10 Hz for a pectoral, SPEC §6).
+    assert status.state == "swimming" and status.commands == 1
+    assert status.fin_frequencies.tolist() == [0.0, 0.0, 0.0, 10.0]
+    assert beating == [(0.0, 0.0, 0.0, 10.0)]
+    # When the driver ends, the fins stop and the LEDs go dark.
+    assert hardware.fins.frequencies == (0.0, 0.0, 0.0, 0.0)  # type: ignore[attr-defined]
+    assert not factory.pin(Wiring().led_pin).state  # type: ignore[attr-defined]
+    assert status.version and status.behavior == "dispersion" and status.link
+
+
+def test_fins_stop_when_commands_stop_for_the_timeout(hardware: Hardware) -> None:
+    async def main() -> tuple[float, Driver]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True])
+        async with trio.open_nursery() as nursery:
+            await nursery.start(driver.run, local, remote)
+            local.put(KEYS.command(ROBOT), command([1.0, 0.0, 0.0, 0.0]))
+            start = trio.current_time()
+            await trio.sleep(0.01)
+            assert hardware.fins.frequencies[0] > 0  # type: ignore[attr-defined]
+            while driver.state != "failsafe":
+                await trio.sleep(0.01)
+            stopped_after = trio.current_time() - start
+            nursery.cancel_scope.cancel()
+        return stopped_after, driver
+
+    stopped_after, driver = run_mock(main)
+    # The guard polls every 0.1 s: the fins stop within one poll of the 1-s timeout.
+    assert 1.0 <= stopped_after <= 1.11
+    assert hardware.fins.frequencies == (0.0, 0.0, 0.0, 0.0)  # type: ignore[attr-defined]
+    assert driver.statistics().failsafe_stops == 1
+
+
+def test_with_the_link_down_it_swims_on_then_stops_until_the_link_returns(
+    hardware: Hardware,
+) -> None:
+    link = [True]
+
+    async def main() -> list[tuple[float, str]]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, link, command_timeout=10.0)
+        states: list[tuple[float, str]] = []
+        async with trio.open_nursery() as nursery:
+            await nursery.start(driver.run, local, remote)
+            local.put(KEYS.command(ROBOT), command([0.5, 0.0, 0.0, 0.0]))
+            start = trio.current_time()
+            link[0] = False
+            await trio.sleep(2.0)
+            states.append((trio.current_time() - start, driver.state))  # still swimming
+            await trio.sleep(1.2)
+            states.append((trio.current_time() - start, driver.state))  # stranded
+            local.put(KEYS.command(ROBOT), command([0.5, 0.0, 0.0, 0.0]))
+            await trio.sleep(0.01)
+            states.append((trio.current_time() - start, driver.state))  # commands ignored
+            link[0] = True
+            await trio.sleep(0.2)
+            states.append((trio.current_time() - start, driver.state))  # waiting again
+            local.put(KEYS.command(ROBOT), command([0.5, 0.0, 0.0, 0.0]))
+            await trio.sleep(0.01)
+            states.append((trio.current_time() - start, driver.state))
+            nursery.cancel_scope.cancel()
+        assert driver.statistics().link_losses == 1
+        assert driver.statistics().stranded_stops == 1
+        return states
+
+    states = run_mock(main)
+    assert [state for _, state in states] == [
+        "swimming",
+        "stranded",
+        "stranded",
+        "waiting",
+        "swimming",
+    ]
+
+
+def test_an_operators_stop_turns_fins_and_leds_off_until_resumed(
+    hardware: Hardware, factory: object
+) -> None:
+    led = factory.pin(Wiring().led_pin)  # type: ignore[attr-defined]
+
+    async def main() -> None:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True], command_timeout=10.0)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(driver.run, local, remote)
+            local.put(KEYS.command(ROBOT), command([1.0, 1.0, 0.0, 0.0]))
+            await trio.sleep(0.01)
+            assert led.state and driver.state == "swimming"
+            remote.put(KEYS.robot_order, encode(RobotOrder("stop", np.array([ROBOT + 1]))))
+            await trio.sleep(0.01)
+            assert driver.state == "swimming"  # an order for another robot
+            remote.put(KEYS.robot_order, encode(RobotOrder("stop")))
+            await trio.sleep(0.01)
+            assert driver.state == "stopped" and not led.state
+            assert hardware.fins.frequencies == (0.0, 0.0, 0.0, 0.0)  # type: ignore[attr-defined]
+            local.put(KEYS.command(ROBOT), command([1.0, 1.0, 0.0, 0.0]))
+            await trio.sleep(0.01)
+            assert driver.state == "stopped"
+            assert hardware.fins.frequencies == (0.0, 0.0, 0.0, 0.0)  # type: ignore[attr-defined]
+            remote.put(KEYS.robot_order, encode(RobotOrder("resume", np.array([ROBOT]))))
+            await trio.sleep(0.01)
+            local.put(KEYS.command(ROBOT), command([1.0, 0.0, 0.0, 0.0]))
+            await trio.sleep(0.01)
+            assert driver.state == "swimming" and led.state
+            assert driver.statistics().orders == 2
+            nursery.cancel_scope.cancel()
+
+    run_mock(main)
+
+
+def test_broadcasts_go_out_and_deliveries_come_in_announced(hardware: Hardware) -> None:
+    async def main() -> tuple[list[bytes], Perception]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True])
+        async with (
+            subscription(remote, KEYS.outbox(ROBOT)) as outgoing,
+            subscription(local, KEYS.inbox(ROBOT)) as incoming,
+            subscription(local, KEYS.perception(ROBOT)) as perceptions,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(driver.run, local, remote)
+            await perceptions.receive()  # the first perception, at start
+            broadcast = encode(Broadcast(ROBOT, 1, "signal", np.array([7])))
+            local.put(KEYS.outbox(ROBOT), broadcast)
+            delivery = Delivery(ROBOT, 1, "signal", np.array([9]), np.array([0.3, 0.0, 0.0]))
+            remote.put(KEYS.inbox(ROBOT), encode(delivery))
+            remote.put(KEYS.inbox(ROBOT), b"garbage")
+            _, got = await incoming.receive()
+            _, payload = await perceptions.receive()
+            sent = [p for _, p in outgoing.drain()]
+            assert decode(got, Delivery) == delivery
+            nursery.cancel_scope.cancel()
+        assert driver.statistics().rejected == 1
+        return sent, decode(payload, Perception)
+
+    sent, perception = run_mock(main)
+    assert len(sent) == 1 and decode(sent[0], Broadcast).values.tolist() == [7]
+    assert perception.inbox_count == 1
+
+
+def test_a_missing_frame_skips_the_period_and_malformed_commands_are_counted(
+    hardware: Hardware,
+) -> None:
+    camera = hardware.camera
+    assert isinstance(camera, SceneCamera)
+    camera.working = False
+
+    async def main() -> Driver:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True])
+        async with (
+            subscription(local, KEYS.perception(ROBOT)) as perceptions,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(driver.run, local, remote)
+            local.put(KEYS.command(ROBOT), b"\x00not msgpack")
+            await trio.sleep(1.2)  # three periods without frames
+            assert perceptions.pending() == 0
+            camera.working = True
+            await perceptions.receive()
+            nursery.cancel_scope.cancel()
+        return driver
+
+    statistics = run_mock(main).statistics()
+    assert statistics.frames_missed == 3 and statistics.perceptions == 1
+    assert statistics.rejected == 1 and statistics.commands == 0
+
+
+def test_settings_that_would_stop_the_fins_between_commands_are_refused() -> None:
+    with pytest.raises(ValueError, match="command_timeout"):
+        DriverSettings(1, "dispersion", control_period=1.0, command_timeout=0.5)
