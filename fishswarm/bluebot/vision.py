@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -156,6 +155,9 @@ def _in_range(position: FloatArray, visual_range: float) -> tuple[NDArray[np.int
     """
     count = position.shape[0]
     if count >= KD_TREE_MIN_FISH:
+        # Imported here: a robot's own vision never needs it, and a Pi Zero has no scipy.
+        from scipy.spatial import cKDTree
+
         tree = cKDTree(position)
         k = min(count, 64)
         while True:

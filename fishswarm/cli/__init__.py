@@ -17,11 +17,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level, format="%(levelname)s %(name)s: %(message)s")
-    from fishswarm.cli import learn, study, swarm
+    from fishswarm.cli import learn, robot, study, swarm
 
     handlers: dict[str, Any] = {
         "run": swarm.run,
         "fish": swarm.fish,
+        "robot": robot.robot,
+        "robots": robot.robots,
         "world": swarm.world,
         "channel": swarm.channel,
         "observe": swarm.observe,

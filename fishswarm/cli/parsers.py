@@ -192,6 +192,85 @@ def build_parser() -> argparse.ArgumentParser:
         "keeps its own keys)",
     )
 
+    robot = commands.add_parser(
+        "robot",
+        help="run a robot: its driver and fish actor (on a BlueBot, or a mock one)",
+        description="Run a robot's driver and its fish actor in one process, over an "
+        "in-memory bus, bridged to the swarm's router. The driver sees through both cameras "
+        "and the depth sensor, runs the fins and LEDs, stops the fins when commands stop "
+        "(--command-timeout) or the link stays down (--link-timeout), obeys operators' "
+        "stop and resume ('fishswarm robots --stop'), and reports its status. With "
+        "--hardware mock it runs on gpiozero's mock pins and swims in a simulated world "
+        "running on the same router ('fishswarm run --time realtime'), its camera images "
+        "rendered from that world.",
+    )
+    robot.add_argument("--id", dest="robot_id", type=int, required=True, help="the robot's fish id")
+    robot.add_argument(
+        "--hardware",
+        choices=["bluebot", "mock"],
+        default="bluebot",
+        help="bluebot (default: gpiozero, picamera2, the MS5803 over I²C) or mock (a laptop)",
+    )
+    _add_connect(robot)
+    _add_scenario_flags(
+        robot,
+        [
+            "behavior",
+            "target_distance",
+            "controller",
+            "control_period",
+            "orbit_radius",
+            "formation",
+            "spacing",
+            "flags",
+            "swarm",
+            "model",
+            "seed",
+        ],
+    )
+    robot.add_argument(
+        "--command-timeout",
+        type=float,
+        default=1.0,
+        help="fins off when no command arrives for this long, s (default 1; more than --period)",
+    )
+    robot.add_argument(
+        "--link-timeout",
+        type=float,
+        default=10.0,
+        help="with the link to the router lost, swim on the robot's own perception for this "
+        "long, then stop the fins until it returns, s (default 10)",
+    )
+    robot.add_argument(
+        "--perception-timeout",
+        type=float,
+        default=3.0,
+        help="the fish actor's own watchdog: fins off after this long without a perception, "
+        "s (default 3)",
+    )
+
+    robots = commands.add_parser(
+        "robots",
+        help="list the robots of a swarm, or stop and resume them",
+        description="Listen for the robots' status messages and liveliness for --listen "
+        "seconds and print the fleet: id, version, behaviour, state, depth, link, fin "
+        "frequencies, CPU temperature and when each was last heard. --stop turns fins and "
+        "LEDs off on the named robots (all when no id is given) until --resume.",
+    )
+    _add_connect(robots)
+    robots.add_argument("--swarm", default="default", help="swarm name (default default)")
+    robots.add_argument(
+        "--listen", type=float, default=1.5, help="how long to listen, s (default 1.5)"
+    )
+    order = robots.add_mutually_exclusive_group()
+    order.add_argument(
+        "--stop", type=int, nargs="*", metavar="ID", help="stop these robots (none given: all)"
+    )
+    order.add_argument(
+        "--resume", type=int, nargs="*", metavar="ID", help="resume these robots (none: all)"
+    )
+    robots.add_argument("--json", action="store_true", help="print the fleet as JSON")
+
     world = commands.add_parser(
         "world",
         help="run the world actor alone",

@@ -1,0 +1,250 @@
+"""A BlueBot on a laptop: the driver's ports on gpiozero's mock pins, and its cameras and depth
+sensor fed from a simulated world over Zenoh.
+
+A mock robot is a fish of a running simulated world. Its body lives in that world: the
+:class:`MockBody` answers the world's perceptions for it with the gains its fins hold now
+(so the world moves it as its fins beat) and keeps the world's latest snapshot, from which
+:class:`SnapshotCamera` renders both camera images (:func:`~fishswarm.sim.camera.
+render_views`) and :class:`SnapshotDepth` reads its depth. What the robot perceives comes over
+its link, as a real robot's light comes through the water: cut the link and the frames go
+stale, the driver stops perceiving, and its failsafe stops the fins.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import trio
+from numpy.typing import NDArray
+
+from fishswarm.actors.bus import Bus, open_subscriber, open_token
+from fishswarm.actors.driver import Hardware, SensorUnavailable
+from fishswarm.actors.inbox import Inbox
+from fishswarm.actors.intake import Intake
+from fishswarm.bluebot.fisheye import Fisheye
+from fishswarm.bluebot.gpio import GpioFins, GpioLeds
+from fishswarm.bluebot.parameters import BlueBot
+from fishswarm.bluebot.ports import CameraSide, Fins
+from fishswarm.protocols.codec import encode
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.messages import Command, Perception, Snapshot
+from fishswarm.sim.camera import Optics, render_views
+
+FloatArray = NDArray[np.float64]
+
+STALE_AFTER = 0.6
+"""A snapshot older than this (wall-clock s) gives no camera frame or depth reading."""
+
+
+class WorldFeed:
+    """The world's latest snapshot, as it arrives (from any thread).
+
+    Args:
+        robot_id: the robot's fish id.
+        stale_after: a snapshot older than this gives nothing, s.
+        clock: wall-clock time, s.
+    """
+
+    def __init__(
+        self, robot_id: int, *, stale_after: float = STALE_AFTER, clock: Any = time.monotonic
+    ) -> None:
+        self.robot_id = robot_id
+        self.stale_after = stale_after
+        self._clock = clock
+        self._latest: tuple[float, Snapshot] | None = None
+
+    def take(self, snapshot: Snapshot) -> None:
+        """A new snapshot arrived."""
+        self._latest = (self._clock(), snapshot)
+
+    def current(self) -> tuple[Snapshot, int]:
+        """The latest snapshot and the robot's row in it.
+
+        Raises:
+            SensorUnavailable: no snapshot yet, too old, or the robot not in the world.
+        """
+        latest = self._latest
+        if latest is None:
+            raise SensorUnavailable("no world snapshot yet")
+        arrived, snapshot = latest
+        if self._clock() - arrived > self.stale_after:
+            raise SensorUnavailable(
+                f"the world's last snapshot is {self._clock() - arrived:.1f} s old"
+            )
+        rows = np.flatnonzero(snapshot.ids == self.robot_id)
+        if rows.size == 0:
+            raise SensorUnavailable(f"fish {self.robot_id} is not in the world (yet)")
+        return snapshot, int(rows[0])
+
+
+@dataclass
+class SnapshotCamera:
+    """Both fisheye cameras, rendered from the world's latest snapshot. Implements ``Camera``.
+
+    Images are rendered once per snapshot, both sides together, with seeded sensor noise.
+    """
+
+    feed: WorldFeed
+    fisheye: Fisheye = field(default_factory=Fisheye)
+    optics: Optics = field(default_factory=Optics)
+    robot: BlueBot = field(default_factory=BlueBot)
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        self._rng = np.random.default_rng([self.seed, self.feed.robot_id])
+        self._lock = threading.Lock()
+        self._rendered: tuple[int, dict[CameraSide, NDArray[np.uint8]]] | None = None
+
+    def capture(self, side: CameraSide) -> NDArray[np.uint8]:
+        """One camera's image of the world as the latest snapshot has it."""
+        snapshot, row = self.feed.current()
+        with self._lock:
+            if self._rendered is None or self._rendered[0] != snapshot.tick:
+                images = render_views(
+                    np.asarray(snapshot.position),
+                    np.asarray(snapshot.yaw),
+                    row,
+                    fisheye=self.fisheye,
+                    optics=self.optics,
+                    robot=self.robot,
+                    rng=self._rng,
+                )
+                self._rendered = (snapshot.tick, images)
+            return self._rendered[1][side]
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+@dataclass
+class SnapshotDepth:
+    """The robot's depth as the world's latest snapshot has it. Implements ``DepthSensor``."""
+
+    feed: WorldFeed
+
+    def read_depth(self) -> float:
+        snapshot, row = self.feed.current()
+        return float(snapshot.position[row, 2])
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+class BodyFins:
+    """Fins that also tell the simulated body what they hold. Implements ``Fins``.
+
+    Args:
+        fins: the real port (gpiozero's mock pins on a laptop).
+    """
+
+    def __init__(self, fins: Fins) -> None:
+        self._fins = fins
+        self.gains = np.zeros(4)
+
+    @property
+    def frequencies(self) -> tuple[float, ...]:
+        """The frequency each fin's pins beat at now, Hz (as the pins, not the body, have it)."""
+        return tuple(getattr(self._fins, "frequencies", ()))
+
+    def set_gains(self, gains: NDArray[np.float64]) -> None:
+        self._fins.set_gains(gains)
+        self.gains = np.clip(np.asarray(gains, dtype=np.float64), 0.0, 1.0).copy()
+
+    def stop(self) -> None:
+        self._fins.stop()
+        self.gains = np.zeros(4)
+
+    def close(self) -> None:
+        self.stop()
+        self._fins.close()
+
+
+class MockBody:
+    """The mock robot's body in the simulated world: answers the world's perceptions for it
+    with its fins' gains and keeps the world's snapshots for its camera and depth sensor.
+
+    Args:
+        robot_id: the robot's fish id.
+        keys: the swarm's key space.
+        fins: the robot's fins.
+        leds: the robot's LEDs.
+        feed: where snapshots go.
+    """
+
+    def __init__(
+        self, robot_id: int, keys: KeySpace, fins: BodyFins, leds: GpioLeds, feed: WorldFeed
+    ) -> None:
+        self.robot_id = robot_id
+        self.keys = keys
+        self.fins = fins
+        self.leds = leds
+        self.feed = feed
+        self.intake = Intake(f"mock body {robot_id}")
+
+    async def run(
+        self, remote: Bus, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
+    ) -> None:
+        """Serve until cancelled; ready once subscribed and alive as a fish of the world."""
+        keys = self.keys
+        perceptions: Inbox[tuple[str, bytes]] = Inbox()
+        async with contextlib.AsyncExitStack() as stack:
+            await stack.enter_async_context(
+                open_subscriber(remote, keys.snapshot, self._take_snapshot)
+            )
+            await stack.enter_async_context(
+                open_subscriber(
+                    remote,
+                    keys.perception(self.robot_id),
+                    lambda key, payload: perceptions.push((key, payload)),
+                )
+            )
+            await stack.enter_async_context(open_token(remote, keys.alive("fish", self.robot_id)))
+            task_status.started()
+            async for key, payload in perceptions:
+                perception = self.intake.decode_addressed(
+                    key, payload, Perception, field="fish_id", owner=self.robot_id
+                )
+                if perception is None:
+                    continue
+                answer = Command(self.robot_id, perception.tick, self.fins.gains, self.leds.lit)
+                remote.put(keys.command(self.robot_id), encode(answer))
+
+    def _take_snapshot(self, key: str, payload: bytes) -> None:
+        snapshot = self.intake.decode(key, payload, Snapshot)
+        if snapshot is not None:
+            self.feed.take(snapshot)
+
+
+def open_mock_hardware(
+    robot_id: int, keys: KeySpace, *, seed: int = 0, pin_factory: Any = None
+) -> tuple[Hardware, MockBody]:
+    """A mock robot's ports and its body in the simulated world.
+
+    Args:
+        robot_id: the robot's fish id.
+        keys: the swarm's key space.
+        seed: the seed of its cameras' sensor noise.
+        pin_factory: gpiozero's pin factory (None: a fresh ``MockFactory``).
+    """
+    if pin_factory is None:
+        try:
+            from gpiozero.pins.mock import MockFactory
+        except ImportError as error:
+            raise ImportError(
+                "a mock robot runs on gpiozero's mock pins: pip install 'fishswarm[robot]'"
+            ) from error
+        pin_factory = MockFactory()
+    feed = WorldFeed(robot_id)
+    fins = BodyFins(GpioFins(pin_factory=pin_factory))
+    try:
+        leds = GpioLeds(pin_factory=pin_factory)
+    except BaseException:
+        fins.close()
+        raise
+    hardware = Hardware(fins, leds, SnapshotCamera(feed, seed=seed), SnapshotDepth(feed))
+    return hardware, MockBody(robot_id, keys, fins, leds, feed)

@@ -1,0 +1,199 @@
+"""A robot: its driver and the unchanged fish actor in one process, bridged to the swarm, and
+the fleet as a base station sees it.
+
+:func:`run_robot` opens the robot's hardware (the BlueBot's, or a mock's that lives in a
+simulated world), a Zenoh client session to the base station's router, and runs the fish
+actor and the driver over an in-memory Bus between them (DESIGN §2). :func:`survey_fleet`
+collects the robots' status messages and liveliness for ``fishswarm robots``;
+:func:`order_fleet` sends an operator's stop or resume.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass
+
+import numpy as np
+import trio
+import zenoh
+
+from fishswarm.actors.bus import Bus, MemoryBus, open_alive_events, open_subscriber
+from fishswarm.actors.driver import Driver, DriverSettings, Hardware
+from fishswarm.actors.fish import Fish, FishSettings
+from fishswarm.actors.inbox import Inbox
+from fishswarm.actors.intake import Intake
+from fishswarm.actors.mock_robot import open_mock_hardware
+from fishswarm.actors.session import SessionSettings, open_session
+from fishswarm.actors.zenoh_bus import ZenohBus
+from fishswarm.behaviors.core import FishParams
+from fishswarm.protocols.codec import encode
+from fishswarm.protocols.keys import KeySpace, fish_id_of
+from fishswarm.protocols.messages import RobotOrder, RobotStatus
+
+HARDWARE = ("bluebot", "mock")
+ROBOT_LEASE = 1.0
+"""The robot's Zenoh link lease, s: a link that carries nothing for this long is down."""
+
+
+@dataclass(frozen=True)
+class RobotSettings:
+    """How a robot process runs.
+
+    Attributes:
+        driver: the driver's settings (its id, timings, pipeline).
+        fish: what the fish decides.
+        connect: the base station's router endpoint.
+        hardware: ``bluebot`` (gpiozero, picamera2, the MS5803) or ``mock`` (gpiozero's mock
+            pins; cameras and depth from the simulated world the robot swims in).
+        connect_timeout: longest wait for the router at start, s (< 0: forever).
+        perception_timeout: the fish actor's own watchdog, s.
+        seed: the mock cameras' sensor-noise seed.
+    """
+
+    driver: DriverSettings
+    fish: FishParams
+    connect: str
+    hardware: str = "bluebot"
+    connect_timeout: float = -1.0
+    perception_timeout: float = 3.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.hardware not in HARDWARE:
+            raise ValueError(
+                f"hardware must be one of {', '.join(HARDWARE)}, got {self.hardware!r}"
+            )
+
+
+def open_bluebot_hardware() -> Hardware:
+    """The BlueBot's own ports: fins and LEDs on gpiozero, both cameras through picamera2,
+    the MS5803 depth sensor over I²C (each released again if a later one fails to open)."""
+    from fishswarm.bluebot.gpio import GpioFins, GpioLeds
+    from fishswarm.bluebot.picamera import PiCameras
+    from fishswarm.bluebot.pressure import open_depth_sensor
+
+    with contextlib.ExitStack() as opened:
+        fins = GpioFins()
+        opened.callback(fins.close)
+        leds = GpioLeds()
+        opened.callback(leds.close)
+        camera = PiCameras()
+        opened.callback(camera.close)
+        depth = open_depth_sensor()
+        opened.pop_all()
+    return Hardware(fins, leds, camera, depth)
+
+
+async def run_robot(
+    settings: RobotSettings, *, task_status: trio.TaskStatus[Driver] = trio.TASK_STATUS_IGNORED
+) -> None:
+    """Run one robot until cancelled: driver and fish actor, bridged to the router; reports
+    readiness with its driver (whose state and ports can be watched).
+
+    Raises:
+        ConnectError: the router could not be reached within ``connect_timeout``.
+    """
+    robot_id = settings.driver.robot_id
+    keys = settings.driver.keys
+    body = None
+    if settings.hardware == "mock":
+        hardware, body = open_mock_hardware(robot_id, keys, seed=settings.seed)
+    else:
+        hardware = open_bluebot_hardware()
+    session_settings = SessionSettings(
+        mode="client",
+        connect=(settings.connect,),
+        connect_timeout=settings.connect_timeout,
+        lease=ROBOT_LEASE,
+    )
+    try:
+        async with open_session(session_settings) as session, trio.open_nursery() as nursery:
+            remote, local = ZenohBus(session), MemoryBus()
+            if body is not None:
+                await nursery.start(body.run, remote)
+            fish = Fish(
+                FishSettings(
+                    (robot_id,),
+                    settings.fish,
+                    keys,
+                    perception_timeout=settings.perception_timeout,
+                )
+            )
+            await nursery.start(fish.run, local)
+            driver = Driver(settings.driver, hardware, link_up=_link_probe(session))
+            await nursery.start(driver.run, local, remote)
+            task_status.started(driver)
+    finally:
+        hardware.close()
+
+
+def _link_probe(session: zenoh.Session) -> Callable[[], bool]:
+    def link_up() -> bool:
+        return bool(list(session.info.routers_zid()))
+
+    return link_up
+
+
+@dataclass(frozen=True)
+class FleetEntry:
+    """One robot as the base station last heard of it.
+
+    Attributes:
+        status: its last status message (None: alive, but no status heard yet).
+        alive: whether its liveliness token is up.
+        last_seen: how long ago its last status arrived, s (None: never).
+    """
+
+    robot_id: int
+    status: RobotStatus | None
+    alive: bool
+    last_seen: float | None
+
+
+async def survey_fleet(bus: Bus, keys: KeySpace, *, listen: float) -> list[FleetEntry]:
+    """The robots heard from within ``listen`` s: statuses and liveliness, by id."""
+    statuses: dict[int, tuple[float, RobotStatus]] = {}
+    alive: set[int] = set()
+    intake = Intake("fleet survey")
+    samples: Inbox[tuple[str, bytes]] = Inbox()
+    tokens: Inbox[tuple[str, bool]] = Inbox()
+    async with (
+        open_subscriber(bus, keys.robot_statuses(), lambda k, p: samples.push((k, p))),
+        open_alive_events(bus, keys.alive_all("robot"), lambda k, a: tokens.push((k, a))),
+    ):
+        with trio.move_on_after(listen):
+            async for key, payload in samples:
+                status = intake.decode(key, payload, RobotStatus)
+                if status is not None:
+                    statuses[status.robot_id] = (trio.current_time(), status)
+        for key, up in tokens.drain():
+            robot = fish_id_of(keys.parse_alive(key).member_id)
+            if robot is not None:
+                (alive.add if up else alive.discard)(robot)
+    now = trio.current_time()
+    return [
+        FleetEntry(
+            robot_id,
+            statuses[robot_id][1] if robot_id in statuses else None,
+            robot_id in alive,
+            now - statuses[robot_id][0] if robot_id in statuses else None,
+        )
+        for robot_id in sorted(set(statuses) | alive)
+    ]
+
+
+def order_fleet(bus: Bus, keys: KeySpace, action: str, robot_ids: list[int]) -> RobotOrder:
+    """Send an operator's order to the robots ``robot_ids`` (empty: all); the order sent."""
+    order = RobotOrder(action, np.array(sorted(set(robot_ids)), dtype=np.int64))
+    bus.put(keys.robot_order, encode(order))
+    return order
+
+
+@contextlib.asynccontextmanager
+async def open_base_session(connect: str, connect_timeout: float) -> AsyncIterator[ZenohBus]:
+    """A client session to the base station's router, as a Bus."""
+    async with open_session(
+        SessionSettings(mode="client", connect=(connect,), connect_timeout=connect_timeout)
+    ) as session:
+        yield ZenohBus(session)

@@ -1,0 +1,147 @@
+"""The ``robot`` and ``robots`` commands: a robot's driver and fish actor; the fleet."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import trio
+
+from fishswarm.actors.driver import DriverSettings
+from fishswarm.actors.robot import (
+    FleetEntry,
+    RobotSettings,
+    open_base_session,
+    order_fleet,
+    run_robot,
+    survey_fleet,
+)
+from fishswarm.cli.swarm import _endpoint, _run_trio
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.sim.scenario import ConfigError, Scenario
+
+
+def robot(args: argparse.Namespace, scenario: Scenario) -> int:
+    """``fishswarm robot``: the driver and the fish actor of one robot."""
+    try:
+        settings = RobotSettings(
+            DriverSettings(
+                args.robot_id,
+                scenario.behavior,
+                scenario.keys,
+                control_period=scenario.control_period,
+                command_timeout=args.command_timeout,
+                link_timeout=args.link_timeout,
+            ),
+            scenario.fish_params(),
+            _endpoint(args.connect, "--connect"),
+            hardware=args.hardware,
+            connect_timeout=args.connect_timeout,
+            perception_timeout=args.perception_timeout,
+            seed=scenario.seed,
+        )
+    except ValueError as error:
+        raise ConfigError(str(error)) from None
+
+    async def main() -> None:
+        async with trio.open_nursery() as nursery:
+            await nursery.start(run_robot, settings)
+            print(
+                f"robot {args.robot_id} up on {args.connect} ({args.hardware} hardware, "
+                f"{scenario.behavior}); Ctrl-C stops it",
+                file=sys.stderr,
+            )
+
+    _run_trio(main)
+    return 0
+
+
+def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm robots``: list the fleet, or send it an operator's order."""
+    keys = KeySpace(args.swarm)
+    order = ("stop", args.stop) if args.stop is not None else None
+    if args.resume is not None:
+        order = ("resume", args.resume)
+
+    async def main() -> list[FleetEntry]:
+        async with open_base_session(
+            _endpoint(args.connect, "--connect"), args.connect_timeout
+        ) as bus:
+            if order is not None:
+                sent = order_fleet(bus, keys, order[0], order[1])
+                whom = ", ".join(map(str, sent.robot_ids.tolist())) or "every robot"
+                print(f"sent {order[0]} to {whom}", file=sys.stderr)
+            return await survey_fleet(bus, keys, listen=args.listen)
+
+    fleet: list[FleetEntry] = _run_trio(main)
+    if args.json:
+        print(json.dumps([_as_dict(entry) for entry in fleet], indent=2))
+    else:
+        print(fleet_table(fleet))
+    return 0
+
+
+def _as_dict(entry: FleetEntry) -> dict[str, object]:
+    status = entry.status
+    return {
+        "id": entry.robot_id,
+        "alive": entry.alive,
+        "last_seen": entry.last_seen,
+        "version": status.version if status else None,
+        "behavior": status.behavior if status else None,
+        "state": status.state if status else None,
+        "depth": status.depth if status else None,
+        "link": status.link if status else None,
+        "fin_frequencies": status.fin_frequencies.tolist() if status else None,
+        "cpu_temperature": status.cpu_temperature if status else None,
+    }
+
+
+_COLUMNS = (
+    ("id", ">4"),
+    ("version", "<8"),
+    ("behavior", "<12"),
+    ("state", "<9"),
+    ("depth m", ">7"),
+    ("link", "<4"),
+    ("fins Hz", "<19"),
+    ("CPU °C", ">6"),
+    ("last seen", ""),
+)
+
+
+def _row(cells: list[str]) -> str:
+    return "  ".join(f"{cell:{spec}}" for cell, (_, spec) in zip(cells, _COLUMNS, strict=True))
+
+
+def fleet_table(fleet: list[FleetEntry]) -> str:
+    """The fleet as a table, one robot a line."""
+    if not fleet:
+        return "no robots heard from (are they up and connected to this router?)"
+    lines = [_row([name for name, _ in _COLUMNS])]
+    for entry in fleet:
+        status = entry.status
+        seen = "never" if entry.last_seen is None else f"{entry.last_seen:.1f} s ago"
+        if not entry.alive:
+            seen += " (gone)"
+        if status is None:
+            lines.append(_row([str(entry.robot_id), *["?"] * 7, seen]))
+            continue
+        temperature = status.cpu_temperature
+        lines.append(
+            _row(
+                [
+                    str(entry.robot_id),
+                    status.version,
+                    status.behavior,
+                    status.state,
+                    f"{status.depth:.2f}",
+                    "up" if status.link else "down",
+                    " ".join(f"{f:.1f}" for f in status.fin_frequencies),
+                    "—" if temperature is None else f"{temperature:.0f}",
+                    seen,
+                ]
+            )
+        )
+    return "\n".join(lines)

@@ -1,0 +1,177 @@
+"""Mock robots over real Zenoh on 127.0.0.1: they join a simulated swarm, show up in the
+fleet, obey an operator's stop within a second, stop their fins within two seconds of losing
+the router (their camera images come over that link), and swim again when it returns."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import trio
+
+pytest.importorskip("gpiozero.pins.mock")
+
+from fishswarm.actors.driver import Driver, DriverSettings
+from fishswarm.actors.mock_robot import BodyFins
+from fishswarm.actors.robot import (
+    RobotSettings,
+    open_base_session,
+    order_fleet,
+    run_robot,
+    survey_fleet,
+)
+from fishswarm.protocols.codec import decode
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.messages import RobotStatus
+from fishswarm.sim.scenario import Scenario
+from tests.conftest import free_port, run_trio, subscription, wait_for_port
+
+pytestmark = pytest.mark.integration
+
+KEYS = KeySpace()
+PERIOD = 0.2
+
+
+def start_world(endpoint: str, folder: Path) -> subprocess.Popen[str]:
+    """A realtime simulated swarm of three fish with its router, for 60 s."""
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "fishswarm",
+            "run",
+            "--fish",
+            "3",
+            "--time",
+            "realtime",
+            "--period",
+            str(PERIOD),
+            "--duration",
+            "60",
+            "--quiet",
+            "--listen",
+            endpoint,
+            "--record",
+            str(folder / "run.mcap"),
+            "--summary",
+            str(folder / "run.json"),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+@pytest.fixture
+def worlds() -> Iterator[list[subprocess.Popen[str]]]:
+    started: list[subprocess.Popen[str]] = []
+    yield started
+    for process in started:
+        if process.poll() is None:
+            process.kill()
+        process.communicate(timeout=30)
+
+
+def settings(robot_id: int, endpoint: str) -> RobotSettings:
+    return RobotSettings(
+        DriverSettings(robot_id, "dispersion", KEYS, control_period=PERIOD, command_timeout=1.0),
+        Scenario(control_period=PERIOD).fish_params(),
+        endpoint,
+        hardware="mock",
+        connect_timeout=10.0,
+    )
+
+
+async def until(condition: object, *, timeout: float, step: float = 0.02) -> float:
+    """Wait until ``condition()`` holds; how long it took, s."""
+    start = trio.current_time()
+    with trio.fail_after(timeout):
+        while not condition():  # type: ignore[operator]
+            await trio.sleep(step)
+    return trio.current_time() - start
+
+
+def beating(driver: Driver) -> bool:
+    fins = driver.hardware.fins
+    assert isinstance(fins, BodyFins)
+    return any(f > 0 for f in fins.frequencies)
+
+
+def test_mock_robots_join_obey_a_stop_and_survive_losing_the_router(
+    tmp_path: Path, worlds: list[subprocess.Popen[str]]
+) -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    worlds.append(start_world(endpoint, tmp_path))
+    wait_for_port(port)
+    measured: dict[str, float] = {}
+
+    async def main() -> None:
+        async with trio.open_nursery() as nursery:
+            robots: list[Driver] = [
+                await nursery.start(run_robot, settings(robot_id, endpoint))
+                for robot_id in (10, 11)
+            ]
+            # They swim in the simulated world: its snapshots render their camera images,
+            # their fish actors answer the perceptions the drivers make of them.
+            await until(lambda: all(r.state == "swimming" for r in robots), timeout=20)
+            assert all(r.statistics().perceptions > 0 for r in robots)
+
+            async with open_base_session(endpoint, 5.0) as base:
+                fleet = await survey_fleet(base, KEYS, listen=1.0)
+                assert [entry.robot_id for entry in fleet] == [10, 11]
+                assert all(e.alive and e.status and e.status.link for e in fleet)
+                listed = await trio.run_process(
+                    [sys.executable, "-m", "fishswarm", "robots", "--connect", endpoint, "--json"],
+                    capture_stdout=True,
+                    capture_stderr=True,
+                )
+                rows = json.loads(listed.stdout)
+                assert [row["id"] for row in rows] == [10, 11]
+                assert {row["behavior"] for row in rows} == {"dispersion"}
+
+                # An operator's stop reaches every robot: both report it.
+                async with subscription(base, KEYS.robot_statuses()) as statuses:
+                    start = trio.current_time()
+                    order_fleet(base, KEYS, "stop", [])
+                    stopped: set[int] = set()
+                    with trio.fail_after(5):
+                        while stopped != {10, 11}:
+                            _, payload = await statuses.receive()
+                            status = decode(payload, RobotStatus)
+                            if status.state == "stopped":
+                                stopped.add(status.robot_id)
+                    measured["stop"] = trio.current_time() - start
+                assert not any(beating(r) for r in robots)
+                order_fleet(base, KEYS, "resume", [10, 11])
+                await until(lambda: all(r.state == "swimming" for r in robots), timeout=5)
+
+            # The router (and the world) die: no more frames, no more commands, fins off.
+            await until(lambda: all(beating(r) for r in robots), timeout=5)
+            start = trio.current_time()
+            worlds[0].kill()
+            measured["fins_off"] = await until(
+                lambda: not any(beating(r) for r in robots), timeout=5
+            )
+            await until(lambda: not any(r.link for r in robots), timeout=5)
+            # A new world on the same router address: the robots reconnect and swim again.
+            worlds.append(start_world(endpoint, tmp_path / "again"))
+            perceptions = [r.statistics().perceptions for r in robots]
+            await until(
+                lambda: all(
+                    r.link and r.state == "swimming" and r.statistics().perceptions > p
+                    for r, p in zip(robots, perceptions, strict=True)
+                ),
+                timeout=30,
+            )
+            assert all(r.statistics().failsafe_stops >= 1 for r in robots)
+            nursery.cancel_scope.cancel()
+
+    (tmp_path / "again").mkdir()
+    run_trio(main, timeout=120)
+    assert measured["stop"] <= 1.0, measured
+    assert measured["fins_off"] <= 2.0, measured
