@@ -49,6 +49,7 @@ class RobotSettings:
         connect_timeout: longest wait for the router at start, s (< 0: forever).
         perception_timeout: the fish actor's own watchdog, s.
         seed: the mock cameras' sensor-noise seed.
+        zenoh_config: a Zenoh configuration file to start the session from (None: defaults).
     """
 
     driver: DriverSettings
@@ -58,6 +59,7 @@ class RobotSettings:
     connect_timeout: float = -1.0
     perception_timeout: float = 3.0
     seed: int = 0
+    zenoh_config: str | None = None
 
     def __post_init__(self) -> None:
         if self.hardware not in HARDWARE:
@@ -66,22 +68,35 @@ class RobotSettings:
             )
 
 
+class HardwareError(RuntimeError):
+    """The robot's hardware could not be opened (a library missing, a device not answering)."""
+
+
 def open_bluebot_hardware() -> Hardware:
     """The BlueBot's own ports: fins and LEDs on gpiozero, both cameras through picamera2,
-    the MS5803 depth sensor over I²C (each released again if a later one fails to open)."""
+    the MS5803 depth sensor over I²C (each released again if a later one fails to open).
+
+    Raises:
+        HardwareError: a library is missing or a device does not answer, with which.
+    """
     from fishswarm.bluebot.gpio import GpioFins, GpioLeds
     from fishswarm.bluebot.picamera import PiCameras
-    from fishswarm.bluebot.pressure import open_depth_sensor
+    from fishswarm.bluebot.pressure import SensorError, open_depth_sensor
 
-    with contextlib.ExitStack() as opened:
-        fins = GpioFins()
-        opened.callback(fins.close)
-        leds = GpioLeds()
-        opened.callback(leds.close)
-        camera = PiCameras()
-        opened.callback(camera.close)
-        depth = open_depth_sensor()
-        opened.pop_all()
+    try:
+        with contextlib.ExitStack() as opened:
+            fins = GpioFins()
+            opened.callback(fins.close)
+            leds = GpioLeds()
+            opened.callback(leds.close)
+            camera = PiCameras()
+            opened.callback(camera.close)
+            depth = open_depth_sensor()
+            opened.pop_all()
+    except (ImportError, OSError, SensorError, RuntimeError) as error:
+        raise HardwareError(
+            f"cannot open the BlueBot's hardware: {error} (on a laptop, use --hardware mock)"
+        ) from error
     return Hardware(fins, leds, camera, depth)
 
 
@@ -96,17 +111,18 @@ async def run_robot(
     """
     robot_id = settings.driver.robot_id
     keys = settings.driver.keys
-    body = None
-    if settings.hardware == "mock":
-        hardware, body = open_mock_hardware(robot_id, keys, seed=settings.seed)
-    else:
-        hardware = open_bluebot_hardware()
     session_settings = SessionSettings(
         mode="client",
         connect=(settings.connect,),
         connect_timeout=settings.connect_timeout,
         lease=ROBOT_LEASE,
+        config_file=settings.zenoh_config,
     )
+    body = None
+    if settings.hardware == "mock":
+        hardware, body = open_mock_hardware(robot_id, keys, seed=settings.seed)
+    else:
+        hardware = open_bluebot_hardware()
     try:
         async with open_session(session_settings) as session, trio.open_nursery() as nursery:
             remote, local = ZenohBus(session), MemoryBus()

@@ -34,6 +34,8 @@ class SessionSettings:
         connect: endpoints to connect to.
         connect_timeout: how long a client waits for its router, s (< 0: forever).
         lease: link lease, s: how soon a frozen peer is noticed.
+        config_file: a Zenoh configuration file (JSON5) to start from, e.g. a robot's with
+            its transport and security settings; the settings above are applied over it.
     """
 
     mode: str = "client"
@@ -42,6 +44,7 @@ class SessionSettings:
     connect_timeout: float = 10.0
     lease: float = 3.0
     extra: dict[str, Any] = field(default_factory=dict)
+    config_file: str | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in ("router", "peer", "client"):
@@ -50,8 +53,20 @@ class SessionSettings:
             check_endpoint(endpoint)
 
     def to_config(self) -> zenoh.Config:
-        """The Zenoh configuration: explicit endpoints, multicast scouting off."""
+        """The Zenoh configuration: explicit endpoints, multicast scouting off.
+
+        Raises:
+            ConnectError: the configuration file is missing or not valid JSON5.
+        """
         config = zenoh.Config()
+        if self.config_file is not None:
+            try:
+                config = zenoh.Config.from_file(self.config_file)
+            except zenoh.ZError as error:
+                reason = str(error).split(" at /")[0].strip()
+                raise ConnectError(
+                    f"Zenoh configuration {self.config_file} cannot be read: {reason}"
+                ) from None
         config.insert_json5("mode", json.dumps(self.mode))
         config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
         config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))

@@ -231,8 +231,8 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument(
         "--command-timeout",
         type=float,
-        default=1.0,
-        help="fins off when no command arrives for this long, s (default 1; more than --period)",
+        help="fins off when no command arrives for this long, s (more than --period; "
+        "default 2.5 periods, at least 1 s)",
     )
     robot.add_argument(
         "--link-timeout",
@@ -240,6 +240,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=10.0,
         help="with the link to the router lost, swim on the robot's own perception for this "
         "long, then stop the fins until it returns, s (default 10)",
+    )
+    robot.add_argument(
+        "--zenoh-config",
+        type=Path,
+        metavar="JSON5",
+        help="a Zenoh configuration file to start the robot's session from (transport and "
+        "security settings; --connect, client mode and the robot's 1-s lease apply over it)",
     )
     robot.add_argument(
         "--perception-timeout",

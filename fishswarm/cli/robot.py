@@ -31,7 +31,11 @@ def robot(args: argparse.Namespace, scenario: Scenario) -> int:
                 scenario.behavior,
                 scenario.keys,
                 control_period=scenario.control_period,
-                command_timeout=args.command_timeout,
+                command_timeout=(
+                    args.command_timeout
+                    if args.command_timeout is not None
+                    else max(1.0, 2.5 * scenario.control_period)
+                ),
                 link_timeout=args.link_timeout,
             ),
             scenario.fish_params(),
@@ -40,6 +44,7 @@ def robot(args: argparse.Namespace, scenario: Scenario) -> int:
             connect_timeout=args.connect_timeout,
             perception_timeout=args.perception_timeout,
             seed=scenario.seed,
+            zenoh_config=str(args.zenoh_config) if args.zenoh_config else None,
         )
     except ValueError as error:
         raise ConfigError(str(error)) from None

@@ -16,6 +16,7 @@ from fishswarm.actors.control import serve_control
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.launcher import EXIT_WORKER_DIED, LaunchSettings, WorkerFailed, run_swarm
 from fishswarm.actors.observer import Observer, Progress
+from fishswarm.actors.robot import HardwareError
 from fishswarm.actors.session import ConnectError, SessionSettings, check_endpoint, open_session
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus, query
@@ -52,7 +53,14 @@ def _client(args: argparse.Namespace) -> SessionSettings:
     )
 
 
-USER_ERRORS = (ConnectError, StartTimeout, RecordingError, WorkerFailed, ConfigError)
+USER_ERRORS = (
+    ConnectError,
+    StartTimeout,
+    RecordingError,
+    WorkerFailed,
+    ConfigError,
+    HardwareError,
+)
 
 
 def _run_trio(main: Callable[[], Any]) -> Any:

@@ -132,6 +132,13 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["run", "--procs", "0"], "--procs must be at least 1"),
         (["run", "--fish", "many"], "invalid int value"),
         (["export", "nowhere.mcap"], "say what to write"),
+        (["run", "--vision", "sonar"], "vision_model must be one of geometric, camera"),
+        (
+            ["robot", "--id", "1", "--period", "0.5", "--command-timeout", "0.4"],
+            "command_timeout (0.4 s) must exceed the control period (0.5 s)",
+        ),
+        (["robot", "--id", "1", "--hardware", "lego"], "invalid choice: 'lego'"),
+        (["robots", "--stop", "1", "--resume", "2"], "not allowed with argument"),
     ],
 )
 def test_bad_arguments_exit_nonzero_with_a_reason(args: list[str], message: str) -> None:
@@ -154,6 +161,21 @@ def test_bad_config_files_are_explained(tmp_path: Path) -> None:
     assert "fish must be a whole number" in _run("run", "--config", str(wrong), timeout=30).stderr
     missing = _run("run", "--config", str(tmp_path / "none.toml"), timeout=30)
     assert missing.returncode == 2 and "does not exist" in missing.stderr
+
+
+def test_a_robot_that_cannot_open_its_hardware_or_configuration_says_so(tmp_path: Path) -> None:
+    # No Raspberry Pi here: gpiozero finds no pin factory.
+    result = _run("robot", "--id", "1", "--connect", "tcp/127.0.0.1:9", timeout=30)
+    assert result.returncode == 1
+    assert "cannot open the BlueBot's hardware" in result.stderr
+    assert "use --hardware mock" in result.stderr
+    broken = tmp_path / "zenoh.json5"
+    broken.write_text("{ mode: ")
+    result = _run(
+        "robot", "--id", "1", "--hardware", "mock", "--zenoh-config", str(broken), timeout=30
+    )
+    assert result.returncode == 1
+    assert f"Zenoh configuration {broken} cannot be read" in result.stderr
 
 
 def test_export_of_a_non_recording_fails_clearly(tmp_path: Path) -> None:
