@@ -20,8 +20,13 @@ ROBOT_MODULES = (
     "fishswarm.bluebot.ports",
     "fishswarm.bluebot.gpio",
     "fishswarm.bluebot.pressure",
+    "fishswarm.bluebot.picamera",
+    "fishswarm.bluebot.leds",
+    "fishswarm.actors.driver",
 )
-ALLOWED = {"numpy", "trio", "msgpack", "zenoh", "gpiozero", "smbus2"}
+# picamera2 and lgpio are Raspberry Pi OS's own packages (the venv sees them), imported when
+# the cameras are opened.
+ALLOWED = {"numpy", "trio", "msgpack", "zenoh", "gpiozero", "smbus2", "picamera2", "lgpio"}
 BLOCKED = ("scipy", "mcap", "matplotlib", "cma", "imageio_ffmpeg")
 
 
@@ -67,3 +72,63 @@ def test_the_robots_modules_import_with_the_base_station_packages_blocked() -> N
     )
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "dispersion,aggregation,orbit,milling,waltz,replica,formation"
+
+
+DRIVE = """
+import sys
+for name in BLOCKED:
+    sys.modules[name] = None
+import numpy as np
+import trio
+from gpiozero.pins.mock import MockFactory
+from fishswarm.actors.bus import MemoryBus
+from fishswarm.actors.driver import Driver, DriverSettings, Hardware
+from fishswarm.actors.fish import Fish, FishSettings
+from fishswarm.behaviors.registry import fish_params
+from fishswarm.bluebot.gpio import GpioFins, GpioLeds
+
+frame = np.zeros((192, 256, 3), dtype=np.uint8)
+frame[100:102, 60:62, 2] = 250   # a robot's two LEDs, one above the other, seen on the left
+frame[90:92, 60:62, 2] = 250
+
+class Camera:
+    def capture(self, side):
+        return frame if side == "left" else np.zeros_like(frame)
+    def close(self):
+        pass
+
+class Depth:
+    def read_depth(self):
+        return 0.4
+    def close(self):
+        pass
+
+async def main():
+    factory = MockFactory()
+    hardware = Hardware(GpioFins(pin_factory=factory), GpioLeds(pin_factory=factory), Camera(), Depth())
+    driver = Driver(DriverSettings(5, "dispersion", control_period=0.2), hardware, link_up=lambda: True)
+    local, remote = MemoryBus(), MemoryBus()
+    async with trio.open_nursery() as nursery:
+        params = fish_params(
+            {"behavior": "dispersion", "tank": (1.78, 1.78, 1.17), "control_period": 0.2}
+        )
+        await nursery.start(Fish(FishSettings((5,), params)).run, local)
+        await nursery.start(driver.run, local, remote)
+        await trio.sleep(1.0)
+        nursery.cancel_scope.cancel()
+    hardware.close()
+    stats = driver.statistics()
+    print(stats.perceptions, stats.commands, "scipy" in sys.modules and sys.modules["scipy"] is not None)
+
+trio.run(main)
+"""
+
+
+def test_the_driver_and_the_fish_actor_run_with_the_base_station_packages_blocked() -> None:
+    program = f"BLOCKED = {BLOCKED!r}\n" + DRIVE
+    result = subprocess.run(
+        [sys.executable, "-c", program], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    perceptions, commands, scipy_loaded = result.stdout.split()
+    assert int(perceptions) >= 4 and int(commands) >= 4 and scipy_loaded == "False"

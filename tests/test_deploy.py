@@ -1,0 +1,161 @@
+"""The Ansible deployment (deploy/): it lints clean, its playbook runs in check mode against
+this machine, and the service it installs starts the robot with arguments our CLI accepts."""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from fishswarm.cli.parsers import build_parser
+
+pytestmark = pytest.mark.integration
+
+DEPLOY = Path(__file__).resolve().parents[1] / "deploy"
+BIN = Path(sys.executable).parent
+ROLE = DEPLOY / "roles" / "fishswarm"
+
+
+def ansible(tool: str, *args: str, cwd: Path = DEPLOY) -> subprocess.CompletedProcess[str]:
+    executable = BIN / tool
+    if not executable.exists():
+        pytest.fail(f"{tool} is missing: pip install -e '.[dev]' installs it")
+    environment = {**os.environ, "ANSIBLE_NOCOLOR": "1", "NO_COLOR": "1"}
+    return subprocess.run(
+        [str(executable), *args],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=environment,
+        check=False,
+    )
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("dist")
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(folder),
+            str(DEPLOY.parent),
+        ],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
+    return next(folder.glob("fishswarm-*.whl"))
+
+
+def inventory(folder: Path, wheel: Path, **robot: object) -> Path:
+    values = {
+        "ansible_connection": "local",
+        "ansible_python_interpreter": sys.executable,
+        "ansible_become": False,
+        "fishswarm_hardware": "mock",
+        "fishswarm_router": "tcp/10.0.0.1:7447",
+        "fishswarm_wheel": str(wheel),
+        **robot,
+    }
+    lines = ["robots:", "  hosts:", "    localhost:"]
+    lines += [
+        f"      {key}: {value!r}" if isinstance(value, str) else f"      {key}: {value}"
+        for key, value in values.items()
+    ]
+    path = folder / "inventory.yml"
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_the_deployment_lints_clean() -> None:
+    result = ansible("ansible-lint", "--offline")
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "Passed" in result.stdout + result.stderr
+
+
+def test_the_playbook_runs_in_check_mode_against_this_machine(tmp_path: Path, wheel: Path) -> None:
+    path = inventory(tmp_path, wheel, fish_id=3)
+    result = ansible("ansible-playbook", "-i", str(path), "site.yml", "--check", "--diff")
+    assert result.returncode == 0, result.stdout + result.stderr
+    recap = re.search(r"localhost\s+: ok=(\d+)\s+changed=(\d+).*failed=(\d+)", result.stdout)
+    assert recap is not None, result.stdout
+    assert int(recap.group(3)) == 0 and int(recap.group(1)) >= 8
+    # What it would write: the robot's settings and the service that runs fish 3's robot.
+    assert "FISHSWARM_ROUTER=tcp/10.0.0.1:7447" in result.stdout
+    assert "ExecStart=/opt/fishswarm/venv/bin/fishswarm robot --id %i" in result.stdout
+
+
+def test_a_robot_without_a_fish_id_is_refused_with_how_to_fix_it(
+    tmp_path: Path, wheel: Path
+) -> None:
+    result = ansible(
+        "ansible-playbook", "-i", str(inventory(tmp_path, wheel)), "site.yml", "--check"
+    )
+    assert result.returncode != 0
+    assert "give every robot a fish_id in the inventory" in result.stdout
+
+
+def render(template: str, folder: Path, **variables: str) -> str:
+    """A template of the role, rendered by Ansible with the role's defaults."""
+    destination = folder / template.removesuffix(".j2")
+    extra = " ".join(f"{key}={value}" for key, value in variables.items())
+    result = ansible(
+        "ansible",
+        "localhost",
+        "-i",
+        "localhost,",
+        "-c",
+        "local",
+        "-e",
+        f"ansible_python_interpreter={sys.executable}",
+        "-e",
+        f"@{ROLE / 'defaults' / 'main.yml'}",
+        "-e",
+        extra,
+        "-m",
+        "ansible.builtin.template",
+        "-a",
+        f"src={ROLE / 'templates' / template} dest={destination}",
+        cwd=folder,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    return destination.read_text()
+
+
+def test_the_service_starts_the_robot_with_arguments_the_cli_accepts(tmp_path: Path) -> None:
+    settings = render("fishswarm.env.j2", tmp_path, fish_id="7", fishswarm_hardware="mock")
+    environment = dict(
+        line.split("=", 1) for line in settings.splitlines() if line and not line.startswith("#")
+    )
+    unit = render("fishswarm-fish@.service.j2", tmp_path, fish_id="7")
+    command = next(line for line in unit.splitlines() if line.startswith("ExecStart="))
+    words = shlex.split(command.removeprefix("ExecStart="))
+    assert words[0] == "/opt/fishswarm/venv/bin/fishswarm"
+    # systemd puts the instance for %i and the environment file's values for ${...}.
+    words = [
+        re.sub(r"\$\{(\w+)\}", lambda m: environment[m.group(1)], w.replace("%i", "7"))
+        for w in words[1:]
+    ]
+    args = build_parser().parse_args(words)
+    assert (args.command, args.robot_id, args.hardware) == ("robot", 7, "mock")
+    assert args.connect == "tcp/192.168.1.10:7447" and args.connect_timeout == -1
+    assert "Restart=on-failure" in unit
+    client = render("zenoh-client.json5.j2", tmp_path, fishswarm_router="tcp/10.1.2.3:7447")
+    config = zenoh.Config.from_file(str(tmp_path / "zenoh-client.json5"))
+    assert config.get_json("connect/endpoints") == '["tcp/10.1.2.3:7447"]'
+    assert config.get_json("scouting/multicast/enabled") == "false"
+    assert "client" in client
