@@ -105,8 +105,10 @@ class Depth:
 
 async def main():
     factory = MockFactory()
-    hardware = Hardware(GpioFins(pin_factory=factory), GpioLeds(pin_factory=factory), Camera(), Depth())
-    driver = Driver(DriverSettings(5, "dispersion", control_period=0.2), hardware, link_up=lambda: True)
+    fins, leds = GpioFins(pin_factory=factory), GpioLeds(pin_factory=factory)
+    hardware = Hardware(fins, leds, Camera(), Depth())
+    settings = DriverSettings(5, "dispersion", control_period=0.2)
+    driver = Driver(settings, hardware, link_up=lambda: True)
     local, remote = MemoryBus(), MemoryBus()
     async with trio.open_nursery() as nursery:
         params = fish_params(
@@ -118,7 +120,8 @@ async def main():
         nursery.cancel_scope.cancel()
     hardware.close()
     stats = driver.statistics()
-    print(stats.perceptions, stats.commands, "scipy" in sys.modules and sys.modules["scipy"] is not None)
+    scipy_loaded = sys.modules.get("scipy") is not None
+    print(stats.perceptions, stats.commands, scipy_loaded)
 
 trio.run(main)
 """
