@@ -20,8 +20,9 @@ import time
 
 import numpy as np
 
+from fishswarm.bluebot.blobs import find_blobs
 from fishswarm.bluebot.fisheye import Fisheye
-from fishswarm.bluebot.leds import LedVision, find_blobs, perceive_leds
+from fishswarm.bluebot.leds import LedVision, perceive_leds
 from fishswarm.bluebot.parameters import BlueBot, Tank
 from fishswarm.bluebot.vision import Vision, perceive
 from fishswarm.sim.camera import SIDES, Optics, render_views

@@ -22,6 +22,7 @@ ROBOT_MODULES = (
     "fishswarm.bluebot.pressure",
     "fishswarm.bluebot.picamera",
     "fishswarm.bluebot.leds",
+    "fishswarm.bluebot.blobs",
     "fishswarm.actors.driver",
 )
 # picamera2 and lgpio are Raspberry Pi OS's own packages (the venv sees them), imported when
