@@ -293,6 +293,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="longest wait for the fish, s (default 60)",
     )
 
+    world.add_argument(
+        "--record",
+        type=Path,
+        help="MCAP recording of the run to write (plot, animate and export read it)",
+    )
     world.add_argument("--quiet", action="store_true", help="no progress lines")
 
     channel = commands.add_parser(

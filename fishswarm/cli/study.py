@@ -252,13 +252,16 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
 def _read(path: Path, *, at_least: int, purpose: str) -> Recording:
     """A recording with at least ``at_least`` snapshots, or a usage error saying why not."""
+    from fishswarm.cli.swarm import UserError
     from fishswarm.study.recording import RecordingError, read_recording
 
     try:
         recording = read_recording(path)
     except RecordingError as error:
-        raise ConfigError(str(error)) from None
+        raise UserError(str(error)) from None
+    if note := recording.note(path):
+        print(note, file=sys.stderr)
     if len(recording.snapshots) < at_least:
         few = "no snapshots" if at_least == 1 else f"fewer than {at_least} snapshots"
-        raise ConfigError(f"{path} holds {few}: nothing to {purpose}")
+        raise UserError(f"{path} holds {few}: nothing to {purpose}")
     return recording

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import sys
 from collections.abc import Awaitable, Callable
+from pathlib import Path
 from typing import Any
 
 import trio
@@ -110,17 +112,22 @@ def progress_printer(ticks: int, stream: Any = sys.stderr) -> Callable[[Progress
     return show
 
 
+def _check_file_path(flag: str, path: Path | None) -> None:
+    """A path a command is to write a file to must not name a directory."""
+    if path is not None and (str(path) in ("", ".") or path.is_dir()):
+        raise ConfigError(
+            f"{flag} must name a file, e.g. {flag} runs/latest"
+            f"{'.json' if flag == '--summary' else '.mcap'}; {str(path)!r} is a directory"
+        )
+
+
 def run(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm run``."""
     if args.procs < 1:
         raise ConfigError(f"--procs must be at least 1, got {args.procs}")
     scenario.fish_params()  # reads a replica model now: a bad one is a usage error, not a crash
     for flag, path in (("--record", args.record), ("--summary", args.summary)):
-        if path is not None and (str(path) in ("", ".") or path.is_dir()):
-            raise ConfigError(
-                f"{flag} must name a file, e.g. {flag} runs/latest"
-                f"{'.mcap' if flag == '--record' else '.json'}; {str(path)!r} is a directory"
-            )
+        _check_file_path(flag, path)
     settings = LaunchSettings(
         scenario=scenario,
         procs=args.procs,
@@ -233,17 +240,31 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm world``: the world alone."""
     actor = World(WorldSettings(scenario, tuple(range(scenario.fish)), args.start_timeout))
     show = None if args.quiet else progress_printer(scenario.ticks)
-    observer = Observer(scenario.keys, on_progress=show, observer_id="world-cli")
 
     async def main() -> None:
-        async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
-            bus = ZenohBus(session)
-            await nursery.start(observer.run, bus)
-            await nursery.start(serve_control, session, actor)
-            await actor.run(bus)
-            nursery.cancel_scope.cancel()
+        with contextlib.ExitStack() as files:
+            recorder = (
+                files.enter_context(open_recorder(args.record, scenario.to_dict()))
+                if args.record is not None
+                else None
+            )
+            observer = Observer(
+                scenario.keys, recorder=recorder, on_progress=show, observer_id="world-cli"
+            )
+            async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
+                bus = ZenohBus(session)
+                await nursery.start(observer.run, bus)
+                await nursery.start(serve_control, session, actor)
+                await actor.run(bus)
+                # Its own last snapshot comes back through the session: record it too.
+                with trio.move_on_after(WORLD_END_GRACE):
+                    await observer.wait_for_tick(actor.tick)
+                nursery.cancel_scope.cancel()
 
+    _check_file_path("--record", args.record)
     _run_trio(main)
+    if args.record is not None:
+        print(f"recording: {args.record}", file=sys.stderr)
     print(json.dumps(dataclasses.asdict(actor.statistics())), file=sys.stderr)
     return 0
 
@@ -358,6 +379,8 @@ def export(args: argparse.Namespace, scenario: Scenario | None) -> int:
         recording = read_recording(args.recording)
     except RecordingError as error:
         raise UserError(str(error)) from None
+    if note := recording.note(args.recording):
+        print(note, file=sys.stderr)
     if args.npz is not None:
         export_npz(recording, args.npz)
         print(f"wrote {args.npz}", file=sys.stderr)

@@ -4,25 +4,35 @@ A recording holds the run's scenario (metadata ``scenario``), every world snapsh
 as it went over the wire (topic ``snapshot``, msgpack), the metrics of each snapshot (topic
 ``metrics``, JSON) and events such as fish joining or getting lost (topic ``events``, JSON).
 Because snapshots are stored as received, a recording replays a run exactly.
+
+Recordings survive a crash: messages go out in small chunks, each written to the file
+(unbuffered) as soon as it is full, so a run killed outright leaves a file readable up to
+its last whole chunk; reading such a file returns what it holds, marked incomplete.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import json
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
 from mcap.reader import make_reader
+from mcap.records import Channel, Message, Metadata
+from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
 from fishswarm.protocols.codec import MessageError, decode
 from fishswarm.protocols.messages import Snapshot
 
+CHUNK_SIZE = 32 * 1024
+"""Bytes of messages per chunk: what a killed run can lose at most (about ten snapshots of
+25 fish with their metrics)."""
 SNAPSHOT_TOPIC = "snapshot"
 METRICS_TOPIC = "metrics"
 EVENTS_TOPIC = "events"
@@ -35,8 +45,8 @@ class RecordingError(ValueError):
 class Recorder:
     """Writes one run to an open MCAP stream; use :func:`open_recorder`."""
 
-    def __init__(self, stream: IO[bytes], scenario: dict[str, Any]) -> None:
-        self._writer = Writer(stream)
+    def __init__(self, stream: IO[bytes] | _Flushing, scenario: dict[str, Any]) -> None:
+        self._writer = Writer(stream, chunk_size=CHUNK_SIZE)  # type: ignore[arg-type]
         self._writer.start(profile="fishswarm", library="fishswarm")
         self._writer.add_metadata("scenario", {"json": json.dumps(scenario)})
         snapshot_schema = self._writer.register_schema(
@@ -76,12 +86,31 @@ class Recorder:
         self._writer.finish()
 
 
+class _Flushing:
+    """A file that hands every write to the operating system at once (the MCAP writer
+    writes a chunk when it is full: it reaches the disk then, not when the run ends)."""
+
+    def __init__(self, stream: IO[bytes]) -> None:
+        self._stream = stream
+
+    def write(self, data: bytes) -> int:
+        written = self._stream.write(data)
+        self._stream.flush()
+        return written
+
+    def tell(self) -> int:
+        return self._stream.tell()
+
+    def flush(self) -> None:
+        self._stream.flush()
+
+
 @contextmanager
 def open_recorder(path: Path, scenario: dict[str, Any]) -> Iterator[Recorder]:
     """Create ``path`` and record into it; the file is complete when the block ends."""
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("wb") as stream:
-        recorder = Recorder(stream, scenario)
+        recorder = Recorder(_Flushing(stream), scenario)
         try:
             yield recorder
         finally:
@@ -97,12 +126,25 @@ class Recording:
         snapshots: every snapshot, in tick order.
         metrics: the metrics of each snapshot.
         events: the events, in order.
+        complete: False when the file ends early (the run was killed): it holds the run up
+            to its last whole chunk.
     """
 
     scenario: dict[str, Any]
     snapshots: list[Snapshot]
     metrics: list[dict[str, Any]]
     events: list[dict[str, Any]]
+    complete: bool = True
+
+    def note(self, path: Path) -> str | None:
+        """A warning for a recording cut short, saying how much it holds; None if complete."""
+        if self.complete:
+            return None
+        last = f", up to tick {self.snapshots[-1].tick}" if self.snapshots else ""
+        return (
+            f"warning: {path} was cut short (the run that wrote it was killed?): read "
+            f"{len(self.snapshots)} snapshots{last}"
+        )
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The run as arrays, SI units: ``t`` (T,), ``pos`` (T, N, 3), ``vel`` (T, N, 3),
@@ -128,36 +170,93 @@ class Recording:
 
 
 def read_recording(path: Path) -> Recording:
-    """Read a recording.
+    """Read a recording; one cut short by a crash is read up to its last whole chunk and
+    marked incomplete.
 
     Raises:
-        RecordingError: the file is missing, not MCAP, or holds invalid snapshots.
+        RecordingError: the file is missing, empty, not MCAP, or holds invalid snapshots.
     """
     try:
-        stream = path.open("rb")
+        data = path.read_bytes()
     except OSError as error:
         raise RecordingError(f"cannot open recording {path}: {error.strerror}") from None
-    with stream:
+    if not data:
+        raise RecordingError(
+            f"{path} is empty (0 bytes): the run that wrote it ended before recording anything"
+        )
+    if not data.startswith(MCAP_MAGIC):
+        raise RecordingError(f"{path} is not an MCAP recording (it does not start like one)")
+    # A finished recording ends with the magic after its footer; one cut short does not.
+    complete = len(data) > len(MCAP_MAGIC) and data.endswith(MCAP_MAGIC)
+    if not complete:
+        contents = _read_stream(path, data)
+    else:
+        contents = _Contents()
         try:
-            reader = make_reader(stream)
-            scenario: dict[str, Any] = {}
+            reader = make_reader(io.BytesIO(data))
             for metadata in reader.iter_metadata():
-                if metadata.name == "scenario":
-                    scenario = json.loads(metadata.metadata["json"])
-            snapshots, metrics, events = [], [], []
+                contents.metadata(metadata.name, metadata.metadata)
             for _, channel, message in reader.iter_messages(log_time_order=False):
-                if channel.topic == SNAPSHOT_TOPIC:
-                    snapshots.append(decode(message.data, Snapshot))
-                elif channel.topic == METRICS_TOPIC:
-                    metrics.append(json.loads(message.data))
-                elif channel.topic == EVENTS_TOPIC:
-                    events.append(json.loads(message.data))
-        except MessageError as error:
-            raise RecordingError(f"{path} holds an invalid snapshot: {error}") from None
+                contents.message(path, channel.topic, message.data)
+        except RecordingError:
+            raise
         except Exception as error:
             raise RecordingError(f"{path} is not a readable MCAP recording: {error}") from None
-    snapshots.sort(key=lambda s: s.tick)
-    return Recording(scenario, snapshots, metrics, events)
+    contents.snapshots.sort(key=lambda s: s.tick)
+    if not complete and contents.metrics:
+        # Each snapshot is followed by its metrics; a cut may fall between the two.
+        whole = min(len(contents.snapshots), len(contents.metrics))
+        del contents.snapshots[whole:], contents.metrics[whole:]
+    return Recording(
+        contents.scenario, contents.snapshots, contents.metrics, contents.events, complete
+    )
+
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+@dataclass
+class _Contents:
+    """What has been read of a recording so far."""
+
+    scenario: dict[str, Any] = field(default_factory=dict)
+    snapshots: list[Snapshot] = field(default_factory=list)
+    metrics: list[dict[str, Any]] = field(default_factory=list)
+    events: list[dict[str, Any]] = field(default_factory=list)
+
+    def metadata(self, name: str, values: dict[str, str]) -> None:
+        if name == "scenario":
+            self.scenario = json.loads(values["json"])
+
+    def message(self, path: Path, topic: str, data: bytes) -> None:
+        if topic == SNAPSHOT_TOPIC:
+            try:
+                self.snapshots.append(decode(data, Snapshot))
+            except MessageError as error:
+                raise RecordingError(f"{path} holds an invalid snapshot: {error}") from None
+        elif topic == METRICS_TOPIC:
+            self.metrics.append(json.loads(data))
+        elif topic == EVENTS_TOPIC:
+            self.events.append(json.loads(data))
+
+
+def _read_stream(path: Path, data: bytes) -> _Contents:
+    """The records of a file without footer, in order, up to the first that is cut off."""
+    contents = _Contents()
+    topics: dict[int, str] = {}
+    try:
+        for record in StreamReader(io.BytesIO(data)).records:
+            if isinstance(record, Channel):
+                topics[record.id] = record.topic
+            elif isinstance(record, Message) and record.channel_id in topics:
+                contents.message(path, topics[record.channel_id], record.data)
+            elif isinstance(record, Metadata):
+                contents.metadata(record.name, record.metadata)
+    except RecordingError:
+        raise
+    except Exception:  # the cut: everything before it has been read
+        pass
+    return contents
 
 
 def export_npz(recording: Recording, out: Path) -> None:

@@ -178,12 +178,70 @@ def test_a_robot_that_cannot_open_its_hardware_or_configuration_says_so(tmp_path
     assert f"Zenoh configuration {broken} cannot be read" in result.stderr
 
 
-def test_export_of_a_non_recording_fails_clearly(tmp_path: Path) -> None:
+def test_a_non_recording_or_empty_file_fails_the_same_way_in_every_command(
+    tmp_path: Path,
+) -> None:
     bogus = tmp_path / "bogus.mcap"
     bogus.write_bytes(b"not an mcap file at all")
-    result = _run("export", str(bogus), "--npz", str(tmp_path / "x.npz"), timeout=30)
-    assert result.returncode == 1
-    assert "is not a readable MCAP recording" in result.stderr
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    for path, message in (
+        (bogus, "is not an MCAP recording (it does not start like one)"),
+        (empty, "is empty (0 bytes): the run that wrote it ended before recording anything"),
+    ):
+        for command in (
+            ["export", str(path), "--npz", str(tmp_path / "x.npz")],
+            ["plot", str(path), "--out", str(tmp_path / "x.png")],
+            ["animate", str(path), "--out", str(tmp_path / "x.gif")],
+        ):
+            result = _run(*command, timeout=30)
+            assert result.returncode == 1, (command, result.stderr)
+            assert f"{path} {message}" in result.stderr
+
+
+def test_a_run_killed_outright_leaves_a_recording_readable_to_its_last_chunk(
+    tmp_path: Path,
+) -> None:
+    record = tmp_path / "killed.mcap"
+    process = subprocess.Popen(
+        [
+            *FISHSWARM,
+            "run",
+            "--duration",
+            "5000",
+            "--quiet",
+            "--listen",
+            f"tcp/127.0.0.1:{free_port()}",
+            "--record",
+            str(record),
+            "--summary",
+            str(tmp_path / "killed.json"),
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not record.exists() or record.stat().st_size < 150_000:
+            assert time.monotonic() < deadline, "the run recorded nothing in a minute"
+            assert process.poll() is None, "the run ended before it was killed"
+            time.sleep(0.05)
+    finally:
+        os.killpg(process.pid, signal.SIGKILL)  # the launcher and its workers, no clean-up
+        process.wait(timeout=30)
+    recording = read_recording(record)
+    assert not recording.complete
+    ticks = [s.tick for s in recording.snapshots]
+    assert len(ticks) >= 50 and ticks == list(range(len(ticks)))
+    assert recording.scenario["fish"] == 25
+    exported = _run("export", str(record), "--npz", str(tmp_path / "k.npz"), timeout=60)
+    assert exported.returncode == 0, exported.stderr
+    assert f"warning: {record} was cut short" in exported.stderr
+    assert f"read {len(ticks)} snapshots, up to tick {ticks[-1]}" in exported.stderr
+    assert np.load(tmp_path / "k.npz")["pos"].shape == (len(ticks), 25, 3)
+    plotted = _run("plot", str(record), "--out", str(tmp_path / "k.png"), timeout=120)
+    assert plotted.returncode == 0 and "was cut short" in plotted.stderr
 
 
 def test_fish_alone_without_router_fails_clearly() -> None:

@@ -23,6 +23,7 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     record = tmp_path / "observed.mcap"
+    world_record = tmp_path / "world.mcap"
     processes: list[subprocess.Popen[str]] = []
 
     def start(*args: str) -> subprocess.Popen[str]:
@@ -56,6 +57,7 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
                     duration,
                     "--start-timeout",
                     "60",
+                    *(["--record", str(world_record)] if duration == "5" else []),
                 ],
                 capture_output=True,
                 text=True,
@@ -82,6 +84,18 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.communicate()
+    # The world records its own run, with its scenario: plot draws it.
+    own = read_recording(world_record)
+    assert own.complete and [s.tick for s in own.snapshots] == [0, 1, 2, 3, 4, 5]
+    assert own.scenario["fish"] == 3 and own.scenario["duration"] == 5
+    plotted = subprocess.run(
+        [*FISHSWARM, "plot", str(world_record), "--out", str(tmp_path / "world.png")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert plotted.returncode == 0, plotted.stderr
     recording = read_recording(record)
     assert [s.tick for s in recording.snapshots][-1] == 6
     assert recording.snapshots[-1].ids.tolist() == [0, 1, 2]

@@ -53,3 +53,45 @@ def test_round_trip_with_a_fish_that_joins_and_one_that_leaves(tmp_path: Path) -
 def test_missing_file_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(RecordingError, match="cannot open recording"):
         read_recording(tmp_path / "none.mcap")
+
+
+def test_a_recording_cut_anywhere_reads_up_to_its_last_whole_chunk(tmp_path: Path) -> None:
+    path = tmp_path / "long.mcap"
+    # Random positions compress poorly, so 300 snapshots of 25 fish fill many 32-KiB chunks.
+    rng = np.random.default_rng(0)
+    snapshots = []
+    for tick in range(300):
+        snapshot = _snapshot(tick, list(range(25)))
+        snapshots.append(
+            Snapshot(
+                tick,
+                float(tick),
+                snapshot.ids,
+                rng.uniform(0, 1.78, (25, 3)),
+                rng.normal(size=(25, 3)),
+                rng.uniform(-3, 3, 25),
+                snapshot.neighbors_seen,
+                snapshot.broadcasts,
+            )
+        )
+    with open_recorder(path, {"fish": 25}) as recorder:
+        for snapshot in snapshots:
+            recorder.snapshot(snapshot.time, encode(snapshot))
+            recorder.metrics(snapshot.time, {"tick": snapshot.tick})
+    data = path.read_bytes()
+    assert read_recording(path).complete
+    counts = []
+    for fraction in np.linspace(0.05, 0.98, 12):
+        cut = tmp_path / "cut.mcap"
+        cut.write_bytes(data[: int(fraction * len(data))])
+        recording = read_recording(cut)
+        assert not recording.complete
+        read = len(recording.snapshots)
+        assert recording.snapshots == snapshots[:read]  # exactly the first ones, none broken
+        assert [m["tick"] for m in recording.metrics] == list(range(read))
+        counts.append(read)
+    assert counts == sorted(counts) and counts[-1] >= 250 and counts[0] < 50
+    assert recording.note(cut) == (
+        f"warning: {cut} was cut short (the run that wrote it was killed?): read "
+        f"{counts[-1]} snapshots, up to tick {counts[-1] - 1}"
+    )
