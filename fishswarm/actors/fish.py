@@ -33,6 +33,7 @@ import numpy as np
 import trio
 from numpy.typing import NDArray
 
+from fishswarm import __version__
 from fishswarm.actors.bus import Bus, open_subscriber, open_token
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
@@ -59,6 +60,7 @@ from fishswarm.protocols.messages import (
     Command,
     CommandBatch,
     Delivery,
+    FishAbout,
     PerceptionBatch,
 )
 from fishswarm.protocols.messages import Perception as PerceptionMessage
@@ -183,6 +185,8 @@ class Fish:
         self._memory = FishMemory.fresh(settings.params, count)
         self._run = np.full(count, -1, dtype=np.int64)
         self._latest_run = -1
+        self._unannounced: list[tuple[Rows, int]] = []
+        """Fish that started a run and have not yet said what they run."""
         self._last_tick = np.full(count, -1, dtype=np.int64)
         self._last_seen = np.zeros(count)
         self._stopped = np.zeros(count, dtype=np.bool_)
@@ -252,6 +256,7 @@ class Fish:
                         self._take_batch(key, payload)
                     else:
                         self._take_delivery(index, key, payload)
+                self._announce(bus)
                 self._decide(bus)
 
     def _take_perception(self, index: int, key: str, payload: bytes) -> None:
@@ -325,6 +330,7 @@ class Fish:
                 log.info("fish %s: a new run (%d) starts", _span(self._ids[rows].tolist()), run)
             self._latest_run = run
         self._run[rows] = run
+        self._unannounced.append((rows, run))
         self._last_tick[rows] = -1
         # Perceptions of the old run waiting for deliveries are dropped whole: every fish in
         # them is free to take the next perception.
@@ -338,6 +344,16 @@ class Fish:
         self._params = self.settings.params  # a new run starts as configured
         fresh = FishMemory.fresh(self._params, rows.size)
         self._memory = put_rows(self._memory, rows, fresh)
+
+    def _announce(self, bus: Bus) -> None:
+        """Tell the world what the fish that started a run run (behaviour, version), so that
+        it can warn when that is not what its scenario says."""
+        keys, school = self.settings.keys, self.settings.school
+        for rows, run in self._unannounced:
+            ids = np.sort(self._ids[rows])
+            about = FishAbout(ids, self.settings.params.behavior.name, __version__, run)
+            bus.put(keys.about(int(ids[0]), school), encode(about))
+        self._unannounced = []
 
     def _take_delivery(self, index: int, key: str, payload: bytes) -> None:
         delivery = self._intake.decode_addressed(

@@ -29,6 +29,7 @@ import numpy as np
 import trio
 from numpy.typing import ArrayLike
 
+from fishswarm import __version__
 from fishswarm.actors.bus import Bus, Declared, open_alive_events, open_subscriber, open_token
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
@@ -41,6 +42,7 @@ from fishswarm.protocols.messages import (
     CommandBatch,
     ControlReply,
     ControlRequest,
+    FishAbout,
     Snapshot,
 )
 from fishswarm.sim.clocks import Event
@@ -94,6 +96,7 @@ class WorldStatistics:
         joined_fish: fish that joined after the start.
         late_commands: realtime mode: commands that missed their tick.
         live_fish: fish in the world now.
+        mismatched_fish: fish that run another behaviour or version than the world's.
     """
 
     ticks: int
@@ -104,6 +107,7 @@ class WorldStatistics:
     joined_fish: int
     late_commands: int
     live_fish: int
+    mismatched_fish: int = 0
 
     @property
     def rejected_total(self) -> int:
@@ -170,6 +174,9 @@ class World:
         self._stop_requested = False
         self._messages_out = 0
         self._current = _Tick()
+        self.mismatched: set[int] = set()
+        """Fish that said they run another behaviour or version than this world's."""
+        self._warned: set[str] = set()
 
     @property
     def lost(self) -> list[LostFish]:
@@ -197,6 +204,7 @@ class World:
             joined_fish=len(self.joined),
             late_commands=self.late_commands,
             live_fish=int(self.sim.ids.size),
+            mismatched_fish=len(self.mismatched),
         )
 
     async def run(
@@ -214,6 +222,8 @@ class World:
                 open_alive_events(
                     bus, keys.alive_all(), lambda k, alive: events.push(("alive", k, alive))
                 ),
+                open_subscriber(bus, keys.abouts()[0], lambda k, p: events.push(("about", k, p))),
+                open_subscriber(bus, keys.abouts()[1], lambda k, p: events.push(("about", k, p))),
                 open_token(bus, keys.alive("world", 0)),
             ):
                 task_status.started()
@@ -405,10 +415,37 @@ class World:
             report = self.intake.decode(key, payload, ChannelReport)
             if report is not None:
                 self._report = report
+        elif kind == "about":
+            self._take_about(key, payload)
         elif kind == "batch":
             self._take_batch(key, payload)
         else:
             self._take_command(key, payload)
+
+    def _take_about(self, key: str, payload: bytes) -> None:
+        """Warn, once for each kind of difference, about fish that run another behaviour or
+        another version than this world's."""
+        about = self.intake.decode(key, payload, FishAbout)
+        if about is None or about.run != self.run_id:
+            return
+        differences = []
+        if about.behavior != self.scenario.behavior:
+            differences.append(
+                f"run {about.behavior!r}, but this world's scenario says {self.scenario.behavior!r}"
+            )
+        if about.version != __version__:
+            differences.append(f"run fishswarm {about.version}, this world {__version__}")
+        if not differences:
+            return
+        self.mismatched.update(about.ids.tolist())
+        for difference in differences:
+            if difference not in self._warned:
+                self._warned.add(difference)
+                log.warning(
+                    "fish %s %s (started with other settings?)",
+                    ids_text(about.ids.tolist()),
+                    difference,
+                )
 
     def _take_command(self, key: str, payload: bytes) -> None:
         sender, _ = self.keys.member_of(key)

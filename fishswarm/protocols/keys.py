@@ -105,6 +105,17 @@ class KeySpace:
         """Channel → world: how many broadcasts each fish will find in its inbox at a tick."""
         return f"{self.prefix}/channel/report"
 
+    def about(self, fish_id: int | str, school: str | None = None) -> str:
+        """Fish actor → world: what its fish run (:class:`FishAbout`), on the fish's own key
+        or its school's."""
+        if school is not None:
+            return f"{self.prefix}/school/{_check_name('school', school)}/about"
+        return f"{self.prefix}/fish/{fish_id}/about"
+
+    def abouts(self) -> tuple[str, str]:
+        """Key expressions matching every fish's and every school's ``about`` key."""
+        return f"{self.prefix}/fish/*/about", f"{self.prefix}/school/*/about"
+
     def robot_status(self, robot_id: int | str) -> str:
         """Robot driver → base station: the robot's :class:`RobotStatus`."""
         return f"{self.prefix}/robot/{robot_id}/status"

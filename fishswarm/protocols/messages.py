@@ -482,6 +482,33 @@ class ControlReply(Message):
         check_int("live_fish", self.live_fish, high=MAX_ROWS)
 
 
+@dataclass(frozen=True, eq=False)
+class FishAbout(Message):
+    """What some fish run, said by their actor when a run of the world starts for them.
+
+    Attributes:
+        ids: the fish, ascending.
+        behavior: the behaviour their decisions follow.
+        version: the fishswarm version of their actor.
+        run: the run of the world they start.
+    """
+
+    type_name: ClassVar[str] = "fish_about"
+    ids: IntArray
+    behavior: str
+    version: str
+    run: int = 0
+
+    def __post_init__(self) -> None:
+        check_array(self, "ids", np.int64, None)
+        check_ids(self.ids)
+        if self.ids.shape[0] == 0:
+            raise ValueError("ids must name at least one fish")
+        check_text("behavior", self.behavior)
+        check_text("version", self.version)
+        check_int("run", self.run)
+
+
 ROBOT_STATES = ("swimming", "waiting", "failsafe", "stranded", "stopped")
 """What a robot's driver is doing: swimming (commands arrive), waiting (no perception yet),
 failsafe (no command for too long: fins off), stranded (link to the base station lost for
@@ -582,6 +609,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         ControlReply,
         RobotStatus,
         RobotOrder,
+        FishAbout,
     )
 }
 

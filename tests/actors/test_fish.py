@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import trio
 
+from fishswarm import __version__
 from fishswarm.actors.bus import MemoryBus
 from fishswarm.actors.fish import Fish, FishSettings, FishStatistics
 from fishswarm.actors.inbox import Inbox
@@ -18,6 +19,7 @@ from fishswarm.protocols.messages import (
     Command,
     CommandBatch,
     Delivery,
+    FishAbout,
     PerceptionBatch,
 )
 from fishswarm.protocols.messages import Perception as PerceptionMessage
@@ -175,7 +177,18 @@ def test_fish_waits_for_announced_deliveries_then_broadcasts_before_its_command(
         for at, key, _ in order
         if not key.endswith(("perception", "inbox"))
     ]
-    assert sent == [(1.5, "outbox"), (1.5, "command"), (3.5, "outbox"), (3.5, "command")]
+    # On the first perception of a run the fish says what it runs; then it waits, broadcasts,
+    # and commands.
+    assert sent == [
+        (0.0, "about"),
+        (1.5, "outbox"),
+        (1.5, "command"),
+        (3.5, "outbox"),
+        (3.5, "command"),
+    ]
+    about = decode(next(p for _, k, p in order if k.endswith("about")), FishAbout)
+    assert about.ids.tolist() == [4] and about.behavior == "test-signal"
+    assert about.version == __version__
     outputs = [payload for _, key, payload in order if key.endswith(("outbox", "command"))]
     broadcast, command = decode(outputs[0], Broadcast), decode(outputs[1], Command)
     # It heard two signals, from (0.2, 0.1, 0): it swims there, LEDs lit, and says so.

@@ -392,3 +392,55 @@ def test_an_operators_formation_switch_reaches_every_fish() -> None:
     assert shapes[11] == {diamond}  # every fish, in both schools
     switched = min(tick for tick, seen in shapes.items() if diamond in seen)
     assert 5 <= switched <= 7 and all(shapes[t] == {diamond} for t in shapes if t > switched)
+
+
+def test_fish_that_run_another_behaviour_are_named_once_and_counted(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    scenario = Scenario(fish=4, duration=3.0, seed=1)  # dispersion
+    other = scenario.replace(behavior="aggregation")
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2, 3)))
+        async with trio.open_nursery() as nursery:
+            # A school of three and one fish alone, all started with aggregation.
+            school = FishSettings((0, 1, 2), other.fish_params(), keys, school="s")
+            await nursery.start(Fish(school).run, bus)
+            await nursery.start(Fish(FishSettings((3,), other.fish_params(), keys)).run, bus)
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    assert world.statistics().mismatched_fish == 4
+    # One warning for the difference (naming the fish that said so first), not one per fish.
+    warnings = [r.getMessage() for r in caplog.records if "this world's scenario says" in r.message]
+    assert len(warnings) == 1
+    assert warnings[0].endswith(
+        "run 'aggregation', but this world's scenario says 'dispersion' "
+        "(started with other settings?)"
+    )
+
+
+def test_fish_that_run_the_worlds_behaviour_raise_no_warning(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    scenario = Scenario(fish=2, duration=2.0, seed=1)
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
+        async with trio.open_nursery() as nursery:
+            fish = FishSettings((0, 1), scenario.fish_params(), scenario.keys)
+            await nursery.start(Fish(fish).run, bus)
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    assert world.statistics().mismatched_fish == 0
+    assert not [r for r in caplog.records if r.name == "fishswarm.actors.world"]

@@ -23,6 +23,7 @@ from fishswarm.protocols.messages import (
     ControlReply,
     ControlRequest,
     Delivery,
+    FishAbout,
     FormationFlag,
     Message,
     Perception,
@@ -74,6 +75,7 @@ EXAMPLES: list[Message] = [
     ),
     RobotStatus(4, "0.4.0", "formation", "stranded", 0.1, np.zeros(4), False, None, 0.0, 5, 4, 1),
     RobotOrder("stop"),
+    FishAbout(np.array([0, 1, 2]), "dispersion", "0.1.0", 7),
     RobotOrder("resume", np.array([2, 5])),
 ]
 
@@ -354,6 +356,8 @@ def test_bad_messages_cannot_be_built() -> None:
         RobotStatus(1, "0.4.0", "dispersion", "swimming", 0.0, np.zeros(3), True, None, 0.0)
     with pytest.raises(ValueError, match="action must be one of"):
         RobotOrder("explode")
+    with pytest.raises(ValueError, match="at least one fish"):
+        FishAbout(np.zeros(0, dtype=np.int64), "dispersion", "0.1.0")
     with pytest.raises(ValueError, match="ascending"):
         RobotOrder("stop", np.array([3, 1]))
 
