@@ -12,10 +12,15 @@ import pytest
 import trio
 import trio.testing
 
-from fishswarm.actors.bus import Bus, open_subscriber
-from fishswarm.actors.inbox import Inbox
+from fishswarm.actors.bus import Bus
+from fishswarm.actors.inbox import Inbox, open_subscription
+from fishswarm.actors.session import SessionSettings, open_session
+from fishswarm.actors.zenoh_bus import ZenohBus
 
 T = TypeVar("T")
+
+subscription = open_subscription
+"""Subscribe for the block; (key, payload) pairs arrive in the inbox it yields."""
 
 
 def free_port() -> int:
@@ -56,14 +61,6 @@ def run_trio(main: Callable[[], Awaitable[T]], *, timeout: float = 60.0) -> T:
     return trio.run(bounded)
 
 
-@asynccontextmanager
-async def subscription(bus: Bus, key_expr: str) -> AsyncIterator[Inbox[tuple[str, bytes]]]:
-    """Subscribe to ``key_expr`` on ``bus``; (key, payload) pairs arrive in the inbox."""
-    inbox: Inbox[tuple[str, bytes]] = Inbox()
-    async with open_subscriber(bus, key_expr, lambda key, payload: inbox.push((key, payload))):
-        yield inbox
-
-
 async def wait_until_routed(bus: Bus, inbox: Inbox[tuple[str, bytes]], key: str) -> None:
     """Put probes on ``key`` until one comes back through ``inbox``: the subscription has
     reached the router. Then the inbox is emptied of probes."""
@@ -85,3 +82,11 @@ def run_mock(main: Callable[[], Awaitable[T]], *, timeout: float = 3600.0) -> T:
             return await main()
 
     return trio.run(bounded, clock=trio.testing.MockClock(autojump_threshold=0))
+
+
+@asynccontextmanager
+async def open_client_bus(endpoint: str, connect_timeout: float = 10.0) -> AsyncIterator[Bus]:
+    """A Zenoh client session to the router at ``endpoint``, as a Bus."""
+    settings = SessionSettings(mode="client", connect=(endpoint,), connect_timeout=connect_timeout)
+    async with open_session(settings) as session:
+        yield ZenohBus(session)

@@ -29,13 +29,13 @@ import trio
 from numpy.typing import NDArray
 
 from fishswarm import __version__
-from fishswarm.actors.bus import Bus, open_subscriber, open_token
-from fishswarm.actors.inbox import Inbox
+from fishswarm.actors.bus import Bus, open_token
+from fishswarm.actors.inbox import Inbox, open_subscription
 from fishswarm.actors.intake import Intake
 from fishswarm.bluebot.fisheye import Fisheye
 from fishswarm.bluebot.leds import LedVision, perceive_leds
 from fishswarm.bluebot.parameters import fin_frequencies
-from fishswarm.bluebot.ports import Camera, DepthSensor, Fins, Leds
+from fishswarm.bluebot.ports import CAMERA_SIDES, Camera, DepthSensor, Fins, Leds
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import (
@@ -240,24 +240,19 @@ class Driver:
     ) -> None:
         """Drive the robot until cancelled; ready once subscribed and alive on the link."""
         keys, robot_id = self.settings.keys, self.settings.robot_id
-        commands: Inbox[tuple[str, bytes]] = Inbox()
-        orders: Inbox[tuple[str, bytes]] = Inbox()
         self._started = trio.current_time()
         try:
             async with contextlib.AsyncExitStack() as stack:
-                for bus, key, inbox in (
-                    (local, keys.command(robot_id), commands),
-                    (remote, keys.robot_order, orders),
-                ):
-                    await stack.enter_async_context(open_subscriber(bus, key, _into(inbox)))
-                # The bridge: the fish's broadcasts out, deliveries to it in.
-                broadcasts: Inbox[tuple[str, bytes]] = Inbox()
-                deliveries: Inbox[tuple[str, bytes]] = Inbox()
-                for bus, key, inbox in (
-                    (local, keys.outbox(robot_id), broadcasts),
-                    (remote, keys.inbox(robot_id), deliveries),
-                ):
-                    await stack.enter_async_context(open_subscriber(bus, key, _into(inbox)))
+                commands, orders, broadcasts, deliveries = [
+                    await stack.enter_async_context(open_subscription(bus, key))
+                    for bus, key in (
+                        (local, keys.command(robot_id)),
+                        (remote, keys.robot_order),
+                        # The bridge: the fish's broadcasts out, deliveries to it in.
+                        (local, keys.outbox(robot_id)),
+                        (remote, keys.inbox(robot_id)),
+                    )
+                ]
                 await stack.enter_async_context(open_token(remote, keys.alive("robot", robot_id)))
                 async with trio.open_nursery() as nursery:
                     nursery.start_soon(self._obey, commands)
@@ -297,9 +292,9 @@ class Driver:
         """Depth and neighbours from the sensors (runs in a worker thread)."""
         camera = self.hardware.camera
         depth = self.hardware.depth.read_depth()
-        images = {side: camera.capture(side) for side in ("left", "right")}
+        images = {side: camera.capture(side) for side in CAMERA_SIDES}
         neighbors = perceive_leds(
-            images,  # type: ignore[arg-type]
+            images,
             depth=depth,
             fisheye=self.settings.fisheye,
             vision=self.settings.leds,
@@ -438,12 +433,3 @@ class Driver:
 
     def _wake(self) -> None:
         self._changed.set()
-
-
-def _into(inbox: Inbox[tuple[str, bytes]]) -> Callable[[str, bytes], None]:
-    """A subscriber callback that hands (key, payload) to ``inbox``."""
-
-    def push(key: str, payload: bytes) -> None:
-        inbox.push((key, payload))
-
-    return push

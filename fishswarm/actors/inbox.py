@@ -8,9 +8,13 @@ trio; one ``run_sync_soon`` per message is 10–70× slower); the trio side wait
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
 from typing import Generic, TypeVar
 
 import trio
+
+from fishswarm.actors.bus import Bus, open_subscriber
 
 T = TypeVar("T")
 
@@ -75,3 +79,12 @@ class Inbox(Generic[T]):
 
     async def __anext__(self) -> T:
         return await self.receive()
+
+
+@asynccontextmanager
+async def open_subscription(bus: Bus, key_expr: str) -> AsyncIterator[Inbox[tuple[str, bytes]]]:
+    """Subscribe to ``key_expr`` for the duration of the block; (key, payload) pairs arrive
+    in the inbox it yields."""
+    inbox: Inbox[tuple[str, bytes]] = Inbox()
+    async with open_subscriber(bus, key_expr, lambda key, payload: inbox.push((key, payload))):
+        yield inbox

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from fishswarm.actors.bus import Bus, open_subscriber, open_token
 from fishswarm.actors.driver import Hardware, SensorUnavailable
-from fishswarm.actors.inbox import Inbox
+from fishswarm.actors.inbox import open_subscription
 from fishswarm.actors.intake import Intake
 from fishswarm.bluebot.fisheye import Fisheye
 from fishswarm.bluebot.gpio import GpioFins, GpioLeds
@@ -191,17 +191,12 @@ class MockBody:
     ) -> None:
         """Serve until cancelled; ready once subscribed and alive as a fish of the world."""
         keys = self.keys
-        perceptions: Inbox[tuple[str, bytes]] = Inbox()
         async with contextlib.AsyncExitStack() as stack:
             await stack.enter_async_context(
                 open_subscriber(remote, keys.snapshot, self._take_snapshot)
             )
-            await stack.enter_async_context(
-                open_subscriber(
-                    remote,
-                    keys.perception(self.robot_id),
-                    lambda key, payload: perceptions.push((key, payload)),
-                )
+            perceptions = await stack.enter_async_context(
+                open_subscription(remote, keys.perception(self.robot_id))
             )
             await stack.enter_async_context(open_token(remote, keys.alive("fish", self.robot_id)))
             task_status.started()

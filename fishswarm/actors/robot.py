@@ -11,17 +11,17 @@ collects the robots' status messages and liveliness for ``fishswarm robots``;
 from __future__ import annotations
 
 import contextlib
-from collections.abc import AsyncIterator, Callable
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import trio
 import zenoh
 
-from fishswarm.actors.bus import Bus, MemoryBus, open_alive_events, open_subscriber
+from fishswarm.actors.bus import Bus, MemoryBus, open_alive_events
 from fishswarm.actors.driver import Driver, DriverSettings, Hardware
 from fishswarm.actors.fish import Fish, FishSettings
-from fishswarm.actors.inbox import Inbox
+from fishswarm.actors.inbox import Inbox, open_subscription
 from fishswarm.actors.intake import Intake
 from fishswarm.actors.mock_robot import open_mock_hardware
 from fishswarm.actors.session import SessionSettings, open_session
@@ -172,10 +172,9 @@ async def survey_fleet(bus: Bus, keys: KeySpace, *, listen: float) -> list[Fleet
     statuses: dict[int, tuple[float, RobotStatus]] = {}
     alive: set[int] = set()
     intake = Intake("fleet survey")
-    samples: Inbox[tuple[str, bytes]] = Inbox()
     tokens: Inbox[tuple[str, bool]] = Inbox()
     async with (
-        open_subscriber(bus, keys.robot_statuses(), lambda k, p: samples.push((k, p))),
+        open_subscription(bus, keys.robot_statuses()) as samples,
         open_alive_events(bus, keys.alive_all("robot"), lambda k, a: tokens.push((k, a))),
     ):
         with trio.move_on_after(listen):
@@ -184,7 +183,10 @@ async def survey_fleet(bus: Bus, keys: KeySpace, *, listen: float) -> list[Fleet
                 if status is not None:
                     statuses[status.robot_id] = (trio.current_time(), status)
         for key, up in tokens.drain():
-            robot = fish_id_of(keys.parse_alive(key).member_id)
+            try:
+                robot = fish_id_of(keys.parse_alive(key).member_id)
+            except ValueError:  # a token no robot of ours holds
+                continue
             if robot is not None:
                 (alive.add if up else alive.discard)(robot)
     now = trio.current_time()
@@ -204,12 +206,3 @@ def order_fleet(bus: Bus, keys: KeySpace, action: str, robot_ids: list[int]) -> 
     order = RobotOrder(action, np.array(sorted(set(robot_ids)), dtype=np.int64))
     bus.put(keys.robot_order, encode(order))
     return order
-
-
-@contextlib.asynccontextmanager
-async def open_base_session(connect: str, connect_timeout: float) -> AsyncIterator[ZenohBus]:
-    """A client session to the base station's router, as a Bus."""
-    async with open_session(
-        SessionSettings(mode="client", connect=(connect,), connect_timeout=connect_timeout)
-    ) as session:
-        yield ZenohBus(session)

@@ -16,6 +16,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 CameraSide = Literal["left", "right"]
+CAMERA_SIDES: tuple[CameraSide, CameraSide] = ("left", "right")
+"""Both cameras, left first."""
 
 
 class Fins(Protocol):

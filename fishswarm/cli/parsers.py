@@ -74,6 +74,21 @@ _SCENARIO_FLAGS: dict[str, tuple[str, type, str]] = {
 }
 
 
+_FISH_FLAGS = (
+    "behavior",
+    "target_distance",
+    "controller",
+    "control_period",
+    "orbit_radius",
+    "formation",
+    "spacing",
+    "flags",
+    "swarm",
+    "model",
+)
+"""The scenario settings a fish actor reads (``fish`` and ``robot``)."""
+
+
 def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -> None:
     group = parser.add_argument_group("scenario (override the --config file)")
     group.add_argument(
@@ -165,18 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_connect(fish)
     _add_scenario_flags(
         fish,
-        [
-            "behavior",
-            "target_distance",
-            "controller",
-            "control_period",
-            "orbit_radius",
-            "formation",
-            "spacing",
-            "flags",
-            "swarm",
-            "model",
-        ],
+        _FISH_FLAGS,
     )
     fish.add_argument(
         "--perception-timeout",
@@ -214,19 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_connect(robot)
     _add_scenario_flags(
         robot,
-        [
-            "behavior",
-            "target_distance",
-            "controller",
-            "control_period",
-            "orbit_radius",
-            "formation",
-            "spacing",
-            "flags",
-            "swarm",
-            "model",
-            "seed",
-        ],
+        [*_FISH_FLAGS, "seed"],
     )
     robot.add_argument(
         "--command-timeout",

@@ -12,12 +12,13 @@ from fishswarm.actors.driver import DriverSettings
 from fishswarm.actors.robot import (
     FleetEntry,
     RobotSettings,
-    open_base_session,
     order_fleet,
     run_robot,
     survey_fleet,
 )
-from fishswarm.cli.swarm import _endpoint, _run_trio
+from fishswarm.actors.session import open_session
+from fishswarm.actors.zenoh_bus import ZenohBus
+from fishswarm.cli.swarm import _client, _endpoint, _run_trio
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.scenario import ConfigError, Scenario
 
@@ -70,9 +71,8 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
         order = ("resume", args.resume)
 
     async def main() -> list[FleetEntry]:
-        async with open_base_session(
-            _endpoint(args.connect, "--connect"), args.connect_timeout
-        ) as bus:
+        async with open_session(_client(args)) as session:
+            bus = ZenohBus(session)
             if order is not None:
                 sent = order_fleet(bus, keys, order[0], order[1])
                 whom = ", ".join(map(str, sent.robot_ids.tolist())) or "every robot"

@@ -22,11 +22,11 @@ from numpy.typing import NDArray
 
 from fishswarm.bluebot.fisheye import Fisheye, camera_position, camera_to_body
 from fishswarm.bluebot.parameters import LED_POSITIONS, BlueBot
-from fishswarm.bluebot.ports import CameraSide
+from fishswarm.bluebot.ports import CAMERA_SIDES, CameraSide
 
 FloatArray = NDArray[np.float64]
 
-SIDES: tuple[CameraSide, CameraSide] = ("left", "right")
+SIDES = CAMERA_SIDES
 _WATER_INDEX = 1.333
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.bluebot.dynamics import rotate_to_tank
 from fishswarm.bluebot.fisheye import Fisheye
 from fishswarm.bluebot.leds import LedVision, perceive_leds
 from fishswarm.bluebot.parameters import BlueBot
@@ -101,11 +102,8 @@ def _match(
     position: FloatArray, yaw: FloatArray, neighbors: FloatArray, mask: NDArray[np.bool_]
 ) -> NDArray[np.intp]:
     """(N, K) the fish each detection is of: the nearest other fish to it, when near enough."""
-    cos, sin = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
-    tank = np.empty_like(neighbors)
-    tank[..., 0] = cos * neighbors[..., 0] - sin * neighbors[..., 1]
-    tank[..., 1] = sin * neighbors[..., 0] + cos * neighbors[..., 1]
-    tank[..., 2] = neighbors[..., 2]
+    count, width = mask.shape
+    tank = rotate_to_tank(neighbors.reshape(-1, 3), np.repeat(yaw, width)).reshape(count, width, 3)
     tank += position[:, None, :]
     gap = np.linalg.norm(tank[:, :, None, :] - position[None, None, :, :], axis=3)  # (N, K, N)
     own = np.arange(position.shape[0])

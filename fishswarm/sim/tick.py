@@ -18,6 +18,8 @@ Everything order-dependent goes in fish-id order; each fish has its own random s
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -135,7 +137,9 @@ class WorldSim:
         rngs = [self._vision_rngs[fish_id] for fish_id in self.ids.tolist()]
         perceived = observe(self.params, self.state, rngs)
         if self.params.cameras is not None:
-            truth = perceive(self.state.position, self.state.yaw, vision=self.params.vision)
+            # What the fish could see, without the geometric model's noise (it has no draws).
+            exact = dataclasses.replace(self.params.vision, noise=0.0)
+            truth = perceive(self.state.position, self.state.yaw, vision=exact)
             self.sight = self.sight + score_sight(perceived, truth, self.state.position)
         return perceived
 

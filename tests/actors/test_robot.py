@@ -19,7 +19,6 @@ from fishswarm.actors.driver import Driver, DriverSettings
 from fishswarm.actors.mock_robot import BodyFins
 from fishswarm.actors.robot import (
     RobotSettings,
-    open_base_session,
     order_fleet,
     run_robot,
     survey_fleet,
@@ -28,7 +27,7 @@ from fishswarm.protocols.codec import decode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import RobotStatus
 from fishswarm.sim.scenario import Scenario
-from tests.conftest import free_port, run_trio, subscription, wait_for_port
+from tests.conftest import free_port, open_client_bus, run_trio, subscription, wait_for_port
 
 pytestmark = pytest.mark.integration
 
@@ -121,7 +120,7 @@ def test_mock_robots_join_obey_a_stop_and_survive_losing_the_router(
             await until(lambda: all(r.state == "swimming" for r in robots), timeout=20)
             assert all(r.statistics().perceptions > 0 for r in robots)
 
-            async with open_base_session(endpoint, 5.0) as base:
+            async with open_client_bus(endpoint, 5.0) as base:
                 fleet = await survey_fleet(base, KEYS, listen=1.0)
                 assert [entry.robot_id for entry in fleet] == [10, 11]
                 assert all(e.alive and e.status and e.status.link for e in fleet)

@@ -19,11 +19,10 @@ import trio
 
 pytest.importorskip("gpiozero.pins.mock")
 
-from fishswarm.actors.robot import open_base_session
 from fishswarm.protocols.codec import decode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import RobotStatus
-from tests.conftest import free_port, run_trio, subscription
+from tests.conftest import free_port, open_client_bus, run_trio, subscription
 
 pytestmark = [
     pytest.mark.integration,
@@ -167,7 +166,7 @@ def test_a_robot_whose_link_is_cut_stops_its_fins_and_rejoins_when_it_returns(
 
         async def main() -> RobotStatus:
             async with (
-                open_base_session(endpoint, 10.0) as base,
+                open_client_bus(endpoint, 10.0) as base,
                 subscription(base, KeySpace().robot_status(ROBOT)) as statuses,
             ):
                 await wait_swimming(statuses)

@@ -99,3 +99,12 @@ def test_the_world_scores_camera_vision_against_the_geometric_model() -> None:
 def test_an_unknown_vision_model_is_refused_with_the_choices() -> None:
     with pytest.raises(ConfigError, match="vision_model must be one of geometric, camera"):
         Scenario(vision_model="sonar")
+
+
+def test_camera_vision_is_scored_against_the_noise_free_model_when_noise_is_set() -> None:
+    noisy = Scenario(fish=5, vision_model="camera", vision_noise=0.05, spawn_region="tank")
+    world = WorldSim(WorldParams.of(noisy))
+    world.join(list(range(5)))
+    world.sense()
+    exact = perceive(world.state.position, world.state.yaw, vision=Vision())
+    assert world.sight.visible == int(exact.mask.sum())
