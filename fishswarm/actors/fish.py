@@ -62,6 +62,7 @@ from fishswarm.protocols.messages import (
     Delivery,
     FishAbout,
     PerceptionBatch,
+    WorldPulse,
 )
 from fishswarm.protocols.messages import Perception as PerceptionMessage
 
@@ -69,7 +70,7 @@ log = logging.getLogger(__name__)
 
 Rows = NDArray[np.intp]
 
-PERCEPTION, BATCH, DELIVERY = "perception", "batch", "delivery"
+PERCEPTION, BATCH, DELIVERY, PULSE = "perception", "batch", "delivery", "pulse"
 
 MAX_WAITING_DELIVERIES = 10_000
 """Most deliveries one fish keeps waiting for their perception."""
@@ -190,6 +191,8 @@ class Fish:
         self._last_tick = np.full(count, -1, dtype=np.int64)
         self._last_seen = np.zeros(count)
         self._stopped = np.zeros(count, dtype=np.bool_)
+        self._watched = np.zeros(count, dtype=np.bool_)
+        """Fish the watchdog watches: from their first perception until their run ends."""
         self._busy = np.zeros(count, dtype=np.bool_)
         self._pending: list[_Pending] = []
         self._mail: dict[int, list[Delivery]] = {n: [] for n in range(count)}
@@ -232,6 +235,7 @@ class Fish:
                 ]
             else:
                 subscriptions.append((-1, BATCH, keys.school_perceptions(school)))
+            subscriptions.append((-1, PULSE, keys.world_pulse))
             for index, kind, key in subscriptions:
                 await stack.enter_async_context(
                     open_subscriber(bus, key, _pusher(events, index, kind))
@@ -254,6 +258,8 @@ class Fish:
                         self._take_perception(index, key, payload)
                     elif kind == BATCH:
                         self._take_batch(key, payload)
+                    elif kind == PULSE:
+                        self._take_pulse(key, payload)
                     else:
                         self._take_delivery(index, key, payload)
                 self._announce(bus)
@@ -306,6 +312,18 @@ class Fish:
         )
         self._admit(key, pending, batch.run)
 
+    def _take_pulse(self, key: str, payload: bytes) -> None:
+        """The world of the fish's run is alive: their next perceptions will come, so their
+        watchdog waits afresh (stopped fish stay stopped until a perception comes)."""
+        pulse = self._intake.decode(key, payload, WorldPulse)
+        if pulse is None:
+            return
+        ours = self._run == pulse.run
+        if pulse.state == "ended":
+            self._watched[ours] = False
+        else:
+            self._last_seen[ours & self._watched & ~self._stopped] = trio.current_time()
+
     def _admit(self, key: str, pending: _Pending, run: int) -> None:
         rows = pending.rows
         fresh = rows[self._run[rows] != run]
@@ -316,9 +334,9 @@ class Fish:
             return
         self._counts["perceptions"] += rows.size
         self._last_seen[rows] = trio.current_time()
-        if self._stopped[rows].any():
-            self._stopped[rows] = False
-            self._resumed.set()
+        self._stopped[rows] = False
+        self._watched[rows] = True
+        self._resumed.set()  # wakes the watchdog: these fish are watched (again)
         self._busy[rows] = True
         self._pending.append(pending)
 
@@ -442,22 +460,24 @@ class Fish:
         """Turn a fish's fins off when its perceptions stop for ``perception_timeout``."""
         timeout = self.settings.perception_timeout
         while True:
-            running = ~self._stopped
+            # A fish is watched from its first perception on (before it, its fins never ran)
+            # until the world says its run has ended.
+            running = self._watched & ~self._stopped
             if not running.any():
                 self._resumed = trio.Event()
                 await self._resumed.wait()
                 continue
             due = float(self._last_seen[running].min()) + timeout
             await trio.sleep_until(due)
+            running = self._watched & ~self._stopped  # a run may have ended meanwhile
             late = np.flatnonzero(running & (self._last_seen + timeout <= trio.current_time()))
             if late.size == 0:
                 continue
-            for index in late.tolist():
-                log.warning(
-                    "fish %d: no perception for %.1f s, fins off",
-                    self.settings.fish_ids[index],
-                    timeout,
-                )
+            log.warning(
+                "%s: no perception for %.1f s, fins off until one comes",
+                _many(sorted(self._ids[late].tolist())),
+                timeout,
+            )
             self._stopped[late] = True
             self._counts["watchdog_stops"] += late.size
             # The last tick is repeated so that a driver acts on it at once.
@@ -551,3 +571,12 @@ def _pusher(events: Inbox[Event], index: int, kind: str) -> Callable[[str, bytes
 
 def _span(ids: list[int] | tuple[int, ...]) -> str:
     return str(ids[0]) if len(ids) == 1 else f"{ids[0]}–{ids[-1]}"
+
+
+def _many(ids: list[int]) -> str:
+    """``fish 4`` or ``12 fish (0, 1, 2 …)``: one line for however many fish (the robot
+    does not import the study's text helpers)."""
+    if len(ids) == 1:
+        return f"fish {ids[0]}"
+    shown = ", ".join(map(str, ids[:10])) + (" …" if len(ids) > 10 else "")
+    return f"{len(ids)} fish ({shown})"

@@ -38,6 +38,8 @@ log = logging.getLogger(__name__)
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_WORKER_DIED = 3
+EXIT_DEGRADED = 4
+"""The run reached its end, but fish were stopped by their safety watchdog on the way."""
 EXIT_INTERRUPTED = 130
 
 
@@ -58,6 +60,8 @@ class LaunchSettings:
         summary: JSON summary to write (None: none).
         start_timeout: longest wait for every fish to come up, s.
         command_timeout: a fish silent this long in a tick is marked lost, s.
+        perception_timeout: each fish's safety watchdog: fins off after this long without a
+            perception or a pulse of the world, s.
         log_level: logging level of the workers.
         handle_signals: stop cleanly on SIGINT (Ctrl-C) and SIGTERM, recording the run as
             interrupted (needs the main thread; the command line sets it).
@@ -70,6 +74,7 @@ class LaunchSettings:
     summary: Path | None = None
     start_timeout: float = 60.0
     command_timeout: float = 10.0
+    perception_timeout: float = 5.0
     log_level: str = "WARNING"
     handle_signals: bool = False
 
@@ -129,6 +134,7 @@ async def run_swarm(
                         params,
                         scenario.swarm,
                         _connect_to(settings.listen),
+                        perception_timeout=settings.perception_timeout,
                         log_level=settings.log_level,
                     )
                     workers.append(start_worker(spec))
@@ -163,7 +169,13 @@ async def run_swarm(
                 settings.summary.parent.mkdir(parents=True, exist_ok=True)
                 settings.summary.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     exit_code = (
-        EXIT_INTERRUPTED if status == "interrupted" else EXIT_WORKER_DIED if died else EXIT_OK
+        EXIT_INTERRUPTED
+        if status == "interrupted"
+        else EXIT_WORKER_DIED
+        if died
+        else EXIT_DEGRADED
+        if summary["status"] == "degraded"
+        else EXIT_OK
     )
     return RunResult(exit_code, summary, observer.history)
 
@@ -246,6 +258,9 @@ def _summary(
             continue
         for name, value in dataclasses.asdict(worker.statistics).items():
             fish_totals[name] = fish_totals.get(name, 0) + int(value)
+    if status == "finished" and fish_totals.get("watchdog_stops", 0):
+        # Fins were off for part of the run: its trajectory is not what the fish decided.
+        status = "degraded"
     world_stats = world.statistics()
     channel_stats = channel.statistics()
     simulated = world.tick * settings.scenario.control_period

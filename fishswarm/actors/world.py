@@ -23,7 +23,9 @@ from __future__ import annotations
 import logging
 import secrets
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import numpy as np
 import trio
@@ -44,6 +46,7 @@ from fishswarm.protocols.messages import (
     ControlRequest,
     FishAbout,
     Snapshot,
+    WorldPulse,
 )
 from fishswarm.sim.clocks import Event
 from fishswarm.sim.physics import WorldParams
@@ -54,6 +57,14 @@ from fishswarm.study.progress import ids_text
 log = logging.getLogger(__name__)
 
 BusEvent = tuple[str, str, bytes | bool]
+T = TypeVar("T")
+
+OFFLOAD_AFTER = 0.25
+"""A simulation step that once took longer than this (s) runs in a worker thread from then
+on: the hop costs about 0.1 ms, worth it only when the world would otherwise be deaf for long
+(and under a test's MockClock, whose time jumps while a thread runs, never at small sizes)."""
+OFFLOAD_FISH = 200
+"""From this many fish on, every step runs in a worker thread (the first one included)."""
 
 
 class StartTimeout(RuntimeError):
@@ -73,6 +84,8 @@ class WorldSettings:
         admit_delay: a fish that comes up is admitted at the first event at least this long
             after the world subscribed to its commands, s (the subscription must reach the
             router first when the world runs as a client).
+        pulse_period: how often the world says it is alive while a run goes on, s (fish
+            take the pulse as a sign of life, so a slow world does not trip their watchdog).
     """
 
     scenario: Scenario
@@ -81,6 +94,11 @@ class WorldSettings:
     command_timeout: float = 10.0
     channel_timeout: float = 5.0
     admit_delay: float = 0.1
+    pulse_period: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.pulse_period <= 0:
+            raise ValueError(f"pulse_period must be positive, got {self.pulse_period}")
 
 
 @dataclass(frozen=True)
@@ -177,6 +195,9 @@ class World:
         self.mismatched: set[int] = set()
         """Fish that said they run another behaviour or version than this world's."""
         self._warned: set[str] = set()
+        self._slow_steps: set[str] = set()
+        """Steps of the simulation that took long once: from then on they run in a worker
+        thread, so that the world keeps pulsing meanwhile."""
 
     @property
     def lost(self) -> list[LostFish]:
@@ -231,12 +252,37 @@ class World:
                 started = time.perf_counter()
                 self.state_name = "running"
                 try:
-                    await self._loop(bus)
+                    async with trio.open_nursery() as nursery:
+                        nursery.start_soon(self._pulse, bus)
+                        await self._loop(bus)
+                        nursery.cancel_scope.cancel()
+                    # The fish stop watching for this run's perceptions: none will come.
+                    self._put(
+                        bus, keys.world_pulse, encode(WorldPulse(self.run_id, self.tick, "ended"))
+                    )
                 finally:
                     self.wall_time = time.perf_counter() - started
         finally:
             self.roster.close()
         self.state_name = "stopped" if self._stop_requested else "finished"
+
+    async def _pulse(self, bus: Bus) -> None:
+        """Say that the world is alive, every ``pulse_period``, until the run ends."""
+        while True:
+            await trio.sleep(self.settings.pulse_period)
+            state = self.state_name if self.state_name in ("paused", "stopping") else "running"
+            self._put(bus, self.keys.world_pulse, encode(WorldPulse(self.run_id, self.tick, state)))
+
+    async def _compute(self, step: Callable[[], T]) -> T:
+        """Run one step of the simulation; in a worker thread when the last step took long
+        enough that the fish would otherwise hear nothing from the world meanwhile."""
+        name = step.__name__
+        offload = name in self._slow_steps or self.sim.ids.size >= OFFLOAD_FISH
+        started = time.perf_counter()
+        result = await trio.to_thread.run_sync(step) if offload else step()
+        if time.perf_counter() - started > OFFLOAD_AFTER:
+            self._slow_steps.add(name)
+        return result
 
     def _subscribe_commands(self, key: str, kind: str) -> Declared:
         # One exact subscription per fish or school, not one on fish/*/command: a router
@@ -293,9 +339,9 @@ class World:
         while True:
             self._drain()
             self._leave()
-            event = self.sim.next_event()
+            event = await self._compute(self.sim.next_event)
             self._admit(self.tick if event.snapshot is None else event.snapshot)
-            perceived = self.sim.sense()
+            perceived = await self._compute(self.sim.sense)
             if event.snapshot is not None:
                 self.tick = event.snapshot
                 ids = self.sim.ids

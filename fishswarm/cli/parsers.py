@@ -161,6 +161,13 @@ def build_parser() -> argparse.ArgumentParser:
         default=60.0,
         help="longest wait for all fish to come up, s (default 60)",
     )
+    run.add_argument(
+        "--perception-timeout",
+        type=float,
+        default=5.0,
+        help="each fish's safety watchdog: fins off after this long without a perception or "
+        "a pulse of the world, s (default 5); a run in which it fired ends 'degraded', exit 4",
+    )
     run.add_argument("--quiet", action="store_true", help="no progress lines")
 
     fish = commands.add_parser(
@@ -186,7 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--perception-timeout",
         type=float,
         default=5.0,
-        help="fins off after this long without a perception, s (default 5)",
+        help="fins off after this long without a perception or a pulse of the world, s (default 5)",
     )
     fish.add_argument(
         "--school",

@@ -125,6 +125,11 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm run``."""
     if args.procs < 1:
         raise ConfigError(f"--procs must be at least 1, got {args.procs}")
+    if not args.perception_timeout > 0:
+        raise ConfigError(
+            f"--perception-timeout must be a positive number of seconds, got "
+            f"{args.perception_timeout:g}"
+        )
     scenario.fish_params()  # reads a replica model now: a bad one is a usage error, not a crash
     for flag, path in (("--record", args.record), ("--summary", args.summary)):
         _check_file_path(flag, path)
@@ -135,6 +140,7 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         record=args.record,
         summary=args.summary,
         start_timeout=args.start_timeout,
+        perception_timeout=args.perception_timeout,
         log_level=args.log_level,
         handle_signals=True,
     )
@@ -166,6 +172,12 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
 
 def _summary_text(summary: dict[str, Any]) -> str:
     lines = [f"status: {summary['status']}"]
+    stops = summary.get("fish", {}).get("watchdog_stops", 0)
+    if stops:
+        lines[0] += (
+            f" — fish were stopped {stops} time(s) by their watchdog (no perception in time), "
+            "so their fins were off for part of the run"
+        )
     for name, values in summary["metrics"].items():
         change = values["change_percent"]
         change_text = "" if change is None else f" ({change:+.1f} %)"
@@ -204,7 +216,13 @@ def _summary_text(summary: dict[str, Any]) -> str:
         f"  ticks {counts['ticks']}, messages {counts['messages']}, rejected {rejected}, "
         f"lost fish {counts['lost_fish']}, broadcasts {counts['broadcasts']}, "
         f"deliveries {counts['deliveries']}, wall {summary['wall_time']:.2f} s"
-        + (f", {rtf:.0f}× real time" if rtf else "")
+        + (
+            f", {rtf:.2f}× real time"
+            if rtf and rtf < 1
+            else f", {rtf:.0f}× real time"
+            if rtf
+            else ""
+        )
     )
     if summary.get("recording"):
         lines.append(f"  recording: {summary['recording']}")

@@ -101,6 +101,11 @@ class KeySpace:
         return f"{self.prefix}/world/control"
 
     @property
+    def world_pulse(self) -> str:
+        """World → fish: the world is alive and the run goes on (:class:`WorldPulse`)."""
+        return f"{self.prefix}/world/pulse"
+
+    @property
     def channel_report(self) -> str:
         """Channel → world: how many broadcasts each fish will find in its inbox at a tick."""
         return f"{self.prefix}/channel/report"

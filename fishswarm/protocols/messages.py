@@ -509,6 +509,37 @@ class FishAbout(Message):
         check_int("run", self.run)
 
 
+@dataclass(frozen=True, eq=False)
+class WorldPulse(Message):
+    """World → fish, about once a second while a run goes on: the world is alive and the
+    next perceptions will come, however long it computes or waits for other fish.
+
+    A fish's safety watchdog counts a pulse of its run as a sign of life, so a slow world
+    (a large swarm, a paused run, a fish that holds up a tick) does not stop the fins; a
+    world that dies or is cut off stops pulsing.
+
+    Attributes:
+        run: the run of the world.
+        tick: the last tick the world published.
+        state: what the world is doing: running, paused, stopping, or ended (its last
+            pulse: the run is over, its fish are no longer watched for it).
+    """
+
+    type_name: ClassVar[str] = "world_pulse"
+    run: int
+    tick: int
+    state: str
+
+    def __post_init__(self) -> None:
+        check_int("run", self.run)
+        check_int("tick", self.tick)
+        if self.state not in WORLD_PULSE_STATES:
+            raise ValueError(f"state must be one of {WORLD_PULSE_STATES}, got {self.state!r}")
+
+
+WORLD_PULSE_STATES = ("running", "paused", "stopping", "ended")
+
+
 ROBOT_STATES = ("swimming", "waiting", "failsafe", "stranded", "stopped")
 """What a robot's driver is doing: swimming (commands arrive), waiting (no perception yet),
 failsafe (no command for too long: fins off), stranded (link to the base station lost for
@@ -610,6 +641,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         RobotStatus,
         RobotOrder,
         FishAbout,
+        WorldPulse,
     )
 }
 

@@ -3,7 +3,10 @@ watchdog, deliveries, broadcasts, LEDs and new runs — each in simulated second
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
+import pytest
 import trio
 
 from fishswarm import __version__
@@ -21,6 +24,7 @@ from fishswarm.protocols.messages import (
     Delivery,
     FishAbout,
     PerceptionBatch,
+    WorldPulse,
 )
 from fishswarm.protocols.messages import Perception as PerceptionMessage
 from fishswarm.sim.scenario import Scenario
@@ -44,7 +48,7 @@ def _perception(fish_id: int, tick: int, **changes: object) -> bytes:
     return encode(PerceptionMessage(**fields))  # type: ignore[arg-type]
 
 
-def test_watchdog_stops_the_fins_after_the_timeout_and_a_perception_resumes() -> None:
+def test_watchdog_is_armed_by_a_perception_stops_the_fins_and_takes_the_worlds_pulse() -> None:
     settings = FishSettings((3,), Scenario().fish_params(), KEYS, perception_timeout=5.0)
 
     async def main() -> tuple[list[tuple[float, Command]], FishStatistics]:
@@ -59,23 +63,79 @@ def test_watchdog_stops_the_fins_after_the_timeout_and_a_perception_resumes() ->
                 _, payload = await commands.receive()
                 got.append((trio.current_time() - started, decode(payload, Command)))
 
-            await next_command()  # the watchdog, 5 s after start
-            await trio.sleep(1.0)
+            await trio.sleep(20.0)  # no perception yet: the fins never ran, nothing to stop
             bus.put(KEYS.perception(3), _perception(3, 1))
             await next_command()  # the answer, at once
-            await next_command()  # the watchdog again, 5 s after the perception
+            await next_command()  # the watchdog, 5 s after the perception
+            await trio.sleep(1.0)
+            bus.put(KEYS.perception(3), _perception(3, 2))
+            await next_command()  # the answer: the fish swims again
+            for second in range(1, 14):
+                await trio.sleep(1.0)
+                # The world of the fish's run pulses for 9 s (a slow tick); pulses of another
+                # run and a malformed one do not count.
+                run = 0 if second <= 9 else 77
+                bus.put(KEYS.world_pulse, encode(WorldPulse(run, 2, "running")))
+            bus.put(KEYS.world_pulse, b"\x81\xa1t\xabworld_pulse")
+            await next_command()  # the watchdog, 5 s after the last pulse of its run
+            bus.put(KEYS.perception(3), _perception(3, 3))
+            await next_command()  # the answer to the run's last perception
+            bus.put(KEYS.world_pulse, encode(WorldPulse(0, 3, "ended")))
+            await trio.sleep(30.0)  # the run is over: nothing more is watched
             nursery.cancel_scope.cancel()
         return got, fish.statistics()
 
     got, statistics = run_mock(main)
-    (stop_at, stop), (answer_at, answer), (again_at, again) = got
-    assert (stop_at, answer_at, again_at) == (5.0, 6.0, 11.0)
-    assert stop.fins.tolist() == [0.0, 0.0, 0.0, 0.0] and stop.led is False
+    times = [at for at, _ in got]
+    assert times == [20.0, 25.0, 26.0, 40.0, 40.0]
+    (_, answer), (_, stop), (_, again), (_, last), _ = got
     # Dispersing from a neighbour ahead and a little left: turn away with the left pectoral.
     assert answer.tick == 1 and answer.fins.tolist() == [0.0, 0.0, 1.0, 0.0] and answer.led
-    assert again.tick == 1 and again.fins.tolist() == [0.0, 0.0, 0.0, 0.0]
-    assert statistics.watchdog_stops == 2 and statistics.commands == 3
-    assert statistics.perceptions == 1 and statistics.rejected == 0
+    assert stop.tick == 1 and stop.fins.tolist() == [0.0, 0.0, 0.0, 0.0] and stop.led is False
+    assert again.tick == 2 and again.fins.tolist() == [0.0, 0.0, 1.0, 0.0]
+    assert last.tick == 2 and last.fins.tolist() == [0.0, 0.0, 0.0, 0.0]
+    assert statistics.watchdog_stops == 2 and statistics.commands == 5
+    assert statistics.perceptions == 3 and statistics.rejected == 1
+
+
+def test_watchdog_says_once_which_fish_it_stopped(caplog: pytest.LogCaptureFixture) -> None:
+    settings = FishSettings(tuple(range(14)), Scenario().fish_params(), KEYS, school="pond")
+    count = 14
+    batch = PerceptionBatch(
+        1,
+        1.0,
+        np.arange(count),
+        np.full(count, 0.5),
+        np.zeros(count, dtype=np.int64),
+        np.zeros((0, 3)),
+        np.zeros(count, dtype=np.int64),
+        np.zeros((0, 3)),
+        np.zeros(count, dtype=np.int64),
+    )
+
+    async def main() -> FishStatistics:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        async with (
+            subscription(bus, KEYS.school_commands("pond")) as commands,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(fish.run, bus)
+            bus.put(KEYS.school_perceptions("pond"), encode(batch))
+            await commands.receive()  # the answer
+            _, payload = await commands.receive()  # the watchdog's stop, for all 14 at once
+            assert decode(payload, CommandBatch).ids.tolist() == list(range(count))
+            nursery.cancel_scope.cancel()
+        return fish.statistics()
+
+    with caplog.at_level(logging.WARNING, logger="fishswarm.actors.fish"):
+        statistics = run_mock(main)
+    assert statistics.watchdog_stops == count
+    lines = [r.getMessage() for r in caplog.records if "no perception" in r.getMessage()]
+    assert lines == [
+        "14 fish (0, 1, 2, 3, 4, 5, 6, 7, 8, 9 …): no perception for 5.0 s, "
+        "fins off until one comes"
+    ]
 
 
 def test_school_answers_a_batch_as_each_fish_would_alone() -> None:

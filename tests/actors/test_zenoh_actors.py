@@ -4,6 +4,7 @@ world's control queryable."""
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import pytest
@@ -134,3 +135,46 @@ def test_world_answers_control_queries_over_zenoh(endpoint: str) -> None:
     assert (pause.state, status.state, stop.state) == ("paused", "paused", "stopping")
     assert status.live_fish == 2 and status.tick in (pause.tick, pause.tick + 1)
     assert malformed == 1
+
+
+@pytest.mark.parametrize("pulse_period", [0.1, 60.0])
+def test_a_slow_world_keeps_its_fish_swimming_by_its_pulse(
+    endpoint: str, monkeypatch: pytest.MonkeyPatch, pulse_period: float
+) -> None:
+    """Every perception takes the world 0.7 s to compute — longer than the fish's 0.4 s
+    watchdog. Pulsing every 0.1 s while it computes, no fish is stopped; with its pulse
+    (nearly) silent, every fish is stopped at every slow tick."""
+    scenario = Scenario(fish=3, duration=3.0, seed=4)
+
+    async def main() -> tuple[World, int, int]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        client = SessionSettings(mode="client", connect=[endpoint])
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2), pulse_period=pulse_period))
+        sense = world.sim.sense
+
+        def slow_sense() -> object:
+            time.sleep(0.7)  # a large swarm's vision, in the world's worker thread
+            return sense()
+
+        monkeypatch.setattr(world.sim, "sense", slow_sense)
+        school = Fish(
+            FishSettings(
+                (0, 1, 2), scenario.fish_params(), scenario.keys, perception_timeout=0.4, school="s"
+            )
+        )
+        async with (
+            open_session(router) as hub,
+            open_session(client) as other,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(school.run, ZenohBus(other))
+            with trio.fail_after(30):
+                await world.run(ZenohBus(hub))
+            await trio.sleep(0.6)  # longer than the watchdog: the run's end is heard
+            nursery.cancel_scope.cancel()
+        return world, school.statistics().watchdog_stops, len(world.lost)
+
+    world, stops, lost = run_trio(main, timeout=60)
+    assert world.state_name == "finished" and world.tick == 3 and lost == 0
+    # Ticks 1, 2 and 3 are computed slowly after the fish decided; at tick 0 they had not.
+    assert stops == (0 if pulse_period < 1 else 3 * 3)

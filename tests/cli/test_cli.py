@@ -130,6 +130,7 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["run", "--duration", "-3"], "duration must be a positive number of seconds"),
         (["run", "--listen", "localhost"], "write PROTOCOL/HOST:PORT"),
         (["run", "--procs", "0"], "--procs must be at least 1"),
+        (["run", "--perception-timeout", "0"], "--perception-timeout must be a positive number"),
         (["run", "--fish", "many"], "invalid int value"),
         (["export", "nowhere.mcap"], "say what to write"),
         (["run", "--vision", "sonar"], "vision_model must be one of geometric, camera"),
@@ -145,6 +146,33 @@ def test_bad_arguments_exit_nonzero_with_a_reason(args: list[str], message: str)
     result = _run(*args, timeout=30)
     assert result.returncode == 2
     assert message in result.stderr
+
+
+def test_a_run_in_which_the_watchdog_stopped_fish_says_so_and_exits_4(tmp_path: Path) -> None:
+    # Realtime at 1 Hz: perceptions (and the world's pulses) a second apart, against a
+    # watchdog of 0.3 s: every fish is stopped between ticks.
+    summary = tmp_path / "s.json"
+    result = _run(
+        "run",
+        "--fish",
+        "2",
+        "--duration",
+        "2",
+        "--time",
+        "realtime",
+        "--perception-timeout",
+        "0.3",
+        "--quiet",
+        *_outputs(tmp_path, summary),
+        timeout=60,
+    )
+    assert result.returncode == 4, result.stderr
+    assert "status: degraded — fish were stopped" in result.stderr
+    written = json.loads(summary.read_text())
+    assert written["status"] == "degraded" and written["fish"]["watchdog_stops"] >= 2
+    # One warning per firing, naming both fish, not one line per fish.
+    assert "2 fish (0, 1): no perception for 0.3 s" in result.stderr
+    assert "fish 0: no perception" not in result.stderr
 
 
 def test_bad_config_files_are_explained(tmp_path: Path) -> None:

@@ -31,6 +31,7 @@ from fishswarm.protocols.messages import (
     RobotOrder,
     RobotStatus,
     Snapshot,
+    WorldPulse,
 )
 
 EXAMPLES: list[Message] = [
@@ -77,6 +78,7 @@ EXAMPLES: list[Message] = [
     RobotOrder("stop"),
     FishAbout(np.array([0, 1, 2]), "dispersion", "0.1.0", 7),
     RobotOrder("resume", np.array([2, 5])),
+    WorldPulse(2**61 + 5, 12, "paused"),
 ]
 
 
@@ -360,6 +362,8 @@ def test_bad_messages_cannot_be_built() -> None:
         FishAbout(np.zeros(0, dtype=np.int64), "dispersion", "0.1.0")
     with pytest.raises(ValueError, match="ascending"):
         RobotOrder("stop", np.array([3, 1]))
+    with pytest.raises(ValueError, match="state must be one of"):
+        WorldPulse(1, 0, "computing")
 
 
 def test_a_robot_order_addresses_its_robots_or_all() -> None:
