@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import trio
 
 from fishswarm.actors.channel import Channel
@@ -30,7 +31,8 @@ from fishswarm.actors.workers import Worker, WorkerSpec, split_fish, start_worke
 from fishswarm.actors.world import World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.sim.scenario import Scenario
-from fishswarm.study.metrics import METRIC_NAMES, formation_summary, formation_target_of
+from fishswarm.study.experiment import ORBIT_SUMMARIES
+from fishswarm.study.metrics import METRIC_NAMES, formation_summary
 from fishswarm.study.recording import open_recorder
 
 log = logging.getLogger(__name__)
@@ -114,12 +116,7 @@ async def run_swarm(
             if settings.record is not None
             else None
         )
-        observer = Observer(
-            scenario.keys,
-            recorder=recorder,
-            on_progress=on_progress,
-            formation=formation_target_of(scenario),
-        )
+        observer = Observer.of(scenario, recorder=recorder, on_progress=on_progress)
         try:
             async with open_session(router) as session, trio.open_nursery() as nursery:
                 bus = ZenohBus(session)
@@ -252,6 +249,17 @@ def _summary(
         if history and observer.formation is not None
         else None
     )
+    orbit = None
+    if history and observer.orbit is not None:
+        centre = observer.orbit.centre
+        orbit = {
+            "post": None if centre is None else [float(v) for v in centre],
+            "orbit_radius": observer.orbit.radius,
+            **{
+                column.key: column.reduce(np.array([p.metrics[column.metric] for p in history]))
+                for column in ORBIT_SUMMARIES
+            },
+        }
     fish_totals: dict[str, int] = {}
     for worker in workers:
         if worker.statistics is None:
@@ -271,6 +279,7 @@ def _summary(
         "listen": settings.listen,
         "metrics": metrics,
         "formation": formation,
+        "orbit": orbit,
         "effort": (
             {
                 "school": history[-1].metrics["effort"],

@@ -18,7 +18,15 @@ from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import Snapshot
-from fishswarm.study.metrics import FormationTarget, swarm_metrics
+from fishswarm.sim.scenario import Scenario
+from fishswarm.study.metrics import (
+    FormationTarget,
+    OrbitTarget,
+    OrbitTracker,
+    formation_target_of,
+    orbit_target_of,
+    swarm_metrics,
+)
 from fishswarm.study.recording import Recorder
 
 log = logging.getLogger(__name__)
@@ -58,6 +66,7 @@ class Observer:
         on_progress: called after every snapshot.
         observer_id: id of this observer's liveliness token.
         formation: a target shape to measure formation metrics against (formation runs).
+        orbit: a post and radius to measure orbit metrics against (orbit, milling, waltz).
     """
 
     def __init__(
@@ -68,12 +77,15 @@ class Observer:
         on_progress: Callable[[Progress], None] | None = None,
         observer_id: str = "0",
         formation: FormationTarget | None = None,
+        orbit: OrbitTarget | None = None,
     ) -> None:
         self.keys = keys
         self.recorder = recorder
         self.on_progress = on_progress
         self.observer_id = observer_id
         self.formation = formation
+        self.orbit = orbit
+        self._orbit_tracker = None if orbit is None else OrbitTracker(orbit)
         self.history: list[Progress] = []
         self.events: list[dict[str, Any]] = []
         self._intake = Intake(f"observer {observer_id}")
@@ -82,6 +94,26 @@ class Observer:
         self._tick_reached = trio.Event()
         self._world_left = trio.Event()
         self._sim_time = 0.0
+
+    @classmethod
+    def of(
+        cls,
+        scenario: Scenario,
+        *,
+        recorder: Recorder | None = None,
+        on_progress: Callable[[Progress], None] | None = None,
+        observer_id: str = "0",
+    ) -> Observer:
+        """An observer of a run of ``scenario``, measuring what its behaviour aims at (a
+        formation's shape, an orbit's post and radius) besides the distances."""
+        return cls(
+            scenario.keys,
+            recorder=recorder,
+            on_progress=on_progress,
+            observer_id=observer_id,
+            formation=formation_target_of(scenario),
+            orbit=orbit_target_of(scenario),
+        )
 
     def statistics(self) -> ObserverStatistics:
         """The observer's counters so far."""
@@ -150,6 +182,10 @@ class Observer:
                 metrics.update(self.formation.metrics(snapshot.position))
             except ValueError as error:  # e.g. positions no assignment can handle
                 log.warning("no formation metrics at tick %d: %s", snapshot.tick, error)
+        if self._orbit_tracker is not None:
+            metrics.update(
+                self._orbit_tracker.metrics(snapshot.ids, snapshot.position, snapshot.time)
+            )
         progress = Progress(snapshot.tick, snapshot.time, int(snapshot.ids.size), metrics)
         self.history.append(progress)
         self._sim_time = snapshot.time

@@ -62,7 +62,15 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         f"  final spacing  ideal {ideal['final_spacing']:.1f}  replica "
         f"{replica['final_spacing']:.1f}\n"
         f"  final speed    ideal {ideal['final_speed']:.2f}  replica {replica['final_speed']:.2f}\n"
-        f"  learned radii  mean {summary['radii']['mean']}  s.d. {summary['radii']['sd']}",
+        f"  learned radii  {radii_text(summary['radii'])}",
         file=sys.stderr,
     )
     return 0
+
+
+def radii_text(radii: dict[str, list[float]]) -> str:
+    """``r1 45.2 ± 3.1, r2 80.0 ± 5.4 units`` (mean ± s.d. over the final classifiers)."""
+    if not radii["mean"]:
+        return "none (the classifiers did not count neighbours)"
+    pairs = zip(radii["mean"], radii["sd"], strict=True)
+    return ", ".join(f"r{n} {m:.1f} ± {sd:.1f}" for n, (m, sd) in enumerate(pairs, 1)) + " units"

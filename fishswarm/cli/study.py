@@ -13,6 +13,7 @@ import numpy as np
 from fishswarm.sim.scenario import ConfigError, Scenario
 
 if TYPE_CHECKING:
+    from fishswarm.study.metrics import OrbitTarget
     from fishswarm.study.recording import Recording
     from fishswarm.study.sweep import Engine
 
@@ -171,10 +172,23 @@ def _tank_of(settings: dict[str, Any], position: np.ndarray) -> list[float]:
     return [float(v) for v in np.maximum(np.asarray(Tank().size), reach)]
 
 
+def _orbit_of(settings: dict[str, Any]) -> OrbitTarget | None:
+    """The post and radius of a recorded orbit, milling or waltz run (None for other runs,
+    and for recordings that do not say what ran, such as an observer's)."""
+    from fishswarm.study.metrics import ORBIT_BEHAVIORS, orbit_target_of
+
+    if settings.get("behavior") not in ORBIT_BEHAVIORS:
+        return None
+    try:
+        return orbit_target_of(Scenario.from_mapping(settings, source="the recording"))
+    except ConfigError:
+        return None
+
+
 def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm plot RECORDING``."""
     from fishswarm.study.figures import FiguresUnavailable, run_figure
-    from fishswarm.study.metrics import METRIC_NAMES
+    from fishswarm.study.metrics import METRIC_NAMES, ORBIT_METRIC_NAMES, OrbitTracker
 
     out = args.out or args.recording.with_suffix(".png")
     if out.suffix not in (".png", ".svg", ".pdf"):
@@ -186,6 +200,13 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
         for name in (*METRIC_NAMES, "neighbors_seen")
     }
     settings = recording.scenario
+    orbit = _orbit_of(settings)
+    if orbit is not None:
+        # From the positions, so that recordings made before the observer measured orbits
+        # are drawn the same way.
+        tracker = OrbitTracker(orbit)
+        series = [tracker.metrics(s.ids, s.position, s.time) for s in recording.snapshots]
+        metrics |= {name: np.array([m[name] for m in series]) for name in ORBIT_METRIC_NAMES}
     title = (
         f"{settings.get('fish', '?')} fish, {settings.get('behavior', '?')}, "
         f"seed {settings.get('seed', '?')} ({args.recording.name})"
@@ -193,7 +214,7 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     try:
         tank = _tank_of(settings, arrays["pos"])
-        figure = run_figure(arrays["t"], arrays["pos"], metrics, tank, title=title)
+        figure = run_figure(arrays["t"], arrays["pos"], metrics, tank, title=title, orbit=orbit)
         figure.savefig(out, dpi=110)
     except FiguresUnavailable as error:
         raise ConfigError(str(error)) from None
@@ -204,22 +225,21 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
 def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm animate RECORDING --out FILE``."""
     from fishswarm.bluebot.vision import Vision
-    from fishswarm.study.animation import AnimationError, frames_per_step, interpolate
+    from fishswarm.study.animation import AnimationError, frame_duration, resample
     from fishswarm.study.animation import animate as make_animation
     from fishswarm.study.progress import ProgressLine, bar
 
-    if args.fps < 1 or not args.speed > 0:
-        raise ConfigError("--fps must be at least 1 and --speed positive")
+    if not args.speed > 0:
+        raise ConfigError(f"--speed must be positive (times real time), got {args.speed:g}")
+    try:
+        shown = frame_duration(args.out.suffix, args.fps)
+    except AnimationError as error:
+        raise ConfigError(f"--fps: {error}") from None
     recording = _read(args.recording, at_least=2, purpose="animate")
     arrays = recording.arrays()
     settings = recording.scenario
-    period = float(settings.get("control_period", 1.0))
-    frames = interpolate(
-        arrays["t"],
-        arrays["pos"],
-        arrays["yaw"],
-        arrays["ids"],
-        per_step=frames_per_step(args.fps, period, args.speed),
+    frames = resample(
+        arrays["t"], arrays["pos"], arrays["yaw"], arrays["ids"], step=args.speed * shown
     )
     vision = Vision(
         float(settings.get("visual_range", 3.0)),

@@ -100,12 +100,17 @@ def progress_printer(ticks: int, stream: Any = sys.stderr) -> Callable[[Progress
             return
         m = progress.metrics
         prefix = bar(progress.tick, ticks) + " " if ticks else ""
-        line = (
-            f"{prefix}tick {progress.tick:>{len(str(ticks))}}/{ticks}  t={progress.time:7.1f} s  "
-            f"fish {progress.fish}  centroid {m['centroid_distance']:.3f} m  "
+        measures = (
+            f"radius {m['radius']:.3f} m  revolutions {m['revolutions']:.2f}  "
+            f"speed {m['speed']:.3f} m/s"
+            if "radius" in m
+            else f"centroid {m['centroid_distance']:.3f} m  "
             f"pairwise {m['pairwise_distance']:.3f} m  "
             f"nearest {m['nearest_neighbor_distance']:.3f} m"
-            f"  seen {m['neighbors_seen']:.1f}"
+        )
+        line = (
+            f"{prefix}tick {progress.tick:>{len(str(ticks))}}/{ticks}  t={progress.time:7.1f} s  "
+            f"fish {progress.fish}  {measures}  seen {m['neighbors_seen']:.1f}"
         )
         output.show(line, last=progress.tick >= ticks)
 
@@ -178,7 +183,24 @@ def _summary_text(summary: dict[str, Any]) -> str:
             f" — fish were stopped {stops} time(s) by their watchdog (no perception in time), "
             "so their fins were off for part of the run"
         )
+    orbit = summary.get("orbit")
+    if orbit:
+        post = orbit["post"]
+        around = (
+            f"around the post at ({post[0]:.2f}, {post[1]:.2f}) m"
+            if post is not None
+            else "around the partners' centre"
+        )
+        lines.append(f"  orbit {around}, R {orbit['orbit_radius']:g} m:")
+        lines.append(
+            f"    radius {orbit['radius']:.3f} m (± {orbit['radius_wobble']:.3f} m in time, "
+            "2nd half), "
+            f"{orbit['revolutions']:.2f} revolutions, speed {orbit['speed']:.3f} m/s, "
+            f"collisions {orbit['collisions']:.0f} pair-ticks"
+        )
     for name, values in summary["metrics"].items():
+        if orbit and name != "neighbors_seen":
+            continue  # the distances say little about circling fish (one fish: all zero)
         change = values["change_percent"]
         change_text = "" if change is None else f" ({change:+.1f} %)"
         lines.append(f"  {name}: {values['initial']:.3f} → {values['final']:.3f}{change_text}")
@@ -266,8 +288,8 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                 if args.record is not None
                 else None
             )
-            observer = Observer(
-                scenario.keys, recorder=recorder, on_progress=show, observer_id="world-cli"
+            observer = Observer.of(
+                scenario, recorder=recorder, on_progress=show, observer_id="world-cli"
             )
             async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
                 bus = ZenohBus(session)

@@ -192,9 +192,22 @@ def _pictures(run: Coevolution, evaluation: Evaluation, out: Path) -> None:
         import matplotlib.pyplot as plt
     except ImportError:
         return
+    for name, figure in (
+        ("fitness.png", fitness_figure(run)),
+        ("spacing_speed.png", spacing_speed_figure(run.settings.arena, evaluation)),
+        ("trajectories.png", trajectories_figure(evaluation)),
+    ):
+        figure.savefig(out / name, dpi=120)
+        plt.close(figure)
+
+
+def fitness_figure(run: Coevolution) -> Any:
+    """Best and mean fitness of both populations per generation (the study's Figure 10)."""
+    import matplotlib.pyplot as plt
+
     history = run.history
     generation = [h["generation"] for h in history]
-    figure, axis = plt.subplots(figsize=(7, 4))
+    figure, axis = plt.subplots(figsize=(8, 4), layout="constrained")
     axis.plot(generation, [h["model_mean"] for h in history], label="models, mean")
     axis.plot(generation, [h["model_best"] for h in history], label="models, best", alpha=0.6)
     axis.plot(generation, [h["classifier_mean"] for h in history], label="classifiers, mean")
@@ -203,17 +216,19 @@ def _pictures(run: Coevolution, evaluation: Evaluation, out: Path) -> None:
     )
     axis.set(
         xlabel="generation",
-        ylabel="fitness",
+        ylabel="fitness (fraction judged right)",
         ylim=(0, 1),
         title=f"Turing learning, {run.settings.behavior}",
     )
-    axis.legend(loc="lower right")
-    figure.tight_layout()
-    figure.savefig(out / "fitness.png", dpi=120)
-    plt.close(figure)
+    figure.legend(loc="outside right upper", fontsize=8)  # beside the curves, not on them
+    return figure
 
-    arena: Arena = run.settings.arena
-    figure, (left, right) = plt.subplots(1, 2, figsize=(10, 4))
+
+def spacing_speed_figure(arena: Arena, evaluation: Evaluation) -> Any:
+    """Spacing and speed over time, ideal fish against the best replica (Figure 11)."""
+    import matplotlib.pyplot as plt
+
+    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 4), layout="constrained")
     for row, label in ((0, "ideal fish"), (1, "best replica")):
         left.plot(
             np.arange(evaluation.spacing.shape[1]) * arena.period,
@@ -225,23 +240,27 @@ def _pictures(run: Coevolution, evaluation: Evaluation, out: Path) -> None:
             evaluation.speed[row],
             label=label,
         )
-    left.axhline(arena.spacing, color="grey", linestyle=":", label="σ")
-    left.set(xlabel="time", ylabel="mean neighbour distance", title="spacing")
-    right.set(xlabel="time", ylabel="mean speed", title="speed")
-    left.legend()
-    right.legend()
-    figure.tight_layout()
-    figure.savefig(out / "spacing_speed.png", dpi=120)
-    plt.close(figure)
+    left.axhline(arena.spacing, color="grey", linestyle=":", label="σ, the ideal spacing")
+    # The study's arena has its own length unit ("units", 300 to a side).
+    left.set(xlabel="time (s)", ylabel="mean neighbour distance (units)", title="spacing")
+    right.set(xlabel="time (s)", ylabel="mean speed (units/s)", title="speed")
+    figure.legend(*left.get_legend_handles_labels(), loc="outside right upper", fontsize=8)
+    return figure
 
-    figure, axes = plt.subplots(1, 2, figsize=(10, 5), sharex=True, sharey=True)
+
+def trajectories_figure(evaluation: Evaluation) -> Any:
+    """One trial of the ideal fish and one of the best replica, from above (Figures
+    12–13); a dot where each fish ended."""
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(
+        1, 2, figsize=(10, 5), sharex=True, sharey=True, layout="constrained"
+    )
     for axis, row, label in ((axes[0], 0, "ideal fish"), (axes[1], 1, "best replica")):
         tracks = evaluation.tracks[row]
         for fish in range(tracks.shape[1]):
             axis.plot(tracks[:, fish, 0], tracks[:, fish, 1], linewidth=0.8)
             axis.plot(tracks[-1, fish, 0], tracks[-1, fish, 1], "k.", markersize=4)
-        axis.set(title=label, aspect="equal", xlabel="x")
-    axes[0].set_ylabel("y")
-    figure.tight_layout()
-    figure.savefig(out / "trajectories.png", dpi=120)
-    plt.close(figure)
+        axis.set(title=label, aspect="equal", xlabel="x (units)")
+    axes[0].set_ylabel("y (units)")
+    return figure

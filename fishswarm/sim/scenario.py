@@ -324,7 +324,8 @@ class Scenario:
 
     @classmethod
     def from_mapping(cls, data: Mapping[str, Any], *, source: str = "scenario") -> Scenario:
-        """Build from a mapping (a parsed TOML table), rejecting unknown keys."""
+        """Build from a mapping (a parsed TOML table, or :meth:`to_dict`'s settings read back
+        from a recording or summary, where None means "not set"), rejecting unknown keys."""
         known = {f.name: f for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - set(known))
         if unknown:
@@ -332,7 +333,7 @@ class Scenario:
                 f"{source}: unknown setting(s) {', '.join(unknown)}; known settings are "
                 f"{', '.join(sorted(known))}"
             )
-        values = dict(data)
+        values = {name: value for name, value in data.items() if value is not None}
         for point in ("tank", "landmark"):
             if point in values:
                 given = values[point]

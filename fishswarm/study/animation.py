@@ -1,10 +1,12 @@
 """Animations of recorded runs: the fish as arrows in the tank, and what one fish sees.
 
-The study's BlueAnimat, redone: four views side by side — from above, from the side, a camera
-circling the tank, and through the eyes of one fish, which shows only the neighbours its
+The study's BlueAnimat, redone: four views — from above and from the side (flat), a camera
+circling the tank (3-D), and through the eyes of one fish, which shows only the neighbours its
 vision model lets it see (range, blind spot, occlusion) at their bearing and elevation.
-Recordings hold one snapshot per control period; frames in between are interpolated
-(positions linearly, headings the short way round) so that motion looks smooth. GIF through
+Recordings hold one snapshot per control period; frames are taken at even steps of
+simulated time between them (positions linearly, headings the short way round), one step
+being the playing speed times how long a frame is really shown, so that the animation plays
+at the speed asked for. GIF through
 Pillow, MP4 through the ffmpeg that imageio-ffmpeg ships (both in the ``viz`` extra).
 """
 
@@ -50,36 +52,50 @@ class Frames:
     ids: NDArray[np.int64]
 
 
-def interpolate(
-    t: FloatArray, position: FloatArray, yaw: FloatArray, ids: NDArray[np.int64], *, per_step: int
+def resample(
+    t: FloatArray, position: FloatArray, yaw: FloatArray, ids: NDArray[np.int64], *, step: float
 ) -> Frames:
-    """``per_step`` frames per recorded step: positions linearly, yaws the short way round.
+    """Frames every ``step`` simulated seconds from the first snapshot to the last:
+    positions linearly between snapshots, yaws the short way round.
 
     Args:
-        t: (T,) snapshot times, s.
+        t: (T,) snapshot times, s, increasing.
         position: (T, N, 3) positions, m (NaN for absent fish stays NaN).
         yaw: (T, N) yaws, rad.
         ids: (N,) fish ids.
-        per_step: frames per snapshot interval (1: the snapshots only).
+        step: simulated time between frames, s (the playing speed × a frame's duration).
     """
-    if per_step < 1:
-        raise AnimationError(f"frames per step must be at least 1, got {per_step}")
-    if t.size < 2 or per_step == 1:
+    if not step > 0:
+        raise AnimationError(f"the time between frames must be positive, got {step}")
+    if t.size < 2:
         return Frames(t, position, yaw, ids)
-    fraction = np.arange(per_step) / per_step
-    turn = np.angle(np.exp(1j * (yaw[1:] - yaw[:-1])))
-    times = (t[:-1, None] + (t[1:] - t[:-1])[:, None] * fraction).reshape(-1)
-    moved = (
-        position[:-1, None]
-        + (position[1:] - position[:-1])[:, None] * fraction[None, :, None, None]
-    )
-    turned = yaw[:-1, None] + turn[:, None] * fraction[None, :, None]
-    return Frames(
-        np.append(times, t[-1]),
-        np.concatenate([moved.reshape(-1, *position.shape[1:]), position[-1:]]),
-        np.concatenate([turned.reshape(-1, yaw.shape[1]), yaw[-1:]]),
-        ids,
-    )
+    count = math.floor((t[-1] - t[0]) / step + 1e-9) + 1
+    times = t[0] + np.arange(count) * step
+    before = np.clip(np.searchsorted(t, times, side="right") - 1, 0, t.size - 2)
+    fraction = (times - t[before]) / (t[before + 1] - t[before])
+    moved = position[before] + (position[before + 1] - position[before]) * fraction[:, None, None]
+    turn = np.angle(np.exp(1j * (yaw[before + 1] - yaw[before])))
+    return Frames(times, moved, yaw[before] + turn * fraction[:, None], ids)
+
+
+def frame_duration(suffix: str, fps: int) -> float:
+    """How long each frame is shown, s: 1/fps, but a GIF counts whole hundredths of a second
+    (after matplotlib's writer truncates to whole milliseconds), so 15 fps plays 0.06 s
+    frames there; the frames are spaced in simulated time by what is really shown.
+
+    Raises:
+        AnimationError: fps outside 1–50 for a GIF (viewers show shorter frames at 0.1 s).
+    """
+    if fps < 1:
+        raise AnimationError(f"fps must be at least 1, got {fps}")
+    if suffix == ".gif":
+        if fps > 50:
+            raise AnimationError(
+                f"a GIF plays at most 50 frames per second (viewers slow shorter frames down "
+                f"to 0.1 s), got --fps {fps}; use .mp4 or a lower --fps"
+            )
+        return (int(1000 / fps) // 10) / 100
+    return 1 / fps
 
 
 def eye_view(
@@ -136,42 +152,8 @@ def animate(
         raise AnimationError(f"fish {viewer} is not in the recording (fish: {ids_text(ids)})")
     plt, animation = _matplotlib()
     writer = _writer(animation, out, fps)
-    figure = plt.figure(figsize=(10, 7.5), dpi=80, layout="constrained")
-    views = [figure.add_subplot(2, 2, n, projection="3d") for n in (1, 2, 3)]
-    angles = (("from above", 90.0, -90.0), ("from the side", 0.0, -90.0), ("circling", 25.0, 0.0))
-    for ax, (name, _, _) in zip(views, angles, strict=True):
-        _tank_axes(ax, tank)
-        ax.set_title(name, fontsize=9)
-    eye = figure.add_subplot(2, 2, 4)
-    _eye_axes(eye)
-    column = ids.index(viewer)
+    figure, draw = animation_figure(frames, tank=tank, vision=vision, viewer=viewer, title=title)
     count = frames.t.size
-    drawn: list[Any] = []
-
-    def column_in(present: NDArray[np.bool_]) -> int | None:
-        return int(present[:column].sum()) if present[column] else None
-
-    def draw(frame: int) -> None:
-        # Only the fish are redrawn; axes, panes and labels stay (redrawing them all was
-        # most of the time per frame).
-        for artist in drawn:
-            artist.remove()
-        drawn.clear()
-        position, yaw = frames.position[frame], frames.yaw[frame]
-        present = ~np.isnan(position[:, 0])
-        mine = column_in(present)
-        for ax, (_, elevation, azimuth) in zip(views, angles, strict=True):
-            drawn.append(_arrows(ax, position[present], yaw[present], highlight=mine))
-            turn = -60.0 + 360.0 * frame / max(count, 1) if ax is views[2] else azimuth
-            ax.view_init(elev=elevation, azim=turn)
-        drawn.extend(_eye(eye, position[present], yaw[present], mine, vision, viewer))
-        figure.suptitle(f"{title}   t = {frames.t[frame]:5.1f} s")
-
-    # Lay the views out once, then keep that layout: re-running constrained layout for
-    # every frame took more time than drawing it.
-    draw(0)
-    figure.canvas.draw()
-    figure.set_layout_engine("none")
     with writer.saving(figure, str(out), dpi=figure.dpi):
         for frame in range(count):
             draw(frame)
@@ -182,19 +164,112 @@ def animate(
     return out
 
 
+def animation_figure(
+    frames: Frames, *, tank: Sequence[float], vision: Vision, viewer: int, title: str = ""
+) -> tuple[Any, Callable[[int], None]]:
+    """The animation's figure and a function that draws frame k into it.
+
+    Four views: from above and from the side (flat, so that their axes read like a plan and
+    an elevation), a camera circling the tank (3-D), and through the eyes of fish ``viewer``
+    (drawn red in the other views).
+    """
+    plt, _ = _matplotlib()
+    ids = frames.ids.tolist()
+    figure = plt.figure(figsize=(12, 9), dpi=80, layout="constrained")
+    grid = figure.add_gridspec(2, 2, height_ratios=(tank[1], max(tank[2], 0.6 * tank[1])))
+    above = figure.add_subplot(grid[0, 0])
+    above.set(xlim=(0, tank[0]), ylim=(0, tank[1]), aspect="equal", xlabel="x (m)")
+    above.set_ylabel("y (m)")
+    above.set_title("from above", fontsize=10)
+    side = figure.add_subplot(grid[1, 0])
+    side.set(xlim=(0, tank[0]), ylim=(tank[2], 0), aspect="equal", xlabel="x (m)")
+    side.set_ylabel("depth (m)")
+    side.set_title("from the side", fontsize=10)
+    circling = figure.add_subplot(grid[0, 1], projection="3d")
+    _tank_axes(circling, tank)
+    circling.set_title("circling", fontsize=10)
+    eye = figure.add_subplot(grid[1, 1])
+    _eye_axes(eye)
+    column = ids.index(viewer)
+    count = frames.t.size
+    drawn: list[Any] = []
+
+    def draw(frame: int) -> None:
+        # Only the fish are redrawn; axes, panes and labels stay (redrawing them all was
+        # most of the time per frame).
+        for artist in drawn:
+            artist.remove()
+        drawn.clear()
+        position, yaw = frames.position[frame], frames.yaw[frame]
+        present = ~np.isnan(position[:, 0])
+        mine = int(present[:column].sum()) if present[column] else None
+        here, heading = position[present], yaw[present]
+        drawn.append(_flat_arrows(above, here[:, 0], here[:, 1], heading, mine, tank))
+        # From the side (looking along +y) a fish shows how far it swims along x.
+        drawn.append(_flat_arrows(side, here[:, 0], here[:, 2], heading, mine, tank, side=True))
+        drawn.append(_arrows(circling, here, heading, highlight=mine))
+        circling.view_init(elev=25.0, azim=-60.0 + 360.0 * frame / max(count, 1))
+        drawn.extend(_eye(eye, here, heading, mine, vision, viewer))
+        figure.suptitle(f"{title}   t = {frames.t[frame]:5.1f} s")
+
+    # Lay the views out once, then keep that layout: re-running constrained layout for
+    # every frame took more time than drawing it.
+    draw(0)
+    figure.canvas.draw()
+    figure.set_layout_engine("none")
+    return figure, draw
+
+
 def _tank_axes(ax: Any, tank: Sequence[float]) -> None:
     ax.set(xlim=(0, tank[0]), ylim=(0, tank[1]), zlim=(tank[2], 0))
     ax.set_xlabel("x (m)", fontsize=8)
     ax.set_ylabel("y (m)", fontsize=8)
     ax.set_zlabel("depth (m)", fontsize=8)
-    ax.set_box_aspect(tank)
-    ax.tick_params(labelsize=7)
+    ax.set_box_aspect(tank, zoom=1.15)
+    # Three ticks an axis: more pile up on the short depth axis as the camera turns.
+    for axis, size in zip((ax.xaxis, ax.yaxis, ax.zaxis), tank, strict=True):
+        axis.set_ticks(np.linspace(0, size, 3).round(2))
+    ax.tick_params(labelsize=7, pad=0)
+
+
+def _colours(count: int, highlight: int | None) -> list[str]:
+    colours = ["tab:blue"] * count
+    if highlight is not None:
+        colours[highlight] = "tab:red"
+    return colours
+
+
+def _flat_arrows(
+    ax: Any,
+    x: FloatArray,
+    y: FloatArray,
+    yaw: FloatArray,
+    highlight: int | None,
+    tank: Sequence[float],
+    *,
+    side: bool = False,
+) -> Any:
+    """Each fish as an arrow one body length long (in the axes' metres) along its heading
+    as this view shows it: from the side, only its x component."""
+    u = np.cos(yaw) * ARROW_LENGTH
+    v = np.zeros_like(yaw) if side else np.sin(yaw) * ARROW_LENGTH
+    return ax.quiver(
+        x,
+        y,
+        u,
+        v,
+        color=_colours(x.size, highlight),
+        angles="xy",
+        scale_units="xy",
+        scale=1.0,
+        width=0.006,
+        headwidth=3.5,
+        headlength=4.0,
+        pivot="middle",
+    )
 
 
 def _arrows(ax: Any, position: FloatArray, yaw: FloatArray, *, highlight: int | None) -> Any:
-    colors = ["tab:blue"] * position.shape[0]
-    if highlight is not None:
-        colors[highlight] = "tab:red"
     return ax.quiver(
         position[:, 0],
         position[:, 1],
@@ -202,9 +277,11 @@ def _arrows(ax: Any, position: FloatArray, yaw: FloatArray, *, highlight: int | 
         np.cos(yaw),
         np.sin(yaw),
         np.zeros_like(yaw),
-        length=ARROW_LENGTH,
-        colors=colors,
-        linewidth=1.5,
+        length=1.5 * ARROW_LENGTH,  # the 3-D view is the smallest: a little longer
+        colors=_colours(position.shape[0], highlight),
+        linewidth=2.0,
+        arrow_length_ratio=0.45,
+        normalize=True,
     )
 
 
@@ -262,8 +339,3 @@ def _writer(animation: Any, out: Path, fps: int) -> Any:
 
     matplotlib.rcParams["animation.ffmpeg_path"] = imageio_ffmpeg.get_ffmpeg_exe()
     return animation.FFMpegWriter(fps=fps, codec="libx264", extra_args=["-pix_fmt", "yuv420p"])
-
-
-def frames_per_step(fps: int, period: float, speed: float) -> int:
-    """Frames per recorded step so that the animation plays ``speed`` times real time."""
-    return max(1, math.ceil(fps * period / speed))

@@ -23,9 +23,11 @@ from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.sim.scenario import ConfigError, Scenario, read_toml
 from fishswarm.study.metrics import (
     FORMATION_METRIC_NAMES,
+    ORBIT_BEHAVIORS,
     ORBIT_METRIC_NAMES,
     formation_target_of,
     orbit_metrics,
+    orbit_target_of,
     swarm_metrics,
 )
 
@@ -36,9 +38,6 @@ log = logging.getLogger(__name__)
 METRICS = ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance", "neighbors_seen")
 """Columns of a swarm run's metric series: the three mean distances (m) of SPEC §3 and
 neighbours seen."""
-
-ORBIT_BEHAVIORS = ("orbit", "milling", "waltz")
-"""Behaviours whose experiments measure circling (radius, revolutions, speed, collisions)."""
 
 ENGINES = ("actors", "batch")
 """How an experiment's runs go: through the actor system, or the in-process batch engine."""
@@ -216,6 +215,13 @@ class Experiment:
         return self.scenario.behavior in ORBIT_BEHAVIORS
 
     @property
+    def spread_text(self) -> str:
+        """How the table and the figures summarise the seeds of each value, in words."""
+        if self.seeds == 1:
+            return "one seed per value (one run each: no spread)"
+        return f"{self.seeds} seeds per value; mean ± s.d. over seeds"
+
+    @property
     def forming(self) -> bool:
         """Whether the fish take places in a formation."""
         return self.scenario.behavior == "formation"
@@ -246,10 +252,11 @@ class Experiment:
                 [[target.metrics(p)[name] for name in FORMATION_METRIC_NAMES] for p in position]
             )
         if self.orbiting:
-            landmarks = scenario.landmarks()
+            orbit = orbit_target_of(scenario)
+            assert orbit is not None  # an orbiting scenario always has one
             return orbit_metrics(
                 position,
-                centre=landmarks[0] if landmarks.shape[0] else None,
+                centre=orbit.centre,
                 period=scenario.control_period,
                 contact=BODY_LENGTH,
             )

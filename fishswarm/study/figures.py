@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.study.experiment import METRIC_LABELS
+from fishswarm.study.metrics import OrbitTarget, orbit_target_of
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -56,14 +57,38 @@ def draw_tracks(
         side.plot(track[:, 0], track[:, 2], color=colors[fish], linewidth=0.8)
         start, end = _first_last(track)
         if start is not None and end is not None:
-            overhead.plot(*start[:2], "o", color=colors[fish], markersize=2)
-            overhead.plot(*end[:2], ">", color=colors[fish], markersize=3)
-            side.plot(start[0], start[2], "o", color=colors[fish], markersize=2)
+            overhead.plot(*start[:2], "o", color=colors[fish], markersize=3)
+            overhead.plot(*end[:2], marker=_arrowhead(track), color=colors[fish], markersize=6)
+            side.plot(start[0], start[2], "o", color=colors[fish], markersize=3)
+    if count:
+        key = [
+            _key_entry("o", "start", markersize=4),
+            _key_entry((3, 0, -90), "end, pointing where it swam", markersize=7),
+        ]
+        overhead.legend(handles=key, fontsize=7, loc="upper right", framealpha=0.8)
     overhead.set(xlim=(0, tank[0]), ylim=(0, tank[1]), aspect="equal", xlabel="x (m)")
     overhead.set_ylabel("y (m)")
     overhead.set_title(title, fontsize=9)
     side.set(xlim=(0, tank[0]), ylim=(tank[2], 0), aspect="equal", xlabel="x (m)")
     side.set_ylabel("depth (m)")
+
+
+def _arrowhead(track: FloatArray) -> tuple[int, int, float]:
+    """A triangle marker pointing along a track's last move seen from above (matplotlib's
+    (sides, style, angle): a triangle at angle 0 points up, angles turn it anticlockwise)."""
+    present = track[~np.isnan(track[:, 0])]
+    step = present[-1, :2] - present[-2, :2] if present.shape[0] > 1 else np.array([1.0, 0.0])
+    heading_deg = float(np.degrees(np.arctan2(step[1], step[0])))
+    return (3, 0, heading_deg - 90.0)
+
+
+def _key_entry(marker: Any, label: str, *, markersize: float) -> Any:
+    """A legend entry for a marker drawn in every fish's colour (shown in grey)."""
+    from matplotlib.lines import Line2D
+
+    return Line2D(
+        [], [], marker=marker, linestyle="none", color="dimgrey", markersize=markersize, label=label
+    )
 
 
 def _colors(count: int) -> list[Any]:
@@ -86,10 +111,17 @@ def run_figure(
     tank: Sequence[float],
     *,
     title: str,
+    orbit: OrbitTarget | None = None,
 ) -> Figure:
-    """One run: tracks from above and from the side, and every metric over time."""
+    """One run: tracks from above and from the side, and every metric over time (for
+    circling fish, given ``orbit``: the post and R drawn, radius, revolutions and speed)."""
     plt = _pyplot()
     figure = plt.figure(figsize=(12, 7), layout="constrained")
+    if orbit is not None:
+        _orbit_panels(figure, t, position, metrics, tank, orbit)
+        figure.suptitle(title)
+        orbit_figure: Figure = figure
+        return orbit_figure
     grid = figure.add_gridspec(2, 2, width_ratios=(1.3, 1))
     overhead = figure.add_subplot(grid[0, 0])
     side = figure.add_subplot(grid[1, 0])
@@ -108,6 +140,42 @@ def run_figure(
     return result
 
 
+def _orbit_panels(
+    figure: Figure,
+    t: FloatArray,
+    position: FloatArray,
+    metrics: dict[str, FloatArray],
+    tank: Sequence[float],
+    orbit: OrbitTarget,
+) -> None:
+    grid = figure.add_gridspec(3, 2, width_ratios=(1.3, 1))
+    overhead = figure.add_subplot(grid[0:2, 0])
+    side = figure.add_subplot(grid[2, 0])
+    draw_tracks(overhead, side, position, tank, title="from above")
+    side.set_title("from the side", fontsize=9)
+    reference = orbit.expected_radius
+    if orbit.centre is not None:
+        from matplotlib.patches import Circle
+
+        x, y, z = orbit.centre
+        overhead.plot(x, y, "+", color="red", markersize=10, label="post")
+        overhead.add_patch(
+            Circle((x, y), reference, fill=False, linestyle="--", color="red", linewidth=0.8)
+        )
+        side.plot(x, z, "+", color="red", markersize=10)
+    radius = figure.add_subplot(grid[0, 1])
+    radius.plot(t, metrics["radius"], color="tab:blue", label="measured")
+    radius.axhline(reference, color="red", linestyle="--", linewidth=0.8, label=orbit.label)
+    radius.set(xlabel="time (s)", ylabel=METRIC_LABELS["radius"])
+    radius.legend(fontsize=8, loc="best")
+    turns = figure.add_subplot(grid[1, 1])
+    turns.plot(t, metrics["revolutions"], color="tab:green")
+    turns.set(xlabel="time (s)", ylabel=METRIC_LABELS["revolutions"])
+    speed = figure.add_subplot(grid[2, 1])
+    speed.plot(t, metrics["speed"], color="tab:orange")
+    speed.set(xlabel="time (s)", ylabel=METRIC_LABELS["speed"])
+
+
 def experiment_figures(
     experiment: Experiment,
     outcomes: list[RunOutcome],
@@ -123,8 +191,17 @@ def experiment_figures(
     """
     plt = _pyplot()
     values = experiment.values
-    positions = np.arange(len(values))
     names = experiment.metric_names
+    spread = experiment.seeds > 1
+    # The radius each value should give (orbit experiments), drawn as a reference.
+    orbits = [orbit_target_of(experiment.scenario_for(value, 0)) for value in values]
+    known = [orbit for orbit in orbits if orbit is not None]
+    expected = [o.expected_radius for o in known] if len(known) == len(values) else None
+    reference = (
+        known[0].label
+        if expected is None or len(set(expected)) == 1
+        else "target radius R" + ("" if known[0].centre is not None else "/2")
+    )
     paths = []
 
     summaries = experiment.summaries
@@ -133,13 +210,17 @@ def experiment_figures(
     )
     for ax, summary in zip(axes, summaries, strict=True):
         means = [row[f"{summary.key}_mean"] for row in rows]
-        errors = [row[f"{summary.key}_sd"] for row in rows]
-        ax.errorbar(positions, means, yerr=errors, fmt="o-", capsize=4)
-        ax.set_xticks(positions, [f"{v:g}" for v in values])
+        errors = [row[f"{summary.key}_sd"] for row in rows] if spread else None
+        # At the values themselves: unevenly spaced values are drawn unevenly spaced.
+        ax.errorbar(values, means, yerr=errors, fmt="o-", capsize=4, label="measured")
+        if summary.key == "radius" and expected is not None:
+            ax.plot(values, expected, "--", color="red", linewidth=0.8, label=reference)
+            ax.legend(fontsize=7)
+        ax.set_xticks(values, [f"{v:g}" for v in values])
         ax.set_xlabel(experiment.label)
         ax.set_title(summary.label, fontsize=9)
         ax.grid(alpha=0.3)
-    figure.suptitle(f"{experiment.title}: mean ± s.d. over {experiment.seeds} seeds")
+    figure.suptitle(f"{experiment.title}: {experiment.spread_text}")
     paths.append(_save(figure, folder / "metrics_vs_parameter.png"))
 
     figure, axes = plt.subplots(
@@ -152,11 +233,24 @@ def experiment_figures(
             stacked = np.array([o.metrics[:, column] for o in mine])
             mean, sd = stacked.mean(axis=0), stacked.std(axis=0)
             ax.plot(mine[0].t, mean, color=color, label=f"{value:g}")
-            ax.fill_between(mine[0].t, mean - sd, mean + sd, color=color, alpha=0.15)
+            if spread:
+                ax.fill_between(mine[0].t, mean - sd, mean + sd, color=color, alpha=0.15)
+        if name == "radius" and expected is not None:
+            for color, radius in zip(colors, expected, strict=True):
+                ax.axhline(radius, color=color, linestyle="--", linewidth=0.8)
+            ax.plot([], [], "--", color="grey", linewidth=0.8, label=reference)
         ax.set(xlabel="time (s)")
         ax.set_title(METRIC_LABELS[name], fontsize=9)
-    axes[0].legend(title=experiment.label, fontsize=7, title_fontsize=7)
-    figure.suptitle(f"{experiment.title}: metrics over time")
+    # Beside the panels, not over the data.
+    figure.legend(
+        *axes[0].get_legend_handles_labels(),
+        loc="outside right upper",
+        title=experiment.label,
+        fontsize=7,
+        title_fontsize=7,
+    )
+    band = ", band ± s.d. over seeds" if spread else ", one seed per value"
+    figure.suptitle(f"{experiment.title}: metrics over time (mean{band})")
     paths.append(_save(figure, folder / "metrics_over_time.png"))
 
     tank = experiment.scenario.tank

@@ -13,6 +13,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.distance import pdist
 
 from fishswarm.behaviors.formation import FormationParams
+from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.formations.maps import target_map
 from fishswarm.formations.metrics import (
     collisions,
@@ -112,6 +113,96 @@ def orbit_metrics(
         speed[1:] = moved.mean(axis=1) / period
     close = np.array([collisions(position[tick], distance=contact) for tick in range(steps)])
     return np.stack([radius, revolutions, speed, close.astype(np.float64)], axis=1)
+
+
+ORBIT_BEHAVIORS = ("orbit", "milling", "waltz")
+"""Behaviours measured by circling (radius, revolutions, speed, collisions)."""
+
+
+@dataclass(frozen=True)
+class OrbitTarget:
+    """What an orbit run is measured against.
+
+    Attributes:
+        centre: (3,) the post the fish circle, m; None for partners circling each other
+            (waltz), whose centre is their barycentre.
+        radius: the orbit radius R (waltz: the partner distance), m.
+    """
+
+    centre: FloatArray | None
+    radius: float
+
+    @property
+    def expected_radius(self) -> float:
+        """The radius the fish should keep from the centre, m: R around a post; R/2 for
+        partners R apart circling their barycentre."""
+        return self.radius if self.centre is not None else self.radius / 2
+
+    @property
+    def label(self) -> str:
+        """What the expected radius is, for a plot's key."""
+        if self.centre is not None:
+            return f"R = {self.radius:g} m"
+        return f"R/2 (partners R = {self.radius:g} m apart)"
+
+
+def orbit_target_of(scenario: Scenario) -> OrbitTarget | None:
+    """The target of an orbit, milling or waltz run (None for other runs)."""
+    if scenario.behavior not in ORBIT_BEHAVIORS:
+        return None
+    landmarks = scenario.landmarks()
+    return OrbitTarget(landmarks[0] if landmarks.shape[0] else None, scenario.orbit_radius)
+
+
+class OrbitTracker:
+    """The orbit metrics snapshot by snapshot, as :func:`orbit_metrics` gives them for a
+    whole run, for a live run whose fish may join or leave (each fish's revolutions count
+    from its first snapshot; speed over fish present at both of the last two)."""
+
+    def __init__(self, target: OrbitTarget, *, contact: float = BODY_LENGTH) -> None:
+        self.target = target
+        self.contact = contact
+        self._ids = np.zeros(0, dtype=np.int64)
+        self._start = np.zeros(0)
+        self._angle = np.zeros(0)
+        self._xy = np.zeros((0, 2))
+        self._time = math.nan
+
+    def metrics(
+        self, ids: NDArray[np.int64], position: FloatArray, time: float
+    ) -> dict[str, float]:
+        """Radius (m), revolutions, speed (m/s) and colliding pairs of one snapshot.
+
+        Args:
+            ids: (N,) the fish.
+            position: (N, 3) their positions, m.
+            time: the snapshot's time, s.
+        """
+        if ids.size == 0:
+            return dict.fromkeys(ORBIT_METRIC_NAMES, 0.0)
+        xy = position[:, :2]
+        centre = self.target.centre
+        offset = xy - (xy.mean(axis=0) if centre is None else centre[:2])
+        raw = np.arctan2(offset[:, 1], offset[:, 0])
+        places = np.clip(np.searchsorted(self._ids, ids), 0, max(self._ids.size - 1, 0))
+        known = (self._ids[places] == ids) if self._ids.size else np.zeros(ids.size, dtype=bool)
+        before = np.where(known, self._angle[places] if self._ids.size else raw, raw)
+        angle = before + (raw - before + np.pi) % (2 * np.pi) - np.pi
+        start = np.where(known, self._start[places] if self._ids.size else raw, raw)
+        speed = 0.0
+        if known.any() and time > self._time:
+            moved = np.hypot(*(xy[known] - self._xy[places[known]]).T)
+            speed = float(moved.mean()) / (time - self._time)
+        order = np.argsort(ids)
+        self._ids, self._start, self._angle = ids[order], start[order], angle[order]
+        self._xy, self._time = xy[order], time
+        return {
+            "radius": float(np.hypot(offset[:, 0], offset[:, 1]).mean()),
+            # Clockwise in overhead plots (the fish keep the centre on their left, z down).
+            "revolutions": float(((start - angle) / (2 * np.pi)).mean()),
+            "speed": speed,
+            "collisions": float(collisions(position, distance=self.contact)),
+        }
 
 
 FORMATION_METRIC_NAMES = ("shape_error", "joined_fraction", "lattice_energy", "collisions")

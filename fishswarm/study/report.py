@@ -136,8 +136,7 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
         f"# {experiment.title}",
         "",
         f"{scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
-        f"{1 / scenario.control_period:g} Hz; {experiment.seeds} seeds per value; mean ± s.d. "
-        f"over seeds. {explain}",
+        f"{1 / scenario.control_period:g} Hz; {experiment.spread_text}. {explain}",
         "",
         "| " + " | ".join([experiment.label, *(s.label for s in experiment.summaries)]) + " |",
         "|" + "---:|" * (1 + len(experiment.summaries)),
@@ -146,6 +145,7 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
         cells = [f"{row[experiment.parameter]:g}"]
         for summary in experiment.summaries:
             mean, sd = row[f"{summary.key}_mean"], row[f"{summary.key}_sd"]
-            cells.append(f"{mean:.{summary.digits}f} ± {sd:.{summary.digits}f}")
+            spread = f" ± {sd:.{summary.digits}f}" if experiment.seeds > 1 else ""
+            cells.append(f"{mean:.{summary.digits}f}{spread}")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

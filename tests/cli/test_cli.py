@@ -94,7 +94,8 @@ def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -
     animated = _run("animate", str(record), "--out", str(gif), "--fish", "2", "--speed", "4")
     assert animated.returncode == 0, animated.stderr
     assert gif.read_bytes()[:6] == b"GIF89a"
-    assert "(13 frames)" in animated.stderr  # 4 steps of 3 frames, and the last snapshot
+    # 4 s of run at 4× and 10 fps: a frame every 0.4 s of the run, 11 in all.
+    assert "(11 frames)" in animated.stderr
     movie = _run("animate", str(record), "--out", str(mp4), "--fps", "4", "--speed", "4")
     assert movie.returncode == 0, movie.stderr
     assert mp4.read_bytes()[4:8] == b"ftyp"
@@ -173,6 +174,23 @@ def test_a_run_in_which_the_watchdog_stopped_fish_says_so_and_exits_4(tmp_path: 
     # One warning per firing, naming both fish, not one line per fish.
     assert "2 fish (0, 1): no perception for 0.3 s" in result.stderr
     assert "fish 0: no perception" not in result.stderr
+
+
+def test_an_orbit_run_reports_and_draws_its_circling(tmp_path: Path) -> None:
+    summary = tmp_path / "s.json"
+    outputs = _outputs(tmp_path, summary)
+    args = ["--behavior", "milling", "--fish", "1", "--duration", "20", "--quiet", *outputs]
+    result = _run("run", *args, timeout=60)
+    assert result.returncode == 0, result.stderr
+    # One fish: the distances are all zero, so the summary speaks of the orbit instead.
+    assert "orbit around the post at (0.89, 0.89) m, R 0.45 m:" in result.stderr
+    assert "revolutions, speed" in result.stderr and "centroid_distance" not in result.stderr
+    orbit = json.loads(summary.read_text())["orbit"]
+    assert orbit["post"][:2] == pytest.approx([0.89, 0.89])
+    assert 0.3 < orbit["radius"] < 0.8 and orbit["revolutions"] > 0.1 and orbit["speed"] > 0
+    picture = tmp_path / "orbit.png"
+    plotted = _run("plot", str(tmp_path / "r.mcap"), "--out", str(picture))
+    assert plotted.returncode == 0 and picture.stat().st_size > 10_000
 
 
 def test_bad_config_files_are_explained(tmp_path: Path) -> None:

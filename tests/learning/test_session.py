@@ -69,6 +69,8 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     )
     assert straight.returncode == 0, straight.stderr
     assert "generation 4/4" in straight.stderr
+    (radii,) = [line for line in straight.stderr.splitlines() if "learned radii" in line]
+    assert radii.startswith("  learned radii  r1 ") and radii.endswith(" units")
     first = subprocess.run(
         [*base, "--generations", "2", "--out", str(tmp_path / "b")],
         capture_output=True,
@@ -90,3 +92,12 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     assert (tmp_path / "a" / "history.csv").read_text() == (
         tmp_path / "b" / "history.csv"
     ).read_text()
+
+
+def test_learned_radii_print_as_mean_and_spread_with_their_unit() -> None:
+    from fishswarm.cli.learn import radii_text
+
+    assert radii_text({"mean": [45.25, 80.0], "sd": [3.14, 5.4]}) == (
+        "r1 45.2 ± 3.1, r2 80.0 ± 5.4 units"
+    )
+    assert radii_text({"mean": [], "sd": []}).startswith("none")

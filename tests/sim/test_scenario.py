@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fishswarm.sim.scenario import ConfigError, Scenario
@@ -77,3 +78,19 @@ def test_settings_are_checked_together_and_name_what_the_user_set() -> None:
     ):
         Scenario(behavior="orbit", orbit_radius=5.0)
     assert Scenario(behavior="waltz", orbit_radius=1.0).orbit_radius == 1.0  # a partner distance
+
+
+@pytest.mark.parametrize(
+    "scenario",
+    [
+        Scenario(),
+        Scenario(behavior="milling", orbit_radius=0.3, fish=3),
+        Scenario(behavior="aggregation", landmark=(0.5, 0.5, 0.5), tank=(2.0, 2.0, 1.0)),
+        Scenario(behavior="formation", formation="pyramid", switch_formation="diamond"),
+    ],
+)
+def test_settings_read_back_from_a_recording_give_the_same_scenario(scenario: Scenario) -> None:
+    # to_dict writes None for what is not set (a landmark, a formation): read back as unset.
+    again = Scenario.from_mapping(scenario.to_dict(), source="recording")
+    assert again.to_dict() == scenario.to_dict()
+    np.testing.assert_array_equal(again.landmarks(), scenario.landmarks())

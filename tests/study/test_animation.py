@@ -1,33 +1,91 @@
-"""Animation helpers: interpolation between snapshots and the fish's-eye geometry."""
+"""Animation helpers: resampling between snapshots, frame durations, the views, and the
+fish's-eye geometry."""
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
 
 from fishswarm.bluebot.vision import Vision
-from fishswarm.study.animation import AnimationError, eye_view, frames_per_step, interpolate
+from fishswarm.study.animation import (
+    ARROW_LENGTH,
+    AnimationError,
+    animation_figure,
+    eye_view,
+    frame_duration,
+    resample,
+)
 
 
-def test_interpolation_is_linear_and_turns_the_short_way() -> None:
-    t = np.array([0.0, 1.0])
-    position = np.array([[[0.0, 0.0, 0.5]], [[1.0, 2.0, 0.5]]])
-    yaw = np.array([[math.radians(170)], [math.radians(-170)]])
-    frames = interpolate(t, position, yaw, np.array([4]), per_step=4)
-    np.testing.assert_allclose(frames.t, [0.0, 0.25, 0.5, 0.75, 1.0])
+def test_resampling_is_linear_and_turns_the_short_way() -> None:
+    t = np.array([0.0, 1.0, 2.0])
+    position = np.array([[[0.0, 0.0, 0.5]], [[1.0, 2.0, 0.5]], [[1.0, 2.0, 0.5]]])
+    yaw = np.array([[math.radians(170)], [math.radians(-170)], [math.radians(-170)]])
+    frames = resample(t, position, yaw, np.array([4]), step=0.25)
+    np.testing.assert_allclose(frames.t, np.arange(9) * 0.25)
     np.testing.assert_allclose(frames.position[2, 0], [0.5, 1.0, 0.5])
+    np.testing.assert_allclose(frames.position[-1, 0], [1.0, 2.0, 0.5])
     # Halfway from 170° to −170° the short way is 180°, not 0°.
     assert abs(math.cos(frames.yaw[2, 0]) + 1) < 1e-12
-    assert frames.position.shape == (5, 1, 3)
-    with pytest.raises(AnimationError, match="at least 1"):
-        interpolate(t, position, yaw, np.array([4]), per_step=0)
+    assert frames.position.shape == (9, 1, 3)
+    # Steps that do not divide a snapshot interval: 0.6 s apart, across snapshots.
+    uneven = resample(t, position, yaw, np.array([4]), step=0.6)
+    np.testing.assert_allclose(uneven.t, [0.0, 0.6, 1.2, 1.8])
+    np.testing.assert_allclose(uneven.position[1, 0], [0.6, 1.2, 0.5])
+    with pytest.raises(AnimationError, match="must be positive"):
+        resample(t, position, yaw, np.array([4]), step=0.0)
 
 
-def test_frames_per_step_plays_at_the_asked_speed() -> None:
-    assert frames_per_step(10, 1.0, 2.0) == 5
-    assert frames_per_step(10, 1.0, 100.0) == 1
+def test_frames_last_as_long_as_the_format_really_shows_them() -> None:
+    assert frame_duration(".mp4", 15) == pytest.approx(1 / 15)
+    assert frame_duration(".gif", 10) == pytest.approx(0.1)
+    # 1000/15 = 66 ms, kept by a GIF as 6 hundredths of a second.
+    assert frame_duration(".gif", 15) == pytest.approx(0.06)
+    with pytest.raises(AnimationError, match="at most 50 frames per second"):
+        frame_duration(".gif", 60)
+
+
+def test_the_animation_views_read_like_a_plan_an_elevation_and_a_camera() -> None:
+    pytest.importorskip("matplotlib")
+    t = np.array([0.0, 1.0])
+    # Fish 7 heads +x at (0.5, 0.5, 0.3); fish 9 heads +y at (1.2, 1.0, 0.8).
+    position = np.array([[[0.5, 0.5, 0.3], [1.2, 1.0, 0.8]]] * 2)
+    yaw = np.array([[0.0, math.pi / 2]] * 2)
+    frames = resample(t, position, yaw, np.array([7, 9]), step=0.5)
+    figure, draw = animation_figure(
+        frames, tank=(1.78, 1.78, 1.17), vision=Vision(), viewer=9, title="test"
+    )
+    draw(1)
+    above, side, circling, eye = figure.axes
+    assert (above.get_xlabel(), above.get_ylabel(), above.get_title()) == (
+        "x (m)",
+        "y (m)",
+        "from above",
+    )
+    assert (side.get_xlabel(), side.get_ylabel()) == ("x (m)", "depth (m)")
+    assert side.get_ylim() == (1.17, 0.0)  # depth grows downwards
+    assert circling.name == "3d" and len(circling.get_zticks()) == 3
+    assert eye.get_xlabel() == "bearing (deg, right +)"
+    # From above, each fish is an arrow one body length long along its heading, in metres;
+    # the viewer is red.
+    (arrows,) = above.collections
+    np.testing.assert_allclose(arrows.U, [ARROW_LENGTH, 0.0], atol=1e-12)
+    np.testing.assert_allclose(arrows.V, [0.0, ARROW_LENGTH], atol=1e-12)
+    assert arrows.scale == 1.0 and arrows.scale_units == "xy"
+    red = matplotlib_colors().to_rgba("tab:red")
+    assert tuple(arrows.get_facecolors()[1]) == red
+    # From the side only the x component shows: fish 9 (heading +y) is end-on.
+    (edge_on,) = side.collections
+    np.testing.assert_allclose(edge_on.U, [ARROW_LENGTH, 0.0], atol=1e-12)
+
+
+def matplotlib_colors() -> Any:
+    import matplotlib.colors
+
+    return matplotlib.colors
 
 
 def test_eye_view_by_hand() -> None:

@@ -8,10 +8,16 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import pdist
 
+from fishswarm.sim.engine import run_batch
+from fishswarm.sim.scenario import Scenario
 from fishswarm.study.metrics import (
+    ORBIT_METRIC_NAMES,
+    OrbitTarget,
+    OrbitTracker,
     centroid_distance,
     nearest_neighbor_distance,
     orbit_metrics,
+    orbit_target_of,
     pairwise_distance,
     swarm_metrics,
 )
@@ -63,6 +69,67 @@ def test_orbit_metrics_of_a_pair_use_the_barycentre_and_count_contacts() -> None
     metrics = orbit_metrics(position, centre=None, period=1.0, contact=0.13)
     np.testing.assert_allclose(metrics[:, 0], [0.05, 0.2])
     assert metrics[:, 3].tolist() == [1.0, 0.0]
+
+
+@pytest.mark.parametrize("behavior", ["milling", "waltz"])
+def test_orbit_tracker_snapshot_by_snapshot_equals_the_whole_runs_metrics(behavior: str) -> None:
+    scenario = Scenario(behavior=behavior, fish=6 if behavior == "milling" else 2, duration=30)
+    run = run_batch(scenario)
+    target = orbit_target_of(scenario)
+    assert target is not None
+    whole = orbit_metrics(
+        run.position, centre=target.centre, period=scenario.control_period, contact=0.13
+    )
+    tracker = OrbitTracker(target, contact=0.13)
+    ids = np.arange(scenario.fish)
+    live = [
+        tracker.metrics(ids, p, tick * scenario.control_period)
+        for tick, p in enumerate(run.position)
+    ]
+    series = np.array([[m[name] for name in ORBIT_METRIC_NAMES] for m in live])
+    np.testing.assert_allclose(series, whole, atol=1e-12)
+    assert whole[-1, 1] > 0.25  # they did circle: more than a quarter turn in 30 s
+
+
+def test_orbit_tracker_counts_each_fish_from_when_it_joined() -> None:
+    # Fish 7 goes clockwise round (1, 1) at 0.5 m, an eighth of a turn a second; fish 3
+    # joins at t = 4 s on the far side, one at 0.3 m that leaves at t = 6 s.
+    centre = np.array([1.0, 1.0, 0.5])
+    tracker = OrbitTracker(OrbitTarget(centre, 0.5))
+
+    def at(angle: float, radius: float = 0.5) -> list[float]:
+        return [1 + radius * math.cos(angle), 1 + radius * math.sin(angle), 0.5]
+
+    got = []
+    for second in range(9):
+        angle = -second * math.pi / 4
+        ids, rows = [7], [at(angle)]
+        if second >= 4:
+            ids.append(3)
+            rows.append(at(angle + math.pi))
+        if 4 <= second < 6:
+            ids.append(5)
+            rows.append(at(0.0, 0.3))
+        got.append(tracker.metrics(np.array(ids), np.array(rows), float(second)))
+    assert got[3]["revolutions"] == pytest.approx(3 / 8)
+    assert got[4]["revolutions"] == pytest.approx((4 / 8 + 0 + 0) / 3)
+    assert got[4]["radius"] == pytest.approx((0.5 + 0.5 + 0.3) / 3)
+    assert got[6]["revolutions"] == pytest.approx((6 / 8 + 2 / 8) / 2)
+    # Speed over the fish present at both snapshots: at t = 4 only fish 7 (a chord).
+    chord = 2 * 0.5 * math.sin(math.pi / 8)
+    assert got[4]["speed"] == pytest.approx(chord)
+    assert got[5]["speed"] == pytest.approx((chord + chord + 0.0) / 3)
+    assert got[0]["speed"] == 0.0 and got[8]["collisions"] == 0.0
+
+
+def test_orbit_targets_of_the_orbiting_behaviours() -> None:
+    milling = orbit_target_of(Scenario(behavior="milling", orbit_radius=0.3))
+    assert milling is not None and milling.radius == 0.3
+    assert milling.centre is not None
+    np.testing.assert_allclose(milling.centre[:2], np.asarray(Scenario().the_tank().size)[:2] / 2)
+    waltz = orbit_target_of(Scenario(behavior="waltz", fish=2))
+    assert waltz is not None and waltz.centre is None
+    assert orbit_target_of(Scenario()) is None
 
 
 def test_formation_metrics_against_the_target_and_their_summary() -> None:

@@ -1,0 +1,166 @@
+"""Pictures read back from the figure objects: axis labels with units, keys, the reference
+radius, parameter values spaced as they are, and what one seed can and cannot show."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from fishswarm.sim.scenario import Scenario
+from fishswarm.study.experiment import Experiment
+from fishswarm.study.metrics import OrbitTarget
+from fishswarm.study.report import markdown_table, table_rows
+from fishswarm.study.sweep import run_experiment
+
+pytest.importorskip("matplotlib")
+
+from fishswarm.study.figures import experiment_figures, run_figure
+
+
+def _circle(steps: int = 9) -> np.ndarray:
+    """A fish going clockwise (seen from above) round (0.9, 0.9) at 0.45 m, 1/8 turn a step."""
+    angle = -np.arange(steps) * math.pi / 4
+    return np.stack(
+        [0.9 + 0.45 * np.cos(angle), 0.9 + 0.45 * np.sin(angle), np.full(steps, 0.5)], -1
+    )[:, None]
+
+
+def _labels(ax: Any) -> tuple[str, str]:
+    return ax.get_xlabel(), ax.get_ylabel()
+
+
+def test_an_orbit_runs_figure_shows_the_post_the_radius_and_the_circling() -> None:
+    position = _circle()
+    t = np.arange(9.0)
+    metrics = {
+        "radius": np.full(9, 0.45),
+        "revolutions": np.arange(9) / 8,
+        "speed": np.full(9, 0.34),
+        "neighbors_seen": np.zeros(9),
+    }
+    target = OrbitTarget(np.array([0.9, 0.9, 0.5]), 0.45)
+    figure = run_figure(t, position, metrics, (1.78, 1.78, 1.17), title="orbit", orbit=target)
+    axes: list[Any] = figure.axes
+    above, side, radius, turns, speed = axes
+    assert _labels(above) == ("x (m)", "y (m)")
+    assert _labels(side) == ("x (m)", "depth (m)")
+    assert _labels(radius) == ("time (s)", "radius (m)")
+    assert _labels(turns) == ("time (s)", "revolutions")
+    assert _labels(speed) == ("time (s)", "speed (m/s)")
+    # The reference line at R, in the key.
+    reference = [line for line in radius.get_lines() if line.get_label() == "R = 0.45 m"]
+    assert len(reference) == 1 and list(reference[0].get_ydata()) == [0.45, 0.45]
+    # The post, and a dashed circle of radius R round it.
+    (circle,) = above.patches
+    assert circle.center == (0.9, 0.9) and circle.radius == 0.45
+    # The key of the tracks: a dot where each fish started, an arrowhead where it ended.
+    assert [text.get_text() for text in above.get_legend().get_texts()] == [
+        "start",
+        "end, pointing where it swam",
+    ]
+    # The last step goes from 45° round the centre to 0°: a chord heading 22.5° − 90° =
+    # −67.5° (clockwise); the triangle (pointing up, 90°, unturned) is turned to it.
+    arrowhead: Any = above.get_lines()[2]
+    assert arrowhead.get_marker() == (3, 0, pytest.approx(-67.5 - 90.0))
+
+
+def test_a_swarm_runs_figure_keeps_its_distance_panels() -> None:
+    position = np.random.default_rng(1).uniform(0.2, 1.5, (5, 4, 3))
+    names = ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance")
+    metrics = {name: np.linspace(0.2, 0.5, 5) for name in names}
+    metrics["neighbors_seen"] = np.full(5, 3.0)
+    figure = run_figure(np.arange(5.0), position, metrics, (1.78, 1.78, 1.17), title="run")
+    assert [_labels(ax) for ax in figure.axes] == [
+        ("x (m)", "y (m)"),
+        ("x (m)", "depth (m)"),
+        ("time (s)", "m"),
+        ("time (s)", "neighbours seen"),
+    ]
+
+
+def _orbit_experiment(values: tuple[float, ...], seeds: int) -> Experiment:
+    return Experiment(
+        name="orbit-test",
+        title="Orbit",
+        parameter="orbit_radius",
+        label="orbit radius R (m)",
+        values=values,
+        seeds=seeds,
+        scenario=Scenario(fish=1, behavior="orbit", duration=8.0, spawn_radius=0.6),
+    )
+
+
+def test_experiment_figures_space_uneven_values_as_they_are_with_one_seed(
+    tmp_path: Path,
+) -> None:
+    from matplotlib.figure import Figure
+
+    experiment = _orbit_experiment((0.3, 0.35, 0.6), seeds=1)
+    outcomes = run_experiment(experiment, jobs=1)
+    rows = table_rows(experiment, outcomes)
+    captured: list[Any] = []
+    original = Figure.savefig
+
+    def keep(figure: Any, *args: Any, **kwargs: Any) -> None:
+        captured.append(figure)
+        original(figure, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(Figure, "savefig", keep)
+        experiment_figures(experiment, outcomes, rows, tmp_path)
+    versus, over_time, _ = captured
+    assert versus.get_suptitle() == "Orbit: one seed per value (one run each: no spread)"
+    radius = versus.axes[0]
+    (container,) = radius.containers
+    assert container.get_label() == "measured"
+    measured = container.lines[0]
+    assert list(measured.get_xdata()) == [0.3, 0.35, 0.6]  # where they are, not 0, 1, 2
+    assert [tick for tick in radius.get_xticks()] == [0.3, 0.35, 0.6]
+    assert not radius.collections  # no error bars from a single seed
+    target = next(line for line in radius.get_lines() if line.get_label() == "target radius R")
+    assert list(target.get_ydata()) == [0.3, 0.35, 0.6]
+    # Over time: a dashed line at each value's R, and the key beside the panels.
+    panel = over_time.axes[0]
+    dashed = [line.get_ydata() for line in panel.get_lines() if line.get_linestyle() == "--"]
+    levels = sorted(data[0] for data in dashed if len(data))  # the key's entry has no data
+    assert levels == [0.3, 0.35, 0.6]
+    assert not panel.collections  # no ± s.d. band from a single seed
+    (key,) = over_time.legends
+    assert [text.get_text() for text in key.get_texts()][-1] == "target radius R"
+    assert "± " not in markdown_table(experiment, rows).split("|---")[1]
+    assert "1 seeds" not in markdown_table(experiment, rows)
+
+
+def test_learning_figures_name_their_units_and_keep_the_key_off_the_data(tmp_path: Path) -> None:
+    from fishswarm.learning.coevolution import Coevolution, LearningSettings
+    from fishswarm.learning.session import (
+        evaluate,
+        fitness_figure,
+        spacing_speed_figure,
+        trajectories_figure,
+    )
+
+    settings = LearningSettings(models=4, classifiers=4, seed=1)
+    run = Coevolution(settings)
+    run.step()
+    evaluation = evaluate(settings, run.best_model())
+    fitness = fitness_figure(run)
+    assert _labels(fitness.axes[0]) == ("generation", "fitness (fraction judged right)")
+    assert not fitness.axes[0].get_legend() and len(fitness.legends) == 1
+    spacing = spacing_speed_figure(settings.arena, evaluation)
+    left, right = spacing.axes
+    assert _labels(left) == ("time (s)", "mean neighbour distance (units)")
+    assert _labels(right) == ("time (s)", "mean speed (units/s)")
+    assert not left.get_legend() and not right.get_legend()
+    (key,) = spacing.legends
+    assert [t.get_text() for t in key.get_texts()] == [
+        "ideal fish",
+        "best replica",
+        "σ, the ideal spacing",
+    ]
+    tracks = trajectories_figure(evaluation)
+    assert _labels(tracks.axes[0]) == ("x (units)", "y (units)")
