@@ -197,11 +197,12 @@ def experiment_figures(
     orbits = [orbit_target_of(experiment.scenario_for(value, 0)) for value in values]
     known = [orbit for orbit in orbits if orbit is not None]
     expected = [o.expected_radius for o in known] if len(known) == len(values) else None
-    reference = (
-        known[0].label
-        if expected is None or len(set(expected)) == 1
-        else "target radius R" + ("" if known[0].centre is not None else "/2")
-    )
+    if expected is None:
+        reference = ""
+    elif len(set(expected)) == 1:
+        reference = known[0].label
+    else:
+        reference = "target radius R" + ("" if known[0].centre is not None else "/2")
     paths = []
 
     summaries = experiment.summaries
