@@ -17,6 +17,7 @@ step.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,6 +81,32 @@ def _coefficients(robot: BlueBot) -> tuple[FloatArray, float]:
     )
     yaw = half_rho * robot.drag_yaw * robot.area_yaw * (robot.length / 6) ** 2 / robot.inertia
     return linear, yaw
+
+
+def _drag_of_speed(robot: BlueBot) -> Callable[[FloatArray], FloatArray]:
+    """The study's code's drag factors (B, 4) as a function of forward speed v_x (B,):
+    backward drag when v_x ≤ 0, lateral and yaw drag growing with |v_x| (SPEC §8)."""
+    half_rho = 0.5 * robot.water_density
+    per_coefficient = np.array(
+        [
+            half_rho * robot.area_x / robot.mass,
+            half_rho * robot.area_y / robot.mass,
+            half_rho * robot.area_z / robot.mass,
+            half_rho * robot.area_yaw * (robot.length / 6) ** 2 / robot.inertia,
+        ]
+    )
+
+    def factors(forward: FloatArray) -> FloatArray:
+        fast = np.abs(forward) / robot.speed_reference
+        coefficient = np.empty((forward.size, 4))
+        coefficient[:, 0] = np.where(forward > 0, robot.drag_x, robot.drag_x_backward)
+        coefficient[:, 1] = robot.drag_y * (1 + 4 * fast)
+        coefficient[:, 2] = robot.drag_z
+        coefficient[:, 3] = robot.drag_yaw * (1 + 9 * fast)
+        result: FloatArray = coefficient * per_coefficient
+        return result
+
+    return factors
 
 
 def fin_forces(fins: FloatArray, robot: BlueBot) -> tuple[FloatArray, FloatArray]:
@@ -146,17 +173,22 @@ def step(
     history = np.empty((steps, count, 4))
     change = np.empty_like(velocity)
     magnitude = np.empty_like(velocity)
+    varying = _drag_of_speed(robot) if robot.speed_dependent_drag else None
     # In place, with the operations in the order of
     # velocity + (acceleration − drag·velocity·|velocity|)·dt, so results are the same bits.
     for n in range(steps):
-        np.multiply(drag_all, velocity, out=change)
+        coefficients = drag_all if varying is None else varying(velocity[:, 0])
+        np.multiply(coefficients, velocity, out=change)
         np.multiply(change, np.abs(velocity, out=magnitude), out=change)
         np.subtract(acceleration, change, out=change)
         np.multiply(change, dt[n], out=change)
         velocity = np.add(velocity, change, out=history[n])
-    yaw_path = np.cumsum(
-        np.concatenate([state.yaw[None, :], history[:, :, 3] * dt[:, None]]), axis=0
-    )[1:]
+    if robot.yaw_before_update and steps:
+        # The study's code turns by the rate the fish had before each substep's update.
+        rates = np.concatenate([state.yaw_rate[None, :], history[:-1, :, 3]])
+    else:
+        rates = history[:, :, 3]
+    yaw_path = np.cumsum(np.concatenate([state.yaw[None, :], rates * dt[:, None]]), axis=0)[1:]
     cos, sin = np.cos(yaw_path), np.sin(yaw_path)
     displacement = np.empty((steps, count, 3))
     displacement[..., 0] = (cos * history[..., 0] - sin * history[..., 1]) * dt[:, None]

@@ -21,6 +21,15 @@ class BlueBot:
     """Physical parameters of one BlueBot (SPEC.md §1.1).
 
     Attributes are SI: forces in N, lengths in m, density in kg/m³, mass in kg, angles in rad.
+    The paper's model is the default; the study's code (SPEC §8) differs in three ways, each
+    a switch here:
+
+    - ``euler_step`` 0.1 s instead of 0.01 s;
+    - ``speed_dependent_drag``: yaw drag coefficient ``drag_yaw·(1 + 9|v_x|/v_ref)``, lateral
+      ``drag_y·(1 + 4|v_x|/v_ref)``, and ``drag_x_backward`` when v_x ≤ 0, with v_ref =
+      ``speed_reference``;
+    - ``yaw_before_update``: yaw is advanced with the yaw rate from before the substep's
+      update (the paper's order uses the updated rate, as the velocities do).
     """
 
     caudal_force: float = 0.020
@@ -39,6 +48,10 @@ class BlueBot:
     drag_z: float = 0.7
     drag_yaw: float = 1.0
     euler_step: float = 0.01
+    speed_dependent_drag: bool = False
+    yaw_before_update: bool = False
+    drag_x_backward: float = 1.0
+    speed_reference: float = 0.16
 
     @property
     def area_x(self) -> float:

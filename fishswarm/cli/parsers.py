@@ -5,16 +5,18 @@ from __future__ import annotations
 import argparse
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from fishswarm import __version__
 from fishswarm.behaviors.registry import BEHAVIORS
 from fishswarm.cli.study import add_parsers as add_study_parsers
 from fishswarm.protocols.messages import FORMATION_SHAPES
-from fishswarm.sim.scenario import ConfigError, Scenario
+from fishswarm.sim.scenario import STUDY_CODE_SWITCHES, ConfigError, Scenario, switch_names
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 
-_SCENARIO_FLAGS: dict[str, tuple[str, type, str]] = {
+
+_SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
     "fish": ("--fish", int, "number of fish (default 25)"),
     "behavior": ("--behavior", str, f"one of {', '.join(BEHAVIORS)} (default dispersion)"),
     "duration": ("--duration", float, "simulated seconds (default 15)"),
@@ -64,6 +66,13 @@ _SCENARIO_FLAGS: dict[str, tuple[str, type, str]] = {
         "--no-flags",
         bool,
         "with --behavior formation: fish neither send nor heed formation flags",
+    ),
+    "study_code": (
+        "--study-code",
+        switch_names,
+        "follow the study's published code instead of its paper's equations here, switches "
+        f"separated by commas: {'; '.join(f'{k} ({v})' for k, v in STUDY_CODE_SWITCHES.items())}"
+        " (default none; see docs/fidelity.md)",
     ),
     "swarm": ("--swarm", str, "swarm name: several swarms can share a router (default default)"),
     "model": (

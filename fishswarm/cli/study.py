@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fishswarm.sim.scenario import ConfigError, Scenario
+from fishswarm.sim.scenario import STUDY_CODE_SWITCHES, ConfigError, Scenario, switch_names
 
 if TYPE_CHECKING:
     from fishswarm.study.metrics import OrbitTarget
@@ -38,6 +38,13 @@ def add_parsers(commands: Any) -> None:
         "--seeds", type=int, help="runs per value (default: the experiment's, 5 in the study)"
     )
     experiment.add_argument("--duration", type=float, help="simulated time per run, s")
+    experiment.add_argument(
+        "--study-code",
+        type=switch_names,
+        metavar="SWITCH,…",
+        help="run every run with these of the study code's ways instead of the paper's "
+        f"equations ({', '.join(STUDY_CODE_SWITCHES)}; see docs/fidelity.md)",
+    )
     experiment.add_argument(
         "--engine",
         choices=ENGINES,
@@ -107,7 +114,9 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
         raise ConfigError("--seeds must be at least 1")
     if args.jobs is not None and args.jobs < 1:
         raise ConfigError("--jobs must be at least 1")
-    chosen = chosen.with_changes(seeds=args.seeds, duration=args.duration)
+    chosen = chosen.with_changes(
+        seeds=args.seeds, duration=args.duration, study_code=args.study_code
+    )
     out = args.out or Path("runs/experiments") / chosen.name
     total = len(chosen.runs())
     print(

@@ -84,6 +84,7 @@ class WorldParams:
             channel_loss=scenario.channel_loss,
             switch_formation=scenario.switch_formation,
             switch_at=scenario.switch_at,
+            robot=scenario.robot(),
         )
 
     def formation_at(self, time: float) -> str | None:

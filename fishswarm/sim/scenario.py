@@ -23,7 +23,7 @@ from fishswarm.behaviors.formation import DEFAULT_LEAD
 from fishswarm.behaviors.lennard_jones import LennardJonesParams, steer_lennard_jones
 from fishswarm.behaviors.registry import behavior_named, fish_params, names
 from fishswarm.bluebot.control import CONTROLLERS
-from fishswarm.bluebot.parameters import Tank
+from fishswarm.bluebot.parameters import BlueBot, Tank
 from fishswarm.bluebot.vision import Vision
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import FORMATION_SHAPES
@@ -31,6 +31,19 @@ from fishswarm.protocols.messages import FORMATION_SHAPES
 SPAWN_REGIONS = ("ball", "tank")
 TIME_MODES = ("lockstep", "jitter", "realtime")
 VISION_MODELS = ("geometric", "camera")
+STUDY_CODE_SWITCHES = {
+    "euler-step": "Euler step 0.1 s, yaw turned by the rate before each substep's update",
+    "drag": "backward drag 1.0, lateral and yaw drag growing with forward speed",
+}
+"""Ways the study's published code differs from its paper's equations (SPEC §8) that a
+scenario can switch on one by one, with what each does; docs/fidelity.md measures them."""
+
+
+def switch_names(text: str) -> tuple[str, ...]:
+    """Study-code switches as written on a command line: ``drag,euler-step`` → ("drag",
+    "euler-step"); an empty text → none."""
+    return tuple(name.strip() for name in text.split(",") if name.strip())
+
 
 FloatArray = NDArray[np.float64]
 
@@ -92,6 +105,8 @@ class Scenario:
         switch_formation: a shape formation fish switch to during the run (as an operator
             would with ``fishswarm formation``), at ``switch_at`` s.
         switch_at: when the switch happens, s of simulated time.
+        study_code: where to follow the study's code instead of its paper's equations, by
+            name (:data:`STUDY_CODE_SWITCHES`); none by default.
     """
 
     fish: int = 25
@@ -127,6 +142,7 @@ class Scenario:
     slot_rule: str = "share"
     switch_formation: str | None = None
     switch_at: float = 0.0
+    study_code: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         def need(ok: bool, message: str) -> None:
@@ -205,6 +221,12 @@ class Scenario:
             f"orbit_radius ({self.orbit_radius:g} m) does not fit in the tank "
             f"({self.tank[0]:g} × {self.tank[1]:g} m): keep it below {half_side:g} m",
         )
+        unknown = [name for name in self.study_code if name not in STUDY_CODE_SWITCHES]
+        need(
+            not unknown,
+            f"study_code: unknown switch(es) {', '.join(map(repr, unknown))}; the switches are "
+            f"{', '.join(STUDY_CODE_SWITCHES)}",
+        )
         need(
             self.vision_model in VISION_MODELS,
             f"vision_model must be one of {', '.join(VISION_MODELS)}, got {self.vision_model!r}",
@@ -270,6 +292,16 @@ class Scenario:
         side = math.sqrt(area)
         return base.replace(fish=fish, tank=(side, side, base.tank[2]), spawn_region="tank")
 
+    def robot(self) -> BlueBot:
+        """The simulated BlueBot: the paper's, with the study code's integration and drag
+        where :attr:`study_code` says so."""
+        study = set(self.study_code)
+        return BlueBot(
+            euler_step=0.1 if "euler-step" in study else BlueBot.euler_step,
+            yaw_before_update="euler-step" in study,
+            speed_dependent_drag="drag" in study,
+        )
+
     def vision(self) -> Vision:
         """The vision model."""
         return Vision(self.visual_range, self.blind_width, self.sphere_radius, self.vision_noise)
@@ -334,6 +366,14 @@ class Scenario:
                 f"{', '.join(sorted(known))}"
             )
         values = {name: value for name, value in data.items() if value is not None}
+        if "study_code" in values:
+            given = values["study_code"]
+            if isinstance(given, str) or not isinstance(given, list | tuple):
+                raise ConfigError(
+                    f'{source}: study_code must be a list of switch names, e.g. ["drag"], '
+                    f"got {given!r}"
+                )
+            values["study_code"] = tuple(given)
         for point in ("tank", "landmark"):
             if point in values:
                 given = values[point]

@@ -282,13 +282,15 @@ class Experiment:
         seeds: int | None = None,
         duration: float | None = None,
         values: tuple[float, ...] | None = None,
+        study_code: tuple[str, ...] | None = None,
     ) -> Experiment:
-        """A copy with fewer seeds, a shorter duration or other values (None: unchanged)."""
+        """A copy with fewer seeds, a shorter duration, other values or some of the study
+        code's ways (None: unchanged)."""
         return dataclasses.replace(
             self,
             values=self.values if values is None else values,
             seeds=self.seeds if seeds is None else seeds,
-            scenario=self.scenario.replace(duration=duration),
+            scenario=self.scenario.replace(duration=duration, study_code=study_code),
         )
 
     @classmethod

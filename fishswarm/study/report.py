@@ -136,7 +136,12 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
         f"# {experiment.title}",
         "",
         f"{scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
-        f"{1 / scenario.control_period:g} Hz; {experiment.spread_text}. {explain}",
+        f"{1 / scenario.control_period:g} Hz; {experiment.spread_text}. {explain}"
+        + (
+            f" Following the study's code in: {', '.join(scenario.study_code)} (docs/fidelity.md)."
+            if scenario.study_code
+            else ""
+        ),
         "",
         "| " + " | ".join([experiment.label, *(s.label for s in experiment.summaries)]) + " |",
         "|" + "---:|" * (1 + len(experiment.summaries)),

@@ -101,3 +101,54 @@ def test_batch_equals_loop_of_single_fish() -> None:
 def test_bad_duration_is_rejected() -> None:
     with pytest.raises(ValueError, match="duration"):
         _one([0, 0, 0, 0], -1.0)
+
+
+STUDY_CODE = BlueBot(euler_step=0.1, yaw_before_update=True, speed_dependent_drag=True)
+
+
+@pytest.mark.parametrize("forward", [0.1, -0.05])
+def test_a_substep_of_the_study_codes_dynamics_by_hand(forward: float) -> None:
+    # One 0.1-s substep (SPEC §8) from v = (forward, 0.02, 0) m/s, ω = 0.5 rad/s, yaw 0.3,
+    # with the caudal fin full and the others off.
+    rho, length, width, height, mass = 998.0, 0.150, 0.050, 0.080, 0.5
+    area_x = math.pi / 4 * height * width
+    area_y = math.pi / 4 * length * height + 2 * 0.00075
+    area_z = math.pi / 4 * length * width
+    inertia = mass / 5 * (length**2 + height**2) / 4
+    c_x = 0.5 if forward > 0 else 1.0  # backward drag
+    c_y = 2.1 * (1 + 4 * abs(forward) / 0.16)
+    c_yaw = 1.0 * (1 + 9 * abs(forward) / 0.16)
+    vx, vy, omega, dt = forward, 0.02, 0.5, 0.1
+    vx_new = vx + dt / mass * (0.020 - 0.5 * rho * c_x * area_x * math.copysign(vx * vx, vx))
+    vy_new = vy + dt / mass * (-0.5 * rho * c_y * area_y * vy * vy)
+    vz_new = 0.0 + dt / mass * (0.0 - 0.010 - 0.5 * rho * 0.7 * area_z * 0.0)
+    omega_new = omega + dt / inertia * (-0.5 * rho * c_yaw * area_y * (length / 6 * omega) ** 2)
+    yaw_new = 0.3 + dt * omega  # turned by the rate before the update
+    x = 1.0 + dt * (math.cos(yaw_new) * vx_new - math.sin(yaw_new) * vy_new)
+    y = 1.0 + dt * (math.sin(yaw_new) * vx_new + math.cos(yaw_new) * vy_new)
+    z = 0.5 + dt * vz_new
+    state = State(
+        np.array([[1.0, 1.0, 0.5]]), np.array([0.3]), np.array([[vx, vy, 0.0]]), np.array([omega])
+    )
+    after = step(state, np.array([[1.0, 0.0, 0.0, 0.0]]), duration=dt, robot=STUDY_CODE, tank=TANK)
+    np.testing.assert_allclose(after.body_velocity[0], [vx_new, vy_new, vz_new], rtol=1e-12)
+    assert after.yaw_rate[0] == pytest.approx(omega_new, rel=1e-12)
+    assert after.yaw[0] == pytest.approx(yaw_new, rel=1e-12)
+    np.testing.assert_allclose(after.position[0], [x, y, z], rtol=1e-12)
+
+
+def test_the_study_codes_drag_slows_turning_at_speed_and_brakes_backwards() -> None:
+    # Full caudal and left pectoral for 10 s: with yaw drag growing with speed the fish turns
+    # less; coasting backwards it stops sooner than with the forward coefficient.
+    turning = rest_state(np.array([[0.9, 0.9, 0.5]]), np.zeros(1))
+    fins = np.array([[1.0, 0.5, 1.0, 0.0]])
+    paper = step(turning, fins, duration=10.0, robot=BlueBot(), tank=TANK)
+    study = step(turning, fins, duration=10.0, robot=STUDY_CODE, tank=TANK)
+    assert abs(study.yaw_rate[0]) < 0.5 * abs(paper.yaw_rate[0])
+    backwards = State(
+        np.array([[0.9, 0.9, 0.5]]), np.zeros(1), np.array([[-0.1, 0.0, 0.0]]), np.zeros(1)
+    )
+    coast = np.zeros((1, 4))
+    paper_coast = step(backwards, coast, duration=2.0, robot=BlueBot(euler_step=0.1), tank=TANK)
+    study_coast = step(backwards, coast, duration=2.0, robot=STUDY_CODE, tank=TANK)
+    assert -0.1 < paper_coast.body_velocity[0, 0] < study_coast.body_velocity[0, 0] < 0

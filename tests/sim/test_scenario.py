@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -94,3 +95,41 @@ def test_settings_read_back_from_a_recording_give_the_same_scenario(scenario: Sc
     again = Scenario.from_mapping(scenario.to_dict(), source="recording")
     assert again.to_dict() == scenario.to_dict()
     np.testing.assert_array_equal(again.landmarks(), scenario.landmarks())
+
+
+def test_study_code_switches_change_only_what_they_name(tmp_path: Path) -> None:
+    from fishswarm.sim.engine import run_batch
+
+    assert Scenario().robot() == Scenario(study_code=()).robot()
+    euler = Scenario(study_code=("euler-step",)).robot()
+    assert (euler.euler_step, euler.yaw_before_update, euler.speed_dependent_drag) == (
+        0.1,
+        True,
+        False,
+    )
+    assert Scenario(study_code=("drag",)).robot().speed_dependent_drag
+    path = tmp_path / "s.toml"
+    path.write_text('[scenario]\nfish = 4\nduration = 4\nstudy_code = ["drag", "euler-step"]\n')
+    loaded = Scenario.from_toml(path)
+    assert loaded.study_code == ("drag", "euler-step")
+    again = Scenario.from_mapping(loaded.to_dict())
+    assert again.study_code == loaded.study_code
+    # Deterministic, and not the paper's trajectory.
+    first, second = run_batch(loaded), run_batch(loaded)
+    np.testing.assert_array_equal(first.position, second.position)
+    paper = run_batch(loaded.replace(study_code=()))
+    assert np.abs(first.position[-1] - paper.position[-1]).max() > 1e-3
+
+
+@pytest.mark.parametrize(
+    ("given", "message"),
+    [
+        ('study_code = ["wobble"]', "unknown switch(es) 'wobble'; the switches are euler-step"),
+        ('study_code = "drag"', 'study_code must be a list of switch names, e.g. ["drag"]'),
+    ],
+)
+def test_bad_study_code_switches_are_named(tmp_path: Path, given: str, message: str) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(f"[scenario]\n{given}\n")
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        Scenario.from_toml(path)
