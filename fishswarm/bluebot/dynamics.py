@@ -85,25 +85,19 @@ def _coefficients(robot: BlueBot) -> tuple[FloatArray, float]:
 
 def _drag_of_speed(robot: BlueBot) -> Callable[[FloatArray], FloatArray]:
     """The study's code's drag factors (B, 4) as a function of forward speed v_x (B,):
-    backward drag when v_x ≤ 0, lateral and yaw drag growing with |v_x| (SPEC §8)."""
-    half_rho = 0.5 * robot.water_density
-    per_coefficient = np.array(
-        [
-            half_rho * robot.area_x / robot.mass,
-            half_rho * robot.area_y / robot.mass,
-            half_rho * robot.area_z / robot.mass,
-            half_rho * robot.area_yaw * (robot.length / 6) ** 2 / robot.inertia,
-        ]
-    )
+    backward drag when v_x ≤ 0, lateral and yaw drag growing with |v_x| (SPEC §8); the
+    paper's factors scaled by how much each coefficient grows."""
+    linear, yaw = _coefficients(robot)
+    paper = np.append(linear, yaw)
+    backward = robot.drag_x_backward / robot.drag_x
 
     def factors(forward: FloatArray) -> FloatArray:
         fast = np.abs(forward) / robot.speed_reference
-        coefficient = np.empty((forward.size, 4))
-        coefficient[:, 0] = np.where(forward > 0, robot.drag_x, robot.drag_x_backward)
-        coefficient[:, 1] = robot.drag_y * (1 + 4 * fast)
-        coefficient[:, 2] = robot.drag_z
-        coefficient[:, 3] = robot.drag_yaw * (1 + 9 * fast)
-        result: FloatArray = coefficient * per_coefficient
+        growth = np.ones((forward.size, 4))
+        growth[:, 0] = np.where(forward > 0, 1.0, backward)
+        growth[:, 1] = 1 + 4 * fast
+        growth[:, 3] = 1 + 9 * fast
+        result: FloatArray = growth * paper
         return result
 
     return factors

@@ -184,10 +184,8 @@ def _tank_of(settings: dict[str, Any], position: np.ndarray) -> list[float]:
 def _orbit_of(settings: dict[str, Any]) -> OrbitTarget | None:
     """The post and radius of a recorded orbit, milling or waltz run (None for other runs,
     and for recordings that do not say what ran, such as an observer's)."""
-    from fishswarm.study.metrics import ORBIT_BEHAVIORS, orbit_target_of
+    from fishswarm.study.metrics import orbit_target_of
 
-    if settings.get("behavior") not in ORBIT_BEHAVIORS:
-        return None
     try:
         return orbit_target_of(Scenario.from_mapping(settings, source="the recording"))
     except ConfigError:

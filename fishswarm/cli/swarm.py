@@ -238,13 +238,7 @@ def _summary_text(summary: dict[str, Any]) -> str:
         f"  ticks {counts['ticks']}, messages {counts['messages']}, rejected {rejected}, "
         f"lost fish {counts['lost_fish']}, broadcasts {counts['broadcasts']}, "
         f"deliveries {counts['deliveries']}, wall {summary['wall_time']:.2f} s"
-        + (
-            f", {rtf:.2f}× real time"
-            if rtf and rtf < 1
-            else f", {rtf:.0f}× real time"
-            if rtf
-            else ""
-        )
+        + (f", {rtf:.{2 if rtf < 1 else 0}f}× real time" if rtf else "")
     )
     if summary.get("recording"):
         lines.append(f"  recording: {summary['recording']}")

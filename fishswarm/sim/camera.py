@@ -26,7 +26,6 @@ from fishswarm.bluebot.ports import CAMERA_SIDES, CameraSide
 
 FloatArray = NDArray[np.float64]
 
-SIDES = CAMERA_SIDES
 _WATER_INDEX = 1.333
 
 
@@ -149,7 +148,7 @@ def render_views(
         sources = np.concatenate([sources, mirrored])
         owners = np.concatenate([owners, owners + others.size])
     images: dict[CameraSide, NDArray[np.uint8]] = {}
-    for side in SIDES:
+    for side in CAMERA_SIDES:
         camera = position[viewer] + rotation[viewer] @ camera_position(side)
         offsets = sources - camera
         distance = np.linalg.norm(offsets, axis=1)

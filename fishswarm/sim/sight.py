@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.behaviors.core import pad_rows
 from fishswarm.bluebot.dynamics import rotate_to_tank
 from fishswarm.bluebot.fisheye import Fisheye
 from fishswarm.bluebot.leds import LedVision, perceive_leds
@@ -88,12 +89,8 @@ def perceive_through_cameras(
                 vision=cameras.leds,
             )
         )
-    width = max((f.shape[0] for f in found), default=0)
-    neighbors = np.zeros((count, width, 3))
-    mask = np.zeros((count, width), dtype=bool)
-    for viewer, rows in enumerate(found):
-        neighbors[viewer, : rows.shape[0]] = rows
-        mask[viewer, : rows.shape[0]] = True
+    counts = np.array([rows.shape[0] for rows in found], dtype=np.int64)
+    neighbors, mask = pad_rows(counts, np.concatenate(found or [np.zeros((0, 3))]).reshape(-1, 3))
     index = _match(position, yaw, neighbors, mask)
     return Perceived(neighbors, mask, index)
 

@@ -69,6 +69,8 @@ class WorldSim:
         self._vision_rngs: dict[int, np.random.Generator] = {}
         self.sight = SightCounts()
         """With camera vision: its detections against the geometric model's, so far."""
+        self._exact_vision = dataclasses.replace(params.vision, noise=0.0)
+        """What the fish could see, without the geometric model's noise (scoring only)."""
         self._departed: dict[int, tuple[State, float]] = {}
 
     def next_event(self) -> Event:
@@ -137,9 +139,7 @@ class WorldSim:
         rngs = [self._vision_rngs[fish_id] for fish_id in self.ids.tolist()]
         perceived = observe(self.params, self.state, rngs)
         if self.params.cameras is not None:
-            # What the fish could see, without the geometric model's noise (it has no draws).
-            exact = dataclasses.replace(self.params.vision, noise=0.0)
-            truth = perceive(self.state.position, self.state.yaw, vision=exact)
+            truth = perceive(self.state.position, self.state.yaw, vision=self._exact_vision)
             self.sight = self.sight + score_sight(perceived, truth, self.state.position)
         return perceived
 

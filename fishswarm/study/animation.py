@@ -204,9 +204,9 @@ def animation_figure(
         present = ~np.isnan(position[:, 0])
         mine = int(present[:column].sum()) if present[column] else None
         here, heading = position[present], yaw[present]
-        drawn.append(_flat_arrows(above, here[:, 0], here[:, 1], heading, mine, tank))
+        drawn.append(_flat_arrows(above, here[:, 0], here[:, 1], heading, mine))
         # From the side (looking along +y) a fish shows how far it swims along x.
-        drawn.append(_flat_arrows(side, here[:, 0], here[:, 2], heading, mine, tank, side=True))
+        drawn.append(_flat_arrows(side, here[:, 0], here[:, 2], heading, mine, side=True))
         drawn.append(_arrows(circling, here, heading, highlight=mine))
         circling.view_init(elev=25.0, azim=-60.0 + 360.0 * frame / max(count, 1))
         drawn.extend(_eye(eye, here, heading, mine, vision, viewer))
@@ -245,7 +245,6 @@ def _flat_arrows(
     y: FloatArray,
     yaw: FloatArray,
     highlight: int | None,
-    tank: Sequence[float],
     *,
     side: bool = False,
 ) -> Any:
