@@ -230,6 +230,8 @@ class FishParams:
             first decision, and the real elapsed time after.
         caudal_cap: largest caudal gain of the homing controller.
         pid_gains: gains of the pid loops.
+        right_when_ahead: the homing controller turns a target dead ahead, or none, to the
+            right pectoral fin, as the study's code did (SPEC §8).
     """
 
     behavior: Behavior
@@ -238,6 +240,7 @@ class FishParams:
     control_period: float = 1.0
     caudal_cap: float = 1.0
     pid_gains: PidGains = PidGains()
+    right_when_ahead: bool = False
 
     def __post_init__(self) -> None:
         if self.controller not in CONTROLLERS:
@@ -300,7 +303,12 @@ def decide(
         fins, pid_state = pid(target, state=memory.pid, period=period, gains=params.pid_gains)
         dorsal = memory.dorsal_on
     else:
-        fins, dorsal = homing(target, dorsal_on=memory.dorsal_on, caudal_cap=params.caudal_cap)
+        fins, dorsal = homing(
+            target,
+            dorsal_on=memory.dorsal_on,
+            caudal_cap=params.caudal_cap,
+            right_when_ahead=params.right_when_ahead,
+        )
         pid_state = memory.pid
     after = FishMemory(remembered, dorsal, pid_state, perception.time.astype(np.float64))
     return after, Decision(fins, steering.led, steering.outbox)

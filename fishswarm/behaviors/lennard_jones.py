@@ -11,6 +11,10 @@ displacement in metres (the homing controller's caudal gain grows with its lengt
 smaller ε = r_t²/72, for which −dV/dr ≈ r_t − r near the minimum, leaves aggregating fish
 almost still (measured with the batch engine, 25 fish, 15 s, 3 seeds: mean pairwise distance
 −1 % with r_t²/72, −12 % with 100·r_t²/72, −42 % with ε = 1 m²; dispersion +212 % in all).
+
+The study's code (SPEC §8) multiplied the force by the *unnormalised* relative position, so a
+neighbour pulls or pushes in proportion to its distance too, with γ·ε = 100·100 in
+millimetres; :data:`STUDY_GAIN` is that scale in metres, and ``study_form`` switches to it.
 """
 
 from __future__ import annotations
@@ -46,6 +50,14 @@ MIN_DISTANCE = 1e-3
 DEFAULT_EPSILON = 1.0
 """Depth of the potential ε, m²."""
 
+STUDY_GAIN = 100 * 100 * 1e-3
+"""The study code's γ·ε = 100·100 with distances in mm, in metres: its target vector
+−γε/r·(12(r_t/r)¹² − 12(r_t/r)⁶)·Δp is in mm with every length in mm; in metres the same
+vector is this gain /r·(…)·Δp with r and Δp in metres (the bracket has no unit)."""
+
+STUDY_MIN_DISTANCE = 1e-6
+"""The study code clipped distances below 0.001 mm, in metres."""
+
 
 def lennard_jones_force(
     distance: FloatArray, *, target_distance: float, epsilon: float
@@ -73,6 +85,7 @@ def lennard_jones(
     target_distance: float,
     epsilon: float = DEFAULT_EPSILON,
     cap: float = BODY_LENGTH,
+    study_form: bool = False,
 ) -> FloatArray:
     """Desired motion of B fish from the neighbours they see.
 
@@ -82,6 +95,9 @@ def lennard_jones(
         target_distance: r_t, m: 0.26 (2 body lengths) aggregates, the tank diagonal disperses.
         epsilon: ε, m².
         cap: distances are capped at r_t + cap in the force, m.
+        study_form: the study code's form: each force times the neighbour's relative
+            position instead of its direction, with ε replaced by :data:`STUDY_GAIN` (m) and
+            distances clipped below at :data:`STUDY_MIN_DISTANCE`.
 
     Returns:
         (B, 3) target vector in the body frame, m; zero for a fish that sees nobody.
@@ -93,12 +109,17 @@ def lennard_jones(
     # Ufuncs called directly (np.add.reduce rather than np.sum): at the batch of one a fish
     # actor decides with, numpy's Python wrappers cost as much as the arithmetic.
     distance = np.sqrt(np.add.reduce(neighbors * neighbors, axis=2))
-    capped = np.minimum(np.maximum(distance, MIN_DISTANCE), target_distance + cap)
-    magnitude = lennard_jones_force(capped, target_distance=target_distance, epsilon=epsilon)
-    # Repulsion (positive) points away from the neighbour: −magnitude along its unit vector.
-    # A coincident neighbour (distance 0) has no direction and contributes nothing.
+    floor = STUDY_MIN_DISTANCE if study_form else MIN_DISTANCE
+    capped = np.minimum(np.maximum(distance, floor), target_distance + cap)
+    magnitude = lennard_jones_force(
+        capped, target_distance=target_distance, epsilon=STUDY_GAIN if study_form else epsilon
+    )
+    # Repulsion (positive) points away from the neighbour: −magnitude along its unit vector
+    # (the study's form: along the relative position itself). A coincident neighbour
+    # (distance 0) has no direction and contributes nothing.
     real = mask & (distance > 0)
-    scale = -magnitude / np.where(real, distance, 1.0) * real
+    length = 1.0 if study_form else np.where(real, distance, 1.0)
+    scale = -magnitude / length * real
     contribution = neighbors * scale[..., None]
     count = np.add.reduce(mask, axis=1)
     # A running sum adds in neighbour order, so padding (zeros at the end) never changes a
@@ -117,10 +138,12 @@ class LennardJonesParams:
     Attributes:
         target_distance: r_t, m.
         epsilon: ε, m².
+        study_form: the study code's force form (:func:`lennard_jones`).
     """
 
     target_distance: float
     epsilon: float = DEFAULT_EPSILON
+    study_form: bool = False
 
     def __post_init__(self) -> None:
         if not self.target_distance > 0:
@@ -136,6 +159,7 @@ def steer_lennard_jones(
         perception.neighbor_mask,
         target_distance=params.target_distance,
         epsilon=params.epsilon,
+        study_form=params.study_form,
     )
     return memory, steady(target)
 
@@ -143,14 +167,23 @@ def steer_lennard_jones(
 def aggregation_params(settings: Mapping[str, Any]) -> LennardJonesParams:
     """r_t from the settings, 2 body lengths by default."""
     given = settings.get("target_distance")
-    return LennardJonesParams(AGGREGATION_DISTANCE if given is None else float(given))
+    return LennardJonesParams(
+        AGGREGATION_DISTANCE if given is None else float(given),
+        study_form=_study_form(settings),
+    )
 
 
 def dispersion_params(settings: Mapping[str, Any]) -> LennardJonesParams:
     """r_t from the settings, the tank diagonal by default."""
     given = settings.get("target_distance")
     diagonal = Tank(tuple(settings["tank"])).diagonal
-    return LennardJonesParams(diagonal if given is None else float(given))
+    return LennardJonesParams(
+        diagonal if given is None else float(given), study_form=_study_form(settings)
+    )
+
+
+def _study_form(settings: Mapping[str, Any]) -> bool:
+    return "lennard-jones" in settings.get("study_code", ())
 
 
 AGGREGATION = Behavior(

@@ -56,9 +56,9 @@ def register(family: Behavior) -> None:
 def fish_params(settings: Mapping[str, Any]) -> FishParams:
     """The parameters of a fish's decision from a scenario's settings.
 
-    ``settings`` holds ``behavior``, ``controller``, ``control_period``, ``caudal_cap`` and
-    whatever the behaviour reads (e.g. ``target_distance``, ``tank``, ``orbit_radius``,
-    ``model``).
+    ``settings`` holds ``behavior``, ``controller``, ``control_period``, ``caudal_cap``,
+    the study code's switches in effect (``study_code``) and whatever the behaviour reads
+    (e.g. ``target_distance``, ``tank``, ``orbit_radius``, ``model``).
 
     Raises:
         ValueError: an unknown behaviour or a bad parameter, with what is wrong.
@@ -71,4 +71,5 @@ def fish_params(settings: Mapping[str, Any]) -> FishParams:
         control_period=float(settings.get("control_period", 1.0)),
         caudal_cap=float(settings.get("caudal_cap", 1.0)),
         pid_gains=family.pid_gains or PidGains(),
+        right_when_ahead="homing" in settings.get("study_code", ()),
     )

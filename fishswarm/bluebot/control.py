@@ -34,6 +34,7 @@ def homing(
     pitch_band_deg: float = 1.0,
     heading_band_deg: float = 20.0,
     body_length: float = BODY_LENGTH,
+    right_when_ahead: bool = False,
 ) -> tuple[FloatArray, BoolArray]:
     """The research code's homing controller.
 
@@ -41,7 +42,9 @@ def homing(
     is more than 1° below, off when more than 1° above, unchanged in between). Heading: a
     target to the right drives the left pectoral at min(1, 0.6 + |h|/180°), mirrored for the
     left. The caudal fin runs only when |h| < 20°, at min(cap, 0.1 + planar distance /
-    (8 body lengths)).
+    (8 body lengths)). A target dead ahead, or none (a zero vector), turns no fin; with
+    ``right_when_ahead`` it drives the right pectoral at 0.6 as in the study's code (its
+    "left" branch took every bearing ≤ 0, SPEC §8), which turns the fish to its left.
 
     Args:
         target: (B, 3) target vectors in the body frame, m.
@@ -50,6 +53,7 @@ def homing(
         pitch_band_deg: half-width of the depth dead band, degrees.
         heading_band_deg: the caudal fin runs only within this bearing, degrees.
         body_length: body length for the caudal gain, m.
+        right_when_ahead: the study code's branch for bearings of exactly 0.
 
     Returns:
         fins (B, 4) and the new dorsal state (B,).
@@ -66,7 +70,7 @@ def homing(
     )
     fins[:, 1] = dorsal
     fins[:, 2] = turn * (heading_deg > 0)
-    fins[:, 3] = turn * (heading_deg < 0)
+    fins[:, 3] = turn * (~(heading_deg > 0) if right_when_ahead else (heading_deg < 0))
     return fins, dorsal
 
 

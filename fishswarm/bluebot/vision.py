@@ -29,12 +29,15 @@ class Vision:
         sphere_radius: radius of the blocking sphere of every robot, m (0.065 for a BlueBot;
             0 means no occlusion).
         noise: standard deviation of the position noise per metre of distance (0 = none).
+        manhattan: a neighbour is in range when |dx| + |dy| + |dz| ≤ ``visual_range``, as in
+            the study's code (SPEC §8), instead of its straight-line distance.
     """
 
     visual_range: float = 3.0
     blind_width: float = 0.05
     sphere_radius: float = 0.065
     noise: float = 0.0
+    manhattan: bool = False
 
     def __post_init__(self) -> None:
         for name in ("visual_range", "blind_width", "sphere_radius", "noise"):
@@ -210,6 +213,8 @@ def perceive(
     candidate = index >= 0
     safe_index = np.where(candidate, index, 0)
     relative = position[safe_index] - position[:, None, :]
+    if vision.manhattan:  # never farther than the straight line: a subset of those in range
+        candidate &= np.abs(relative).sum(axis=2) <= vision.visual_range
     if vision.blind_width > 0:
         candidate &= ~in_blind_spot(relative, yaw, blind_width=vision.blind_width)
     distance = np.where(candidate, distance, np.inf)

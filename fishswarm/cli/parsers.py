@@ -11,7 +11,13 @@ from fishswarm import __version__
 from fishswarm.behaviors.registry import BEHAVIORS
 from fishswarm.cli.study import add_parsers as add_study_parsers
 from fishswarm.protocols.messages import FORMATION_SHAPES
-from fishswarm.sim.scenario import STUDY_CODE_SWITCHES, ConfigError, Scenario, switch_names
+from fishswarm.sim.scenario import (
+    PROFILES,
+    STUDY_CODE_SWITCHES,
+    ConfigError,
+    Scenario,
+    switch_names,
+)
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 
@@ -74,6 +80,13 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
         f"separated by commas: {'; '.join(f'{k} ({v})' for k, v in STUDY_CODE_SWITCHES.items())}"
         " (default none; see docs/fidelity.md)",
     ),
+    "profile": (
+        "--profile",
+        str,
+        f"one of {', '.join(PROFILES)}: paper (default: the paper's equations, plus any "
+        "--study-code switches) or study-code (every switch: the model the study's published "
+        "tables came from; docs/fidelity.md)",
+    ),
     "swarm": ("--swarm", str, "swarm name: several swarms can share a router (default default)"),
     "model": (
         "--model",
@@ -94,6 +107,8 @@ _FISH_FLAGS = (
     "flags",
     "swarm",
     "model",
+    "study_code",
+    "profile",
 )
 """The scenario settings a fish actor reads (``fish`` and ``robot``)."""
 

@@ -10,7 +10,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fishswarm.sim.scenario import STUDY_CODE_SWITCHES, ConfigError, Scenario, switch_names
+from fishswarm.sim.scenario import (
+    PROFILES,
+    STUDY_CODE_SWITCHES,
+    ConfigError,
+    Scenario,
+    switch_names,
+)
 
 if TYPE_CHECKING:
     from fishswarm.study.metrics import OrbitTarget
@@ -44,6 +50,12 @@ def add_parsers(commands: Any) -> None:
         metavar="SWITCH,…",
         help="run every run with these of the study code's ways instead of the paper's "
         f"equations ({', '.join(STUDY_CODE_SWITCHES)}; see docs/fidelity.md)",
+    )
+    experiment.add_argument(
+        "--profile",
+        choices=PROFILES,
+        help="paper (default: the paper's equations) or study-code (every switch of "
+        "--study-code: the model the study's published tables came from)",
     )
     experiment.add_argument(
         "--engine",
@@ -115,7 +127,10 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
     if args.jobs is not None and args.jobs < 1:
         raise ConfigError("--jobs must be at least 1")
     chosen = chosen.with_changes(
-        seeds=args.seeds, duration=args.duration, study_code=args.study_code
+        seeds=args.seeds,
+        duration=args.duration,
+        study_code=args.study_code,
+        profile=args.profile,
     )
     out = args.out or Path("runs/experiments") / chosen.name
     total = len(chosen.runs())

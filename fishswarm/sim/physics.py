@@ -46,6 +46,8 @@ class WorldParams:
         switch_formation: a formation the fish are told to switch to, or None.
         switch_at: when, s.
         robot: the BlueBot's parameters.
+        still_until: fish are held still until this time, s (the study code's start delay;
+            0 by default).
     """
 
     seed: int
@@ -64,6 +66,7 @@ class WorldParams:
     switch_formation: str | None = None
     switch_at: float = 0.0
     robot: BlueBot = BlueBot()
+    still_until: float = 0.0
 
     @classmethod
     def of(cls, scenario: Scenario) -> WorldParams:
@@ -85,6 +88,7 @@ class WorldParams:
             switch_formation=scenario.switch_formation,
             switch_at=scenario.switch_at,
             robot=scenario.robot(),
+            still_until=scenario.still_until,
         )
 
     def formation_at(self, time: float) -> str | None:

@@ -34,9 +34,27 @@ VISION_MODELS = ("geometric", "camera")
 STUDY_CODE_SWITCHES = {
     "euler-step": "Euler step 0.1 s, yaw turned by the rate before each substep's update",
     "drag": "backward drag 1.0, lateral and yaw drag growing with forward speed",
+    "lennard-jones": "the force times the unscaled relative position, gamma*epsilon = 100*100 "
+    "in mm",
+    "homing": "a target straight ahead or absent drives the right pectoral fin (a lone fish "
+    "circles)",
+    "manhattan": "neighbours linked within the visual range as |dx|+|dy|+|dz|",
+    "start-delay": "fish are held still for the first two control periods",
+    "side-settings": "the experiments' other vision setting: a 50-mm sphere in the blind-spot "
+    "runs, a 50-mm blind spot in the blocking-sphere runs",
+    "mean-distance": "experiments also report the study's mean distance (centroid of linked "
+    "neighbours, third sample vs last)",
 }
 """Ways the study's published code differs from its paper's equations (SPEC §8) that a
 scenario can switch on one by one, with what each does; docs/fidelity.md measures them."""
+
+PROFILES = ("paper", "study-code")
+"""``paper``: the paper's equations, plus the switches named in ``study_code``;
+``study-code``: every switch of :data:`STUDY_CODE_SWITCHES`."""
+
+START_DELAY_PERIODS = 2
+"""Control periods the study code's fish stood still at the start of a run (its fish moved
+only once their clock passed 1)."""
 
 
 def switch_names(text: str) -> tuple[str, ...]:
@@ -107,6 +125,8 @@ class Scenario:
         switch_at: when the switch happens, s of simulated time.
         study_code: where to follow the study's code instead of its paper's equations, by
             name (:data:`STUDY_CODE_SWITCHES`); none by default.
+        profile: ``paper`` (default: the paper's equations and the ``study_code`` switches)
+            or ``study-code`` (every switch: the model the study's tables came from).
     """
 
     fish: int = 25
@@ -143,6 +163,7 @@ class Scenario:
     switch_formation: str | None = None
     switch_at: float = 0.0
     study_code: tuple[str, ...] = ()
+    profile: str = "paper"
 
     def __post_init__(self) -> None:
         def need(ok: bool, message: str) -> None:
@@ -228,6 +249,16 @@ class Scenario:
             f"{', '.join(STUDY_CODE_SWITCHES)}",
         )
         need(
+            self.profile in PROFILES,
+            f"profile must be one of {', '.join(PROFILES)}, got {self.profile!r}",
+        )
+        need(
+            "manhattan" not in self.study_switches or self.vision_model == "geometric",
+            "the study code's Manhattan links change the geometric vision model; with "
+            "vision_model camera the cameras decide what is seen: drop 'manhattan' from "
+            "study_code, or use profile paper with the other switches",
+        )
+        need(
             self.vision_model in VISION_MODELS,
             f"vision_model must be one of {', '.join(VISION_MODELS)}, got {self.vision_model!r}",
         )
@@ -292,10 +323,25 @@ class Scenario:
         side = math.sqrt(area)
         return base.replace(fish=fish, tank=(side, side, base.tank[2]), spawn_region="tank")
 
+    @property
+    def study_switches(self) -> tuple[str, ...]:
+        """The study code's switches in effect: every one under the ``study-code`` profile,
+        else those named in :attr:`study_code`."""
+        if self.profile == "study-code":
+            return tuple(STUDY_CODE_SWITCHES)
+        return self.study_code
+
+    @property
+    def still_until(self) -> float:
+        """Until when fish are held still at the start, s (0 but for the start delay)."""
+        if "start-delay" in self.study_switches:
+            return START_DELAY_PERIODS * self.control_period
+        return 0.0
+
     def robot(self) -> BlueBot:
         """The simulated BlueBot: the paper's, with the study code's integration and drag
-        where :attr:`study_code` says so."""
-        study = set(self.study_code)
+        where :attr:`study_switches` say so."""
+        study = set(self.study_switches)
         return BlueBot(
             euler_step=0.1 if "euler-step" in study else BlueBot.euler_step,
             yaw_before_update="euler-step" in study,
@@ -304,7 +350,13 @@ class Scenario:
 
     def vision(self) -> Vision:
         """The vision model."""
-        return Vision(self.visual_range, self.blind_width, self.sphere_radius, self.vision_noise)
+        return Vision(
+            self.visual_range,
+            self.blind_width,
+            self.sphere_radius,
+            self.vision_noise,
+            manhattan="manhattan" in self.study_switches,
+        )
 
     def fish_params(self) -> FishParams:
         """What the fish's decisions depend on: behaviour, controller and their parameters
@@ -313,8 +365,10 @@ class Scenario:
         Raises:
             ConfigError: a parameter the behaviour cannot take, or an unreadable model.
         """
+        settings = dataclasses.asdict(self)
+        settings["study_code"] = self.study_switches
         try:
-            return fish_params(dataclasses.asdict(self))
+            return fish_params(settings)
         except ValueError as error:
             raise ConfigError(str(error)) from None
 

@@ -76,9 +76,15 @@ class WorldSim:
     def next_event(self) -> Event:
         """Move on to the next event: every fish swims up to it with its fins held."""
         event = self.clock.next_event()
-        if event.duration is not None:
-            self.state = advance(self.params, self.state, self.fins, event.duration)
-            self.effort = self.effort + fin_frequencies(self.fins).sum(axis=1) * event.duration
+        duration = event.duration
+        if duration is not None and self.params.still_until > 0:
+            # The study code's fish did not move before their clock passed 1: only the part
+            # of this interval after the hold counts.
+            moving = min(duration, event.time - self.params.still_until)
+            duration = moving if moving > 0 else None
+        if duration is not None:
+            self.state = advance(self.params, self.state, self.fins, duration)
+            self.effort = self.effort + fin_frequencies(self.fins).sum(axis=1) * duration
         self.now = event.time
         return event
 

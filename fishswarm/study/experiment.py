@@ -26,6 +26,7 @@ from fishswarm.study.metrics import (
     ORBIT_BEHAVIORS,
     ORBIT_METRIC_NAMES,
     formation_target_of,
+    linked_centroid_distance,
     orbit_metrics,
     orbit_target_of,
     swarm_metrics,
@@ -47,6 +48,7 @@ METRIC_LABELS = {
     "pairwise_distance": "mean pairwise distance (m)",
     "nearest_neighbor_distance": "nearest-neighbour distance (m)",
     "neighbors_seen": "neighbours seen",
+    "linked_centroid_distance": "mean distance, study code (m)",
     "radius": "radius (m)",
     "revolutions": "revolutions",
     "speed": "speed (m/s)",
@@ -61,6 +63,12 @@ def change_percent(series: FloatArray) -> float:
     """Change of a metric from its first to its last value, per cent of the first."""
     first, last = float(series[0]), float(series[-1])
     return math.nan if first == 0 else 100.0 * (last - first) / first
+
+
+def change_from_third_percent(series: FloatArray) -> float:
+    """Change of a metric from its third to its last value, per cent of the third (how the
+    study's code compared its "mean distance": its fish moved from the third sample on)."""
+    return change_percent(series[2:]) if len(series) > 2 else math.nan
 
 
 def _first(series: FloatArray) -> float:
@@ -132,6 +140,15 @@ SWARM_SUMMARIES = (
     Summary("neighbors_seen_final", "neighbours seen, final", "neighbors_seen", _last, 1),
 )
 
+STUDY_MEAN_DISTANCE = Summary(
+    "study_mean_distance_change_percent",
+    "mean distance change, study code (%)",
+    "linked_centroid_distance",
+    change_from_third_percent,
+    1,
+)
+"""The column the ``mean-distance`` switch adds: the study code's own measure."""
+
 ORBIT_SUMMARIES = (
     Summary("radius", "radius, 2nd half (m)", "radius", _late_mean, 3),
     Summary("radius_wobble", "radius s.d. in time, 2nd half (m)", "radius", _late_sd, 3),
@@ -186,6 +203,8 @@ class Experiment:
         values: the settings of the parameter.
         seeds: runs per value (seeds 0 … seeds−1).
         scenario: the set-up every run starts from.
+        study_settings: the settings the study's code used instead in this experiment
+            (its ``[study_code]`` table), applied under the ``side-settings`` switch.
     """
 
     name: str
@@ -195,6 +214,7 @@ class Experiment:
     values: tuple[float, ...]
     seeds: int
     scenario: Scenario
+    study_settings: Mapping[str, float] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.parameter not in SWEEPABLE:
@@ -227,18 +247,32 @@ class Experiment:
         return self.scenario.behavior == "formation"
 
     @property
+    def _study_mean_distance(self) -> bool:
+        return (
+            "mean-distance" in self.scenario.study_switches
+            and not self.forming
+            and not self.orbiting
+        )
+
+    @property
     def metric_names(self) -> tuple[str, ...]:
         """The columns of each run's metric series."""
         if self.forming:
             return FORMATION_METRIC_NAMES
-        return ORBIT_METRIC_NAMES if self.orbiting else METRICS
+        if self.orbiting:
+            return ORBIT_METRIC_NAMES
+        return (*METRICS, "linked_centroid_distance") if self._study_mean_distance else METRICS
 
     @property
     def summaries(self) -> tuple[Summary, ...]:
         """The columns of the experiment's table."""
         if self.forming:
             return FORMATION_SUMMARIES
-        return ORBIT_SUMMARIES if self.orbiting else SWARM_SUMMARIES
+        if self.orbiting:
+            return ORBIT_SUMMARIES
+        if self._study_mean_distance:
+            return (STUDY_MEAN_DISTANCE, *SWARM_SUMMARIES)
+        return SWARM_SUMMARIES
 
     def metrics_of(
         self, scenario: Scenario, position: FloatArray, seen: NDArray[np.int64]
@@ -260,17 +294,29 @@ class Experiment:
                 period=scenario.control_period,
                 contact=BODY_LENGTH,
             )
-        return np.array(
+        series = np.array(
             [
                 [swarm_metrics(p, s)[name] for name in METRICS]
                 for p, s in zip(position, seen, strict=True)
             ]
         )
+        if not self._study_mean_distance:
+            return series
+        manhattan = "manhattan" in scenario.study_switches
+        study = [
+            linked_centroid_distance(p, link_range=scenario.visual_range, manhattan=manhattan)
+            for p in position
+        ]
+        return np.column_stack([series, study])
 
     def scenario_for(self, value: float, seed: int) -> Scenario:
-        """The scenario of one run."""
+        """The scenario of one run (with the study's own settings under its
+        ``side-settings`` switch; the swept parameter always as given)."""
         kind = int if self.parameter == "fish" else float
-        return self.scenario.replace(**{self.parameter: kind(value), "seed": seed})
+        base = self.scenario
+        if "side-settings" in base.study_switches:
+            base = base.replace(**self.study_settings)
+        return base.replace(**{self.parameter: kind(value), "seed": seed})
 
     def runs(self) -> list[tuple[float, int]]:
         """Every (value, seed) pair, value by value."""
@@ -283,14 +329,17 @@ class Experiment:
         duration: float | None = None,
         values: tuple[float, ...] | None = None,
         study_code: tuple[str, ...] | None = None,
+        profile: str | None = None,
     ) -> Experiment:
-        """A copy with fewer seeds, a shorter duration, other values or some of the study
-        code's ways (None: unchanged)."""
+        """A copy with fewer seeds, a shorter duration, other values, some of the study
+        code's ways or another profile (None: unchanged)."""
         return dataclasses.replace(
             self,
             values=self.values if values is None else values,
             seeds=self.seeds if seeds is None else seeds,
-            scenario=self.scenario.replace(duration=duration, study_code=study_code),
+            scenario=self.scenario.replace(
+                duration=duration, study_code=study_code, profile=profile
+            ),
         )
 
     @classmethod
@@ -323,6 +372,13 @@ class Experiment:
         if not isinstance(scenario_table, Mapping):
             raise ConfigError(f"{path}: [scenario] must be a table")
         scenario = Scenario.from_mapping(scenario_table, source=str(path))
+        study_settings = data.get("study_code", {})
+        if not isinstance(study_settings, Mapping):
+            raise ConfigError(f"{path}: [study_code] must be a table of scenario settings")
+        try:
+            scenario.replace(**study_settings)
+        except (ConfigError, TypeError) as error:
+            raise ConfigError(f"{path}: [study_code]: {error}") from None
         name = str(table["name"])
         return cls(
             name,
@@ -332,6 +388,7 @@ class Experiment:
             tuple(float(v) for v in values),
             table.get("seeds", 5),
             scenario,
+            dict(study_settings),
         )
 
 

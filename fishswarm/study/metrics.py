@@ -40,6 +40,32 @@ def centroid_distance(position: FloatArray) -> float:
     return float(np.linalg.norm(position - others, axis=1).mean())
 
 
+def linked_centroid_distance(
+    position: FloatArray, *, link_range: float, manhattan: bool = False
+) -> float:
+    """The study code's "mean distance": each fish's distance to the centroid of the fish
+    linked to it — every other fish within ``link_range``, before blind spot and occlusion
+    filter any out — averaged over fish; a fish with no link counts 0 (SPEC §8), m.
+
+    Args:
+        position: (N, 3) positions, m.
+        link_range: how far a link reaches, m (the visual range).
+        manhattan: measure the link's length as |dx| + |dy| + |dz|, as the study's code did.
+    """
+    count = position.shape[0]
+    if count < 2:
+        return 0.0
+    relative = position[None, :, :] - position[:, None, :]
+    length = (
+        np.abs(relative).sum(axis=2) if manhattan else np.sqrt((relative * relative).sum(axis=2))
+    )
+    linked = length <= link_range
+    np.fill_diagonal(linked, False)
+    links = linked.sum(axis=1)
+    centre = (relative * linked[..., None]).sum(axis=1) / np.maximum(links, 1)[:, None]
+    return float(np.linalg.norm(centre, axis=1).mean())
+
+
 def pairwise_distance(position: FloatArray) -> float:
     """Mean distance over all pairs of fish, m."""
     if position.shape[0] < 2:

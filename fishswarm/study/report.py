@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import Experiment, RunOutcome
 from fishswarm.study.figures import FiguresUnavailable, experiment_figures
 
@@ -137,11 +138,7 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
         "",
         f"{scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
         f"{1 / scenario.control_period:g} Hz; {experiment.spread_text}. {explain}"
-        + (
-            f" Following the study's code in: {', '.join(scenario.study_code)} (docs/fidelity.md)."
-            if scenario.study_code
-            else ""
-        ),
+        + _following_text(scenario),
         "",
         "| " + " | ".join([experiment.label, *(s.label for s in experiment.summaries)]) + " |",
         "|" + "---:|" * (1 + len(experiment.summaries)),
@@ -154,3 +151,14 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
             cells.append(f"{mean:.{summary.digits}f}{spread}")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _following_text(scenario: Scenario) -> str:
+    """Where the runs follow the study's code instead of the paper, as a sentence."""
+    if scenario.profile == "study-code":
+        return " Profile study-code: every difference of the study's code (docs/fidelity.md)."
+    if scenario.study_code:
+        return (
+            f" Following the study's code in: {', '.join(scenario.study_code)} (docs/fidelity.md)."
+        )
+    return ""

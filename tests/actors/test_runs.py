@@ -28,6 +28,12 @@ def test_actor_and_batch_engines_give_the_same_trajectories() -> None:
     orbiting = find("milling").with_changes(values=(0.45,), seeds=1, duration=6.0)
     through_actors += run_experiment(orbiting, engine=run_on_actors, jobs=1)
     in_batch += run_experiment(orbiting, engine=run_on_batch_engine, jobs=1)
+    # The study code's profile: fish-side switches reach the fish processes too.
+    studied = find("blindspot").with_changes(
+        values=(0.05,), seeds=1, duration=4.0, profile="study-code"
+    )
+    through_actors += run_experiment(studied, engine=run_on_actors, jobs=1)
+    in_batch += run_experiment(studied, engine=run_on_batch_engine, jobs=1)
     for actors, batch in zip(through_actors, in_batch, strict=True):
         assert actors.position.shape[1:] == (25, 3)
         np.testing.assert_array_equal(actors.position, batch.position)
@@ -76,6 +82,31 @@ def test_experiment_command_end_to_end(
         assert (out / picture).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     printed = capsys.readouterr().out
     assert printed.startswith(f"# {experiment.title}")
+
+
+def test_an_experiment_under_the_study_code_profile(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "study"
+    arguments = ["experiment", "blindspot", "--engine", "batch", "--profile", "study-code"]
+    code = main([*arguments, "--seeds", "2", "--duration", "5", "--out", str(out)])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "Profile study-code: every difference of the study's code" in printed
+    assert "mean distance change, study code (%)" in printed
+    with (out / "table.csv").open(encoding="utf-8") as stream:
+        rows = list(csv.DictReader(stream))
+    studied = find("blindspot").with_changes(seeds=2, duration=5, profile="study-code")
+    expected = table_rows(studied, run_experiment(studied, engine=run_on_batch_engine, jobs=1))
+    paper = find("blindspot").with_changes(seeds=2, duration=5)
+    against = table_rows(paper, run_experiment(paper, engine=run_on_batch_engine, jobs=1))
+    column = "study_mean_distance_change_percent_mean"
+    for row, want, other in zip(rows, expected, against, strict=True):
+        assert float(row[column]) == pytest.approx(want[column], rel=1e-12)
+        assert column not in other
+        # The profile changes the runs: not the paper's numbers.
+        key = "pairwise_distance_change_percent_mean"
+        assert float(row[key]) != pytest.approx(other[key], rel=1e-6)
 
 
 def test_unknown_experiment_exits_2(capsys: pytest.CaptureFixture[str]) -> None:

@@ -60,6 +60,8 @@ async def _swarm(scenario: Scenario, *, schools: int) -> tuple[World, list[Snaps
         {"behavior": "milling", "controller": "pid"},
         {"behavior": "waltz", "fish": 2},
         {"behavior": "dispersion", "time_mode": "jitter", "vision_noise": 0.05},
+        {"behavior": "aggregation", "profile": "study-code"},
+        {"behavior": "dispersion", "profile": "study-code", "time_mode": "jitter"},
         {
             "behavior": "formation",
             "formation": "pyramid",

@@ -60,3 +60,59 @@ def test_contributions_are_averaged_and_padding_ignored() -> None:
 def test_lonely_and_coincident_fish_stay_finite() -> None:
     result = lennard_jones(np.zeros((2, 1, 3)), np.array([[False], [True]]), target_distance=2.5)
     np.testing.assert_array_equal(result, 0.0)
+
+
+def _study(neighbors: list[list[float]], target_distance: float) -> np.ndarray:
+    result = lennard_jones(
+        np.array([neighbors]),
+        np.ones((1, len(neighbors)), bool),
+        target_distance=target_distance,
+        study_form=True,
+    )
+    row: np.ndarray = result[0]
+    return row
+
+
+def test_study_form_repulsion_by_hand() -> None:
+    # One neighbour at r = r_t/2 = 0.13 m ahead: f = −(γε/r)·12·(2¹² − 2⁶) with γε = 10 m
+    # (100·100 in mm), times the relative position itself (0.13 m):
+    # −10·12·4032 = −483 840 m along x.
+    assert _study([[0.13, 0.0, 0.0]], 0.26) == pytest.approx([-483_840.0, 0.0, 0.0], rel=1e-12)
+
+
+def test_study_form_attraction_is_capped_but_grows_with_the_offset() -> None:
+    # 0.5 m to the right, r_t = 0.26: r is capped at r_t + 1 body length = 0.39, ratio 2/3:
+    # (2/3)¹² − (2/3)⁶ = (4096 − 46656)/531441 = −42560/531441, so
+    # f·Δy = (10/0.39)·12·(42560/531441)·0.5 = 12.3206 m towards it.
+    expected = 10 / 0.39 * 12 * 42560 / 531441 * 0.5
+    assert expected == pytest.approx(12.3206, abs=1e-4)
+    assert _study([[0.0, 0.5, 0.0]], 0.26) == pytest.approx([0.0, expected, 0.0], rel=1e-12)
+    # Twice as far: the same capped force times twice the offset (the paper's form would
+    # give the same vector for both).
+    assert _study([[0.0, 1.0, 0.0]], 0.26)[1] == pytest.approx(2 * expected, rel=1e-12)
+    paper = lennard_jones(
+        np.array([[[0.0, 0.5, 0.0]], [[0.0, 1.0, 0.0]]]),
+        np.ones((2, 1), bool),
+        target_distance=0.26,
+    )
+    np.testing.assert_allclose(paper[0], paper[1])
+    # Both neighbours: the mean of the two vectors.
+    both = _study([[0.13, 0.0, 0.0], [0.0, 0.5, 0.0]], 0.26)
+    assert both == pytest.approx([-483_840.0 / 2, expected / 2, 0.0], rel=1e-12)
+
+
+def test_study_form_equals_the_study_codes_millimetre_arithmetic() -> None:
+    # The study's lj_force in its own units (mm, γ = ε = 100, r clipped to
+    # [0.001, r_t + 130] mm), averaged; ours in metres is its result / 1000.
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        neighbors = rng.uniform(-1.5, 1.5, (6, 3))
+        target_distance = float(rng.choice([0.26, 2.517]))
+        centre = np.zeros(3)
+        for offset in neighbors * 1000:
+            r = np.clip(np.linalg.norm(offset), 0.001, target_distance * 1000 + 130)
+            ratio = target_distance * 1000 / r
+            centre += -100 * 100 / r * (12 * ratio**12 - 2 * 6 * ratio**6) * offset
+        centre /= len(neighbors)
+        ours = _study(neighbors.tolist(), target_distance)
+        np.testing.assert_allclose(ours, centre / 1000, rtol=1e-10)

@@ -62,3 +62,25 @@ def test_batch_equals_loop_for_homing() -> None:
         one, state = homing(targets[i : i + 1], dorsal_on=dorsal[i : i + 1])
         np.testing.assert_array_equal(one[0], fins[i])
         assert state[0] == new[i]
+
+
+def test_study_codes_homing_turns_a_target_dead_ahead_or_none_to_the_right_pectoral() -> None:
+    # The study's code: bearing > 0 → left pectoral, else (0 included) → right pectoral at
+    # 0.6 + |h|/180 = 0.6. The caudal rule is the same in both.
+    for target, caudal in (
+        ([0.52, 0.0, 0.0], 0.6),
+        ([0.0, 0.0, 0.0], 0.1),
+        ([0.52, -0.0, 0.0], 0.6),
+    ):
+        paper, _ = homing(np.array([target]), dorsal_on=np.array([False]))
+        study, _ = homing(np.array([target]), dorsal_on=np.array([False]), right_when_ahead=True)
+        assert paper[0].tolist() == pytest.approx([caudal, 0.0, 0.0, 0.0])
+        assert study[0].tolist() == pytest.approx([caudal, 0.0, 0.0, 0.6])
+    # Off the axis both agree: a target 45° right drives the left pectoral at 0.85.
+    for right_when_ahead in (False, True):
+        fins, _ = homing(
+            np.array([[1.0, 1.0, 0.0], [1.0, -1.0, 0.0]]),
+            dorsal_on=np.array([False, False]),
+            right_when_ahead=right_when_ahead,
+        )
+        np.testing.assert_allclose(fins, [[0.0, 0.0, 0.85, 0.0], [0.0, 0.0, 0.0, 0.85]])

@@ -146,3 +146,27 @@ def test_vision_is_finite_and_sane_for_any_arrangement(positions: np.ndarray, ya
         assert fish not in set(result.index[fish].tolist())
         # the nearest non-blind neighbour is always visible
     assert result.mask.shape == result.index.shape
+
+
+def test_manhattan_links_on_drawn_cases() -> None:
+    # A fish at the origin facing +x, range 3 m, no blind spot, no occlusion. Drawn:
+    #   (2, 0, 0)      straight line 2.00, |dx|+|dy|+|dz| 2.0  → seen both ways
+    #   (0, 1.5, -1.5) straight line 2.12, Manhattan 3.0 (on the edge) → seen both ways
+    #   (1.5, 1.5, 0.5) straight line 2.18, Manhattan 3.5 → only the straight line sees it
+    #   (0, -2.9, 0.2) straight line 2.91, Manhattan 3.1 → only the straight line sees it
+    position = (
+        np.array(
+            [[0, 0, 0], [2, 0, 0], [0, 1.5, -1.5], [1.5, 1.5, 0.5], [0, -2.9, 0.2]], dtype=float
+        )
+        + 5.0
+    )
+    yaw = np.zeros(5)
+    straight = Vision(3.0, 0.0, 0.0)
+    manhattan = Vision(3.0, 0.0, 0.0, manhattan=True)
+    seen_straight = perceive(position, yaw, vision=straight)
+    seen_manhattan = perceive(position, yaw, vision=manhattan)
+    assert sorted(seen_straight.index[0][seen_straight.mask[0]].tolist()) == [1, 2, 3, 4]
+    assert sorted(seen_manhattan.index[0][seen_manhattan.mask[0]].tolist()) == [1, 2]
+    # Links are symmetric: fish 3 does not see fish 0 either.
+    assert 0 not in seen_manhattan.index[3].tolist()
+    assert 0 in seen_straight.index[3].tolist()

@@ -135,6 +135,9 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["run", "--fish", "many"], "invalid int value"),
         (["export", "nowhere.mcap"], "say what to write"),
         (["run", "--vision", "sonar"], "vision_model must be one of geometric, camera"),
+        (["run", "--profile", "code"], "profile must be one of paper, study-code, got 'code'"),
+        (["fish", "--id", "1", "--study-code", "drag,wobble"], "unknown switch(es) 'wobble'"),
+        (["experiment", "blindspot", "--profile", "code"], "invalid choice: 'code'"),
         (
             ["robot", "--id", "1", "--period", "0.5", "--command-timeout", "0.4"],
             "command_timeout (0.4 s) must exceed the control period (0.5 s)",

@@ -133,3 +133,59 @@ def test_bad_study_code_switches_are_named(tmp_path: Path, given: str, message: 
     path.write_text(f"[scenario]\n{given}\n")
     with pytest.raises(ConfigError, match=re.escape(message)):
         Scenario.from_toml(path)
+
+
+def test_the_study_code_profile_sets_every_switch_and_each_reaches_its_place() -> None:
+    from fishswarm.sim.physics import WorldParams
+    from fishswarm.sim.scenario import STUDY_CODE_SWITCHES
+
+    paper, study = Scenario(), Scenario(profile="study-code")
+    assert paper.study_switches == ()
+    assert study.study_switches == tuple(STUDY_CODE_SWITCHES)
+    assert Scenario(study_code=("homing",)).study_switches == ("homing",)
+    # Fish side: the Lennard-Jones form and the homing branch.
+    assert not paper.fish_params().right_when_ahead
+    assert not paper.fish_params().steering.study_form
+    assert study.fish_params().right_when_ahead
+    assert study.fish_params().steering.study_form
+    assert Scenario(study_code=("lennard-jones",)).fish_params().steering.study_form
+    assert not Scenario(study_code=("lennard-jones",)).fish_params().right_when_ahead
+    # World side: dynamics, links, start delay.
+    assert (paper.vision().manhattan, study.vision().manhattan) == (False, True)
+    assert WorldParams.of(paper).still_until == 0.0
+    assert WorldParams.of(study.replace(control_period=0.5)).still_until == 1.0
+    assert study.robot().euler_step == 0.1
+    # The profile reads back from a recording's settings.
+    assert Scenario.from_mapping(study.to_dict()).profile == "study-code"
+
+
+def test_bad_profiles_and_manhattan_with_cameras_are_refused() -> None:
+    with pytest.raises(ConfigError, match="profile must be one of paper, study-code, got 'code'"):
+        Scenario(profile="code")
+    with pytest.raises(ConfigError, match="Manhattan links change the geometric vision model"):
+        Scenario(profile="study-code", vision_model="camera")
+    assert Scenario(study_code=("drag", "homing"), vision_model="camera").vision_model == "camera"
+
+
+def test_a_lone_fish_circles_under_the_study_codes_homing() -> None:
+    from fishswarm.sim.engine import run_batch
+
+    # Alone it sees nobody: the target is zero, bearing 0. The paper's controller runs only
+    # the caudal fin (0.1) and the fish swims straight; the study's code drives the right
+    # pectoral at 0.6 too, which turns the fish to its own left (z down) — clockwise in a
+    # plan view with y up, how the study and fishswarm draw the tank ("circles right").
+    paper = run_batch(Scenario(fish=1, duration=60))
+    study = run_batch(Scenario(fish=1, duration=60, study_code=("homing",)))
+    np.testing.assert_array_equal(paper.yaw, np.full_like(paper.yaw, paper.yaw[0]))
+    yaw = np.unwrap(study.yaw[:, 0])
+    assert np.all(np.diff(yaw)[1:] < 0)  # turning the same way all along
+    assert (yaw[0] - yaw[-1]) / (2 * np.pi) > 1.5  # more than one and a half turns
+    planar = study.position[:, 0, :2]
+    assert np.ptp(planar, axis=0).max() < 0.3  # a small circle, not a wall-to-wall path
+    # The path goes round the same way: clockwise with y up, its signed (shoelace) area
+    # negative, and the bearing of the fish from the circle's centre falls.
+    x, y = planar[:, 0], planar[:, 1]
+    assert 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y) < -0.01
+    around = planar[10:] - planar[10:].mean(axis=0)
+    bearing = np.unwrap(np.arctan2(around[:, 1], around[:, 0]))
+    assert bearing[-1] - bearing[0] < -2 * np.pi

@@ -13,6 +13,7 @@ from fishswarm.study.experiment import (
     Experiment,
     RunOutcome,
     available,
+    change_from_third_percent,
     change_percent,
     find,
 )
@@ -33,6 +34,40 @@ def test_the_studys_experiments_are_defined_as_in_spec() -> None:
     assert sphere.scenario.resolved_spawn_radius() == pytest.approx(1.3)
     assert sphere.scenario_for(0.39, 3).sphere_radius == 0.39
     assert sphere.scenario_for(0.39, 3).seed == 3
+
+
+def test_the_study_codes_side_settings_and_mean_distance_in_the_two_experiments() -> None:
+    blindspot, sphere = find("blindspot"), find("blockingsphere")
+    # The paper's set-up by default; the study code's other vision setting when switched.
+    assert blindspot.scenario_for(0.25, 0).sphere_radius == 0.065
+    assert sphere.scenario_for(0.39, 0).blind_width == 0.05
+    side = blindspot.with_changes(study_code=("side-settings",))
+    assert side.scenario_for(0.25, 0).sphere_radius == 0.05
+    assert side.scenario_for(0.25, 0).blind_width == 0.25  # the swept value wins
+    profiled = sphere.with_changes(profile="study-code")
+    assert profiled.scenario_for(0.39, 1).blind_width == 0.05
+    assert profiled.scenario_for(0.39, 1).sphere_radius == 0.39
+    # The mean-distance switch adds the study's own measure as the table's first column.
+    assert blindspot.summaries[0].key == "centroid_distance_change_percent"
+    counted = blindspot.with_changes(study_code=("mean-distance",))
+    assert counted.summaries[0].key == "study_mean_distance_change_percent"
+    assert counted.metric_names[-1] == "linked_centroid_distance"
+    assert find("orbit").with_changes(profile="study-code").summaries == find("orbit").summaries
+    # Third sample vs last: the study's fish moved from the third sample on.
+    assert change_from_third_percent(np.array([9.0, 7.0, 2.0, 3.0, 5.0])) == pytest.approx(150.0)
+    assert np.isnan(change_from_third_percent(np.array([1.0, 2.0])))
+
+
+def test_an_experiments_study_code_table_is_checked(tmp_path: Path) -> None:
+    path = tmp_path / "x.toml"
+    path.write_text(
+        '[experiment]\nname = "x"\nparameter = "blind_width"\nvalues = [0.1]\n'
+        "[study_code]\nsphere_radius = -1\n"
+    )
+    with pytest.raises(
+        ConfigError, match=r"\[study_code\]: vision sphere_radius must be a finite non-negative"
+    ):
+        Experiment.from_toml(path)
 
 
 def test_unknown_experiment_lists_the_known_ones() -> None:

@@ -15,6 +15,7 @@ from fishswarm.study.metrics import (
     OrbitTarget,
     OrbitTracker,
     centroid_distance,
+    linked_centroid_distance,
     nearest_neighbor_distance,
     orbit_metrics,
     orbit_target_of,
@@ -34,6 +35,25 @@ def test_pairwise_and_nearest_on_a_square() -> None:
 def test_centroid_of_the_others_on_a_square() -> None:
     # For (0,0): others' centroid is (2/3, 2/3), at distance (2/3)·√2; same for every corner.
     assert centroid_distance(SQUARE) == pytest.approx(2 / 3 * math.sqrt(2))
+
+
+def test_the_study_codes_mean_distance_on_a_drawn_triangle() -> None:
+    # Fish at (0,0), (1,0), (0,1). All linked (range 3): fish 0's linked centroid is
+    # (0.5, 0.5), √0.5 away; fish 1's is (0, 0.5), |(−1, 0.5)| = √1.25 away; fish 2 alike.
+    triangle = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    every = (math.sqrt(0.5) + 2 * math.sqrt(1.25)) / 3
+    assert linked_centroid_distance(triangle, link_range=3.0) == pytest.approx(every)
+    assert every == pytest.approx(centroid_distance(triangle))
+    # Range 1.2 cuts the √2 link between fish 1 and 2: each then sees only fish 0, 1 m off.
+    cut = (math.sqrt(0.5) + 1 + 1) / 3
+    assert linked_centroid_distance(triangle, link_range=1.2) == pytest.approx(cut)
+    # Manhattan 1.5 cuts it too (|dx|+|dy| = 2), the straight line 1.5 does not (√2 ≈ 1.41).
+    assert linked_centroid_distance(triangle, link_range=1.5, manhattan=True) == pytest.approx(cut)
+    assert linked_centroid_distance(triangle, link_range=1.5) == pytest.approx(every)
+    # A fish with no link counts zero; one fish alone is zero.
+    apart = np.array([[0.0, 0, 0], [1, 0, 0], [9, 9, 0]])
+    assert linked_centroid_distance(apart, link_range=3.0) == pytest.approx(2 / 3)
+    assert linked_centroid_distance(apart[:1], link_range=3.0) == 0.0
 
 
 def test_single_fish_and_neighbors_seen() -> None:
