@@ -15,20 +15,39 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
     from fishswarm.learning.coevolution import LearningSettings
     from fishswarm.learning.session import LearningError, learn
 
+    named = {
+        "behavior": args.behavior,
+        "inputs": None
+        if args.inputs is None
+        else tuple(name.strip() for name in args.inputs.split(",") if name.strip()),
+        "radii": args.radii,
+        "models": args.models,
+        "classifiers": args.classifiers,
+        "seed": args.seed,
+        "hall_of_fame": args.hall_of_fame,
+    }
+    given = {name: value for name, value in named.items() if value is not None}
     try:
-        settings = LearningSettings(
-            behavior=args.behavior,
-            inputs=tuple(name.strip() for name in args.inputs.split(",") if name.strip()),
-            radii=args.radii,
-            models=args.models,
-            classifiers=args.classifiers,
-            seed=args.seed,
-            hall_of_fame=args.hall_of_fame,
-        )
+        settings = LearningSettings(**given)
     except ValueError as error:
         raise ConfigError(str(error)) from None
     every = max(1, args.generations // 50)
     output = ProgressLine()
+
+    def started(run: Any, resumed: bool) -> None:
+        chosen = run.settings
+        print(
+            f"fishswarm learn: {chosen.behavior} ideal fish; classifier inputs "
+            f"{','.join(chosen.inputs)}, radii {chosen.radii}; {chosen.models} replicas × "
+            f"{chosen.classifiers} classifiers, seed {chosen.seed}, hall of fame "
+            f"{chosen.hall_of_fame}; up to generation {args.generations}; output {args.out}",
+            file=sys.stderr,
+        )
+        if resumed:
+            print(
+                f"resumed from generation {run.generation} ({args.out / 'checkpoint.npz'})",
+                file=sys.stderr,
+            )
 
     def progress(run: Any, record: dict[str, float], seconds: float) -> None:
         done = run.generation
@@ -50,6 +69,8 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             out=args.out,
             checkpoint_every=args.checkpoint_every,
             resume=args.resume,
+            given=given,
+            on_start=started,
             on_generation=progress,
         )
     except LearningError as error:

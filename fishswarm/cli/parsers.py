@@ -374,15 +374,15 @@ def build_parser() -> argparse.ArgumentParser:
         "behave like the ideal fish (SPEC §4). Writes checkpoints, the best replica, fitness "
         "curves, spacing/speed and trajectory plots and the learned radii to --out.",
     )
+    # Settings of the run default to None here: a resumed run takes the checkpoint's, and
+    # refuses only those the user names and that differ.
     learn.add_argument(
         "--behavior",
         choices=["aggregation", "dispersion"],
-        default="aggregation",
         help="what the ideal fish do (default aggregation)",
     )
     learn.add_argument(
         "--inputs",
-        default="speed,neighbors",
         help="classifier inputs, comma-separated, from speed, angular-speed, "
         "neighbors (one learned radius), neighbors2 (two) (default "
         "speed,neighbors)",
@@ -390,17 +390,16 @@ def build_parser() -> argparse.ArgumentParser:
     learn.add_argument(
         "--radii",
         choices=["bounded", "unbounded"],
-        default="bounded",
-        help="radii clipped to [0, 300] or free from a start in [-40, 300] (default bounded)",
+        help="bounded: radii folded back into [0, 300] units (a triangle wave of the genome, "
+        "not clipped); unbounded: started in [-40, 300] and free (default bounded)",
     )
     learn.add_argument("--generations", type=int, default=500, help="default 500")
-    learn.add_argument("--models", type=int, default=100, help="replica population (100)")
-    learn.add_argument("--classifiers", type=int, default=100, help="classifier population (100)")
-    learn.add_argument("--seed", type=int, default=0, help="master seed (default 0)")
+    learn.add_argument("--models", type=int, help="replica population (default 100)")
+    learn.add_argument("--classifiers", type=int, help="classifier population (default 100)")
+    learn.add_argument("--seed", type=int, help="master seed (default 0)")
     learn.add_argument(
         "--hall-of-fame",
         type=int,
-        default=0,
         help="past champions drawn into every generation (default 0: the study's method)",
     )
     learn.add_argument(
@@ -413,7 +412,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="generations between checkpoints (default 10)",
     )
     learn.add_argument(
-        "--resume", action="store_true", help="continue from OUT/checkpoint.npz up to --generations"
+        "--resume",
+        action="store_true",
+        help="continue from OUT/checkpoint.npz up to --generations, with the settings it was "
+        "learned with (naming a different one stops with a message)",
     )
     learn.add_argument("--quiet", action="store_true", help="no progress lines")
 

@@ -273,7 +273,7 @@ class Coevolution:
         self.population, self.classifier_population = models, classifiers
         self.last_fitness = result
         record = {
-            "generation": float(self.generation),
+            "generation": self.generation,
             "model_best": float(result.models.max()),
             "model_mean": float(result.models.mean()),
             "classifier_best": float(result.classifiers.max()),

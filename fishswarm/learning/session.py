@@ -21,7 +21,7 @@ import csv
 import dataclasses
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -94,21 +94,30 @@ def learn(
     out: Path,
     checkpoint_every: int = 10,
     resume: bool = False,
+    given: Mapping[str, Any] | None = None,
+    on_start: Callable[[Coevolution, bool], None] | None = None,
     on_generation: Callable[[Coevolution, dict[str, float], float], None] | None = None,
 ) -> dict[str, Any]:
     """Run (or resume) co-evolution up to ``generations`` and write the outputs to ``out``.
 
     Args:
-        settings: the run's settings (ignored when resuming: the checkpoint's rule).
+        settings: the run's settings (when resuming, the checkpoint's settings rule).
         generations: total number of generations, counting those already done.
         out: output folder.
         checkpoint_every: write a checkpoint every this many generations (and at the end).
         resume: continue from ``out/checkpoint.npz``.
+        given: the settings the user asked for by name (e.g. ``{"behavior": "dispersion"}``);
+            resuming a run learned with other values of them is refused, not ignored.
+        on_start: called once the run is set up, with the run and whether it was resumed.
         on_generation: called after each generation with the run, its record and the wall
             time of the generation, s.
 
     Returns:
         The summary also written to ``out/summary.json``.
+
+    Raises:
+        LearningError: nothing to resume, an unreadable checkpoint, or settings that differ
+            from the resumed run's.
     """
     if generations < 1 or checkpoint_every < 1:
         raise LearningError("generations and checkpoint interval must be at least 1")
@@ -120,8 +129,11 @@ def learn(
             run = load_checkpoint(checkpoint)
         except CheckpointError as error:
             raise LearningError(str(error)) from None
+        _check_same(run.settings, given or {}, checkpoint)
     else:
         run = Coevolution(settings)
+    if on_start is not None:
+        on_start(run, resume)
     while run.generation < generations:
         started = time.perf_counter()
         record = run.step()
@@ -130,6 +142,23 @@ def learn(
         if run.generation % checkpoint_every == 0 or run.generation == generations:
             save_checkpoint(run, checkpoint)
     return write_results(run, out)
+
+
+def _check_same(saved: LearningSettings, given: Mapping[str, Any], checkpoint: Path) -> None:
+    """Refuse to resume a run learned with other settings than those asked for."""
+    for name, value in given.items():
+        old = getattr(saved, name)
+        if old != value:
+            flag = "--" + name.replace("_", "-")
+            raise LearningError(
+                f"{checkpoint} holds a run learned with {name} {_shown(old)}, but this command "
+                f"asks for {_shown(value)}: drop {flag} to go on with that run, or start a new "
+                "one in another --out folder"
+            )
+
+
+def _shown(value: Any) -> str:
+    return ",".join(value) if isinstance(value, tuple) else str(value)
 
 
 def write_results(run: Coevolution, out: Path) -> dict[str, Any]:
@@ -142,7 +171,8 @@ def write_results(run: Coevolution, out: Path) -> dict[str, Any]:
     with (out / "history.csv").open("w", newline="", encoding="utf-8") as stream:
         writer = csv.DictWriter(stream, fieldnames=list(run.history[0]))
         writer.writeheader()
-        writer.writerows(run.history)
+        # Generations are counts (checkpoints of older versions stored them as floats).
+        writer.writerows({**row, "generation": int(row["generation"])} for row in run.history)
     radii = run.final_radii()
     table = ["| radius | mean | s.d. |", "|---|---:|---:|"]
     for index in range(radii.shape[1]):

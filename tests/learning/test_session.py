@@ -38,6 +38,27 @@ def test_learn_writes_every_output(tmp_path: Path) -> None:
     assert json.loads((tmp_path / "summary.json").read_text())["settings"]["seed"] == 2
 
 
+def test_resuming_with_other_settings_is_refused_and_with_the_same_allowed(
+    tmp_path: Path,
+) -> None:
+    settings = LearningSettings(models=4, classifiers=4, seed=1, inputs=("speed",))
+    learn(settings, generations=1, out=tmp_path)
+    for given in ({"inputs": ("speed", "neighbors")}, {"radii": "unbounded"}, {"seed": 2}):
+        with pytest.raises(LearningError, match="holds a run learned with"):
+            learn(settings, generations=2, out=tmp_path, resume=True, given=given)
+    resumed: list[tuple[int, bool]] = []
+    summary = learn(
+        LearningSettings(),  # not named: the checkpoint's settings rule
+        generations=2,
+        out=tmp_path,
+        resume=True,
+        given={"seed": 1, "inputs": ("speed",)},
+        on_start=lambda run, again: resumed.append((run.generation, again)),
+    )
+    assert resumed == [(1, True)]
+    assert summary["generations"] == 2 and summary["settings"]["models"] == 4
+
+
 def test_resume_needs_a_checkpoint(tmp_path: Path) -> None:
     with pytest.raises(LearningError, match="nothing to resume"):
         learn(LearningSettings(), generations=2, out=tmp_path, resume=True)
@@ -86,6 +107,31 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
         check=False,
     )
     assert first.returncode == 0 and second.returncode == 0, second.stderr
+    header = (
+        "fishswarm learn: aggregation ideal fish; classifier inputs speed,neighbors, radii "
+        "bounded; 6 replicas × 6 classifiers, seed 5, hall of fame 0; up to generation 2"
+    )
+    assert header in first.stderr.splitlines()[0]
+    assert "resumed from generation" not in first.stderr
+    assert f"resumed from generation 2 ({tmp_path / 'b' / 'checkpoint.npz'})" in second.stderr
+    history = (tmp_path / "b" / "history.csv").read_text().splitlines()
+    assert [line.split(",")[0] for line in history] == ["generation", "0", "1", "2", "3"]
+    # Resuming with another setting named stops and says which; the run is left as it was.
+    before = (tmp_path / "b" / "checkpoint.npz").read_bytes()
+    changed = subprocess.run(
+        [*base, "--generations", "6", "--out", str(tmp_path / "b"), "--resume"]
+        + ["--behavior", "dispersion"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert changed.returncode == 2
+    assert "holds a run learned with behavior aggregation, but this command asks for " in (
+        changed.stderr
+    )
+    assert "drop --behavior to go on with that run" in changed.stderr
+    assert (tmp_path / "b" / "checkpoint.npz").read_bytes() == before
     a = np.load(tmp_path / "a" / "best_replica.npz")["weights"]
     b = np.load(tmp_path / "b" / "best_replica.npz")["weights"]
     np.testing.assert_array_equal(a, b)
