@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -173,7 +174,9 @@ def _in_range(position: FloatArray, visual_range: float) -> tuple[NDArray[np.int
         own = index == np.arange(count)[:, None]
         distance = np.where(own, np.inf, distance)
         index = np.where(own, -1, index)
-        order = np.argsort(distance, axis=1, kind="stable")
+        # Nearest first, ties by index (as the all-pairs branch orders them): the tree
+        # returns tied neighbours in an order of its own.
+        order = np.lexsort((np.where(index < 0, count, index), distance), axis=1)
         distance = np.take_along_axis(distance, order, axis=1)
         index = np.take_along_axis(index, order, axis=1)
     else:
@@ -188,28 +191,51 @@ def _in_range(position: FloatArray, visual_range: float) -> tuple[NDArray[np.int
     return index[:, :width], distance[:, :width]
 
 
-def perceive(
+Sifted = tuple[BoolArray, NDArray[np.intp], FloatArray, FloatArray]
+"""What :func:`sift` returns: seen (N, K'), the seen fish's indices (N, K'), their tank-frame
+positions relative to each fish (N, K', 3, m) and their distances (N, K', m), visible ones
+first and near to far; K' the most any fish sees. Rows past a fish's count are not defined."""
+
+
+class VisionKernels(Protocol):
+    """Another implementation of the two costly steps of :func:`perceive`."""
+
+    def in_range(
+        self, position: FloatArray, visual_range: float
+    ) -> tuple[NDArray[np.intp], FloatArray]:
+        """Every fish's others within range, nearest first: index (N, K) (−1 in padding)
+        and distance (N, K) (inf in padding)."""
+        ...
+
+    def sift(
+        self,
+        position: FloatArray,
+        yaw: FloatArray,
+        index: NDArray[np.intp],
+        distance: FloatArray,
+        vision: Vision,
+    ) -> Sifted:
+        """As :func:`sift`."""
+        ...
+
+
+def sift(
     position: FloatArray,
     yaw: FloatArray,
-    *,
+    index: NDArray[np.intp],
+    distance: FloatArray,
     vision: Vision,
-    rngs: Sequence[np.random.Generator] | None = None,
-) -> Perceived:
-    """Compute what every fish sees of the others.
+) -> Sifted:
+    """Which of the fish in range each fish sees: Manhattan links (if asked), blind spot and
+    occlusion, compacted near to far.
 
     Args:
         position: (N, 3) tank-frame positions, m.
         yaw: (N,) yaws, rad.
+        index: (N, K) the others in range of each fish, nearest first (−1 in padding).
+        distance: (N, K) their distances, m (inf in padding).
         vision: the vision parameters.
-        rngs: one generator per fish for the position noise (needed when ``vision.noise``
-            > 0; fish i's noise comes from ``rngs[i]`` only, so results do not depend on the
-            other fish's draws).
-
-    Returns:
-        The visible neighbours of each fish, nearest first, in its body frame.
     """
-    count = position.shape[0]
-    index, distance = _in_range(position, vision.visual_range)
     candidate = index >= 0
     safe_index = np.where(candidate, index, 0)
     relative = position[safe_index] - position[:, None, :]
@@ -231,10 +257,44 @@ def perceive(
     compact = compact[:, :keep]
     chosen = np.take_along_axis(safe_index, compact, axis=1)
     relative_seen = np.take_along_axis(relative, compact[..., None], axis=1)
+    distance_seen = np.take_along_axis(distance, compact, axis=1)
+    return seen, chosen, relative_seen, distance_seen
+
+
+def perceive(
+    position: FloatArray,
+    yaw: FloatArray,
+    *,
+    vision: Vision,
+    rngs: Sequence[np.random.Generator] | None = None,
+    kernels: VisionKernels | None = None,
+) -> Perceived:
+    """Compute what every fish sees of the others.
+
+    Args:
+        position: (N, 3) tank-frame positions, m.
+        yaw: (N,) yaws, rad.
+        vision: the vision parameters.
+        rngs: one generator per fish for the position noise (needed when ``vision.noise``
+            > 0; fish i's noise comes from ``rngs[i]`` only, so results do not depend on the
+            other fish's draws).
+        kernels: other implementations of the range search and of :func:`sift` (the
+            simulator's compiled ones for large swarms); None: this module's.
+
+    Returns:
+        The visible neighbours of each fish, nearest first, in its body frame.
+    """
+    count = position.shape[0]
+    if kernels is None:
+        index, distance = _in_range(position, vision.visual_range)
+        sifted = sift(position, yaw, index, distance, vision)
+    else:
+        index, distance = kernels.in_range(position, vision.visual_range)
+        sifted = kernels.sift(position, yaw, index, distance, vision)
+    seen, chosen, relative_seen, distance_seen = sifted
     if vision.noise > 0:
         if rngs is None or len(rngs) != count:
             raise ValueError("vision noise needs one random generator per fish")
-        distance_seen = np.take_along_axis(distance, compact, axis=1)
         for fish in range(count):
             rows = int(seen[fish].sum())
             scale = vision.noise * distance_seen[fish, :rows, None]

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from fishswarm.bluebot.dynamics import State, rest_state, step
 from fishswarm.bluebot.parameters import BlueBot, Tank
 from fishswarm.bluebot.vision import Perceived, Vision, perceive, perceive_landmarks
+from fishswarm.sim import kernels
 from fishswarm.sim.scenario import Scenario
 from fishswarm.sim.sight import Cameras, perceive_through_cameras
 from fishswarm.sim.streams import Stream, stream
@@ -48,6 +49,8 @@ class WorldParams:
         robot: the BlueBot's parameters.
         still_until: fish are held still until this time, s (the study code's start delay;
             0 by default).
+        compiled: integrate with the compiled kernel (:mod:`fishswarm.sim.kernels`): chosen
+            from the scenario's size, so every process of a run integrates alike.
     """
 
     seed: int
@@ -67,6 +70,7 @@ class WorldParams:
     switch_at: float = 0.0
     robot: BlueBot = BlueBot()
     still_until: float = 0.0
+    compiled: bool = False
 
     @classmethod
     def of(cls, scenario: Scenario) -> WorldParams:
@@ -89,6 +93,7 @@ class WorldParams:
             switch_at=scenario.switch_at,
             robot=scenario.robot(),
             still_until=scenario.still_until,
+            compiled=scenario.fish >= kernels.COMPILED_MIN_FISH and kernels.available(),
         )
 
     def formation_at(self, time: float) -> str | None:
@@ -135,7 +140,13 @@ def observe(
             state.position, state.yaw, cameras=params.cameras, rngs=rngs
         )
     vision = params.vision
-    return perceive(state.position, state.yaw, vision=vision, rngs=rngs if vision.noise else None)
+    return perceive(
+        state.position,
+        state.yaw,
+        vision=vision,
+        rngs=rngs if vision.noise else None,
+        kernels=kernels.CompiledVision() if params.compiled else None,
+    )
 
 
 def observe_landmarks(params: WorldParams, state: State) -> Perceived:
@@ -145,4 +156,5 @@ def observe_landmarks(params: WorldParams, state: State) -> Perceived:
 
 def advance(params: WorldParams, state: State, fins: FloatArray, duration: float) -> State:
     """Every fish swims ``duration`` s with its fins held."""
-    return step(state, fins, duration=duration, robot=params.robot, tank=params.tank)
+    integrate = kernels.step if params.compiled else step
+    return integrate(state, fins, duration=duration, robot=params.robot, tank=params.tank)

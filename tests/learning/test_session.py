@@ -118,9 +118,9 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     assert [line.split(",")[0] for line in history] == ["generation", "0", "1", "2", "3"]
     # Resuming with another setting named stops and says which; the run is left as it was.
     before = (tmp_path / "b" / "checkpoint.npz").read_bytes()
+    again = [*base, "--generations", "6", "--out", str(tmp_path / "b"), "--resume"]
     changed = subprocess.run(
-        [*base, "--generations", "6", "--out", str(tmp_path / "b"), "--resume"]
-        + ["--behavior", "dispersion"],
+        [*again, "--behavior", "dispersion"],
         capture_output=True,
         text=True,
         timeout=120,
