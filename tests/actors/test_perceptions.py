@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from fishswarm.actors.perceptions import perception_messages
@@ -64,3 +66,39 @@ def test_schools_get_one_batch_and_others_their_own_perception() -> None:
     assert len(only_seven) == 1
     assert isinstance(only_seven[0][1], PerceptionBatch)
     assert only_seven[0][1].ids.tolist() == [7]
+
+
+def test_a_school_too_large_for_one_batch_gets_consecutive_parts_within_the_limit() -> None:
+    # Six fish of one school seeing 3, 1, 4, 1, 5, 2 neighbours, a limit of 5 rows: parts
+    # [3, 1] (4 rows), [4, 1] (5), [5] (5), [2]; together exactly the one batch's rows.
+    keys = KeySpace()
+    seen = [3, 1, 4, 1, 5, 2]
+    rows = [[[float(fish), float(k), 0.0] for k in range(n)] for fish, n in enumerate(seen)]
+    perceived = _perceived(rows, width=5)
+    landmarks = _perceived([[] for _ in seen], width=1)
+    common: dict[str, Any] = {
+        "ids": np.arange(10, 16),
+        "school_of": dict.fromkeys(range(10, 16), "s"),
+        "depth": np.linspace(0.1, 0.6, 6),
+        "perceived": perceived,
+        "landmarks": landmarks,
+        "inbox_counts": np.zeros(6, dtype=np.int64),
+        "tick": 3,
+        "time": 3.0,
+    }
+    whole = [m for _, m in perception_messages(keys, **common) if isinstance(m, PerceptionBatch)]
+    parts = perception_messages(keys, row_limit=5, **common)
+    batches = [m for _, m in parts if isinstance(m, PerceptionBatch)]
+    assert len(whole) == 1 and len(batches) == len(parts)
+    assert [b.ids.tolist() for b in batches] == [[10, 11], [12, 13], [14], [15]]
+    assert all(b.neighbors.shape[0] <= 5 for b in batches)
+    np.testing.assert_array_equal(
+        np.concatenate([b.neighbors for b in batches]), whole[0].neighbors
+    )
+    # A limit below one fish's rows still sends that fish, alone.
+    tight = perception_messages(keys, row_limit=2, **common)
+    assert [m.ids.tolist() for _, m in tight if isinstance(m, PerceptionBatch)][:3] == [
+        [10],
+        [11],
+        [12],
+    ]

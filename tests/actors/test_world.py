@@ -82,6 +82,30 @@ def test_the_actors_give_the_batch_engines_trajectory(changes: dict[str, object]
     np.testing.assert_array_equal(np.array([s.yaw for s in snapshots]), reference.yaw)
 
 
+def test_schools_whose_perceptions_come_in_parts_decide_as_with_one_batch(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Batches cut at 12 rows: a school of 7 aggregating fish gets its perception in several
+    # parts a tick, decides each as it comes, and the run is the batch engine's.
+    from fishswarm.actors import perceptions
+
+    cut = perceptions.perception_messages
+    parts: list[int] = []
+
+    def small_parts(*args: object, **kwargs: object) -> list[tuple[str, object]]:
+        messages = cut(*args, row_limit=12, **kwargs)  # type: ignore[arg-type]
+        parts.append(len(messages))
+        return messages  # type: ignore[return-value]
+
+    monkeypatch.setattr("fishswarm.actors.world.perception_messages", small_parts)
+    scenario = Scenario(fish=14, duration=5.0, seed=3, behavior="aggregation")
+    world, snapshots = run_mock(lambda: _swarm(scenario, schools=2))
+    assert world.state_name == "finished" and world.lost == []
+    assert max(parts) > 2  # more than one part for a school of 7
+    reference = run_batch(scenario)
+    np.testing.assert_array_equal(np.array([s.position for s in snapshots]), reference.position)
+
+
 def test_broadcasts_decided_at_a_tick_are_heard_at_the_next_and_match_the_batch_engine() -> None:
     behavior = registered().name
     scenario = Scenario(fish=5, duration=5.0, seed=2, behavior=behavior, channel_loss=0.3)
