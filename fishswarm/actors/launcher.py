@@ -310,6 +310,10 @@ def _summary(
         "simulated_time": simulated,
         "wall_time": wall_time,
         "loop_time": world.wall_time,
+        "answer_time": {
+            "median": world_stats.answer_time_median,
+            "p90": world_stats.answer_time_p90,
+        },
         "real_time_factor": simulated / world.wall_time if world.wall_time > 0 else None,
         "recording": str(settings.record) if settings.record else None,
     }

@@ -115,6 +115,10 @@ class WorldStatistics:
         late_commands: realtime mode: commands that missed their tick.
         live_fish: fish in the world now.
         mismatched_fish: fish that run another behaviour or version than the world's.
+        answer_time_median, answer_time_p90: lockstep and jitter modes: how long the fish
+            took to answer a tick — perceptions out to the last command in — median and
+            90th percentile over the run, s (0 before any tick); the network's latency shows
+            here.
     """
 
     ticks: int
@@ -126,6 +130,8 @@ class WorldStatistics:
     late_commands: int
     live_fish: int
     mismatched_fish: int = 0
+    answer_time_median: float = 0.0
+    answer_time_p90: float = 0.0
 
     @property
     def rejected_total(self) -> int:
@@ -173,6 +179,7 @@ class World:
         self.tick = 0
         self.wall_time = 0.0
         self.late_commands = 0
+        self._answer_times: list[float] = []
         """Realtime mode: commands that missed their tick's deadline (the fish kept its fins)."""
         self.run_id = secrets.randbits(62)
         """Names this run in every perception, so fish that served another start afresh."""
@@ -226,6 +233,8 @@ class World:
             late_commands=self.late_commands,
             live_fish=int(self.sim.ids.size),
             mismatched_fish=len(self.mismatched),
+            answer_time_median=_quantile(self._answer_times, 0.5),
+            answer_time_p90=_quantile(self._answer_times, 0.9),
         )
 
     async def run(
@@ -437,10 +446,13 @@ class World:
         self.late_commands += len(self._current.waiting)
 
     async def _collect(self) -> None:
-        deadline = trio.current_time() + self.settings.command_timeout
+        asked = trio.current_time()
+        deadline = asked + self.settings.command_timeout
         with trio.move_on_at(deadline):
             while self._current.waiting:
                 self._handle(await self._events.receive())
+        if not self._current.waiting:
+            self._answer_times.append(trio.current_time() - asked)
         for fish_id in sorted(self._current.waiting):
             self._lose(fish_id, f"no command within {self.settings.command_timeout:g} s")
 
@@ -553,3 +565,8 @@ class World:
                 self.joined.append((fish_id, tick))
                 log.info("fish %d joined at tick %d", fish_id, tick)
         self.sim.join(new)
+
+
+def _quantile(values: list[float], share: float) -> float:
+    """The ``share`` quantile of ``values`` (0 when there are none)."""
+    return float(np.quantile(values, share)) if values else 0.0

@@ -240,6 +240,12 @@ def _summary_text(summary: dict[str, Any]) -> str:
         f"deliveries {counts['deliveries']}, wall {summary['wall_time']:.2f} s"
         + (f", {rtf:.{2 if rtf < 1 else 0}f}× real time" if rtf else "")
     )
+    answer = summary.get("answer_time") or {}
+    if answer.get("median"):
+        lines.append(
+            f"  fish answered a tick in {answer['median'] * 1e3:.1f} ms (median), "
+            f"{answer['p90'] * 1e3:.1f} ms (90 %)"
+        )
     if summary.get("recording"):
         lines.append(f"  recording: {summary['recording']}")
     return "\n".join(lines)
