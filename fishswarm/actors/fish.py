@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -224,22 +224,27 @@ class Fish:
         events: Inbox[Event] = Inbox()
         async with contextlib.AsyncExitStack() as stack:
             # Subscribe before declaring the tokens: whoever sees a fish alive can reach it.
-            subscriptions = [
-                (index, DELIVERY, keys.inbox(fish_id))
-                for index, fish_id in enumerate(self.settings.fish_ids)
-            ]
+            subscriptions: list[tuple[str, Callable[[str, bytes], None]]] = []
             if school is None:
-                subscriptions += [
-                    (index, PERCEPTION, keys.perception(fish_id))
-                    for index, fish_id in enumerate(self.settings.fish_ids)
-                ]
+                for index, fish_id in enumerate(self.settings.fish_ids):
+                    subscriptions += [
+                        (keys.inbox(fish_id), _pusher(events, index, DELIVERY)),
+                        (keys.perception(fish_id), _pusher(events, index, PERCEPTION)),
+                    ]
             else:
-                subscriptions.append((-1, BATCH, keys.school_perceptions(school)))
-            subscriptions.append((-1, PULSE, keys.world_pulse))
-            for index, kind, key in subscriptions:
-                await stack.enter_async_context(
-                    open_subscriber(bus, key, _pusher(events, index, kind))
-                )
+                # One subscription for the whole school's inboxes: a Zenoh session declares
+                # thousands of subscribers in a time that grows with their square (5 000:
+                # 12 s), so a school takes every fish's deliveries and keeps its own.
+                subscriptions += [
+                    (
+                        keys.fish_inboxes(),
+                        _school_inbox_pusher(events, keys, self.settings.fish_ids),
+                    ),
+                    (keys.school_perceptions(school), _pusher(events, -1, BATCH)),
+                ]
+            subscriptions.append((keys.world_pulse, _pusher(events, -1, PULSE)))
+            for key, push in subscriptions:
+                await stack.enter_async_context(open_subscriber(bus, key, push))
             for fish_id in self.settings.fish_ids:
                 await stack.enter_async_context(
                     open_token(bus, keys.alive("fish", fish_id, school))
@@ -560,6 +565,25 @@ def _perception(ready: list[_Pending]) -> Perception:
         landmark_mask,
         np.concatenate(headings) if known else None,
     )
+
+
+def _school_inbox_pusher(
+    events: Inbox[Event], keys: KeySpace, fish_ids: Sequence[int]
+) -> Callable[[str, bytes], None]:
+    """Deliveries to a school's fish, from the swarm's inbox keys; others' are let go (they
+    are another school's, not bad input)."""
+    index_of = {str(fish_id): index for index, fish_id in enumerate(fish_ids)}
+
+    def push(key: str, payload: bytes) -> None:
+        try:
+            fish_id, _ = keys.member_of(key)
+        except ValueError:
+            return
+        index = index_of.get(fish_id)
+        if index is not None:
+            events.push((index, DELIVERY, key, payload))
+
+    return push
 
 
 def _pusher(events: Inbox[Event], index: int, kind: str) -> Callable[[str, bytes], None]:

@@ -163,6 +163,10 @@ class KeySpace:
         """Key expression matching every fish's outbox key."""
         return f"{self.prefix}/fish/*/outbox"
 
+    def fish_inboxes(self) -> str:
+        """Key expression matching every fish's inbox key."""
+        return f"{self.prefix}/fish/*/inbox"
+
     def member_of(self, key: str) -> tuple[str, str]:
         """Split a per-member key: ``.../fish/3/command`` → ("3", "command").
 

@@ -197,6 +197,17 @@ def in_range(position: FloatArray, visual_range: float) -> tuple[NDArray[np.intp
     return index, distance
 
 
+def mean_pairwise_distance(position: FloatArray) -> float:
+    """The mean distance over all pairs of ``position`` (N, 3), m: scipy's
+    ``pdist(position).mean()`` within rounding, summed fish by fish in parallel."""
+    count = position.shape[0]
+    if count < 2:
+        return 0.0
+    sums = np.zeros(count)
+    _pairwise_sums()(np.ascontiguousarray(position, dtype=np.float64), sums)
+    return float(sums.sum() / (count * (count - 1) / 2))
+
+
 def sift(
     position: FloatArray,
     yaw: FloatArray,
@@ -381,3 +392,23 @@ def _fill_in_range() -> Callable[..., None]:
                 distance[fish, k] = gaps[ranked[k]]
 
     return fill_all
+
+
+@functools.cache
+def _pairwise_sums() -> Callable[..., None]:
+    """Each fish's summed distance to the fish after it (compiled on first use, cached)."""
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def sums_all(points: Any, sums: Any) -> None:
+        count = points.shape[0]
+        for fish in numba.prange(count):
+            total = 0.0
+            for other in range(fish + 1, count):
+                dx = points[other, 0] - points[fish, 0]
+                dy = points[other, 1] - points[fish, 1]
+                dz = points[other, 2] - points[fish, 2]
+                total += math.sqrt(dx * dx + dy * dy + dz * dz)
+            sums[fish] = total
+
+    return sums_all
