@@ -16,6 +16,7 @@ import trio
 from fishswarm.actors.bus import Bus, open_alive_events, open_subscriber, open_token
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
+from fishswarm.actors.world import OFFLOAD_FISH
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import Snapshot
 from fishswarm.sim.scenario import Scenario
@@ -138,7 +139,7 @@ class Observer:
                     self._on_alive(key, payload)
                 else:
                     assert isinstance(payload, bytes)
-                    self._on_snapshot(key, payload)
+                    await self._on_snapshot(key, payload)
 
     async def wait_for_tick(self, tick: int) -> None:
         """Wait until a snapshot of ``tick`` or later has been seen (bound it with a timeout).
@@ -168,7 +169,7 @@ class Observer:
         if member.role == "world" and not alive:
             self._world_left.set()
 
-    def _on_snapshot(self, key: str, payload: bytes) -> None:
+    async def _on_snapshot(self, key: str, payload: bytes) -> None:
         snapshot = self._intake.decode(key, payload, Snapshot)
         if snapshot is None:
             return
@@ -176,7 +177,13 @@ class Observer:
             self._intake.accepted -= 1
             self._intake.reject(key, "stale", f"snapshot of tick {snapshot.tick} repeated")
             return
-        metrics = swarm_metrics(snapshot.position, snapshot.neighbors_seen, snapshot.effort)
+        measure = (snapshot.position, snapshot.neighbors_seen, snapshot.effort)
+        if snapshot.ids.size >= OFFLOAD_FISH:
+            # Thousands of fish: the distances take a tenth of a second; in a thread, the
+            # world's tick (in this process) goes on meanwhile.
+            metrics = await trio.to_thread.run_sync(swarm_metrics, *measure)
+        else:
+            metrics = swarm_metrics(*measure)
         if self.formation is not None:
             try:
                 metrics.update(self.formation.metrics(snapshot.position))

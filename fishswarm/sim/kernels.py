@@ -10,7 +10,9 @@ their order, so velocities agree bit for bit; angles go through the C library's 
 cosine, which may differ from numpy's in the last bit (tested equal within 1e-12, and the
 same fish seen on random swarms).
 
-numba is optional (``pip install 'fishswarm[fast]'``) and imported only when a kernel is
+The kernels release the GIL: the world's steps, computed in a worker thread, and the
+observer's metrics run beside the actors' own work. numba is optional
+(``pip install 'fishswarm[fast]'``) and imported only when a kernel is
 first asked for: the robot's import path never reaches this module, and a simulator without
 numba runs the numpy reference.
 """
@@ -119,7 +121,7 @@ def _integrate() -> Callable[..., None]:
     """The compiled integration loop (compiled on first use, cached on disk)."""
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(parallel=True, cache=True, nogil=True)
     def integrate(
         position: Any,
         yaw: Any,
@@ -246,7 +248,7 @@ def _sift() -> Callable[..., None]:
     """The compiled sifting loop (compiled on first use, cached on disk)."""
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(parallel=True, cache=True, nogil=True)
     def sift_all(
         position: Any,
         yaw: Any,
@@ -313,7 +315,7 @@ def _count_in_range() -> Callable[..., None]:
     """How many others each fish has in range (compiled on first use, cached on disk)."""
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(parallel=True, cache=True, nogil=True)
     def count_all(
         points: Any,
         reach: float,
@@ -348,7 +350,7 @@ def _fill_in_range() -> Callable[..., None]:
     """Each fish's others in range, nearest first (compiled on first use, cached on disk)."""
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(parallel=True, cache=True, nogil=True)
     def fill_all(
         points: Any,
         reach: float,
@@ -399,7 +401,7 @@ def _pairwise_sums() -> Callable[..., None]:
     """Each fish's summed distance to the fish after it (compiled on first use, cached)."""
     import numba
 
-    @numba.njit(parallel=True, cache=True)
+    @numba.njit(parallel=True, cache=True, nogil=True)
     def sums_all(points: Any, sums: Any) -> None:
         count = points.shape[0]
         for fish in numba.prange(count):
