@@ -1,16 +1,21 @@
-"""Benchmark: fish-control steps per second, real-time factor and round-trip latency.
+"""Benchmark: the actor system against its floors, in one run.
 
-Runs whole swarms through the actor system over Zenoh on 127.0.0.1 (1 Hz control, full
-physics and vision) for 25, 100 and 1000 fish with 1 and 2 worker processes; beyond 25 fish
-the tank grows so that each fish has about 25 others within visual range. A worker's fish
-form a school: one perception batch and one command batch per tick. Then measures the
-perception → command round trip of one fish actor on its own keys (as on a robot) in a
-worker process, timed from a plain Zenoh session and from a trio task.
+First the floors: the Zenoh echo round trip (``bench_bridge.py``) and, for each size, the
+in-process batch engine's tick (compiled kernels from 200 fish on when numba is installed,
+as the world uses them). Then whole swarms through the actor system over Zenoh on 127.0.0.1
+(1 Hz control, full physics and vision) for 25, 1 000 and 10 000 fish with 1 and 2 worker
+processes; beyond 25 fish the tank grows so that each fish has about 25 others within visual
+range. A worker's fish form a school: one perception batch (in parts when large) and one
+command batch per tick. Each row gives the tick, start-up (launch to the end of the run,
+less the tick loop: processes, sessions, tokens, teardown), and the ratios issue 14 sets
+targets for: the actor tick over (batch tick + one echo) and the batch engine's speed as a
+share. Then the perception → command round trip of one fish actor on its own keys (as on a
+robot) in a worker process, timed from a plain Zenoh session and from a trio task.
 
 Usage:
-    python bench/bench_swarm.py                 # everything, prints Markdown tables
-    python bench/bench_swarm.py --fish 25 100   # some sizes only
-    python bench/bench_swarm.py --round-trips 0 # skip the latency part
+    python bench/bench_swarm.py                    # everything, prints Markdown tables
+    python bench/bench_swarm.py --fish 25 1000     # some sizes only
+    python bench/bench_swarm.py --round-trips 0    # skip the latency part
 
 Results and conditions are kept in docs/benchmarks.md.
 """
@@ -27,6 +32,7 @@ import time
 import numpy as np
 import trio
 import zenoh
+from bench_bridge import echo_round_trips
 
 from fishswarm.actors.bus import open_subscriber
 from fishswarm.actors.inbox import Inbox
@@ -36,9 +42,11 @@ from fishswarm.actors.workers import WorkerSpec, start_worker, stop_worker
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.messages import Perception
+from fishswarm.sim import kernels
+from fishswarm.sim.engine import run_batch
 from fishswarm.sim.scenario import Scenario
 
-DURATION = {25: 120.0, 100: 60.0, 1000: 15.0}
+DURATION = {25: 120.0, 100: 60.0, 1000: 15.0, 10_000: 6.0}
 
 
 def swarm_row(fish: int, procs: int) -> dict[str, float]:
@@ -54,6 +62,8 @@ def swarm_row(fish: int, procs: int) -> dict[str, float]:
     return {
         "fish": fish,
         "procs": procs,
+        "tick": loop_time / summary["counts"]["ticks"],
+        "start_up": summary["wall_time"] - loop_time,
         "ticks": summary["counts"]["ticks"],
         "steps_per_second": steps / loop_time,
         "real_time_factor": summary["real_time_factor"],
@@ -145,29 +155,87 @@ def _describe(name: str, samples: list[float]) -> str:
     )
 
 
+def batch_tick(fish: int) -> float:
+    """Seconds a tick of the batch engine on the same scenario as :func:`swarm_row`."""
+    scenario = Scenario.crowded(fish, duration=DURATION.get(fish, 15.0), seed=1)
+    first = scenario.replace(duration=1.0)
+    run_batch(first)  # warm up: kernels, imports
+    started = time.perf_counter()
+    run_batch(first)
+    start_up = time.perf_counter() - started
+    started = time.perf_counter()
+    run_batch(scenario)
+    return (time.perf_counter() - started - start_up) / (scenario.ticks - 1)
+
+
+def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None:
+    """Tick time against fish count, log-log: the batch engine and the actor system with
+    each number of workers, from rows (fish, workers, batch s, actors s)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(6.4, 4.4), layout="constrained")
+    sizes = sorted({row[0] for row in measured})
+    batch = {row[0]: row[2] for row in measured}
+    axis.plot(sizes, [batch[n] * 1e3 for n in sizes], "o-", color="black", label="batch engine")
+    for procs in sorted({row[1] for row in measured}):
+        rows = sorted(row for row in measured if row[1] == procs)
+        axis.plot(
+            [r[0] for r in rows],
+            [r[3] * 1e3 for r in rows],
+            "s--",
+            label=f"actor system, {procs} worker{'s' if procs > 1 else ''}",
+        )
+    axis.set(
+        xscale="log",
+        yscale="log",
+        xlabel="fish",
+        ylabel="time per tick (ms)",
+        title="One control period of a whole swarm, 2 cores",
+    )
+    axis.grid(True, which="both", alpha=0.3)
+    axis.legend()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--fish", type=int, nargs="+", default=[25, 100, 1000])
+    parser.add_argument("--fish", type=int, nargs="+", default=[25, 1000, 10_000])
     parser.add_argument("--procs", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--round-trips", type=int, default=2000)
+    parser.add_argument("--plot", help="also draw tick time against fish count to this file")
     args = parser.parse_args()
+    measured: list[tuple[int, int, float, float]] = []
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
-        f"{platform.python_version()}\n"
+        f"{platform.python_version()}, compiled kernels: "
+        f"{'yes' if kernels.available() else 'no (numba not installed)'}\n"
     )
+    echo = float(np.median(echo_round_trips("zenoh", 1000))) / 1e3
+    print(f"Zenoh echo floor: {echo * 1e3:.3f} ms (median of 1000)\n")
     print(
-        "| fish | worker processes | ticks | fish-control steps/s | real-time factor "
-        "| neighbours seen |"
+        "| fish | workers | batch ms/tick | actors ms/tick | actors / (batch + echo) "
+        "| batch speed share | steps/s | start-up s | real-time factor |"
     )
-    print("|---:|---:|---:|---:|---:|---:|")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for fish in args.fish:
+        batch = batch_tick(fish)
         for procs in args.procs:
             row = swarm_row(fish, procs)
+            tick = row["tick"]
+            measured.append((fish, procs, batch, tick))
             print(
-                f"| {fish} | {procs} | {row['ticks']} | {row['steps_per_second']:,.0f} | "
-                f"{row['real_time_factor']:.0f}× | {row['seen']:.1f} |",
+                f"| {fish} | {procs} | {batch * 1e3:.1f} | {tick * 1e3:.1f} | "
+                f"{tick / (batch + echo):.2f} | {batch / tick:.2f} | "
+                f"{row['steps_per_second']:,.0f} | {row['start_up']:.1f} | "
+                f"{row['real_time_factor']:.1f}× |",
                 flush=True,
             )
+    if args.plot:
+        plot_ticks(measured, args.plot)
     if args.round_trips:
         print()
         print(_describe("timed from Zenoh", round_trips_from_zenoh(args.round_trips)))
