@@ -4,8 +4,8 @@ the compiled kernels (fishswarm.sim.kernels), in one run.
 1 Hz control, 100 Euler substeps a period, full vision (range, blind spot, occlusion); beyond
 25 fish the tank grows so that each fish has about 25 others within visual range
 (``Scenario.crowded``). Each size is warmed up once (the kernels compile or load from their
-cache), then timed over a run; the time of a one-tick run (placing the fish, the first
-look) is subtracted and reported as start-up.
+cache), then timed over a run (``bench_swarm.batch_tick``); the median time of three
+one-tick runs (placing the fish, the first look) is subtracted and reported as start-up.
 
 Usage:
     python bench/bench_engine.py
@@ -19,30 +19,19 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import time
+
+from bench_swarm import batch_tick
 
 from fishswarm.sim import kernels
-from fishswarm.sim.engine import run_batch
-from fishswarm.sim.scenario import Scenario
-
-DURATION = {25: 60.0, 1000: 15.0, 10_000: 6.0}
 
 
 def tick_seconds(fish: int, compiled: bool) -> tuple[float, float]:
-    """(seconds a tick, seconds of start-up and the first tick) of the batch engine."""
+    """(seconds a tick, seconds of start-up and the first tick) of the batch engine, with
+    or without the compiled kernels."""
     saved = kernels.COMPILED_MIN_FISH
     kernels.COMPILED_MIN_FISH = 0 if compiled else 10**9
     try:
-        scenario = Scenario.crowded(fish, duration=DURATION.get(fish, 10.0), seed=1)
-        first = scenario.replace(duration=1.0)
-        run_batch(first)  # warm up: compile or load the kernels, import scipy
-        started = time.perf_counter()
-        run_batch(first)
-        start_up = time.perf_counter() - started
-        started = time.perf_counter()
-        run_batch(scenario)
-        whole = time.perf_counter() - started
-        return (whole - start_up) / (scenario.ticks - 1), start_up
+        return batch_tick(fish)
     finally:
         kernels.COMPILED_MIN_FISH = saved
 

@@ -47,6 +47,7 @@ from fishswarm.sim.engine import run_batch
 from fishswarm.sim.scenario import Scenario
 
 DURATION = {25: 120.0, 100: 60.0, 1000: 15.0, 10_000: 6.0}
+BATCH_DURATION = {25: 300.0, 1000: 60.0, 10_000: 20.0}
 
 
 def swarm_row(fish: int, procs: int) -> dict[str, float]:
@@ -155,17 +156,22 @@ def _describe(name: str, samples: list[float]) -> str:
     )
 
 
-def batch_tick(fish: int) -> float:
-    """Seconds a tick of the batch engine on the same scenario as :func:`swarm_row`."""
-    scenario = Scenario.crowded(fish, duration=DURATION.get(fish, 15.0), seed=1)
+def batch_tick(fish: int) -> tuple[float, float]:
+    """(seconds a tick, seconds of start-up and the first tick) of the batch engine on the
+    scenario of :func:`swarm_row`: a run's time less the median of three one-tick runs,
+    over its ticks after the first (runs long enough that start-up jitter stays small)."""
+    scenario = Scenario.crowded(fish, duration=BATCH_DURATION.get(fish, 30.0), seed=1)
     first = scenario.replace(duration=1.0)
     run_batch(first)  # warm up: kernels, imports
-    started = time.perf_counter()
-    run_batch(first)
-    start_up = time.perf_counter() - started
+    start_ups = []
+    for _ in range(3):
+        started = time.perf_counter()
+        run_batch(first)
+        start_ups.append(time.perf_counter() - started)
+    start_up = statistics.median(start_ups)
     started = time.perf_counter()
     run_batch(scenario)
-    return (time.perf_counter() - started - start_up) / (scenario.ticks - 1)
+    return (time.perf_counter() - started - start_up) / (scenario.ticks - 1), start_up
 
 
 def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None:
@@ -222,7 +228,7 @@ def main() -> None:
     )
     print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for fish in args.fish:
-        batch = batch_tick(fish)
+        batch, _ = batch_tick(fish)
         for procs in args.procs:
             row = swarm_row(fish, procs)
             tick = row["tick"]

@@ -310,6 +310,7 @@ def _summary(
         "simulated_time": simulated,
         "wall_time": wall_time,
         "loop_time": world.wall_time,
+        "compiled_kernels": world.params.compiled,
         "answer_time": {
             "median": world_stats.answer_time_median,
             "p90": world_stats.answer_time_p90,

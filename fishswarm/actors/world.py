@@ -117,8 +117,9 @@ class WorldStatistics:
         mismatched_fish: fish that run another behaviour or version than the world's.
         answer_time_median, answer_time_p90: lockstep and jitter modes: how long the fish
             took to answer a tick — perceptions out to the last command in — median and
-            90th percentile over the run, s (0 before any tick); the network's latency shows
-            here.
+            90th percentile over the ticks every fish answered, s (0 before any tick; a tick
+            in which a fish timed out is left out, its fish counted as lost); the network's
+            latency shows here.
     """
 
     ticks: int
@@ -179,8 +180,9 @@ class World:
         self.tick = 0
         self.wall_time = 0.0
         self.late_commands = 0
-        self._answer_times: list[float] = []
         """Realtime mode: commands that missed their tick's deadline (the fish kept its fins)."""
+        self._answer_times: list[float] = []
+        """Per tick every fish answered: perceptions out to the last command in, s."""
         self.run_id = secrets.randbits(62)
         """Names this run in every perception, so fish that served another start afresh."""
         self.sim = WorldSim(self.params)

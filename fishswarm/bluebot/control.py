@@ -42,7 +42,7 @@ def homing(
     is more than 1° below, off when more than 1° above, unchanged in between). Heading: a
     target to the right drives the left pectoral at min(1, 0.6 + |h|/180°), mirrored for the
     left. The caudal fin runs only when |h| < 20°, at min(cap, 0.1 + planar distance /
-    (8 body lengths)). A target dead ahead, or none (a zero vector), turns no fin; with
+    (8 body lengths)). A target dead ahead, or none (a zero vector), drives no pectoral fin; with
     ``right_when_ahead`` it drives the right pectoral at 0.6 as in the study's code (its
     "left" branch took every bearing ≤ 0, SPEC §8), which turns the fish to its left.
 

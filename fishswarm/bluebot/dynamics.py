@@ -69,7 +69,7 @@ def rotate_to_tank(body: FloatArray, yaw: FloatArray) -> FloatArray:
     return out
 
 
-def _coefficients(robot: BlueBot) -> tuple[FloatArray, float]:
+def drag_coefficients(robot: BlueBot) -> tuple[FloatArray, float]:
     """Per-axis quadratic drag factors ½ρ·c·A/m (B-independent) and the yaw factor."""
     half_rho = 0.5 * robot.water_density
     linear = np.array(
@@ -87,7 +87,7 @@ def _drag_of_speed(robot: BlueBot) -> Callable[[FloatArray], FloatArray]:
     """The study's code's drag factors (B, 4) as a function of forward speed v_x (B,):
     backward drag when v_x ≤ 0, lateral and yaw drag growing with |v_x| (SPEC §8); the
     paper's factors scaled by how much each coefficient grows."""
-    linear, yaw = _coefficients(robot)
+    linear, yaw = drag_coefficients(robot)
     paper = np.append(linear, yaw)
     backward = robot.drag_x_backward / robot.drag_x
 
@@ -101,6 +101,16 @@ def _drag_of_speed(robot: BlueBot) -> Callable[[FloatArray], FloatArray]:
         return result
 
     return factors
+
+
+def substeps(duration: float, euler_step: float) -> FloatArray:
+    """The Euler steps of a period, s: ``euler_step`` each, the last shortened to land
+    exactly on ``duration`` (none for a period of 0)."""
+    steps = math.ceil(duration / euler_step - 1e-9)
+    dt = np.full(steps, euler_step)
+    if steps:
+        dt[-1] = duration - euler_step * (steps - 1)
+    return dt
 
 
 def fin_forces(fins: FloatArray, robot: BlueBot) -> tuple[FloatArray, FloatArray]:
@@ -153,16 +163,14 @@ def step(
     fins = np.clip(np.asarray(fins, dtype=np.float64), 0.0, 1.0)
     count = fins.shape[0]
     force, torque = fin_forces(fins, robot)
-    drag, drag_yaw = _coefficients(robot)
+    drag, drag_yaw = drag_coefficients(robot)
     # Velocities and yaw rate evolve on their own (fins are held, drag depends only on them):
     # run that recursion first as one (B, 4) array, then integrate yaw and position with
     # running sums, which add in the same order as a step-by-step loop.
     acceleration = np.concatenate([force / robot.mass, (torque / robot.inertia)[:, None]], axis=1)
     drag_all = np.append(drag, drag_yaw)
-    steps = math.ceil(duration / robot.euler_step - 1e-9)
-    dt = np.full(steps, robot.euler_step)
-    if steps:
-        dt[-1] = duration - robot.euler_step * (steps - 1)
+    dt = substeps(duration, robot.euler_step)
+    steps = dt.size
     velocity = np.concatenate([state.body_velocity, state.yaw_rate[:, None]], axis=1)
     history = np.empty((steps, count, 4))
     change = np.empty_like(velocity)

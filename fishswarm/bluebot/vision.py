@@ -165,7 +165,10 @@ def _in_range(position: FloatArray, visual_range: float) -> tuple[NDArray[np.int
         tree = cKDTree(position)
         k = min(count, 64)
         while True:
-            distance, index = tree.query(position, k=k, distance_upper_bound=visual_range)
+            # The tree keeps only distances strictly below its bound; a neighbour exactly at
+            # the range is in range, as in the all-pairs branch.
+            bound = np.nextafter(visual_range, np.inf)
+            distance, index = tree.query(position, k=k, distance_upper_bound=bound)
             if k == count or not np.isfinite(distance[:, -1]).any():
                 break
             k = min(count, 2 * k)

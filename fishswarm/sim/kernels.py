@@ -22,6 +22,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import math
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -29,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fishswarm.bluebot.dynamics import State, fin_forces
+from fishswarm.bluebot.dynamics import State, drag_coefficients, fin_forces, substeps
 from fishswarm.bluebot.parameters import BlueBot, Tank
 from fishswarm.bluebot.vision import Sifted, Vision
 
@@ -60,8 +61,13 @@ class CompiledVision:
 
 
 COMPILED_MIN_FISH = 200
-"""From this many fish in a scenario on, its world integrates with the compiled kernel
-(below, compiling takes longer than it saves; small swarms stay on the numpy reference)."""
+"""From this many fish on, a scenario's world integrates and sees with the compiled kernels,
+and the swarm metrics take the compiled pairwise distance (below, loading the kernels takes
+longer than they save; small swarms stay on the numpy references)."""
+
+_LOCK = threading.Lock()
+"""One kernel at a time per process: the world's thread and the observer's may both call
+one, and numba's simplest threading layer must not start two parallel regions at once."""
 
 
 def available() -> bool:
@@ -82,25 +88,16 @@ def step(state: State, fins: FloatArray, *, duration: float, robot: BlueBot, tan
     acceleration = np.ascontiguousarray(
         np.concatenate([force / robot.mass, (torque / robot.inertia)[:, None]], axis=1)
     )
-    half_rho = 0.5 * robot.water_density
-    drag = np.array(
-        [
-            half_rho * robot.drag_x * robot.area_x / robot.mass,
-            half_rho * robot.drag_y * robot.area_y / robot.mass,
-            half_rho * robot.drag_z * robot.area_z / robot.mass,
-            half_rho * robot.drag_yaw * robot.area_yaw * (robot.length / 6) ** 2 / robot.inertia,
-        ]
-    )
-    steps = math.ceil(duration / robot.euler_step - 1e-9)
-    dt = np.full(steps, robot.euler_step)
-    if steps:
-        dt[-1] = duration - robot.euler_step * (steps - 1)
+    linear, yaw_drag = drag_coefficients(robot)
+    drag = np.append(linear, yaw_drag)
+    dt = substeps(duration, robot.euler_step)
     velocity = np.ascontiguousarray(
         np.concatenate([state.body_velocity, state.yaw_rate[:, None]], axis=1)
     )
     position = np.ascontiguousarray(state.position, dtype=np.float64).copy()
     yaw = np.ascontiguousarray(state.yaw, dtype=np.float64).copy()
-    _integrate()(
+    _call(
+        _integrate(),
         position,
         yaw,
         velocity,
@@ -114,6 +111,12 @@ def step(state: State, fins: FloatArray, *, duration: float, robot: BlueBot, tan
         robot.yaw_before_update,
     )
     return State(position, yaw, velocity[:, :3].copy(), velocity[:, 3].copy())
+
+
+def _call(kernel: Callable[..., None], *arguments: Any) -> None:
+    """Run a compiled kernel, one at a time in this process."""
+    with _LOCK:
+        kernel(*arguments)
 
 
 @functools.cache
@@ -182,8 +185,12 @@ def in_range(position: FloatArray, visual_range: float) -> tuple[NDArray[np.intp
     points = np.ascontiguousarray(position, dtype=np.float64)
     if count == 0:
         return np.zeros((0, 0), dtype=np.intp), np.zeros((0, 0))
-    side = max(visual_range, 1e-9)
     low = points[:, :2].min(axis=0)
+    span = float((points[:, :2].max(axis=0) - low).max())
+    # Columns at least a visual range wide (a little more: rounding in the division must not
+    # put two fish exactly one range apart two columns apart), and never more of them than
+    # fish (a tiny range on a large tank would ask for billions).
+    side = max(visual_range * (1 + 1e-9), span / math.ceil(math.sqrt(count)), 1e-9)
     cell = np.floor((points[:, :2] - low) / side).astype(np.int64)
     columns = int(cell[:, 0].max()) + 1
     rows = int(cell[:, 1].max()) + 1
@@ -191,11 +198,13 @@ def in_range(position: FloatArray, visual_range: float) -> tuple[NDArray[np.intp
     order = np.argsort(key, kind="stable").astype(np.intp)
     start = np.searchsorted(key[order], np.arange(columns * rows + 1)).astype(np.intp)
     found = np.zeros(count, dtype=np.int64)
-    _count_in_range()(points, visual_range, cell, columns, rows, order, start, found)
+    _call(_count_in_range(), points, visual_range, cell, columns, rows, order, start, found)
     width = int(found.max(initial=0))
     index = np.full((count, width), -1, dtype=np.intp)
     distance = np.full((count, width), np.inf)
-    _fill_in_range()(points, visual_range, cell, columns, rows, order, start, index, distance)
+    _call(
+        _fill_in_range(), points, visual_range, cell, columns, rows, order, start, index, distance
+    )
     return index, distance
 
 
@@ -206,7 +215,7 @@ def mean_pairwise_distance(position: FloatArray) -> float:
     if count < 2:
         return 0.0
     sums = np.zeros(count)
-    _pairwise_sums()(np.ascontiguousarray(position, dtype=np.float64), sums)
+    _call(_pairwise_sums(), np.ascontiguousarray(position, dtype=np.float64), sums)
     return float(sums.sum() / (count * (count - 1) / 2))
 
 
@@ -224,7 +233,8 @@ def sift(
     relative = np.zeros((count, width, 3))
     reach = np.zeros((count, width))
     visible = np.zeros(count, dtype=np.int64)
-    _sift()(
+    _call(
+        _sift(),
         np.ascontiguousarray(position, dtype=np.float64),
         np.ascontiguousarray(yaw, dtype=np.float64),
         np.ascontiguousarray(index, dtype=np.intp),

@@ -57,7 +57,9 @@ def _swarm(rng: np.random.Generator, count: int, side: float) -> tuple[np.ndarra
     position[1] = position[0]  # coincident
     position[3] = position[2] + [0.5, 0.0, 0.0]  # collinear: 2, 3, 4 on a line, 3 between
     position[4] = position[2] + [1.0, 0.0, 0.0]
-    return position, rng.uniform(-np.pi, np.pi, count)
+    yaw = rng.uniform(-np.pi, np.pi, count)
+    yaw[2] = 0.0  # fish 2 faces along the line: 3 ahead, 4 behind 3
+    return position, yaw
 
 
 @pytest.mark.parametrize(("count", "side"), [(40, 2.0), (600, 12.0)])
@@ -74,6 +76,29 @@ def test_the_range_search_kernel_equals_the_reference(count: int, side: float) -
     assert row.index(4) == row.index(2) + 1  # tied at 0.5 m: the lower index first
     assert gaps[3][row.index(2)] == gaps[3][row.index(4)] == 0.5
     assert found[0][0] == 1 and gaps[0][0] == 0.0
+
+
+def test_the_range_search_kernel_at_its_edges() -> None:
+    # A row of fish exactly one range apart: each has its two neighbours, in every branch.
+    row = np.zeros((300, 3))
+    row[:, 0] = np.arange(300) * 3.0
+    for position in (row, row[:40]):
+        index, distance = _in_range(position, 3.0)
+        found, gaps = kernels.in_range(position, 3.0)
+        np.testing.assert_array_equal(found, index)
+        np.testing.assert_array_equal(gaps, distance)
+        assert found[1][:2].tolist() == [0, 2] and gaps[1][:2].tolist() == [3.0, 3.0]
+    # No fish, one fish: nobody in range.
+    for count in (0, 1):
+        found, gaps = kernels.in_range(np.zeros((count, 3)), 3.0)
+        assert found.shape == gaps.shape == (count, 0)
+    # A tiny range over a wide tank does not ask for a column per millimetre.
+    spread = np.random.default_rng(2).uniform(0.0, 1000.0, (500, 3))
+    found, _ = kernels.in_range(spread, 1e-6)
+    assert found.shape == (500, 0)
+    # Everyone in one place: all in range at distance 0, ties by index.
+    found, gaps = kernels.in_range(np.ones((250, 3)), 0.0)
+    assert found[0].tolist() == list(range(1, 250)) and not gaps.any()
 
 
 @pytest.mark.parametrize(
@@ -94,9 +119,11 @@ def test_the_sifting_kernel_sees_what_the_reference_sees(vision: Vision) -> None
     fast = perceive(position, yaw, vision=vision, kernels=kernels.CompiledVision())
     np.testing.assert_array_equal(fast.index, whole.index)
     np.testing.assert_allclose(fast.neighbors, whole.neighbors, rtol=0, atol=1e-12)
-    # The collinear fish: 4 hides behind 3 from 2 whenever 2 sees 3 and spheres block.
-    if vision.sphere_radius > 0 and 3 in fast.index[2]:
-        assert 4 not in fast.index[2]
+    # The collinear fish: from 2, fish 4 hides behind 3 where spheres block (with the
+    # BlueBot's small spheres nothing else hides 3 in this swarm; big ones may).
+    if vision.sphere_radius <= 0.065 and vision.visual_range >= 1.0:
+        assert 3 in fast.index[2]
+        assert (4 in fast.index[2]) == (vision.sphere_radius == 0)
 
 
 def test_large_scenarios_integrate_and_see_with_the_kernels_and_match_the_reference(
