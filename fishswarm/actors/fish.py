@@ -234,7 +234,9 @@ class Fish:
             else:
                 # One subscription for the whole school's inboxes: a Zenoh session declares
                 # thousands of subscribers in a time that grows with their square (5 000:
-                # 12 s), so a school takes every fish's deliveries and keeps its own.
+                # 12 s), so a school takes every fish's deliveries and keeps its own. The
+                # price: each delivery reaches every school (traffic × schools), and only
+                # behaviours that broadcast (formation flags) have any.
                 subscriptions += [
                     (
                         keys.fish_inboxes(),

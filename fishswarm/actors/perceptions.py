@@ -90,10 +90,21 @@ def perception_messages(
             messages.append(
                 (
                     keys.school_perceptions(school),
-                    _batch(members, ids, depth, perceived, landmarks, inbox_counts, tick, time,
-                           run, heading, formation),
+                    _batch(
+                        members,
+                        ids=ids,
+                        depth=depth,
+                        perceived=perceived,
+                        landmarks=landmarks,
+                        inbox_counts=inbox_counts,
+                        tick=tick,
+                        time=time,
+                        run=run,
+                        heading=heading,
+                        formation=formation,
+                    ),
                 )
-            )  # fmt: skip
+            )
     return messages
 
 
@@ -115,6 +126,7 @@ def _parts(
 
 def _batch(
     members: NDArray[np.intp],
+    *,
     ids: NDArray[np.int64],
     depth: NDArray[np.float64],
     perceived: Perceived,

@@ -31,7 +31,8 @@ class Vision:
             0 means no occlusion).
         noise: standard deviation of the position noise per metre of distance (0 = none).
         manhattan: a neighbour is in range when |dx| + |dy| + |dz| ≤ ``visual_range``, as in
-            the study's code (SPEC §8), instead of its straight-line distance.
+            the study's code (SPEC §8), instead of its straight-line distance (links between
+            fish only: landmarks are seen within the straight-line range).
     """
 
     visual_range: float = 3.0

@@ -15,6 +15,7 @@ import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -214,7 +215,7 @@ class Experiment:
     values: tuple[float, ...]
     seeds: int
     scenario: Scenario
-    study_settings: Mapping[str, float] = dataclasses.field(default_factory=dict)
+    study_settings: Mapping[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.parameter not in SWEEPABLE:
