@@ -51,6 +51,7 @@ from fishswarm.behaviors.core import (
     take_rows,
 )
 from fishswarm.behaviors.formation import apply_directive
+from fishswarm.behaviors.registry import rules_of
 from fishswarm.bluebot.control import stop_fins
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
@@ -371,12 +372,13 @@ class Fish:
         self._memory = put_rows(self._memory, rows, fresh)
 
     def _announce(self, bus: Bus) -> None:
-        """Tell the world what the fish that started a run run (behaviour, version), so that
-        it can warn when that is not what its scenario says."""
+        """Tell the world what the fish that started a run run (behaviour, version, rules),
+        so that it can warn when that is not what its scenario says."""
         keys, school = self.settings.keys, self.settings.school
         for rows, run in self._unannounced:
             ids = np.sort(self._ids[rows])
-            about = FishAbout(ids, self.settings.params.behavior.name, __version__, run)
+            params = self.settings.params
+            about = FishAbout(ids, params.behavior.name, __version__, run, rules_of(params))
             bus.put(keys.about(int(ids[0]), school), encode(about))
         self._unannounced = []
 

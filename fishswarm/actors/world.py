@@ -37,6 +37,7 @@ from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.actors.perceptions import perception_messages
 from fishswarm.actors.roster import LostFish, Roster
+from fishswarm.behaviors.registry import rules_of
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.messages import (
     ChannelReport,
@@ -114,7 +115,7 @@ class WorldStatistics:
         joined_fish: fish that joined after the start.
         late_commands: realtime mode: commands that missed their tick.
         live_fish: fish in the world now.
-        mismatched_fish: fish that run another behaviour or version than the world's.
+        mismatched_fish: fish that run another behaviour, version or rules than the world's.
         answer_time_median, answer_time_p90: lockstep and jitter modes: how long the fish
             took to answer a tick — perceptions out to the last command in — median and
             90th percentile over the ticks every fish answered, s (0 before any tick; a tick
@@ -202,7 +203,9 @@ class World:
         self._messages_out = 0
         self._current = _Tick()
         self.mismatched: set[int] = set()
-        """Fish that said they run another behaviour or version than this world's."""
+        """Fish that said they run another behaviour, version or rules than this world's."""
+        self._fish_rules = rules_of(settings.scenario.fish_params())
+        """The rules this world's scenario says its fish decide by (FishAbout.rules)."""
         self._warned: set[str] = set()
         self._slow_steps: set[str] = set()
         """Steps of the simulation that took long once: from then on they run in a worker
@@ -483,8 +486,8 @@ class World:
             self._take_command(key, payload)
 
     def _take_about(self, key: str, payload: bytes) -> None:
-        """Warn, once for each kind of difference, about fish that run another behaviour or
-        another version than this world's."""
+        """Warn, once for each kind of difference, about fish that run another behaviour,
+        version or rules than this world's."""
         about = self.intake.decode(key, payload, FishAbout)
         if about is None or about.run != self.run_id:
             return
@@ -495,6 +498,11 @@ class World:
             )
         if about.version != __version__:
             differences.append(f"run fishswarm {about.version}, this world {__version__}")
+        if about.rules != self._fish_rules:
+            differences.append(
+                f"follow the {about.rules!r} rules, but this world's scenario says "
+                f"{self._fish_rules!r} (--profile, --study-code)"
+            )
         if not differences:
             return
         self.mismatched.update(about.ids.tolist())

@@ -73,3 +73,18 @@ def fish_params(settings: Mapping[str, Any]) -> FishParams:
         pid_gains=family.pid_gains or PidGains(),
         right_when_ahead="homing" in settings.get("study_code", ()),
     )
+
+
+def rules_of(params: FishParams) -> str:
+    """The rules a fish's decisions follow, as text: ``paper``, or the study code's
+    fish-side switches in effect (``lennard-jones``, ``homing``), comma-separated — what a
+    fish actor tells the world, so that a world can warn of fish started with other rules."""
+    switches = [
+        name
+        for name, on in (
+            ("lennard-jones", bool(getattr(params.steering, "study_form", False))),
+            ("homing", params.right_when_ahead),
+        )
+        if on
+    ]
+    return ",".join(switches) or "paper"

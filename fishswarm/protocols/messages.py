@@ -491,6 +491,8 @@ class FishAbout(Message):
         behavior: the behaviour their decisions follow.
         version: the fishswarm version of their actor.
         run: the run of the world they start.
+        rules: ``paper``, or the study code's fish-side switches their decisions follow
+            (e.g. ``lennard-jones,homing``).
     """
 
     type_name: ClassVar[str] = "fish_about"
@@ -498,6 +500,7 @@ class FishAbout(Message):
     behavior: str
     version: str
     run: int = 0
+    rules: str = "paper"
 
     def __post_init__(self) -> None:
         check_array(self, "ids", np.int64, None)
@@ -507,6 +510,7 @@ class FishAbout(Message):
         check_text("behavior", self.behavior)
         check_text("version", self.version)
         check_int("run", self.run)
+        check_text("rules", self.rules)
 
 
 @dataclass(frozen=True, eq=False)

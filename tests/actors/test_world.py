@@ -451,6 +451,33 @@ def test_fish_that_run_another_behaviour_are_named_once_and_counted(
     )
 
 
+def test_fish_started_with_other_study_code_rules_are_named(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # The world runs the study's code; the fish were started with the paper's rules.
+    scenario = Scenario(fish=2, duration=2.0, seed=1, profile="study-code")
+    paper = scenario.replace(profile="paper")
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
+        async with trio.open_nursery() as nursery:
+            fish = FishSettings((0, 1), paper.fish_params(), scenario.keys)
+            await nursery.start(Fish(fish).run, bus)
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    assert world.statistics().mismatched_fish == 2
+    (warning,) = [r.getMessage() for r in caplog.records if "rules" in r.getMessage()]
+    assert warning.endswith(
+        "follow the 'paper' rules, but this world's scenario says 'lennard-jones,homing' "
+        "(--profile, --study-code) (started with other settings?)"
+    )
+
+
 def test_fish_that_run_the_worlds_behaviour_raise_no_warning(
     caplog: pytest.LogCaptureFixture,
 ) -> None:

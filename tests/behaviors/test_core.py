@@ -248,3 +248,15 @@ def test_inbox_of_pads_what_each_fish_heard() -> None:
     assert inbox.values[0, 0].tolist() == [4, 5, 0, 0, 0, 0, 0, 0]
     assert inbox.kind.tolist() == [[1], [0]]
     np.testing.assert_array_equal(inbox.sender[0, 0], [0.1, 0.2, 0.3])
+
+
+def test_the_rules_a_fish_reports_name_its_fish_side_study_code_switches() -> None:
+    from fishswarm.behaviors.registry import rules_of
+    from fishswarm.sim.scenario import Scenario
+
+    assert rules_of(Scenario().fish_params()) == "paper"
+    assert rules_of(Scenario(profile="study-code").fish_params()) == "lennard-jones,homing"
+    assert rules_of(Scenario(study_code=("homing", "drag")).fish_params()) == "homing"
+    # Orbiting has no Lennard-Jones force: only the homing branch applies.
+    orbit = Scenario(behavior="orbit", profile="study-code").fish_params()
+    assert rules_of(orbit) == "homing"

@@ -77,6 +77,7 @@ EXAMPLES: list[Message] = [
     RobotStatus(4, "0.4.0", "formation", "stranded", 0.1, np.zeros(4), False, None, 0.0, 5, 4, 1),
     RobotOrder("stop"),
     FishAbout(np.array([0, 1, 2]), "dispersion", "0.1.0", 7),
+    FishAbout(np.array([4]), "aggregation", "0.1.0", 2, "lennard-jones,homing"),
     RobotOrder("resume", np.array([2, 5])),
     WorldPulse(2**61 + 5, 12, "paused"),
 ]
