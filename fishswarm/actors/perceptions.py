@@ -113,6 +113,8 @@ def _parts(
 ) -> list[NDArray[np.intp]]:
     """Consecutive runs of ``members`` whose fish and rows (``sizes`` each) stay within
     ``limit``; one fish alone is never split (a fish's own rows are far below the limit)."""
+    if members.size <= limit and int(sizes.sum()) <= limit:
+        return [members]  # the usual case: one batch, without a loop over the fish
     parts: list[NDArray[np.intp]] = []
     start, total = 0, 0
     for index, size in enumerate(sizes.tolist()):

@@ -55,6 +55,9 @@ STUDY_GAIN = 100 * 100 * 1e-3
 −γε/r·(12(r_t/r)¹² − 12(r_t/r)⁶)·Δp is in mm with every length in mm; in metres the same
 vector is this gain /r·(…)·Δp with r and Δp in metres (the bracket has no unit)."""
 
+STUDY_FORM_SWITCH = "lennard-jones"
+"""The study-code switch (a scenario's ``study_code``) that selects the study's form."""
+
 STUDY_MIN_DISTANCE = 1e-6
 """The study code clipped distances below 0.001 mm, in metres."""
 
@@ -183,7 +186,7 @@ def dispersion_params(settings: Mapping[str, Any]) -> LennardJonesParams:
 
 
 def _study_form(settings: Mapping[str, Any]) -> bool:
-    return "lennard-jones" in settings.get("study_code", ())
+    return STUDY_FORM_SWITCH in settings.get("study_code", ())
 
 
 AGGREGATION = Behavior(

@@ -13,10 +13,14 @@ from typing import Any
 
 from fishswarm.behaviors.core import Behavior, FishParams
 from fishswarm.behaviors.formation import FORMATION
-from fishswarm.behaviors.lennard_jones import AGGREGATION, DISPERSION
+from fishswarm.behaviors.lennard_jones import AGGREGATION, DISPERSION, STUDY_FORM_SWITCH
 from fishswarm.behaviors.orbit import MILLING, ORBIT, WALTZ
 from fishswarm.behaviors.replica import REPLICA
 from fishswarm.bluebot.control import PidGains
+
+STUDY_HOMING_SWITCH = "homing"
+"""The study-code switch (a scenario's ``study_code``) that selects the study's homing
+branch for a target dead ahead or none (:attr:`FishParams.right_when_ahead`)."""
 
 BEHAVIORS: dict[str, Behavior] = {
     family.name: family
@@ -71,7 +75,7 @@ def fish_params(settings: Mapping[str, Any]) -> FishParams:
         control_period=float(settings.get("control_period", 1.0)),
         caudal_cap=float(settings.get("caudal_cap", 1.0)),
         pid_gains=family.pid_gains or PidGains(),
-        right_when_ahead="homing" in settings.get("study_code", ()),
+        right_when_ahead=STUDY_HOMING_SWITCH in settings.get("study_code", ()),
     )
 
 
@@ -82,8 +86,8 @@ def rules_of(params: FishParams) -> str:
     switches = [
         name
         for name, on in (
-            ("lennard-jones", bool(getattr(params.steering, "study_form", False))),
-            ("homing", params.right_when_ahead),
+            (STUDY_FORM_SWITCH, bool(getattr(params.steering, "study_form", False))),
+            (STUDY_HOMING_SWITCH, params.right_when_ahead),
         )
         if on
     ]

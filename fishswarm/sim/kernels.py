@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fishswarm.bluebot.dynamics import State, drag_coefficients, fin_forces, substeps
+from fishswarm.bluebot.dynamics import State, period_inputs
 from fishswarm.bluebot.parameters import BlueBot, Tank
 from fishswarm.bluebot.vision import Sifted, Vision
 
@@ -81,19 +81,7 @@ def step(state: State, fins: FloatArray, *, duration: float, robot: BlueBot, tan
     Raises:
         ValueError: a negative or infinite duration.
     """
-    if duration < 0 or not math.isfinite(duration):
-        raise ValueError(f"duration must be a finite non-negative time, got {duration}")
-    fins = np.clip(np.asarray(fins, dtype=np.float64), 0.0, 1.0)
-    force, torque = fin_forces(fins, robot)
-    acceleration = np.ascontiguousarray(
-        np.concatenate([force / robot.mass, (torque / robot.inertia)[:, None]], axis=1)
-    )
-    linear, yaw_drag = drag_coefficients(robot)
-    drag = np.append(linear, yaw_drag)
-    dt = substeps(duration, robot.euler_step)
-    velocity = np.ascontiguousarray(
-        np.concatenate([state.body_velocity, state.yaw_rate[:, None]], axis=1)
-    )
+    acceleration, drag, dt, velocity = period_inputs(state, fins, duration, robot)
     position = np.ascontiguousarray(state.position, dtype=np.float64).copy()
     yaw = np.ascontiguousarray(state.yaw, dtype=np.float64).copy()
     _call(
@@ -197,14 +185,16 @@ def in_range(position: FloatArray, visual_range: float) -> tuple[NDArray[np.intp
     key = cell[:, 1] * columns + cell[:, 0]
     order = np.argsort(key, kind="stable").astype(np.intp)
     start = np.searchsorted(key[order], np.arange(columns * rows + 1)).astype(np.intp)
+    grid = (points, visual_range, cell, columns, rows, order, start)
+    # Twice through the columns: first how many each fish has in range (the padded width),
+    # then who they are.
     found = np.zeros(count, dtype=np.int64)
-    _call(_count_in_range(), points, visual_range, cell, columns, rows, order, start, found)
+    none = np.zeros((count, 0), dtype=np.intp)
+    _call(_scan_in_range(), *grid, found, none, np.zeros((count, 0)))
     width = int(found.max(initial=0))
     index = np.full((count, width), -1, dtype=np.intp)
     distance = np.full((count, width), np.inf)
-    _call(
-        _fill_in_range(), points, visual_range, cell, columns, rows, order, start, index, distance
-    )
+    _call(_scan_in_range(), *grid, found, index, distance)
     return index, distance
 
 
@@ -321,12 +311,14 @@ def _sift() -> Callable[..., None]:
 
 
 @functools.cache
-def _count_in_range() -> Callable[..., None]:
-    """How many others each fish has in range (compiled on first use, cached on disk)."""
+def _scan_in_range() -> Callable[..., None]:
+    """Each fish's others in range from the nine columns around it: their count, and with
+    room in ``index`` (its width), who they are, nearest first (compiled on first use,
+    cached on disk)."""
     import numba
 
     @numba.njit(parallel=True, cache=True, nogil=True)
-    def count_all(
+    def scan_all(
         points: Any,
         reach: float,
         cell: Any,
@@ -335,40 +327,6 @@ def _count_in_range() -> Callable[..., None]:
         order: Any,
         start: Any,
         found: Any,
-    ) -> None:
-        for fish in numba.prange(points.shape[0]):
-            total = 0
-            for row in range(max(cell[fish, 1] - 1, 0), min(cell[fish, 1] + 2, rows)):
-                for column in range(max(cell[fish, 0] - 1, 0), min(cell[fish, 0] + 2, columns)):
-                    bucket = row * columns + column
-                    for slot in range(start[bucket], start[bucket + 1]):
-                        other = order[slot]
-                        if other == fish:
-                            continue
-                        dx = points[other, 0] - points[fish, 0]
-                        dy = points[other, 1] - points[fish, 1]
-                        dz = points[other, 2] - points[fish, 2]
-                        if math.sqrt(dx * dx + dy * dy + dz * dz) <= reach:
-                            total += 1
-            found[fish] = total
-
-    return count_all
-
-
-@functools.cache
-def _fill_in_range() -> Callable[..., None]:
-    """Each fish's others in range, nearest first (compiled on first use, cached on disk)."""
-    import numba
-
-    @numba.njit(parallel=True, cache=True, nogil=True)
-    def fill_all(
-        points: Any,
-        reach: float,
-        cell: Any,
-        columns: int,
-        rows: int,
-        order: Any,
-        start: Any,
         index: Any,
         distance: Any,
     ) -> None:
@@ -387,8 +345,12 @@ def _fill_in_range() -> Callable[..., None]:
                         dy = points[other, 1] - points[fish, 1]
                         dz = points[other, 2] - points[fish, 2]
                         if math.sqrt(dx * dx + dy * dy + dz * dz) <= reach:
-                            others[total] = other
+                            if width:
+                                others[total] = other
                             total += 1
+            found[fish] = total
+            if not width:
+                continue
             # Index order first, then a stable sort by distance: ties go by index.
             chosen = np.sort(others[:total])
             gaps = np.empty(total)
@@ -403,7 +365,7 @@ def _fill_in_range() -> Callable[..., None]:
                 index[fish, k] = chosen[ranked[k]]
                 distance[fish, k] = gaps[ranked[k]]
 
-    return fill_all
+    return scan_all
 
 
 @functools.cache

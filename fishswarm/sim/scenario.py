@@ -20,8 +20,17 @@ from numpy.typing import NDArray
 
 from fishswarm.behaviors.core import FishParams
 from fishswarm.behaviors.formation import DEFAULT_LEAD
-from fishswarm.behaviors.lennard_jones import LennardJonesParams, steer_lennard_jones
-from fishswarm.behaviors.registry import behavior_named, fish_params, names
+from fishswarm.behaviors.lennard_jones import (
+    STUDY_FORM_SWITCH,
+    LennardJonesParams,
+    steer_lennard_jones,
+)
+from fishswarm.behaviors.registry import (
+    STUDY_HOMING_SWITCH,
+    behavior_named,
+    fish_params,
+    names,
+)
 from fishswarm.bluebot.control import CONTROLLERS
 from fishswarm.bluebot.parameters import BlueBot, Tank
 from fishswarm.bluebot.vision import Vision
@@ -34,10 +43,10 @@ VISION_MODELS = ("geometric", "camera")
 STUDY_CODE_SWITCHES = {
     "euler-step": "Euler step 0.1 s, yaw turned by the rate before each substep's update",
     "drag": "backward drag 1.0, lateral and yaw drag growing with forward speed",
-    "lennard-jones": "the force times the unscaled relative position, gamma*epsilon = 100*100 "
-    "in mm",
-    "homing": "a target straight ahead or absent drives the right pectoral fin (a lone fish "
-    "circles)",
+    STUDY_FORM_SWITCH: "the force times the unscaled relative position, gamma*epsilon = "
+    "100*100 in mm",
+    STUDY_HOMING_SWITCH: "a target straight ahead or absent drives the right pectoral fin (a "
+    "lone fish circles)",
     "manhattan": "neighbours linked within the visual range as |dx|+|dy|+|dz|",
     "start-delay": "fish are held still for the first two control periods",
     "side-settings": "the experiments' other vision setting: a 50-mm sphere in the blind-spot "
