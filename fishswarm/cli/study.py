@@ -19,7 +19,7 @@ from fishswarm.sim.scenario import (
 )
 
 if TYPE_CHECKING:
-    from fishswarm.study.metrics import OrbitTarget
+    from fishswarm.study.metrics import FormationTarget, OrbitTarget
     from fishswarm.study.recording import Recording
     from fishswarm.study.sweep import Engine
 
@@ -207,10 +207,26 @@ def _orbit_of(settings: dict[str, Any]) -> OrbitTarget | None:
         return None
 
 
+def _formation_of(settings: dict[str, Any]) -> FormationTarget | None:
+    """The target of a recorded formation run (None for other runs, and for recordings
+    that do not say what ran)."""
+    from fishswarm.study.metrics import formation_target_of
+
+    try:
+        return formation_target_of(Scenario.from_mapping(settings, source="the recording"))
+    except ConfigError:
+        return None
+
+
 def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm plot RECORDING``."""
     from fishswarm.study.figures import FiguresUnavailable, run_figure
-    from fishswarm.study.metrics import METRIC_NAMES, ORBIT_METRIC_NAMES, OrbitTracker
+    from fishswarm.study.metrics import (
+        FORMATION_METRIC_NAMES,
+        METRIC_NAMES,
+        ORBIT_METRIC_NAMES,
+        OrbitTracker,
+    )
 
     out = args.out or args.recording.with_suffix(".png")
     if out.suffix not in (".png", ".svg", ".pdf"):
@@ -223,6 +239,10 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     }
     settings = recording.scenario
     orbit = _orbit_of(settings)
+    formation = _formation_of(settings)
+    if formation is not None:
+        series = [formation.metrics(s.position) for s in recording.snapshots]
+        metrics |= {name: np.array([m[name] for m in series]) for name in FORMATION_METRIC_NAMES}
     if orbit is not None:
         # From the positions, so that recordings made before the observer measured orbits
         # are drawn the same way.
@@ -236,7 +256,10 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     try:
         tank = _tank_of(settings, arrays["pos"])
-        figure = run_figure(arrays["t"], arrays["pos"], metrics, tank, title=title, orbit=orbit)
+        figure = run_figure(
+            arrays["t"], arrays["pos"], metrics, tank, title=title, orbit=orbit,
+            formation=formation,
+        )  # fmt: skip
         figure.savefig(out, dpi=110)
     except FiguresUnavailable as error:
         raise ConfigError(str(error)) from None
@@ -285,6 +308,7 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
             fps=args.fps,
             title=f"{settings.get('fish', '?')} fish, {settings.get('behavior', '?')}",
             on_frame=show,
+            formation=_formation_of(settings),
         )
     except AnimationError as error:
         raise ConfigError(str(error)) from None

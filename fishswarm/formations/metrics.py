@@ -15,6 +15,7 @@ Base station only (scipy): nothing a robot runs imports this module.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -25,6 +26,8 @@ from scipy.spatial.distance import cdist, pdist
 from fishswarm.bluebot.parameters import BODY_LENGTH
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
 
 LATTICE_RANGE = 1.2
 """Pairs closer than this many spacings are neighbours in the α-lattice energy."""
@@ -76,25 +79,52 @@ def _kabsch(moving: FloatArray, fixed: FloatArray) -> tuple[FloatArray, FloatArr
     return rotation, fixed_centre - moving_centre @ rotation
 
 
-def shape_error(
-    position: FloatArray, target: FloatArray, *, tolerance: float, starts: int = 12
-) -> tuple[float, float]:
-    """RMS distance of N fish from N slots after the best rigid motion and assignment, and
-    the fraction of fish then within ``tolerance`` of their slot.
+@dataclass(frozen=True)
+class Alignment:
+    """A target shape moved onto a school by the best rigid motion and assignment.
+
+    Attributes:
+        slots: (N, 3) where each of the target's slots lands (in the target's order), in the
+            school's frame, m.
+        slot_of: (N,) the slot each fish is assigned to (an index into the target's rows).
+        gaps: (N,) each fish's distance from its slot, m.
+    """
+
+    slots: FloatArray
+    slot_of: IntArray
+    gaps: FloatArray
+
+    @property
+    def rms(self) -> float:
+        """The RMS distance of the fish from their slots, m."""
+        return float(np.sqrt(np.mean(self.gaps**2))) if self.gaps.size else 0.0
+
+    def joined(self, tolerance: float) -> BoolArray:
+        """(N,) which fish are within ``tolerance`` of their slot."""
+        result: BoolArray = self.gaps <= tolerance
+        return result
+
+
+def align(position: FloatArray, target: FloatArray, *, starts: int = 12) -> Alignment:
+    """The best rigid motion (no mirror) and assignment of N slots to N fish.
+
+    The alignment is iterated (assign by the Hungarian method, then turn and shift by
+    Kabsch) from ``starts`` turns about the vertical; the smallest RMS distance wins.
 
     Args:
         position: (N, 3) the fish, m.
         target: (N, 3) the target shape in any frame, m.
-        tolerance: a fish this close to its slot has joined, m.
-        starts: starting turns about the vertical tried (the alignment is iterated from
-            each; the best result counts).
+        starts: starting turns about the vertical tried.
+
+    Raises:
+        ValueError: as many fish as slots are needed.
     """
     count = position.shape[0]
     if count != target.shape[0]:
         raise ValueError(f"{count} fish against a target of {target.shape[0]} slots")
     if count == 1:
-        return 0.0, 1.0
-    best = (math.inf, 0.0)
+        return Alignment(position.copy(), np.zeros(1, dtype=np.int64), np.zeros(1))
+    best: Alignment | None = None
     centred = target - target.mean(axis=0)
     for turn in np.linspace(0.0, 2 * math.pi, starts, endpoint=False):
         c, s = math.cos(turn), math.sin(turn)
@@ -109,10 +139,27 @@ def shape_error(
             moved = aligned
         rows, columns = linear_sum_assignment(cdist(position, moved))
         gaps = np.linalg.norm(position[rows] - moved[columns], axis=1)
-        rms = float(np.sqrt(np.mean(gaps**2)))
-        if rms < best[0]:
-            best = (rms, float(np.mean(gaps <= tolerance)))
+        candidate = Alignment(moved, columns.astype(np.int64), gaps)
+        if best is None or candidate.rms < best.rms:
+            best = candidate
+    assert best is not None
     return best
+
+
+def shape_error(
+    position: FloatArray, target: FloatArray, *, tolerance: float, starts: int = 12
+) -> tuple[float, float]:
+    """RMS distance of N fish from N slots after the best rigid motion and assignment
+    (:func:`align`), and the fraction of fish then within ``tolerance`` of their slot.
+
+    Args:
+        position: (N, 3) the fish, m.
+        target: (N, 3) the target shape in any frame, m.
+        tolerance: a fish this close to its slot has joined, m.
+        starts: starting turns about the vertical tried.
+    """
+    fit = align(position, target, starts=starts)
+    return fit.rms, float(np.mean(fit.joined(tolerance)))
 
 
 def ideal_local_shape(shape: str, *, spacing: float) -> FloatArray:
@@ -129,23 +176,29 @@ def ideal_local_shape(shape: str, *, spacing: float) -> FloatArray:
     raise ValueError(f"no local shape {shape!r}")
 
 
-def local_shape_error(
-    position: FloatArray, shape: str, *, spacing: float, tolerance: float
-) -> tuple[float, float]:
-    """How well every fish completes its local shape with its nearest neighbours: the mean
-    over fish of the RMS error of the group (the fish and its k nearest) after the best
-    rigid alignment to the ideal shape, and the fraction of fish whose group is within
-    ``tolerance`` (RMS)."""
+def local_shape_errors(position: FloatArray, shape: str, *, spacing: float) -> FloatArray:
+    """(N,) each fish's local-shape error: the RMS error of its group (the fish and its k
+    nearest neighbours) after the best rigid alignment to the ideal shape, m (NaN for all
+    when there are no more than k fish)."""
     ideal = ideal_local_shape(shape, spacing=spacing)
     k = ideal.shape[0] - 1
     count = position.shape[0]
     if count <= k:
-        return math.nan, 0.0
+        return np.full(count, math.nan)
     apart = cdist(position, position)
     nearest = np.argsort(apart, axis=1, kind="stable")[:, : k + 1]  # itself first
-    errors = np.array(
-        [shape_error(position[group], ideal, tolerance=tolerance, starts=4)[0] for group in nearest]
-    )
+    return np.array([align(position[group], ideal, starts=4).rms for group in nearest])
+
+
+def local_shape_error(
+    position: FloatArray, shape: str, *, spacing: float, tolerance: float
+) -> tuple[float, float]:
+    """How well every fish completes its local shape with its nearest neighbours: the mean
+    over fish of :func:`local_shape_errors`, and the fraction of fish whose group is within
+    ``tolerance`` (RMS)."""
+    errors = local_shape_errors(position, shape, spacing=spacing)
+    if errors.size == 0 or np.isnan(errors).all():
+        return math.nan, 0.0
     return float(errors.mean()), float(np.mean(errors <= tolerance))
 
 

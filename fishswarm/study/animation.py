@@ -22,6 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.bluebot.vision import Vision, perceive
+from fishswarm.study.figures import ROLE_COLOURS, role_colours
+from fishswarm.study.metrics import FormationTarget
 from fishswarm.study.progress import ids_text
 
 FloatArray = NDArray[np.float64]
@@ -129,6 +131,7 @@ def animate(
     fps: int = 10,
     title: str = "",
     on_frame: Callable[[int, int], None] | None = None,
+    formation: FormationTarget | None = None,
 ) -> Path:
     """Write an animation of the run to ``out`` (.gif or .mp4).
 
@@ -141,6 +144,8 @@ def animate(
         fps: frames per second of the animation.
         title: shown above the views.
         on_frame: called with (frame number, frames in all) as frames are drawn.
+        formation: the target of a formation run: fish coloured by role and joined state,
+            the target laid onto them in the flat views.
 
     Raises:
         AnimationError: unknown format, the viewer is not in the run, or a tool is missing.
@@ -152,7 +157,9 @@ def animate(
         raise AnimationError(f"fish {viewer} is not in the recording (fish: {ids_text(ids)})")
     plt, animation = _matplotlib()
     writer = _writer(animation, out, fps)
-    figure, draw = animation_figure(frames, tank=tank, vision=vision, viewer=viewer, title=title)
+    figure, draw = animation_figure(
+        frames, tank=tank, vision=vision, viewer=viewer, title=title, formation=formation
+    )
     count = frames.t.size
     with writer.saving(figure, str(out), dpi=figure.dpi):
         for frame in range(count):
@@ -165,13 +172,20 @@ def animate(
 
 
 def animation_figure(
-    frames: Frames, *, tank: Sequence[float], vision: Vision, viewer: int, title: str = ""
+    frames: Frames,
+    *,
+    tank: Sequence[float],
+    vision: Vision,
+    viewer: int,
+    title: str = "",
+    formation: FormationTarget | None = None,
 ) -> tuple[Any, Callable[[int], None]]:
     """The animation's figure and a function that draws frame k into it.
 
     Four views: from above and from the side (flat, so that their axes read like a plan and
     an elevation), a camera circling the tank (3-D), and through the eyes of fish ``viewer``
-    (drawn red in the other views).
+    (drawn red in the other views). A formation's fish are coloured by role and joined state
+    (:data:`fishswarm.study.figures.ROLE_COLOURS`), its target drawn as hollow circles.
     """
     plt, _ = _matplotlib()
     ids = frames.ids.tolist()
@@ -190,6 +204,18 @@ def animation_figure(
     circling.set_title("circling", fontsize=10)
     eye = figure.add_subplot(grid[1, 1])
     _eye_axes(eye)
+    if formation is not None:
+        from matplotlib.lines import Line2D
+
+        above.legend(
+            handles=[
+                Line2D([], [], marker="o", linestyle="none", color=colour, label=role)
+                for role, colour in ROLE_COLOURS.items()
+            ],
+            fontsize=7,
+            loc="lower right",
+            framealpha=0.8,
+        )
     column = ids.index(viewer)
     count = frames.t.size
     drawn: list[Any] = []
@@ -204,10 +230,19 @@ def animation_figure(
         present = ~np.isnan(position[:, 0])
         mine = int(present[:column].sum()) if present[column] else None
         here, heading = position[present], yaw[present]
-        drawn.append(_flat_arrows(above, here[:, 0], here[:, 1], heading, mine))
+        colours = _colours(here.shape[0])
+        if formation is not None:
+            roles = formation.roles(here)
+            colours = role_colours(roles.joined, roles.leader)
+            if roles.slots is not None:
+                drawn.append(_hollow(above, roles.slots[:, 0], roles.slots[:, 1]))
+                drawn.append(_hollow(side, roles.slots[:, 0], roles.slots[:, 2]))
+        if mine is not None:
+            colours[mine] = "tab:red"
+        drawn.append(_flat_arrows(above, here[:, 0], here[:, 1], heading, colours))
         # From the side (looking along +y) a fish shows how far it swims along x.
-        drawn.append(_flat_arrows(side, here[:, 0], here[:, 2], heading, mine, side=True))
-        drawn.append(_arrows(circling, here, heading, highlight=mine))
+        drawn.append(_flat_arrows(side, here[:, 0], here[:, 2], heading, colours, side=True))
+        drawn.append(_arrows(circling, here, heading, colours=colours))
         circling.view_init(elev=25.0, azim=-60.0 + 360.0 * frame / max(count, 1))
         drawn.extend(_eye(eye, here, heading, mine, vision, viewer))
         figure.suptitle(f"{title}   t = {frames.t[frame]:5.1f} s")
@@ -232,11 +267,8 @@ def _tank_axes(ax: Any, tank: Sequence[float]) -> None:
     ax.tick_params(labelsize=7, pad=0)
 
 
-def _colours(count: int, highlight: int | None) -> list[str]:
-    colours = ["tab:blue"] * count
-    if highlight is not None:
-        colours[highlight] = "tab:red"
-    return colours
+def _colours(count: int) -> list[str]:
+    return ["tab:blue"] * count
 
 
 def _flat_arrows(
@@ -244,7 +276,7 @@ def _flat_arrows(
     x: FloatArray,
     y: FloatArray,
     yaw: FloatArray,
-    highlight: int | None,
+    colours: list[str],
     *,
     side: bool = False,
 ) -> Any:
@@ -257,7 +289,7 @@ def _flat_arrows(
         y,
         u,
         v,
-        color=_colours(x.size, highlight),
+        color=colours,
         angles="xy",
         scale_units="xy",
         scale=1.0,
@@ -268,7 +300,12 @@ def _flat_arrows(
     )
 
 
-def _arrows(ax: Any, position: FloatArray, yaw: FloatArray, *, highlight: int | None) -> Any:
+def _hollow(ax: Any, x: FloatArray, y: FloatArray) -> Any:
+    """A formation's target slots as hollow circles."""
+    return ax.scatter(x, y, s=50, facecolors="none", edgecolors="black", linewidths=0.7)
+
+
+def _arrows(ax: Any, position: FloatArray, yaw: FloatArray, *, colours: list[str]) -> Any:
     return ax.quiver(
         position[:, 0],
         position[:, 1],
@@ -277,7 +314,7 @@ def _arrows(ax: Any, position: FloatArray, yaw: FloatArray, *, highlight: int | 
         np.sin(yaw),
         np.zeros_like(yaw),
         length=1.5 * ARROW_LENGTH,  # the 3-D view is the smallest: a little longer
-        colors=_colours(position.shape[0], highlight),
+        colors=colours,
         linewidth=2.0,
         arrow_length_ratio=0.45,
         normalize=True,

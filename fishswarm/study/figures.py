@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.study.experiment import METRIC_LABELS
-from fishswarm.study.metrics import OrbitTarget, orbit_target_of
+from fishswarm.study.metrics import FormationTarget, OrbitTarget, orbit_target_of
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -112,16 +112,22 @@ def run_figure(
     *,
     title: str,
     orbit: OrbitTarget | None = None,
+    formation: FormationTarget | None = None,
 ) -> Figure:
     """One run: tracks from above and from the side, and every metric over time (for
-    circling fish, given ``orbit``: the post and R drawn, radius, revolutions and speed)."""
+    circling fish, given ``orbit``: the post and R drawn, radius, revolutions and speed;
+    for a formation, given ``formation``: the fish at the end coloured by role and joined
+    state, the target laid onto them, shape error, joined fraction and collisions)."""
     plt = _pyplot()
     figure = plt.figure(figsize=(12, 7), layout="constrained")
-    if orbit is not None:
-        _orbit_panels(figure, t, position, metrics, tank, orbit)
+    if orbit is not None or formation is not None:
+        if orbit is not None:
+            _orbit_panels(figure, t, position, metrics, tank, orbit)
+        elif formation is not None:
+            _formation_panels(figure, t, position, metrics, tank, formation)
         figure.suptitle(title)
-        orbit_figure: Figure = figure
-        return orbit_figure
+        special: Figure = figure
+        return special
     grid = figure.add_gridspec(2, 2, width_ratios=(1.3, 1))
     overhead = figure.add_subplot(grid[0, 0])
     side = figure.add_subplot(grid[1, 0])
@@ -174,6 +180,85 @@ def _orbit_panels(
     speed = figure.add_subplot(grid[2, 1])
     speed.plot(t, metrics["speed"], color="tab:orange")
     speed.set(xlabel="time (s)", ylabel=METRIC_LABELS["speed"])
+
+
+ROLE_COLOURS = {"joined": "tab:green", "seeking": "tab:orange", "leader": "tab:purple"}
+"""How fish in a formation are coloured: in their place, still seeking one, the leader."""
+
+
+def role_colours(joined: NDArray[np.bool_], leader: NDArray[np.bool_]) -> list[str]:
+    """Each fish's colour by its role in a formation (:data:`ROLE_COLOURS`)."""
+    return [
+        ROLE_COLOURS["leader" if lead else "joined" if inside else "seeking"]
+        for inside, lead in zip(joined.tolist(), leader.tolist(), strict=True)
+    ]
+
+
+def draw_formation(
+    overhead: Axes, side: Axes, position: FloatArray, formation: FormationTarget
+) -> list[Any]:
+    """The fish of one moment (N, 3) coloured by role, and the target's slots laid onto
+    them (hollow circles), from above and from the side; returns the artists drawn."""
+    here = position[~np.isnan(position[:, 0])]
+    roles = formation.roles(here)
+    colours = role_colours(roles.joined, roles.leader)
+    drawn: list[Any] = []
+    if roles.slots is not None:
+        for ax, (a, b) in ((overhead, (0, 1)), (side, (0, 2))):
+            drawn.append(
+                ax.scatter(
+                    roles.slots[:, a], roles.slots[:, b], s=60, facecolors="none",
+                    edgecolors="black", linewidths=0.8, zorder=3,
+                )
+            )  # fmt: skip
+    for ax, (a, b) in ((overhead, (0, 1)), (side, (0, 2))):
+        drawn.append(ax.scatter(here[:, a], here[:, b], s=22, c=colours, zorder=4))
+    return drawn
+
+
+def _formation_panels(
+    figure: Figure,
+    t: FloatArray,
+    position: FloatArray,
+    metrics: dict[str, FloatArray],
+    tank: Sequence[float],
+    formation: FormationTarget,
+) -> None:
+    from matplotlib.lines import Line2D
+
+    grid = figure.add_gridspec(3, 2, width_ratios=(1.3, 1))
+    overhead = figure.add_subplot(grid[0:2, 0])
+    side = figure.add_subplot(grid[2, 0])
+    draw_tracks(overhead, side, position, tank, title="from above; the fish at the end")
+    side.set_title("from the side", fontsize=9)
+    draw_formation(overhead, side, position[-1], formation)
+    key = [
+        _key_entry("o", "start", markersize=4),
+        *(
+            Line2D([], [], marker="o", linestyle="none", color=colour, label=role)
+            for role, colour in ROLE_COLOURS.items()
+            if role != "leader" or formation.slots is not None
+        ),
+    ]
+    if formation.slots is not None:
+        key.append(
+            Line2D([], [], marker="o", linestyle="none", markerfacecolor="none",
+                   markeredgecolor="black", label="target, best fit")
+        )  # fmt: skip
+    overhead.legend(handles=key, fontsize=7, loc="lower right", framealpha=0.8)
+    error = figure.add_subplot(grid[0, 1])
+    error.plot(t, metrics["shape_error"], color="tab:blue")
+    error.axhline(formation.tolerance, color="red", linestyle="--", linewidth=0.8,
+                  label="tolerance")  # fmt: skip
+    error.set(xlabel="time (s)", ylabel=METRIC_LABELS["shape_error"])
+    error.legend(fontsize=8)
+    joined = figure.add_subplot(grid[1, 1])
+    joined.plot(t, 100 * metrics["joined_fraction"], color="tab:green")
+    joined.axhline(90, color="grey", linestyle=":", linewidth=0.8)
+    joined.set(xlabel="time (s)", ylabel="in their places (%)", ylim=(-2, 102))
+    crowded = figure.add_subplot(grid[2, 1])
+    crowded.plot(t, metrics["collisions"], color="tab:red")
+    crowded.set(xlabel="time (s)", ylabel=METRIC_LABELS["collisions"])
 
 
 def experiment_figures(

@@ -16,9 +16,11 @@ from fishswarm.behaviors.formation import FormationParams
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.formations.maps import target_map
 from fishswarm.formations.metrics import (
+    align,
     collisions,
     deviation_energy,
     local_shape_error,
+    local_shape_errors,
     shape_error,
 )
 from fishswarm.sim import kernels
@@ -252,18 +254,22 @@ class FormationTarget:
         spacing: distance between neighbouring places, m.
         tolerance: a fish this close to its slot has joined, m.
         local_shape: the local shape measured around every fish (None for a global map).
+        orientation: the formation's forward, rad in the tank frame (yaw).
     """
 
     slots: FloatArray | None
     spacing: float
     tolerance: float
     local_shape: str | None = None
+    orientation: float = 0.0
 
     def metrics(self, position: FloatArray) -> dict[str, float]:
         """The formation metrics of one snapshot. A global map: the school against its
         first N slots. A local shape: every fish's group (it and its nearest neighbours)
         against the ideal shape, errors averaged over fish; joined when within tolerance."""
         count = position.shape[0]
+        if count == 0:
+            return dict.fromkeys(FORMATION_METRIC_NAMES, math.nan)
         if self.local_shape is not None:
             rms, joined = local_shape_error(
                 position, self.local_shape, spacing=self.spacing, tolerance=self.tolerance
@@ -281,6 +287,45 @@ class FormationTarget:
             "collisions": float(collisions(position)),
         }
 
+    def roles(self, position: FloatArray) -> FormationRoles:
+        """Who holds which place in one snapshot (N, 3), as an observer sees it from the
+        positions alone (fish do not report their slots to observers): joined fish are within
+        the tolerance of their slot of the aligned map (a local shape: their group within the
+        tolerance); the leader, by the study's rule, is the fish furthest along the
+        formation's orientation (a global map's; a local shape has none)."""
+        count = position.shape[0]
+        if self.local_shape is not None:
+            errors = local_shape_errors(position, self.local_shape, spacing=self.spacing)
+            joined = ~np.isnan(errors) & (errors <= self.tolerance)
+            return FormationRoles(joined, np.zeros(count, dtype=np.bool_), None)
+        assert self.slots is not None
+        if self.slots.shape[0] < count or count == 0:
+            return FormationRoles(
+                np.zeros(count, dtype=np.bool_), np.zeros(count, dtype=np.bool_), None
+            )
+        fit = align(position, self.slots[:count], starts=6)
+        along = position[:, :2] @ np.array([math.cos(self.orientation), math.sin(self.orientation)])
+        leader = np.zeros(count, dtype=np.bool_)
+        leader[np.argmax(along)] = True
+        return FormationRoles(fit.joined(self.tolerance), leader, fit.slots)
+
+
+@dataclass(frozen=True)
+class FormationRoles:
+    """Who is where in a formation at one moment.
+
+    Attributes:
+        joined: (N,) fish within the tolerance of their place.
+        leader: (N,) the fish furthest along a global map's orientation (none for a local
+            shape).
+        slots: (N, 3) the map's slots laid onto the school by the best rigid motion, m (None
+            for a local shape).
+    """
+
+    joined: NDArray[np.bool_]
+    leader: NDArray[np.bool_]
+    slots: FloatArray | None
+
 
 def formation_target_of(scenario: Scenario) -> FormationTarget | None:
     """The target of a formation run (None for other runs)."""
@@ -292,7 +337,7 @@ def formation_target_of(scenario: Scenario) -> FormationTarget | None:
     if params.is_local:
         return FormationTarget(None, params.spacing, params.tolerance, params.shape)
     slots = target_map(params.shape, scenario.fish, spacing=params.spacing)
-    return FormationTarget(slots, params.spacing, params.tolerance)
+    return FormationTarget(slots, params.spacing, params.tolerance, orientation=params.orientation)
 
 
 def formation_summary(times: list[float], series: list[dict[str, float]]) -> dict[str, Any]:

@@ -51,3 +51,24 @@ def test_lattice_energy_and_collisions() -> None:
     assert deviation_energy(stretched, spacing=0.3) == pytest.approx(0.01)  # 10 % off
     assert deviation_energy(lattice * 10, spacing=0.3) == 1.0
     assert collisions(np.array([[0.0, 0, 0], [0.1, 0, 0], [0.5, 0, 0]])) == 1  # 0.1 < 0.13
+
+
+def test_alignment_lays_a_drawn_triangle_onto_fish_that_hold_it_turned_and_shuffled() -> None:
+    from fishswarm.formations.metrics import align
+
+    # Target: a right triangle (0,0), (0.4,0), (0,0.3). The fish hold it turned by 90°
+    # anticlockwise and shifted to (1, 1): (1,1), (1,1.4), (0.7,1); listed in another order.
+    target = np.array([[0.0, 0, 0], [0.4, 0, 0], [0.0, 0.3, 0]])
+    fish = np.array([[0.7, 1.0, 0.5], [1.0, 1.0, 0.5], [1.0, 1.4, 0.5]])
+    fit = align(fish, target)
+    assert fit.slot_of.tolist() == [2, 0, 1]
+    np.testing.assert_allclose(fit.slots[fit.slot_of], fish, atol=1e-9)
+    np.testing.assert_allclose(fit.gaps, 0.0, atol=1e-9)
+    # One fish 0.1 m off its place along z: the best fit splits the miss over the three
+    # (the plane may tilt and shift), and only a tolerance below the miss leaves it out.
+    off = fish + np.array([[0.0, 0, 0], [0.0, 0, 0.1], [0.0, 0, 0]])
+    fit = align(off, target)
+    assert 0.0 < fit.rms < 0.1 / math.sqrt(3) + 1e-12
+    assert fit.joined(0.1).all() and not fit.joined(1e-6).all()
+    with pytest.raises(ValueError, match="3 fish against a target of 2 slots"):
+        align(fish, target[:2])

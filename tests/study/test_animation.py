@@ -82,6 +82,36 @@ def test_the_animation_views_read_like_a_plan_an_elevation_and_a_camera() -> Non
     np.testing.assert_allclose(edge_on.U, [ARROW_LENGTH, 0.0], atol=1e-12)
 
 
+def test_formation_frames_show_roles_and_the_target() -> None:
+    pytest.importorskip("matplotlib")
+    from fishswarm.formations.maps import target_map
+    from fishswarm.study.figures import ROLE_COLOURS
+    from fishswarm.study.metrics import FormationTarget
+
+    slots = target_map("pyramid", 3, spacing=0.3)
+    placed = slots + np.array([1.0, 1.0, 0.5])
+    position = np.stack([placed, placed])
+    frames = resample(
+        np.array([0.0, 1.0]), position, np.zeros((2, 3)), np.array([1, 2, 3]), step=1.0
+    )
+    figure, draw = animation_figure(
+        frames, tank=(1.78, 1.78, 1.17), vision=Vision(), viewer=3, title="f",
+        formation=FormationTarget(slots, 0.3, 0.05),
+    )  # fmt: skip
+    draw(1)
+    above = figure.axes[0]
+    hollow, arrows = above.collections
+    np.testing.assert_allclose(
+        np.sort(hollow.get_offsets(), axis=0), np.sort(placed[:, :2], axis=0), atol=1e-9
+    )
+    to_rgba = matplotlib_colors().to_rgba
+    # Fish 1 on the apex leads, fish 2 has joined, fish 3 (the viewer) is red.
+    assert [tuple(c) for c in arrows.get_facecolors()] == [
+        to_rgba(ROLE_COLOURS["leader"]), to_rgba(ROLE_COLOURS["joined"]), to_rgba("tab:red"),
+    ]  # fmt: skip
+    assert [t.get_text() for t in above.get_legend().get_texts()] == list(ROLE_COLOURS)
+
+
 def matplotlib_colors() -> Any:
     import matplotlib.colors
 

@@ -82,6 +82,54 @@ def test_a_swarm_runs_figure_keeps_its_distance_panels() -> None:
     ]
 
 
+def test_a_formation_runs_figure_colours_fish_by_role_and_lays_the_target_on_them() -> None:
+    import matplotlib.colors
+
+    from fishswarm.formations.maps import target_map
+    from fishswarm.study.figures import ROLE_COLOURS
+    from fishswarm.study.metrics import FormationTarget
+
+    slots = target_map("pyramid", 6, spacing=0.3)
+    target = FormationTarget(slots, 0.3, 0.1)
+    end = slots + np.array([1.2, 0.9, 0.5])
+    # The last fish is 0.3 m from its slot; the best fit shifts the others by up to 0.075 m
+    # (computed), within the tolerance of 0.1 m.
+    end[5, 1] += 0.3
+    position = np.stack([end + np.array([-0.4, 0.0, 0.0]), end])
+    metrics = {
+        "shape_error": np.array([0.2, 0.05]),
+        "joined_fraction": np.array([0.0, 5 / 6]),
+        "collisions": np.array([1.0, 0.0]),
+    }
+    figure = run_figure(
+        np.arange(2.0), position, metrics, (1.78, 1.78, 1.17), title="f", formation=target
+    )
+    above, side, error, joined, crowded = figure.axes
+    assert _labels(error) == ("time (s)", "shape error (m)")
+    assert len(side.collections) == 2  # the slots and the fish, seen from the side too
+    assert _labels(joined) == ("time (s)", "in their places (%)")
+    np.testing.assert_allclose(joined.get_lines()[0].get_ydata(), [0.0, 500 / 6])
+    assert _labels(crowded) == ("time (s)", "colliding pairs")
+    # The tolerance drawn over the shape error.
+    (tolerance,) = [line for line in error.get_lines() if line.get_label() == "tolerance"]
+    assert list(tolerance.get_ydata()) == [0.1, 0.1]
+    slots_drawn, fish_drawn = above.collections
+    # The target's six slots, hollow, laid onto the fish at the end (five of them nearly).
+    laid = slots_drawn.get_offsets()
+    assert laid.shape == (6, 2) and (slots_drawn.get_facecolors().size == 0)
+    near = np.linalg.norm(laid[:, None, :] - end[None, :, :2], axis=2).min(axis=0)
+    assert (near[:5] < 0.08).all() and near[5] > 0.2
+    # Colours: the apex (furthest along +x) leads, four in their places, one still seeking.
+    rgba = matplotlib.colors.to_rgba
+    colours = [tuple(c) for c in fish_drawn.get_facecolors()]
+    assert colours[0] == rgba(ROLE_COLOURS["leader"])
+    assert colours[1:5] == [rgba(ROLE_COLOURS["joined"])] * 4
+    assert colours[5] == rgba(ROLE_COLOURS["seeking"])
+    assert [text.get_text() for text in above.get_legend().get_texts()] == [
+        "start", "joined", "seeking", "leader", "target, best fit",
+    ]  # fmt: skip
+
+
 def _orbit_experiment(values: tuple[float, ...], seeds: int) -> Experiment:
     return Experiment(
         name="orbit-test",

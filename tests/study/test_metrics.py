@@ -193,3 +193,30 @@ def test_local_shape_error_around_every_fish() -> None:
         assert local_shape_error(ideal, shape, spacing=0.3, tolerance=0.01)[0] < 1e-9
     tetrahedron = ideal_local_shape("tetrahedron", spacing=0.3)
     np.testing.assert_allclose(pdist(tetrahedron), 0.3)
+
+
+def test_formation_roles_as_an_observer_sees_them() -> None:
+    from fishswarm.formations.maps import target_map
+    from fishswarm.study.metrics import FormationTarget
+
+    slots = target_map("pyramid", 10, spacing=0.3)
+    target = FormationTarget(slots, 0.3, 0.05, orientation=0.0)
+    # Ten fish on the pyramid (its apex, slot 0, furthest along +x) shifted to (1, 1, 0.5),
+    # listed backwards; the fish on slot 9 (listed first) is 0.2 m off it: not joined (the
+    # best fit shifts the others by about a tenth of that).
+    placed = slots + np.array([1.0, 1.0, 0.5])
+    fish = placed[::-1].copy()
+    fish[0, 1] += 0.2
+    roles = target.roles(fish)
+    assert np.flatnonzero(roles.leader).tolist() == [9]
+    assert roles.joined.tolist() == [False] + [True] * 9
+    assert roles.slots is not None and roles.slots.shape == (10, 3)
+    # Facing −y, the fish furthest that way leads instead: the back row's end at y = −0.45
+    # (slot 8, listed second).
+    facing = FormationTarget(slots, 0.3, 0.05, orientation=-math.pi / 2).roles(fish)
+    assert np.flatnonzero(facing.leader).tolist() == [1]
+    # A local shape has no leader and no map to lay down; a strip of two triangles joins.
+    h = 0.3 * math.sqrt(3) / 2
+    strip = np.array([[0, 0, 0], [0.3, 0, 0], [0.15, h, 0], [0.45, h, 0]], dtype=np.float64)
+    local = FormationTarget(None, 0.3, 0.02, "triangle").roles(strip)
+    assert local.joined.all() and not local.leader.any() and local.slots is None
