@@ -134,10 +134,11 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
     )
     out = args.out or Path("runs/experiments") / chosen.name
     total = len(chosen.runs())
+    groups = f" for {' and '.join(chosen.group_names)}" if chosen.groups else ""
     print(
         f"fishswarm: {chosen.title}: {chosen.parameter} in "
-        f"{', '.join(f'{v:g}' for v in chosen.values)}, {chosen.seeds} seed(s) each, "
-        f"{total} runs, engine {args.engine}",
+        f"{', '.join(f'{v:g}' for v in chosen.values)}{groups}, {chosen.seeds} seed(s) "
+        f"each, {total} runs, engine {args.engine}",
         file=sys.stderr,
     )
     output = ProgressLine()
@@ -149,7 +150,8 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
         elapsed = time.perf_counter() - started
         left = elapsed / done * (runs - done)
         output.show(
-            f"{bar(done, runs)} run {done}/{runs}  {chosen.parameter}={outcome.value:g} "
+            f"{bar(done, runs)} run {done}/{runs}  {outcome.group + ' ' if outcome.group else ''}"
+            f"{chosen.parameter}={outcome.value:g} "
             f"seed {outcome.seed}  {outcome.wall_time:.1f} s  ~{left:.0f} s left",
             last=done == runs,
         )

@@ -184,6 +184,10 @@ class Scenario:
             f"fish must be a whole number from 1 to 100000, got {self.fish!r}",
         )
         need(
+            isinstance(self.flags, bool),
+            f"flags must be true or false, got {self.flags!r}",
+        )
+        need(
             self.behavior in names(),
             f"behavior must be one of {', '.join(names())}, got {self.behavior!r}",
         )

@@ -2,8 +2,10 @@
 
 An experiment is a TOML file (``experiments/<name>.toml``): an ``[experiment]`` table naming
 the scenario setting to sweep, its values and the number of seeds, and a ``[scenario]``
-table with the study's set-up. This module defines experiments and turns their runs into
-tables and pictures; :mod:`fishswarm.study.sweep` runs them.
+table with the study's set-up. An optional ``[experiment.groups]`` table compares the sweep
+under several named sets of settings (e.g. ``"flags" = {flags = true}``, ``"no flags" =
+{flags = false}``): every group runs every value and seed. This module defines experiments
+and turns their runs into tables and pictures; :mod:`fishswarm.study.sweep` runs them.
 """
 
 from __future__ import annotations
@@ -191,6 +193,9 @@ SWEEPABLE = (
 )
 EXPERIMENTS_FOLDER = Path(__file__).resolve().parent / "experiments"
 
+RunKey = tuple[str, float, int]
+"""One run of an experiment: (group, value, seed)."""
+
 
 @dataclass(frozen=True)
 class Experiment:
@@ -206,6 +211,8 @@ class Experiment:
         scenario: the set-up every run starts from.
         study_settings: the settings the study's code used instead in this experiment
             (its ``[study_code]`` table), applied under the ``side-settings`` switch.
+        groups: named sets of scenario settings compared (each runs every value and seed);
+            none: one unnamed group, the scenario as it is.
     """
 
     name: str
@@ -216,6 +223,7 @@ class Experiment:
     seeds: int
     scenario: Scenario
     study_settings: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    groups: tuple[tuple[str, Mapping[str, Any]], ...] = ()
 
     def __post_init__(self) -> None:
         if self.parameter not in SWEEPABLE:
@@ -227,8 +235,17 @@ class Experiment:
             raise ConfigError(f"experiment {self.name}: values must not be empty")
         if not isinstance(self.seeds, int) or self.seeds < 1:
             raise ConfigError(f"experiment {self.name}: seeds must be at least 1")
-        for value in self.values:
-            self.scenario_for(value, 0)  # every setting must make a valid scenario
+        names = [name for name, _ in self.groups]
+        if len(set(names)) < len(names) or "" in names:
+            raise ConfigError(f"experiment {self.name}: groups need distinct, non-empty names")
+        for group in self.group_names:
+            for value in self.values:
+                self.scenario_for(value, 0, group)  # every setting must make a valid scenario
+
+    @property
+    def group_names(self) -> tuple[str, ...]:
+        """The groups compared, in order (one unnamed group, ``""``, when there are none)."""
+        return tuple(name for name, _ in self.groups) or ("",)
 
     @property
     def orbiting(self) -> bool:
@@ -310,18 +327,35 @@ class Experiment:
         ]
         return np.column_stack([series, study])
 
-    def scenario_for(self, value: float, seed: int) -> Scenario:
-        """The scenario of one run (with the study's own settings under its
-        ``side-settings`` switch; the swept parameter always as given)."""
+    def scenario_for(self, value: float, seed: int, group: str = "") -> Scenario:
+        """The scenario of one run: the group's settings, then the study's own settings
+        under its ``side-settings`` switch; the swept parameter always as given.
+
+        Raises:
+            ConfigError: no such group, or a setting is wrong.
+        """
         kind = int if self.parameter == "fish" else float
         base = self.scenario
+        if group:
+            settings = dict(self.groups).get(group)
+            if settings is None:
+                raise ConfigError(
+                    f"experiment {self.name}: no group {group!r}; groups: "
+                    f"{', '.join(self.group_names)}"
+                )
+            base = base.replace(**settings)
         if "side-settings" in base.study_switches:
             base = base.replace(**self.study_settings)
         return base.replace(**{self.parameter: kind(value), "seed": seed})
 
-    def runs(self) -> list[tuple[float, int]]:
-        """Every (value, seed) pair, value by value."""
-        return [(value, seed) for value in self.values for seed in range(self.seeds)]
+    def runs(self) -> list[RunKey]:
+        """Every (group, value, seed), group by group, then value by value."""
+        return [
+            (group, value, seed)
+            for group in self.group_names
+            for value in self.values
+            for seed in range(self.seeds)
+        ]
 
     def with_changes(
         self,
@@ -354,7 +388,7 @@ class Experiment:
         table = data.get("experiment")
         if not isinstance(table, dict):
             raise ConfigError(f"{path}: needs an [experiment] table (name, parameter, values)")
-        known = {"name", "title", "parameter", "label", "values", "seeds"}
+        known = {"name", "title", "parameter", "label", "values", "seeds", "groups"}
         unknown = sorted(set(table) - known)
         if unknown:
             raise ConfigError(
@@ -380,6 +414,19 @@ class Experiment:
             scenario.replace(**study_settings)
         except (ConfigError, TypeError) as error:
             raise ConfigError(f"{path}: [study_code]: {error}") from None
+        groups = table.get("groups", {})
+        if not isinstance(groups, Mapping) or not all(
+            isinstance(settings, Mapping) for settings in groups.values()
+        ):
+            raise ConfigError(
+                f"{path}: [experiment.groups] must name tables of scenario settings, e.g. "
+                '"no flags" = { flags = false }'
+            )
+        for group, settings in groups.items():
+            try:
+                scenario.replace(**settings)
+            except (ConfigError, TypeError) as error:
+                raise ConfigError(f"{path}: group {group!r}: {error}") from None
         name = str(table["name"])
         return cls(
             name,
@@ -390,6 +437,7 @@ class Experiment:
             table.get("seeds", 5),
             scenario,
             dict(study_settings),
+            tuple((str(group), dict(settings)) for group, settings in groups.items()),
         )
 
 
@@ -430,6 +478,7 @@ class RunOutcome:
     Attributes:
         value: the parameter's value.
         seed: the seed.
+        group: the group it ran in (``""``: the experiment has none).
         t: (T,) times, s.
         metrics: (T, M) the experiment's metric series (:attr:`Experiment.metric_names`).
         position: (T, N, 3) every fish's position, m.
@@ -442,3 +491,4 @@ class RunOutcome:
     metrics: FloatArray
     position: FloatArray
     wall_time: float
+    group: str = ""

@@ -3,6 +3,7 @@ metrics against a swept parameter (matplotlib, the ``viz`` extra)."""
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -294,13 +295,20 @@ def experiment_figures(
     figure, axes = plt.subplots(
         1, len(summaries), figsize=(3.4 * len(summaries), 3.6), layout="constrained"
     )
+    groups = experiment.group_names
     for ax, summary in zip(axes, summaries, strict=True):
-        means = [row[f"{summary.key}_mean"] for row in rows]
-        errors = [row[f"{summary.key}_sd"] for row in rows] if spread else None
-        # At the values themselves: unevenly spaced values are drawn unevenly spaced.
-        ax.errorbar(values, means, yerr=errors, fmt="o-", capsize=4, label="measured")
+        for group in groups:
+            group_rows = [row for row in rows if row.get("group", "") == group]
+            means = [row[f"{summary.key}_mean"] for row in group_rows]
+            errors = [row[f"{summary.key}_sd"] for row in group_rows] if spread else None
+            # At the values themselves: unevenly spaced values are drawn unevenly spaced.
+            ax.errorbar(
+                [row[experiment.parameter] for row in group_rows], means, yerr=errors, fmt="o-",
+                capsize=4, label=group or "measured",
+            )  # fmt: skip
         if summary.key == "radius" and expected is not None:
             ax.plot(values, expected, "--", color="red", linewidth=0.8, label=reference)
+        if (summary.key == "radius" and expected is not None) or len(groups) > 1:
             ax.legend(fontsize=7)
         ax.set_xticks(values, [f"{v:g}" for v in values])
         ax.set_xlabel(experiment.label)
@@ -313,12 +321,18 @@ def experiment_figures(
         1, len(names), figsize=(3.8 * len(names), 3.6), layout="constrained"
     )
     colors = _colors(len(values))
+    styles = ("-", "--", ":", "-.")
     for ax, (column, name) in zip(axes, enumerate(names), strict=True):
-        for color, value in zip(colors, values, strict=True):
-            mine = [o for o in outcomes if o.value == value]
+        for (style, group), (color, value) in itertools.product(
+            zip(itertools.cycle(styles), groups), zip(colors, values, strict=True)
+        ):
+            mine = [o for o in outcomes if o.value == value and o.group == group]
+            if not mine:
+                continue
             stacked = np.array([o.metrics[:, column] for o in mine])
             mean, sd = stacked.mean(axis=0), stacked.std(axis=0)
-            ax.plot(mine[0].t, mean, color=color, label=f"{value:g}")
+            label = f"{group}, {value:g}" if group else f"{value:g}"
+            ax.plot(mine[0].t, mean, color=color, linestyle=style, label=label)
             if spread:
                 ax.fill_between(mine[0].t, mean - sd, mean + sd, color=color, alpha=0.15)
         if name == "radius" and expected is not None:
@@ -340,19 +354,27 @@ def experiment_figures(
     paths.append(_save(figure, folder / "metrics_over_time.png"))
 
     tank = experiment.scenario.tank
+    shown = [
+        (group, value)
+        for group, value in itertools.product(groups, values)
+        if any(o.value == value and o.group == group for o in outcomes)
+    ]
     figure, axes = plt.subplots(
-        2, len(values), figsize=(3.2 * len(values), 5.2), layout="constrained", squeeze=False
+        2, len(shown), figsize=(3.2 * len(shown), 5.2), layout="constrained", squeeze=False
     )
-    for column, value in enumerate(values):
-        first = min((o for o in outcomes if o.value == value), key=lambda o: o.seed)
+    for column, (group, value) in enumerate(shown):
+        first = min(
+            (o for o in outcomes if o.value == value and o.group == group), key=lambda o: o.seed
+        )
+        title = f"{experiment.label.split(' (')[0]} = {value:g}, seed {first.seed}"
         draw_tracks(
             axes[0, column],
             axes[1, column],
             first.position,
             tank,
-            title=f"{experiment.label.split(' (')[0]} = {value:g}, seed {first.seed}",
+            title=f"{group}: {title}" if group else title,
         )
-        for landmark in experiment.scenario_for(value, first.seed).landmarks():
+        for landmark in experiment.scenario_for(value, first.seed, group).landmarks():
             axes[0, column].plot(landmark[0], landmark[1], "+", color="red", markersize=8)
             axes[1, column].plot(landmark[0], landmark[2], "+", color="red", markersize=8)
     figure.suptitle(f"{experiment.title}: tracks from above and from the side")

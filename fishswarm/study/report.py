@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import logging
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -18,11 +20,15 @@ log = logging.getLogger(__name__)
 
 
 def table_rows(experiment: Experiment, outcomes: list[RunOutcome]) -> list[dict[str, Any]]:
-    """One row per value: each of the experiment's summaries, mean and s.d. over seeds."""
+    """One row per group and value that has runs: each of the experiment's summaries, mean
+    and s.d. over seeds (a ``group`` column first when the experiment compares groups)."""
     rows = []
-    for value in experiment.values:
-        mine = [o for o in outcomes if o.value == value]
-        row: dict[str, Any] = {experiment.parameter: value, "runs": len(mine)}
+    for group, value in itertools.product(experiment.group_names, experiment.values):
+        mine = [o for o in outcomes if o.value == value and o.group == group]
+        if not mine:
+            continue
+        row: dict[str, Any] = {"group": group} if experiment.groups else {}
+        row |= {experiment.parameter: value, "runs": len(mine)}
         for summary in experiment.summaries:
             column = experiment.metric_names.index(summary.metric)
             values = np.array([summary.reduce(o.metrics[:, column]) for o in mine])
@@ -73,8 +79,10 @@ def write_report(
         table.writerows(rows)
     with paths[2].open("w", newline="", encoding="utf-8") as stream:
         writer = csv.writer(stream)
+        grouped = bool(experiment.groups)
         writer.writerow(
             [
+                *(["group"] if grouped else []),
                 experiment.parameter,
                 "seed",
                 *(f"{m}_initial" for m in experiment.metric_names),
@@ -85,6 +93,7 @@ def write_report(
         for outcome in outcomes:
             writer.writerow(
                 [
+                    *([outcome.group] if grouped else []),
                     outcome.value,
                     outcome.seed,
                     *outcome.metrics[0].tolist(),
@@ -97,6 +106,7 @@ def write_report(
         "title": experiment.title,
         "parameter": experiment.parameter,
         "values": list(experiment.values),
+        "groups": {name: dict(settings) for name, settings in experiment.groups},
         "seeds": experiment.seeds,
         "engine": engine,
         "scenario": experiment.scenario.to_dict(),
@@ -133,6 +143,15 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
         )
     else:
         explain = "Changes are from the first to the last tick, per cent of the first."
+    group_label = ["group"] if experiment.groups else []
+    if experiment.groups:
+        explain += (
+            " Groups: "
+            + "; ".join(
+                f"{name}: {_settings_text(settings)}" for name, settings in experiment.groups
+            )
+            + "."
+        )
     lines = [
         f"# {experiment.title}",
         "",
@@ -140,17 +159,28 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
         f"{1 / scenario.control_period:g} Hz; {experiment.spread_text}. {explain}"
         + _following_text(scenario),
         "",
-        "| " + " | ".join([experiment.label, *(s.label for s in experiment.summaries)]) + " |",
-        "|" + "---:|" * (1 + len(experiment.summaries)),
+        "| "
+        + " | ".join([*group_label, experiment.label, *(s.label for s in experiment.summaries)])
+        + " |",
+        "|" + ":---|" * len(group_label) + "---:|" * (1 + len(experiment.summaries)),
     ]
     for row in rows:
-        cells = [f"{row[experiment.parameter]:g}"]
+        cells = [row["group"]] if group_label else []
+        cells.append(f"{row[experiment.parameter]:g}")
         for summary in experiment.summaries:
             mean, sd = row[f"{summary.key}_mean"], row[f"{summary.key}_sd"]
             spread = f" ± {sd:.{summary.digits}f}" if experiment.seeds > 1 else ""
             cells.append(f"{mean:.{summary.digits}f}{spread}")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _settings_text(settings: Mapping[str, Any]) -> str:
+    """A group's settings as TOML would write them."""
+    return ", ".join(
+        f"{key} = {str(value).lower() if isinstance(value, bool) else value}"
+        for key, value in settings.items()
+    )
 
 
 def _following_text(scenario: Scenario) -> str:

@@ -1,4 +1,4 @@
-"""Running an experiment's (value, seed) runs, in parallel processes, with a chosen engine.
+"""Running an experiment's (group, value, seed) runs, in parallel processes, with a chosen engine.
 
 An engine turns a scenario into its recorded run: the in-process batch engine
 (:func:`run_on_batch_engine`) or the actor system (``fishswarm.actors.runs.run_on_actors``:
@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 
 from fishswarm.sim.engine import run_batch
 from fishswarm.sim.scenario import Scenario
-from fishswarm.study.experiment import Experiment, RunOutcome
+from fishswarm.study.experiment import Experiment, RunKey, RunOutcome
 
 FloatArray = NDArray[np.float64]
 
@@ -42,13 +42,15 @@ def run_on_batch_engine(scenario: Scenario) -> Run:
     return trajectory.t, trajectory.position, trajectory.neighbors_seen
 
 
-def run_one(experiment: Experiment, value: float, seed: int, engine: Engine) -> RunOutcome:
-    """Run one (value, seed) of an experiment with ``engine``."""
-    scenario = experiment.scenario_for(value, seed)
+def run_one(experiment: Experiment, key: RunKey, engine: Engine) -> RunOutcome:
+    """Run one (group, value, seed) of an experiment with ``engine``."""
+    group, value, seed = key
+    scenario = experiment.scenario_for(value, seed, group)
     started = time.perf_counter()
     t, position, seen = engine(scenario)
     metrics = experiment.metrics_of(scenario, position, seen)
-    return RunOutcome(value, seed, t, metrics, position, time.perf_counter() - started)
+    elapsed = time.perf_counter() - started
+    return RunOutcome(value, seed, t, metrics, position, elapsed, group)
 
 
 Progress = Callable[[int, int, RunOutcome], None]
@@ -76,7 +78,8 @@ def run_experiment(
     jobs: int | None = None,
     on_run: Progress | None = None,
 ) -> list[RunOutcome]:
-    """Run every (value, seed) of an experiment, ``jobs`` at a time in spawned processes.
+    """Run every (group, value, seed) of an experiment, ``jobs`` at a time in spawned
+    processes.
 
     Args:
         experiment: what to run.
@@ -92,17 +95,17 @@ def run_experiment(
     """
     pairs = experiment.runs()
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(pairs)))
-    outcomes: dict[tuple[float, int], RunOutcome] = {}
+    outcomes: dict[RunKey, RunOutcome] = {}
 
     def done(outcome: RunOutcome) -> None:
-        outcomes[(outcome.value, outcome.seed)] = outcome
+        outcomes[(outcome.group, outcome.value, outcome.seed)] = outcome
         if on_run is not None:
             on_run(len(outcomes), len(pairs), outcome)
 
     try:
         if jobs == 1:
-            for value, seed in pairs:
-                done(run_one(experiment, value, seed, engine))
+            for key in pairs:
+                done(run_one(experiment, key, engine))
         else:
             _run_in_processes(experiment, pairs, engine, jobs, done)
     except KeyboardInterrupt:
@@ -113,7 +116,7 @@ def run_experiment(
 
 def _run_in_processes(
     experiment: Experiment,
-    pairs: list[tuple[float, int]],
+    pairs: list[RunKey],
     engine: Engine,
     jobs: int,
     done: Callable[[RunOutcome], None],
@@ -127,7 +130,7 @@ def _run_in_processes(
     pool = concurrent.futures.ProcessPoolExecutor(
         jobs, mp_context=context, initializer=_ignore_interrupts
     )
-    futures = [pool.submit(run_one, experiment, value, seed, engine) for value, seed in pairs]
+    futures = [pool.submit(run_one, experiment, key, engine) for key in pairs]
     handed: set[concurrent.futures.Future[RunOutcome]] = set()
     try:
         for future in concurrent.futures.as_completed(futures):

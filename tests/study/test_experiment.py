@@ -177,7 +177,7 @@ def test_ctrl_c_in_a_sweep_returns_the_runs_that_finished(tmp_path: Path) -> Non
 
     with pytest.raises(SweepInterrupted) as stop:
         run_experiment(experiment, engine=interrupted_at_the_third_run, jobs=1)  # type: ignore[arg-type]
-    assert [(o.value, o.seed) for o in stop.value.outcomes] == experiment.runs()[:2]
+    assert [(o.group, o.value, o.seed) for o in stop.value.outcomes] == experiment.runs()[:2]
     assert stop.value.total == len(experiment.runs()) == 2 * len(experiment.values)
     # What finished is reported, marked incomplete.
     first = experiment.with_changes(values=experiment.values[:1])
@@ -187,3 +187,65 @@ def test_ctrl_c_in_a_sweep_returns_the_runs_that_finished(tmp_path: Path) -> Non
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert (summary["complete"], summary["runs_done"], summary["runs_total"]) == (False, 2, 8)
     assert [row["runs"] for row in summary["rows"]] == [2]
+
+
+def test_groups_compare_the_sweep_under_named_settings(tmp_path: Path) -> None:
+    import json
+
+    from fishswarm.study.report import write_report
+    from fishswarm.study.sweep import run_experiment
+
+    folder = tmp_path / "experiments"
+    folder.mkdir()
+    path = folder / "grouped.toml"
+    path.write_text(
+        '[experiment]\nname = "grouped"\nparameter = "channel_loss"\nvalues = [0.0, 0.5]\n'
+        'seeds = 1\n[experiment.groups]\n"flags" = { flags = true }\n'
+        '"no flags" = { flags = false }\n'
+        '[scenario]\nfish = 4\nbehavior = "formation"\nformation = "pyramid"\n'
+        "duration = 2\ncontrol_period = 0.5\n",
+        encoding="utf-8",
+    )
+    experiment = find(str(path))
+    assert experiment.group_names == ("flags", "no flags")
+    assert experiment.runs() == [
+        ("flags", 0.0, 0), ("flags", 0.5, 0), ("no flags", 0.0, 0), ("no flags", 0.5, 0),
+    ]  # fmt: skip
+    off = experiment.scenario_for(0.5, 3, "no flags")
+    assert (off.flags, off.channel_loss, off.seed) == (False, 0.5, 3)
+    assert experiment.scenario_for(0.5, 3, "flags").flags is True
+    with pytest.raises(ConfigError, match="no group 'sometimes'; groups: flags, no flags"):
+        experiment.scenario_for(0.0, 0, "sometimes")
+    outcomes = run_experiment(experiment, jobs=1)
+    assert [(o.group, o.value) for o in outcomes] == [key[:2] for key in experiment.runs()]
+    rows = table_rows(experiment, outcomes)
+    assert [(r["group"], r["channel_loss"]) for r in rows] == [key[:2] for key in experiment.runs()]
+    # Without flags nothing goes over the channel, so its loss changes nothing.
+    no_flags = [r for r in rows if r["group"] == "no flags"]
+    assert no_flags[0]["shape_error_mean"] == no_flags[1]["shape_error_mean"]
+    text = markdown_table(experiment, rows)
+    assert "| group | channel_loss |" in text and "| no flags | 0.5 |" in text
+    assert "Groups: flags: flags = true; no flags: flags = false." in text
+    write_report(experiment, outcomes, tmp_path / "out", engine="batch", wall_time=1.0)
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["groups"] == {"flags": {"flags": True}, "no flags": {"flags": False}}
+    runs_csv = (tmp_path / "out" / "runs.csv").read_text().splitlines()
+    assert runs_csv[0].startswith("group,channel_loss,seed,") and len(runs_csv) == 5
+
+
+@pytest.mark.parametrize(
+    ("groups", "message"),
+    [
+        ('"a" = 3', r"must name tables of scenario settings"),
+        ('"a" = { flags = "maybe" }', r"group 'a': flags must be true or false, got 'maybe'"),
+    ],
+)
+def test_bad_groups_are_named(tmp_path: Path, groups: str, message: str) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text(
+        f'[experiment]\nname = "bad"\nparameter = "fish"\nvalues = [2]\n'
+        f"[experiment.groups]\n{groups}\n[scenario]\n",
+        encoding="utf-8",
+    )
+    with pytest.raises(ConfigError, match=message):
+        find(str(path))
