@@ -36,4 +36,7 @@ def run_on_actors(scenario: Scenario) -> Run:
     t = np.array([s.time for s in snapshots])
     position = np.array([s.position for s in snapshots])
     seen = np.array([s.neighbors_seen for s in snapshots])
-    return t, position, seen
+    effort = np.array(
+        [np.zeros(s.ids.shape[0]) if s.effort is None else s.effort for s in snapshots]
+    )
+    return t, position, seen, effort

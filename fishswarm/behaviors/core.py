@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.bluebot.control import CONTROLLERS, PidGains, PidState, homing, pid
+from fishswarm.bluebot.parameters import effort_rate
 from fishswarm.protocols.messages import BROADCAST_WIDTH
 
 FloatArray = NDArray[np.float64]
@@ -47,6 +48,9 @@ class Perception:
         landmark_mask: (B, L) which landmark rows are real.
         heading: (B,) each fish's heading from a compass, rad in the tank frame (yaw; NaN
             where a fish has none), or None when no fish has one.
+        effort: (B,) each fish's own effort so far, gain-weighted fin beats: its count of
+            the beats of the fins it commanded, each weighted by the fin's gain
+            (:func:`decide` fills it in from the fish's memory).
     """
 
     time: FloatArray
@@ -56,6 +60,7 @@ class Perception:
     landmarks: FloatArray
     landmark_mask: BoolArray
     heading: FloatArray | None = None
+    effort: FloatArray | None = None
 
     @property
     def count(self) -> int:
@@ -258,12 +263,16 @@ class FishMemory:
         dorsal_on: (B,) the homing controller's dorsal state.
         pid: the pid loops' state.
         last_time: (B,) time of each fish's last decision, s (NaN before the first).
+        fins: (B, 4) the fin gains of the last decision, held since.
+        effort: (B,) gain-weighted fin beats commanded so far (up to the last decision).
     """
 
     behavior: Any
     dorsal_on: BoolArray
     pid: PidState
     last_time: FloatArray
+    fins: FloatArray
+    effort: FloatArray
 
     @classmethod
     def fresh(cls, params: FishParams, count: int) -> FishMemory:
@@ -273,6 +282,8 @@ class FishMemory:
             np.zeros(count, dtype=np.bool_),
             PidState.zeros(count),
             np.full(count, np.nan),
+            np.zeros((count, 4)),
+            np.zeros(count),
         )
 
 
@@ -290,6 +301,11 @@ def decide(
     Returns:
         The fish's memory after deciding, and their decision.
     """
+    # The fins a fish commanded ran since its last decision: it counts their beats.
+    elapsed = perception.time - memory.last_time
+    ran = np.where(elapsed > 0, elapsed, 0.0)
+    effort = memory.effort + effort_rate(memory.fins) * ran
+    perception = dataclasses.replace(perception, effort=effort)
     remembered, steering = params.behavior.steer(
         memory.behavior, perception, inbox, params=params.steering
     )
@@ -298,7 +314,6 @@ def decide(
         # The loops integrate over the real time since a fish's last decision (jittered or
         # late perceptions included); a first decision, or a clock that went back (a new
         # run), counts one nominal period.
-        elapsed = perception.time - memory.last_time
         period = np.where(elapsed > 0, elapsed, params.control_period)
         fins, pid_state = pid(target, state=memory.pid, period=period, gains=params.pid_gains)
         dorsal = memory.dorsal_on
@@ -310,7 +325,9 @@ def decide(
             right_when_ahead=params.right_when_ahead,
         )
         pid_state = memory.pid
-    after = FishMemory(remembered, dorsal, pid_state, perception.time.astype(np.float64))
+    after = FishMemory(
+        remembered, dorsal, pid_state, perception.time.astype(np.float64), fins, effort
+    )
     return after, Decision(fins, steering.led, steering.outbox)
 
 

@@ -73,6 +73,18 @@ FORMATION_KIND = BROADCAST_KINDS.index("formation")
 NO_HOPS = 10_000
 """The hop count of a fish that has heard of no leader."""
 SLOT_RULES = ("share", "study")
+DEFAULT_EFFORT_MARGIN = 40.0
+"""Default margin of effort sharing, gain-weighted fin beats (set from measurements, see
+docs/formations.md)."""
+SWAP_TIMEOUT = 20.0
+"""A swap of places not completed within this time is given up, s."""
+NEIGHBOUR_SPACINGS = 1.5
+"""A fish asks only fish within this many spacings of it to swap places: its neighbours."""
+SWAP_REST = 30.0
+"""A fish that began a swap asks for no other within this time, s: it rests in its new
+place (accumulated effort changes slowly, so without a rest it would swap on and on)."""
+EFFORT_COLUMN, SWAP_COLUMN = 6, 7
+"""Where a formation flag's effort and swap request sit among a broadcast's numbers."""
 
 
 @dataclass(frozen=True)
@@ -95,6 +107,13 @@ class FormationParams:
             place, s; 0 aims at the place itself. A BlueBot cannot swim backwards and
             its drag is quadratic, so it glides far at low speed: without a lead it circles
             its place instead of stopping on it.
+        station: a global map's slot 0 is this far behind the first landmark (against the
+            orientation), m, for a fish that sees the landmark — the leader holds station
+            there, in a flow; None: the map is anchored at the leader.
+        rotate_effort: share the effort (global maps, with flags): a fish whose effort
+            exceeds that of the most rested fish it hears by ``effort_margin`` asks it to
+            swap places; the asked fish agrees by flag and both move (:func:`share_effort`).
+        effort_margin: gain-weighted fin beats.
     """
 
     shape: str
@@ -105,6 +124,9 @@ class FormationParams:
     flags: bool = True
     rule: str = "share"
     lead: float = DEFAULT_LEAD
+    station: float | None = None
+    rotate_effort: bool = False
+    effort_margin: float = DEFAULT_EFFORT_MARGIN
 
     def __post_init__(self) -> None:
         if self.rule not in SLOT_RULES:
@@ -128,13 +150,18 @@ class FormationParams:
 class FormationMemory:
     """What formation fish remember: (B,) their last place (−1: none), whether they had
     joined, how many flags each has sent, and where their place was at their last
-    decision — (B, 3) in the tank's orientation, m (NaN: unknown) — and when (B,) s."""
+    decision — (B, 3) in the tank's orientation, m (NaN: unknown) — and when (B,) s; and
+    a swap of places under way: (B,) the slot a fish moves to (−1: none), the slot it gave
+    up, and since when, s."""
 
     place: IntArray
     joined: BoolArray
     sequence: IntArray
     place_vector: FloatArray
     place_time: FloatArray
+    swap_to: IntArray
+    swap_from: IntArray
+    swap_since: FloatArray
 
 
 def fresh_formation_memory(count: int) -> FormationMemory:
@@ -145,15 +172,20 @@ def fresh_formation_memory(count: int) -> FormationMemory:
         np.zeros(count, dtype=np.int64),
         np.full((count, 3), np.nan),
         np.full(count, np.nan),
+        np.full(count, STAY, dtype=np.int64),
+        np.full(count, STAY, dtype=np.int64),
+        np.full(count, np.nan),
     )
 
 
 def formation_params(settings: Mapping[str, Any]) -> FormationParams:
     """The behaviour's parameters from a scenario's settings (``formation``, ``spacing``,
-    ``tolerance``, ``formation_heading_deg``, ``flags``, ``fish``)."""
+    ``tolerance``, ``formation_heading_deg``, ``flags``, ``fish``, ``slot_rule``,
+    ``formation_lead``, ``station_distance``, ``rotate_effort``, ``effort_margin``)."""
     spacing = settings.get("spacing")
     spacing = DEFAULT_SPACING if spacing is None else float(spacing)
     tolerance = settings.get("tolerance")
+    station = settings.get("station_distance")
     return FormationParams(
         shape=str(settings.get("formation") or "pyramid"),
         count=int(settings.get("fish", 15)),
@@ -163,6 +195,9 @@ def formation_params(settings: Mapping[str, Any]) -> FormationParams:
         flags=bool(settings.get("flags", True)),
         rule=str(settings.get("slot_rule") or "share"),
         lead=float(settings.get("formation_lead", DEFAULT_LEAD)),
+        station=None if station is None else float(station),
+        rotate_effort=bool(settings.get("rotate_effort", False)),
+        effort_margin=float(settings.get("effort_margin", DEFAULT_EFFORT_MARGIN)),
     )
 
 
@@ -257,6 +292,94 @@ def _settled(places: FloatArray, neighbors: FloatArray, params: FormationParams)
     return settled
 
 
+@dataclass(frozen=True)
+class _Swaps:
+    """Swaps of places for effort sharing, (B,) each: the slot a fish moves to (−1: none),
+    the slot it gave up, since when (s), and the swap field of its flag (−1: none)."""
+
+    swap_to: IntArray
+    swap_from: IntArray
+    swap_since: FloatArray
+    asking: IntArray
+
+    @classmethod
+    def none(cls, memory: FormationMemory) -> _Swaps:
+        """No swap under way or asked for (the memory's record of swaps as it was)."""
+        return cls(
+            memory.swap_to, memory.swap_from, memory.swap_since, np.full_like(memory.place, STAY)
+        )
+
+
+def share_effort(
+    memory: FormationMemory,
+    effort: FloatArray,
+    inbox: Inbox,
+    heard: _Heard,
+    slots: int,
+    now: FloatArray,
+    params: FormationParams,
+) -> _Swaps:
+    """Swaps of places that share a formation's effort, by a handshake of flags (the swap
+    field names a slot). A costly place (the front, where no wake helps; a place that needs
+    much steering) shows in the effort of the fish that holds it:
+
+    1. *ask*: a fish holding a slot whose effort exceeds that of the most rested neighbour
+       it hears (within :data:`NEIGHBOUR_SPACINGS`, holding a slot, asking nothing) by
+       more than the margin flags that fish's slot, joined, and stays;
+    2. *agree*: the fish holding that slot, hearing it, moves to the asker's slot, flagging
+       that it seeks it (not joined) and gives up its own;
+    3. *go*: the asker, hearing a fish seek its slot and give one up, moves to that one.
+
+    A swap under way lasts until the fish holds its new place (at its last decision) or
+    :data:`SWAP_TIMEOUT` passes. Fish busy with a swap neither ask nor agree; a fish asks
+    for no swap within :data:`SWAP_REST` of its last one.
+
+    Args:
+        memory: the fish's formation memory.
+        effort: (B,) each fish's own effort so far, gain-weighted fin beats.
+        inbox: their inboxes.
+        heard: what the formation flags in them say.
+        slots: the number of slots in the map.
+        now: (B,) the time of the decision, s.
+        params: the behaviour's parameters.
+    """
+    count = memory.place.shape[0]
+    rows = np.arange(count)
+    told_effort = inbox.values[..., EFFORT_COLUMN]
+    told_swap = inbox.values[..., SWAP_COLUMN] - 1
+    slot = heard.slot
+    in_map = heard.flag & (slot >= 0) & (slot < slots)
+    arrived = memory.joined & (memory.place == memory.swap_to)
+    busy = (memory.swap_to >= 0) & ~arrived & (now - memory.swap_since < SWAP_TIMEOUT)
+    place = memory.place
+    holds = memory.joined & (place >= 0) & ~busy
+    asked = in_map & heard.joined & (told_swap == place[:, None]) & holds[:, None]
+    answered = in_map & ~heard.joined & (slot == place[:, None]) & (told_swap >= 0) & holds[:, None]
+    agree, go = asked.any(axis=1), answered.any(axis=1) & ~asked.any(axis=1)
+    new_slot = np.where(
+        agree, slot[rows, np.argmax(asked, axis=1)], told_swap[rows, np.argmax(answered, axis=1)]
+    ) if slot.shape[1] else np.full(count, STAY)  # fmt: skip
+    starting = agree | go
+    swap_to = np.where(busy, memory.swap_to, np.where(starting, new_slot, STAY))
+    swap_from = np.where(busy, memory.swap_from, np.where(starting, place, STAY))
+    since = np.where(starting, now, memory.swap_since)
+    resting = now - since < SWAP_REST
+    # Only a neighbour, the holder of a slot next to the fish's own, is asked: a short swap.
+    near = np.linalg.norm(inbox.sender, axis=2) <= NEIGHBOUR_SPACINGS * params.spacing
+    rested = in_map & heard.joined & (told_swap < 0) & near
+    lowest = np.where(rested, told_effort, np.iinfo(np.int64).max)
+    pick = np.argmin(lowest, axis=1) if lowest.shape[1] else np.zeros(count, dtype=np.int64)
+    least = lowest[rows, pick] if lowest.shape[1] else np.full(count, np.iinfo(np.int64).max)
+    tired = holds & ~starting & ~resting & rested.any(axis=1)
+    tired &= effort - least > params.effort_margin
+    asking = np.where(
+        swap_to >= 0, swap_from, np.where(tired, slot[rows, pick] if slot.shape[1] else STAY, STAY)
+    )
+    return _Swaps(
+        swap_to.astype(np.int64), swap_from.astype(np.int64), since, asking.astype(np.int64)
+    )
+
+
 def lead_aim(
     target: FloatArray,
     *,
@@ -320,6 +443,10 @@ def steer_formation(
         known, real, holding = _with_senders(neighbors, mask, inbox, heard, params)
         leader, rank = leader_and_rank(known, real, orientation)
         leader, rank = _agreed_leader(leader, rank, inbox, heard.leader, orientation)
+        if params.station is not None and perception.landmarks.shape[1]:
+            # A fish that sees the landmark knows where the station is: slot 0 goes there.
+            station = perception.landmarks[:, 0] - params.station * orientation
+            leader = np.where(perception.landmark_mask[:, :1], station, leader)
         places = place_map(leader, orientation, slots)
         valid = np.ones(places.shape[:2], dtype=np.bool_)
         claimed = np.zeros(places.shape[:2], dtype=np.bool_)
@@ -336,6 +463,11 @@ def steer_formation(
             # its rank; sharing ignores the order.
             first=np.where(memory.place >= 0, memory.place, np.minimum(rank, params.count - 1)),
         )  # fmt: skip
+    effort = np.zeros(count) if perception.effort is None else perception.effort
+    swaps = _Swaps.none(memory)
+    if params.rotate_effort and params.flags and not params.is_local:
+        swaps = share_effort(memory, effort, inbox, heard, slots.shape[0], perception.time, params)
+        chosen = np.where(swaps.swap_to >= 0, swaps.swap_to, chosen)
     has_place = chosen != STAY
     target = np.where(has_place[:, None], places[np.arange(count), np.maximum(chosen, 0)], 0.0)
     joined = has_place & (np.linalg.norm(target, axis=1) <= params.tolerance)
@@ -365,8 +497,10 @@ def steer_formation(
             int(hops[row]),
             heading_mdeg,
             int(sequence[row]),
+            round(float(effort[row])),
+            int(swaps.asking[row]),
         )
-        values[row, :6] = flag.values()
+        values[row] = flag.values()
     outbox = Outbox(np.full(count, FORMATION_KIND, dtype=np.int64), values, sending)
     after = FormationMemory(
         chosen.astype(np.int64),
@@ -374,6 +508,9 @@ def steer_formation(
         sequence.astype(np.int64),
         place_vector,
         perception.time.astype(np.float64),
+        swaps.swap_to,
+        swaps.swap_from,
+        swaps.swap_since,
     )
     # LEDs lit while the fish is in its place: on a robot, the flag is the LED signal.
     return after, Steering(aim, joined | ~np.bool_(params.flags), outbox)

@@ -163,6 +163,8 @@ def step(
     duration: float,
     robot: BlueBot,
     tank: Tank,
+    flow: FloatArray | None = None,
+    drag_scale: FloatArray | None = None,
 ) -> State:
     """Advance B fish by ``duration`` seconds with fins held constant (one control period).
 
@@ -174,6 +176,12 @@ def step(
             (the last one shortened to land exactly on ``duration``).
         robot: the robot's parameters.
         tank: the tank; positions are clipped into it after every step.
+        flow: (3,) the water's velocity in the tank frame, m/s (None: still water). Drag
+            acts on a fish's motion through the water, so in a uniform flow the velocities
+            evolve as in still water and the flow carries the fish: it adds flow·dt to
+            every step's displacement (velocities stay relative to the water).
+        drag_scale: (B,) a factor on each fish's surge drag for the period (below 1 for a
+            fish sheltered in another's wake; None: 1).
 
     Returns:
         The new state (the input is not modified).
@@ -187,10 +195,16 @@ def step(
     change = np.empty_like(velocity)
     magnitude = np.empty_like(velocity)
     varying = _drag_of_speed(robot) if robot.speed_dependent_drag else None
+    scale = None
+    if drag_scale is not None:
+        scale = np.ones((count, 4))
+        scale[:, 0] = drag_scale
     # In place, with the operations in the order of
     # velocity + (acceleration − drag·velocity·|velocity|)·dt, so results are the same bits.
     for n in range(steps):
         coefficients = drag_all if varying is None else varying(velocity[:, 0])
+        if scale is not None:
+            coefficients = coefficients * scale
         np.multiply(coefficients, velocity, out=change)
         np.multiply(change, np.abs(velocity, out=magnitude), out=change)
         np.subtract(acceleration, change, out=change)
@@ -207,6 +221,8 @@ def step(
     displacement[..., 0] = (cos * history[..., 0] - sin * history[..., 1]) * dt[:, None]
     displacement[..., 1] = (sin * history[..., 0] + cos * history[..., 1]) * dt[:, None]
     displacement[..., 2] = history[..., 2] * dt[:, None]
+    if flow is not None:
+        displacement += np.asarray(flow, dtype=np.float64) * dt[:, None, None]
     path = np.cumsum(np.concatenate([state.position[None], displacement]), axis=0)
     upper = np.asarray(tank.size)
     position = path[-1].copy()

@@ -98,6 +98,14 @@ def fin_frequencies(fins: NDArray[np.float64]) -> NDArray[np.float64]:
     return frequency
 
 
+def effort_rate(fins: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(B,) how fast fish with fin gains (B, 4) spend effort: the sum over fins of gain
+    times beat frequency (:func:`fin_frequencies`), gain-weighted fin beats per second — a
+    proxy of the energy the electromagnetic fins draw (SPEC §6)."""
+    rate: NDArray[np.float64] = (np.clip(fins, 0.0, 1.0) * fin_frequencies(fins)).sum(axis=1)
+    return rate
+
+
 @dataclass(frozen=True)
 class Tank:
     """The tank: a box with its origin at a corner, z down (SPEC.md preamble).

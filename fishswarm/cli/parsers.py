@@ -22,6 +22,9 @@ from fishswarm.sim.scenario import (
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 
 
+SWITCH_ON = object()
+"""The kind of a flag that turns a setting on (``bool``: one that turns it off)."""
+
 _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
     "fish": ("--fish", int, "number of fish (default 25)"),
     "behavior": ("--behavior", str, f"one of {', '.join(BEHAVIORS)} (default dispersion)"),
@@ -73,6 +76,13 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
         bool,
         "with --behavior formation: fish neither send nor heed formation flags",
     ),
+    "rotate_effort": (
+        "--rotate-effort",
+        SWITCH_ON,
+        "with --behavior formation: a fish that has spent more effort than the most rested "
+        "fish it hears (by effort_margin) swaps places with it, agreed by formation flags "
+        "(docs/formations.md)",
+    ),
     "study_code": (
         "--study-code",
         switch_names,
@@ -105,6 +115,7 @@ _FISH_FLAGS = (
     "formation",
     "spacing",
     "flags",
+    "rotate_effort",
     "swarm",
     "model",
     "study_code",
@@ -125,6 +136,8 @@ def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -
         flag, kind, text = _SCENARIO_FLAGS[name]
         if kind is bool:  # a switch that turns a setting off
             group.add_argument(flag, dest=name, action="store_const", const=False, help=text)
+        elif kind is SWITCH_ON:
+            group.add_argument(flag, dest=name, action="store_const", const=True, help=text)
         else:
             group.add_argument(flag, dest=name, type=kind, default=None, help=text)
 

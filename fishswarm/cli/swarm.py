@@ -217,7 +217,7 @@ def _summary_text(summary: dict[str, Any]) -> str:
     effort = summary.get("effort")
     if effort:
         lines.append(
-            f"  effort: {effort['school']:.0f} fin beats in all, the busiest fish "
+            f"  effort: {effort['school']:.0f} gain-weighted fin beats in all, the busiest fish "
             f"{effort['spread']:.2f}× the mean"
         )
     sight = summary.get("vision")

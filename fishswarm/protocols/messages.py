@@ -326,6 +326,10 @@ class FormationFlag:
         heading_mdeg: the formation's orientation the sender follows, millidegrees in the
             tank frame, in [−180 000, 180 000].
         sequence: the sender's flag count, to tell a new flag from an old one.
+        effort: the sender's effort so far, whole gain-weighted fin beats (0: not told).
+        swap: the slot whose holder the sender asks to swap places with (−1: none; sent
+            as swap + 1, so that 0 means none); a tired fish in a costly slot asks a
+            rested one.
     """
 
     shape: int
@@ -334,6 +338,8 @@ class FormationFlag:
     hops: int
     heading_mdeg: int
     sequence: int
+    effort: int = 0
+    swap: int = -1
 
     def __post_init__(self) -> None:
         check_int("shape", self.shape, high=len(FORMATION_SHAPES) - 1)
@@ -343,11 +349,22 @@ class FormationFlag:
         check_int("hops", self.hops, high=MAX_ROWS)
         check_int("heading_mdeg", self.heading_mdeg, low=-180_000, high=180_000)
         check_int("sequence", self.sequence)
+        check_int("effort", self.effort)
+        check_int("swap", self.swap, low=-1, high=MAX_ROWS)
 
     def values(self) -> IntArray:
         """The flag as a broadcast's numbers."""
         return np.array(
-            [self.shape, self.slot, int(self.joined), self.hops, self.heading_mdeg, self.sequence],
+            [
+                self.shape,
+                self.slot,
+                int(self.joined),
+                self.hops,
+                self.heading_mdeg,
+                self.sequence,
+                self.effort,
+                self.swap + 1,  # 0 on the wire is "none", as in a zero-padded inbox row
+            ],
             dtype=np.int64,
         )
 
@@ -359,11 +376,14 @@ class FormationFlag:
             ValueError: the numbers are not a formation flag.
         """
         if values.shape[0] < 6:
-            raise ValueError(f"a formation flag has 6 numbers, got {values.shape[0]}")
+            raise ValueError(f"a formation flag has 6 to 8 numbers, got {values.shape[0]}")
         shape, slot, joined, hops, heading, sequence = (int(v) for v in values[:6])
         if joined not in (0, 1):
             raise ValueError(f"joined must be 0 or 1, got {joined}")
-        return cls(shape, slot, bool(joined), hops, heading, sequence)
+        # Flags of 6 numbers (before effort sharing) read as effort 0, no swap.
+        effort = int(values[6]) if values.shape[0] > 6 else 0
+        swap = int(values[7]) - 1 if values.shape[0] > 7 else -1
+        return cls(shape, slot, bool(joined), hops, heading, sequence, effort, swap)
 
 
 @dataclass(frozen=True, eq=False)
@@ -379,7 +399,8 @@ class Snapshot(Message):
         yaw: (N,) yaw angles, rad.
         neighbors_seen: (N,) how many neighbours each fish saw at this tick.
         broadcasts: (N,) how many broadcasts each fish sent at the previous tick.
-        effort: (N,) each fish's effort so far, fin beats (None: not measured).
+        effort: (N,) each fish's effort so far, gain-weighted fin beats (None: not
+            measured).
     """
 
     type_name: ClassVar[str] = "snapshot"

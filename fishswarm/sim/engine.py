@@ -45,7 +45,7 @@ class Trajectory:
         velocity: (T, N, 3) tank frame, m/s.
         yaw: (T, N) rad.
         neighbors_seen: (T, N) neighbours seen at each tick.
-        effort: (T, N) each fish's effort so far, fin beats.
+        effort: (T, N) each fish's effort so far, gain-weighted fin beats.
     """
 
     t: FloatArray

@@ -20,6 +20,7 @@ from fishswarm.sim import kernels
 from fishswarm.sim.scenario import Scenario
 from fishswarm.sim.sight import Cameras, perceive_through_cameras
 from fishswarm.sim.streams import Stream, stream
+from fishswarm.sim.wake import wake_shelter
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -49,6 +50,9 @@ class WorldParams:
         robot: the BlueBot's parameters.
         still_until: fish are held still until this time, s (the study code's start delay;
             0 by default).
+        flow: the water's velocity in the tank frame, m/s.
+        wake_saving, wake_length, wake_width: the wake model (:mod:`fishswarm.sim.wake`;
+            saving 0: none).
         compiled: integrate with the compiled kernel (:mod:`fishswarm.sim.kernels`): chosen
             from the scenario's size, so every process of a run integrates alike.
     """
@@ -71,6 +75,10 @@ class WorldParams:
     robot: BlueBot = BlueBot()
     still_until: float = 0.0
     compiled: bool = False
+    flow: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    wake_saving: float = 0.0
+    wake_length: float = 0.5
+    wake_width: float = 0.15
 
     @classmethod
     def of(cls, scenario: Scenario) -> WorldParams:
@@ -93,7 +101,15 @@ class WorldParams:
             switch_at=scenario.switch_at,
             robot=scenario.robot(),
             still_until=scenario.still_until,
-            compiled=scenario.fish >= kernels.COMPILED_MIN_FISH and kernels.available(),
+            # The compiled integrator knows neither flow nor wakes.
+            compiled=scenario.fish >= kernels.COMPILED_MIN_FISH
+            and kernels.available()
+            and not any(scenario.flow)
+            and scenario.wake_saving == 0,
+            flow=scenario.flow,
+            wake_saving=scenario.wake_saving,
+            wake_length=scenario.wake_length,
+            wake_width=scenario.wake_width,
         )
 
     def formation_at(self, time: float) -> str | None:
@@ -155,6 +171,15 @@ def observe_landmarks(params: WorldParams, state: State) -> Perceived:
 
 
 def advance(params: WorldParams, state: State, fins: FloatArray, duration: float) -> State:
-    """Every fish swims ``duration`` s with its fins held."""
-    integrate = kernels.step if params.compiled else step
-    return integrate(state, fins, duration=duration, robot=params.robot, tank=params.tank)
+    """Every fish swims ``duration`` s with its fins held (in the flow, sheltered by the
+    wakes of the fish ahead as they are at the start of the interval)."""
+    if params.compiled:
+        return kernels.step(state, fins, duration=duration, robot=params.robot, tank=params.tank)
+    drag_scale = None
+    if params.wake_saving:
+        shelter = wake_shelter(state, length=params.wake_length, width=params.wake_width)
+        drag_scale = 1.0 - params.wake_saving * shelter
+    return step(
+        state, fins, duration=duration, robot=params.robot, tank=params.tank,
+        flow=np.asarray(params.flow) if any(params.flow) else None, drag_scale=drag_scale,
+    )  # fmt: skip

@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.behaviors.core import FishParams
-from fishswarm.behaviors.formation import DEFAULT_LEAD
+from fishswarm.behaviors.formation import DEFAULT_EFFORT_MARGIN, DEFAULT_LEAD
 from fishswarm.behaviors.lennard_jones import (
     STUDY_FORM_SWITCH,
     LennardJonesParams,
@@ -132,6 +132,18 @@ class Scenario:
         switch_formation: a shape formation fish switch to during the run (as an operator
             would with ``fishswarm formation``), at ``switch_at`` s.
         switch_at: when the switch happens, s of simulated time.
+        flow: the water's velocity in the tank frame (a flow tank), m/s; still by default.
+        wake_saving: how much of its surge drag a fish right behind another saves (0: no
+            wake model, the default; :mod:`fishswarm.sim.wake`), in [0, 1).
+        wake_length: how far behind a swimming fish its wake reaches, m.
+        wake_width: the radius of a fish's wake about its axis, m.
+        station_distance: with a ``landmark``, a formation's leader holds station this far
+            behind it (against the formation's heading), m; None: the leader stays where it
+            is (no station).
+        rotate_effort: a formation fish that has spent ``effort_margin`` (gain-weighted fin
+            beats) more than the most rested fish it hears swaps places with it (formation
+            flags carry each fish's effort; global maps with flags).
+        effort_margin: the margin of ``rotate_effort``, gain-weighted fin beats.
         study_code: where to follow the study's code instead of its paper's equations, by
             name (:data:`STUDY_CODE_SWITCHES`); none by default.
         profile: ``paper`` (default: the paper's equations and the ``study_code`` switches)
@@ -171,6 +183,13 @@ class Scenario:
     slot_rule: str = "share"
     switch_formation: str | None = None
     switch_at: float = 0.0
+    flow: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    wake_saving: float = 0.0
+    wake_length: float = 0.5
+    wake_width: float = 0.15
+    station_distance: float | None = None
+    rotate_effort: bool = False
+    effort_margin: float = DEFAULT_EFFORT_MARGIN
     study_code: tuple[str, ...] = ()
     profile: str = "paper"
 
@@ -184,8 +203,33 @@ class Scenario:
             f"fish must be a whole number from 1 to 100000, got {self.fish!r}",
         )
         need(
-            isinstance(self.flags, bool),
-            f"flags must be true or false, got {self.flags!r}",
+            isinstance(self.flags, bool) and isinstance(self.rotate_effort, bool),
+            f"flags and rotate_effort must be true or false, got {self.flags!r} and "
+            f"{self.rotate_effort!r}",
+        )
+        need(
+            len(self.flow) == 3 and all(math.isfinite(v) for v in self.flow),
+            f"flow must be a velocity (x, y, z) in m/s, got {self.flow!r}",
+        )
+        need(
+            0.0 <= self.wake_saving < 1.0,
+            f"wake_saving must be a fraction in [0, 1), got {self.wake_saving!r}",
+        )
+        need(
+            self.wake_length > 0 and self.wake_width > 0,
+            f"wake_length and wake_width must be positive lengths, got {self.wake_length!r} "
+            f"and {self.wake_width!r}",
+        )
+        need(
+            self.station_distance is None
+            or (self.station_distance >= 0 and self.landmark is not None),
+            "station_distance must be a length of 0 m or more, with a landmark to hold "
+            f"station behind (landmark = [x, y, z]), got {self.station_distance!r}",
+        )
+        need(
+            self.effort_margin >= 0,
+            "effort_margin must be 0 or more (gain-weighted fin beats), got "
+            f"{self.effort_margin!r}",
         )
         need(
             self.behavior in names(),
@@ -441,7 +485,7 @@ class Scenario:
                     f"got {given!r}"
                 )
             values["study_code"] = tuple(given)
-        for point in ("tank", "landmark"):
+        for point in ("tank", "landmark", "flow"):
             if point in values:
                 given = values[point]
                 if not isinstance(given, list | tuple) or len(given) != 3:
@@ -468,6 +512,11 @@ class Scenario:
             "formation_heading_deg",
             "formation_lead",
             "switch_at",
+            "wake_saving",
+            "wake_length",
+            "wake_width",
+            "station_distance",
+            "effort_margin",
         ):
             if isinstance(values.get(name), int) and not isinstance(values[name], bool):
                 values[name] = float(values[name])

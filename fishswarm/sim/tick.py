@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.bluebot.dynamics import State
-from fishswarm.bluebot.parameters import fin_frequencies
+from fishswarm.bluebot.parameters import effort_rate
 from fishswarm.bluebot.vision import Perceived, perceive
 from fishswarm.sim.clocks import Clock, Event, clock_for
 from fishswarm.sim.physics import WorldParams, advance, observe, observe_landmarks, place
@@ -46,9 +46,9 @@ class WorldSim:
         ids: (N,) the fish in the world, ascending.
         state: their states, rows in the order of ``ids``.
         fins: (N, 4) the fins each fish holds until it decides again.
-        effort: (N,) each fish's effort so far: fin beats (the beat frequency of every fin,
-            :func:`~fishswarm.bluebot.parameters.fin_frequencies`, times how long it ran) —
-            a proxy of the energy an electromagnetic fin spends.
+        effort: (N,) each fish's effort so far: gain-weighted fin beats (each fin's gain
+            times its beat frequency, :func:`~fishswarm.bluebot.parameters.effort_rate`,
+            times how long it ran) — a proxy of the energy the electromagnetic fins spend.
         now: simulated time of the last event, s.
     """
 
@@ -84,7 +84,7 @@ class WorldSim:
             duration = moving if moving > 0 else None
         if duration is not None:
             self.state = advance(self.params, self.state, self.fins, duration)
-            self.effort = self.effort + fin_frequencies(self.fins).sum(axis=1) * duration
+            self.effort = self.effort + effort_rate(self.fins) * duration
         self.now = event.time
         return event
 

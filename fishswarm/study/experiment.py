@@ -28,6 +28,7 @@ from fishswarm.study.metrics import (
     FORMATION_METRIC_NAMES,
     ORBIT_BEHAVIORS,
     ORBIT_METRIC_NAMES,
+    effort_spread,
     formation_target_of,
     linked_centroid_distance,
     orbit_metrics,
@@ -59,6 +60,7 @@ METRIC_LABELS = {
     "shape_error": "shape error (m)",
     "joined_fraction": "fraction in their slots",
     "lattice_energy": "lattice energy",
+    "effort_spread": "effort spread (max/mean)",
 }
 
 
@@ -178,6 +180,7 @@ FORMATION_SUMMARIES = (
     ),
     Summary("lattice_energy", "lattice energy, end", "lattice_energy", _last, 3),
     Summary("collisions", "collisions (pair-snapshots)", "collisions", _total, 0),
+    Summary("effort_spread", "effort spread, end (max/mean)", "effort_spread", _last, 3),
 )
 
 SWEEPABLE = (
@@ -190,6 +193,7 @@ SWEEPABLE = (
     "tolerance",
     "spacing",
     "channel_loss",
+    "effort_margin",
 )
 EXPERIMENTS_FOLDER = Path(__file__).resolve().parent / "experiments"
 
@@ -276,7 +280,7 @@ class Experiment:
     def metric_names(self) -> tuple[str, ...]:
         """The columns of each run's metric series."""
         if self.forming:
-            return FORMATION_METRIC_NAMES
+            return (*FORMATION_METRIC_NAMES, "effort_spread")
         if self.orbiting:
             return ORBIT_METRIC_NAMES
         return (*METRICS, "linked_centroid_distance") if self._study_mean_distance else METRICS
@@ -293,16 +297,25 @@ class Experiment:
         return SWARM_SUMMARIES
 
     def metrics_of(
-        self, scenario: Scenario, position: FloatArray, seen: NDArray[np.int64]
+        self,
+        scenario: Scenario,
+        position: FloatArray,
+        seen: NDArray[np.int64],
+        effort: FloatArray | None = None,
     ) -> FloatArray:
-        """(T, M) the metric series of one run from its positions (T, N, 3) and the
-        neighbours each fish saw (T, N)."""
+        """(T, M) the metric series of one run from its positions (T, N, 3), the
+        neighbours each fish saw (T, N) and each fish's effort so far (T, N; formations)."""
         if self.forming:
             target = formation_target_of(scenario)
             assert target is not None  # a formation scenario always has one
+            spent = np.zeros(position.shape[:2]) if effort is None else effort
             return np.array(
-                [[target.metrics(p)[name] for name in FORMATION_METRIC_NAMES] for p in position]
-            )
+                [
+                    [*(target.metrics(p)[name] for name in FORMATION_METRIC_NAMES),
+                     effort_spread(e)]
+                    for p, e in zip(position, spent, strict=True)
+                ]
+            )  # fmt: skip
         if self.orbiting:
             orbit = orbit_target_of(scenario)
             assert orbit is not None  # an orbiting scenario always has one

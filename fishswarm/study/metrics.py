@@ -89,12 +89,19 @@ def nearest_neighbor_distance(position: FloatArray) -> float:
     return float(distance[:, 1].mean())
 
 
+def effort_spread(effort: FloatArray) -> float:
+    """How unevenly N fish have spent their effort: the most any fish spent over the mean
+    (1: evenly; 1 also when nobody has spent anything)."""
+    mean = float(effort.mean()) if effort.size else 0.0
+    return float(effort.max()) / mean if mean > 0 else 1.0
+
+
 def swarm_metrics(
     position: FloatArray, neighbors_seen: NDArray[np.int64], effort: FloatArray | None = None
 ) -> dict[str, float]:
     """All metrics of one snapshot: the three distances (m), mean neighbours seen and, when
-    the fish's efforts are known, the school's effort (fin beats) and its spread (the most
-    a fish spent over the mean)."""
+    the fish's efforts are known, the school's effort (gain-weighted fin beats) and its
+    spread (the most a fish spent over the mean)."""
     metrics = {
         "centroid_distance": centroid_distance(position),
         "pairwise_distance": pairwise_distance(position),
@@ -102,9 +109,8 @@ def swarm_metrics(
         "neighbors_seen": float(neighbors_seen.mean()) if neighbors_seen.size else 0.0,
     }
     if effort is not None and effort.size:
-        mean = float(effort.mean())
         metrics["effort"] = float(effort.sum())
-        metrics["effort_spread"] = float(effort.max()) / mean if mean > 0 else 1.0
+        metrics["effort_spread"] = effort_spread(effort)
     return metrics
 
 

@@ -29,8 +29,9 @@ from fishswarm.study.experiment import Experiment, RunKey, RunOutcome
 FloatArray = NDArray[np.float64]
 
 
-Run = tuple[FloatArray, FloatArray, NDArray[np.int64]]
-"""A recorded run: times (T,) s, positions (T, N, 3) m, neighbours seen (T, N)."""
+Run = tuple[FloatArray, FloatArray, NDArray[np.int64], FloatArray]
+"""A recorded run: times (T,) s, positions (T, N, 3) m, neighbours seen (T, N), each fish's
+effort so far (T, N, gain-weighted fin beats)."""
 
 Engine = Callable[[Scenario], Run]
 """Runs a scenario to its end (a top-level function: runs go to spawned processes)."""
@@ -39,7 +40,7 @@ Engine = Callable[[Scenario], Run]
 def run_on_batch_engine(scenario: Scenario) -> Run:
     """The batch engine: every fish in this process, one batch."""
     trajectory = run_batch(scenario)
-    return trajectory.t, trajectory.position, trajectory.neighbors_seen
+    return trajectory.t, trajectory.position, trajectory.neighbors_seen, trajectory.effort
 
 
 def run_one(experiment: Experiment, key: RunKey, engine: Engine) -> RunOutcome:
@@ -47,8 +48,8 @@ def run_one(experiment: Experiment, key: RunKey, engine: Engine) -> RunOutcome:
     group, value, seed = key
     scenario = experiment.scenario_for(value, seed, group)
     started = time.perf_counter()
-    t, position, seen = engine(scenario)
-    metrics = experiment.metrics_of(scenario, position, seen)
+    t, position, seen, effort = engine(scenario)
+    metrics = experiment.metrics_of(scenario, position, seen, effort)
     elapsed = time.perf_counter() - started
     return RunOutcome(value, seed, t, metrics, position, elapsed, group)
 

@@ -54,6 +54,7 @@ def test_actor_and_batch_engines_give_the_same_trajectories() -> None:
         "formation-global",
         "formation-local",
         "formation-flags",
+        "formation-energy",
     ],
 )
 def test_experiment_command_end_to_end(
@@ -65,10 +66,11 @@ def test_experiment_command_end_to_end(
     experiment = find(name)
     with (out / "table.csv").open(encoding="utf-8") as stream:
         rows = list(csv.DictReader(stream))
-    assert [float(row[experiment.parameter]) for row in rows] == list(experiment.values)
+    groups = len(experiment.group_names)
+    assert [float(row[experiment.parameter]) for row in rows] == list(experiment.values) * groups
     assert all(row["runs"] == "2" for row in rows)
     with (out / "runs.csv").open(encoding="utf-8") as stream:
-        assert len(list(csv.DictReader(stream))) == 2 * len(experiment.values)
+        assert len(list(csv.DictReader(stream))) == 2 * len(experiment.values) * groups
     # The numbers are those of the same runs in the batch engine.
     shrunk = experiment.with_changes(seeds=2, duration=2)
     expected = table_rows(shrunk, run_experiment(shrunk, engine=run_on_batch_engine, jobs=1))

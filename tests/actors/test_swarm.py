@@ -7,6 +7,7 @@ import os
 import signal
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -293,3 +294,38 @@ def test_a_formation_with_flags_flowing_is_the_same_across_processes_and_engines
         assert result.summary["counts"]["broadcasts"] == 8 * 8
         assert result.summary["formation"]["shape_error"] > 0.0
         np.testing.assert_array_equal(read_recording(path).arrays()["pos"], reference.position)
+
+
+def test_effort_sharing_in_a_flow_is_the_same_across_processes_and_engines(
+    endpoint: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import fishswarm.behaviors.formation as formation
+
+    # A column holding station behind a post against the flow, wakes on, swaps asked for
+    # from 1 gain-weighted fin beat over the most rested neighbour, a tenth of the flags lost.
+    scenario = Scenario(
+        fish=4, behavior="formation", formation="column", duration=30.0, seed=2,
+        control_period=0.5, controller="pid", spawn_radius=0.2, spacing=0.25, tolerance=0.2,
+        flow=(-0.06, 0.0, 0.0), landmark=(1.3, 0.89, 0.6), station_distance=0.2,
+        wake_saving=0.9, rotate_effort=True, effort_margin=1.0, channel_loss=0.1,
+    )  # fmt: skip
+    asking: list[int] = []
+    share = formation.share_effort
+
+    def counting(*arguments: Any) -> Any:
+        swaps = share(*arguments)
+        asking.append(int((swaps.asking >= 0).sum()))
+        return swaps
+
+    with monkeypatch.context() as patch:
+        patch.setattr(formation, "share_effort", counting)
+        reference = run_batch(scenario)
+    assert sum(asking) > 20  # swaps were asked for, agreed and made: the flags carried them
+    for procs in (1, 2):
+        path = tmp_path / f"energy{procs}.mcap"
+        result = _launch(scenario, endpoint, path, procs=procs)
+        assert result.exit_code == 0
+        np.testing.assert_array_equal(read_recording(path).arrays()["pos"], reference.position)
+        assert result.summary["effort"]["spread"] == pytest.approx(
+            reference.effort[-1].max() / reference.effort[-1].mean(), rel=1e-12
+        )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -223,7 +224,9 @@ def test_rows_are_taken_and_put_back_through_nested_memory() -> None:
     rows = np.array([1, 3])
     part = take_rows(memory, rows)
     assert part.dorsal_on.shape == (2,) and part.pid.integral.shape == (2, 3)
-    changed = FishMemory(part.behavior, np.array([True, True]), part.pid, np.array([7.0, 8.0]))
+    changed = dataclasses.replace(
+        part, dorsal_on=np.array([True, True]), last_time=np.array([7.0, 8.0])
+    )
     whole = put_rows(memory, rows, changed)
     assert whole.dorsal_on.tolist() == [False, True, False, True]
     np.testing.assert_array_equal(whole.last_time, [np.nan, 7.0, np.nan, 8.0])
@@ -260,3 +263,30 @@ def test_the_rules_a_fish_reports_name_its_fish_side_study_code_switches() -> No
     # Orbiting has no Lennard-Jones force: only the homing branch applies.
     orbit = Scenario(behavior="orbit", profile="study-code").fish_params()
     assert rules_of(orbit) == "homing"
+
+
+def test_a_fish_counts_the_effort_of_the_fins_it_commanded() -> None:
+    from fishswarm.bluebot.parameters import effort_rate
+    from fishswarm.protocols.messages import FormationFlag
+
+    params = fish_params(
+        {"behavior": "formation", "formation": "column", "fish": 2, "controller": "pid",
+         "tank": TANK}
+    )  # fmt: skip
+    neighbors = np.array([[[0.8, 0.3, 0.1]]])
+
+    def seen_at(time: float) -> Perception:
+        return Perception(
+            np.array([time]), np.array([0.5]), neighbors, np.ones((1, 1), dtype=np.bool_),
+            np.zeros((1, 0, 3)), np.zeros((1, 0), dtype=np.bool_), np.zeros(1),
+        )  # fmt: skip
+
+    memory, first = decide(FishMemory.fresh(params, 1), seen_at(1.0), Inbox.empty(1),
+                           params=params)  # fmt: skip
+    assert memory.effort.tolist() == [0.0]  # nothing ran before the first decision
+    np.testing.assert_array_equal(memory.fins, first.fins)
+    memory, second = decide(memory, seen_at(1.5), Inbox.empty(1), params=params)
+    # The first decision's fins ran for 0.5 s: gain times frequency, summed over fins.
+    spent = float(effort_rate(first.fins)[0]) * 0.5
+    assert spent > 1 and memory.effort.tolist() == [pytest.approx(spent, rel=1e-15)]
+    assert FormationFlag.from_values(second.outbox.values[0]).effort == round(spent)

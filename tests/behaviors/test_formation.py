@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -9,6 +10,7 @@ import pytest
 
 from fishswarm.behaviors.core import FishMemory, Inbox, Perception, decide, inbox_of, take_rows
 from fishswarm.behaviors.formation import (
+    FormationMemory,
     FormationParams,
     fresh_formation_memory,
     lead_aim,
@@ -203,3 +205,151 @@ def test_fifteen_fish_hold_their_places(shape: str) -> None:
     # the pyramid ends at 67 % and 0.067 m.
     assert final["joined_fraction"] >= 0.9 and final["shape_error"] <= 0.25 * 0.25
     np.testing.assert_array_less(np.linalg.norm(trajectory.velocity[-1], axis=1), 0.05)
+
+
+def _holding(place: int, *, swap_to: int = -1, since: float = math.nan) -> FormationMemory:
+    """The formation memory of one fish that holds ``place`` (joined)."""
+    fresh = fresh_formation_memory(1)
+    return dataclasses.replace(
+        fresh,
+        place=np.array([place]),
+        joined=np.array([True]),
+        swap_to=np.array([swap_to]),
+        swap_from=np.array([-1 if swap_to < 0 else place]),
+        swap_since=np.array([since]),
+    )
+
+
+def _flag(slot: int, joined: bool, *, effort: int = 0, swap: int = -1) -> np.ndarray:
+    return FormationFlag(
+        FORMATION_SHAPES.index("column"), slot, joined, 0, 0, 1, effort, swap
+    ).values()
+
+
+def _tired(perception: Perception, effort: float) -> Perception:
+    return dataclasses.replace(perception, time=np.array([100.0]), effort=np.array([effort]))
+
+
+def test_effort_sharing_by_a_handshake_of_flags_drawn_on_paper() -> None:
+    # A column (spacing 0.3 m, margin 40): T leads at slot 0; R holds slot 1, 0.3 m behind
+    # it; U holds slot 2, 0.6 m behind: too far to be T's neighbour (1.5 spacings).
+    params = FormationParams("column", count=3, spacing=0.3, rotate_effort=True, effort_margin=40)
+    behind = _tired(_perception((-0.3, 0.0, 0.0), (-0.6, 0.0, 0.0)), 100.0)
+    heard = inbox_of([[
+        (FLAG, _flag(1, True, effort=50), np.array([-0.3, 0.0, 0.0])),
+        (FLAG, _flag(2, True, effort=10), np.array([-0.6, 0.0, 0.0])),
+    ]])  # fmt: skip
+    # 1. Ask: T spent 50 more than R (more than the margin): it flags R's slot, and stays.
+    memory, steering = steer_formation(_holding(0), behind, heard, params=params)
+    asking = FormationFlag.from_values(steering.outbox.values[0])
+    assert (asking.slot, asking.joined, asking.swap, asking.effort) == (0, True, 1, 100)
+    assert memory.swap_to.tolist() == [-1]
+    np.testing.assert_array_equal(steering.target, [[0.0, 0.0, 0.0]])
+    # Within the margin, nobody is asked.
+    _, calm = steer_formation(_holding(0), _tired(behind, 80.0), heard, params=params)
+    assert FormationFlag.from_values(calm.outbox.values[0]).swap == -1
+    # 2. Agree: R hears T's request (T 0.3 m ahead of it) and heads for slot 0, flagging
+    # that it seeks it and gives up slot 1.
+    at_r = _tired(_perception((0.3, 0.0, 0.0), (-0.3, 0.0, 0.0)), 50.0)
+    request = inbox_of([[(FLAG, asking.values(), np.array([0.3, 0.0, 0.0]))]])
+    memory_r, steering_r = steer_formation(_holding(1), at_r, request, params=params)
+    agreed = FormationFlag.from_values(steering_r.outbox.values[0])
+    assert (agreed.slot, agreed.joined, agreed.swap) == (0, False, 1)
+    assert (memory_r.swap_to.tolist(), memory_r.swap_from.tolist()) == ([0], [1])
+    assert memory_r.swap_since.tolist() == [100.0]
+    # 3. Go: T hears R seek its slot and give up slot 1: it heads for slot 1, 0.3 m behind.
+    answer = inbox_of([[(FLAG, agreed.values(), np.array([-0.3, 0.0, 0.0]))]])
+    memory_t, steering_t = steer_formation(_holding(0), behind, answer, params=params)
+    going = FormationFlag.from_values(steering_t.outbox.values[0])
+    assert (going.slot, going.joined, going.swap) == (1, False, 0)
+    assert memory_t.swap_to.tolist() == [1]
+    np.testing.assert_allclose(steering_t.target, [[-0.3, 0.0, 0.0]], atol=1e-12)
+    # Without rotation (the default) the same inbox moves nobody.
+    still = FormationParams("column", count=3, spacing=0.3)
+    _, unmoved = steer_formation(_holding(0), behind, answer, params=still)
+    np.testing.assert_array_equal(unmoved.target, [[0.0, 0.0, 0.0]])
+
+
+def test_a_swap_goes_on_until_the_fish_arrives_or_gives_up_and_then_it_rests() -> None:
+    params = FormationParams("column", count=3, spacing=0.3, rotate_effort=True, effort_margin=40)
+    here = _tired(_perception((-0.3, 0.0, 0.0)), 100.0)
+    rested = inbox_of([[(FLAG, _flag(1, True, effort=10), np.array([-0.3, 0.0, 0.0]))]])
+    # Under way (began 10 s ago, not there): it keeps going for slot 2 and asks nothing.
+    moving = dataclasses.replace(_holding(1, swap_to=2, since=90.0), joined=np.array([False]))
+    memory, steering = steer_formation(moving, here, rested, params=params)
+    flag = FormationFlag.from_values(steering.outbox.values[0])
+    assert memory.swap_to.tolist() == [2] and (flag.slot, flag.swap) == (2, 1)
+    # Not there after SWAP_TIMEOUT (20 s): it gives up; still within SWAP_REST (30 s) of the
+    # swap's start, so it does not ask either.
+    late = dataclasses.replace(moving, swap_since=np.array([75.0]))
+    memory, steering = steer_formation(late, here, rested, params=params)
+    assert memory.swap_to.tolist() == [-1]
+    assert FormationFlag.from_values(steering.outbox.values[0]).swap == -1
+    # Arrived (holds slot 2, joined): the swap is over; it rests.
+    arrived = dataclasses.replace(_holding(2, swap_to=2, since=80.0))
+    memory, steering = steer_formation(arrived, here, rested, params=params)
+    assert memory.swap_to.tolist() == [-1] and memory.swap_since.tolist() == [80.0]
+    assert FormationFlag.from_values(steering.outbox.values[0]).swap == -1
+    # Rested long enough (the swap began 31 s ago): tired again, it asks.
+    _, steering = steer_formation(_holding(2, since=69.0), here, rested, params=params)
+    assert FormationFlag.from_values(steering.outbox.values[0]).swap == 1
+
+
+def test_a_fish_that_sees_the_post_anchors_the_map_at_the_station_behind_it() -> None:
+    # The post 1 m ahead (+x: the formation's forward, the fish's too); the station is
+    # 0.2 m behind it: slot 0 at 0.8 m, slot 1 (a column, spacing 0.3) at 0.5 m.
+    params = FormationParams("column", count=2, spacing=0.3, station=0.2, rule="study")
+    seen = dataclasses.replace(
+        _perception((-0.5, 0.0, 0.0)),
+        landmarks=np.array([[[1.0, 0.0, 0.0]]]),
+        landmark_mask=np.array([[True]]),
+    )
+    memory, steering = steer_formation(
+        fresh_formation_memory(1), seen, Inbox.empty(1), params=params
+    )
+    assert memory.place.tolist() == [0]
+    np.testing.assert_allclose(steering.target, [[0.8, 0.0, 0.0]], atol=1e-12)
+    # Not seeing the post, it anchors the map at the leader it sees (itself, ahead of all).
+    _, blind = steer_formation(
+        fresh_formation_memory(1), _perception((-0.5, 0.0, 0.0)), Inbox.empty(1), params=params
+    )
+    np.testing.assert_allclose(blind.target, [[0.0, 0.0, 0.0]], atol=1e-12)
+
+
+def test_effort_sharing_fish_decide_alone_as_in_a_school() -> None:
+    params = fish_params(
+        {"behavior": "formation", "formation": "column", "fish": 4, "spacing": 0.3,
+         "rotate_effort": True, "effort_margin": 5.0, "tank": (1.78, 1.78, 1.17)}
+    )  # fmt: skip
+    rng = np.random.default_rng(5)
+    neighbors = np.tile(np.array([[-0.3, 0.0, 0.0], [0.3, 0.0, 0.0]]), (4, 1, 1))
+    perception = Perception(
+        np.full(4, 50.0), np.full(4, 0.5), neighbors, np.ones((4, 2), dtype=np.bool_),
+        np.zeros((4, 0, 3)), np.zeros((4, 0), bool), np.zeros(4),
+    )  # fmt: skip
+    heard = [
+        [(FLAG, _flag(int(rng.integers(0, 4)), bool(rng.integers(0, 2)),
+                      effort=int(rng.integers(0, 40)), swap=int(rng.integers(-1, 4))),
+          neighbors[0, int(rng.integers(0, 2))]) for _ in range(3)]
+        for _ in range(4)
+    ]  # fmt: skip
+    memory = FishMemory.fresh(params, 4)
+    memory = dataclasses.replace(
+        memory,
+        behavior=dataclasses.replace(
+            memory.behavior, place=np.array([0, 1, 2, 3]), joined=np.ones(4, dtype=np.bool_)
+        ),
+        effort=np.array([60.0, 10.0, 30.0, 45.0]),
+        last_time=np.full(4, 49.5),
+    )
+    _, together = decide(memory, perception, inbox_of(heard), params=params)
+    for fish in range(4):
+        rows = np.array([fish])
+        _, single = decide(
+            take_rows(memory, rows), take_rows(perception, rows), inbox_of([heard[fish]]),
+            params=params,
+        )  # fmt: skip
+        np.testing.assert_array_equal(single.fins[0], together.fins[fish])
+        np.testing.assert_array_equal(single.outbox.values[0], together.outbox.values[fish])
+    # Some of them asked, agreed or went (the case is not idle).
+    assert (together.outbox.values[:, 7] > 0).any()

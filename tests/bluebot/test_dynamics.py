@@ -152,3 +152,38 @@ def test_the_study_codes_drag_slows_turning_at_speed_and_brakes_backwards() -> N
     paper_coast = step(backwards, coast, duration=2.0, robot=BlueBot(euler_step=0.1), tank=TANK)
     study_coast = step(backwards, coast, duration=2.0, robot=STUDY_CODE, tank=TANK)
     assert -0.1 < paper_coast.body_velocity[0, 0] < study_coast.body_velocity[0, 0] < 0
+
+
+def test_a_flow_carries_the_fish_and_drag_acts_on_its_motion_through_the_water() -> None:
+    flow = np.array([-0.05, 0.02, 0.0])
+    start = np.array([1.0, 0.8, 0.5])
+    # Half dorsal balances buoyancy: a fish with no thrust drifts exactly with the water,
+    # 0.05·10 = 0.5 m back and 0.2 m sideways in 10 s.
+    state = rest_state(start[None].copy(), np.array([0.3]))
+    drifting = step(state, np.array([[0.0, 0.5, 0.0, 0.0]]), duration=10.0, robot=ROBOT,
+                    tank=TANK, flow=flow)  # fmt: skip
+    np.testing.assert_allclose(drifting.position[0], start + 10.0 * flow, atol=1e-12)
+    np.testing.assert_allclose(drifting.body_velocity, 0.0, atol=1e-15)
+    # Swimming, its path is the still-water path plus the water's: speeds stay relative.
+    fins = np.array([[0.6, 0.5, 0.2, 0.0]])
+    still = step(state, fins, duration=7.0, robot=ROBOT, tank=TANK)
+    carried = step(state, fins, duration=7.0, robot=ROBOT, tank=TANK, flow=flow)
+    np.testing.assert_allclose(carried.position, still.position + 7.0 * flow, atol=1e-12)
+    np.testing.assert_array_equal(carried.body_velocity, still.body_velocity)
+    np.testing.assert_array_equal(carried.yaw, still.yaw)
+
+
+def test_a_fish_with_less_surge_drag_reaches_a_higher_speed() -> None:
+    # v_t = sqrt(F / (m·k_x·scale)): with half the drag, √2 times the terminal speed.
+    start = rest_state(np.array([[0.1, 0.9, 0.5], [0.1, 0.5, 0.5]]), np.zeros(2))
+    fins = np.array([[0.25, 0.5, 0.0, 0.0], [0.25, 0.5, 0.0, 0.0]])
+    # τ = 1/(k·scale·v_t) is 11 s for the sheltered fish: 200 s is 18 τ.
+    state = step(start, fins, duration=200.0, robot=ROBOT, tank=Tank((40.0, 2.0, 1.17)),
+                 drag_scale=np.array([1.0, 0.5]))  # fmt: skip
+    expected = 0.5 * ROBOT.terminal_speed()  # a quarter of the force: half the speed
+    assert state.body_velocity[0, 0] == pytest.approx(expected, rel=1e-6)
+    assert state.body_velocity[1, 0] == pytest.approx(expected * math.sqrt(2), rel=1e-6)
+    # A scale of one changes nothing, bit for bit.
+    plain = step(start, fins, duration=3.0, robot=ROBOT, tank=TANK)
+    ones = step(start, fins, duration=3.0, robot=ROBOT, tank=TANK, drag_scale=np.ones(2))
+    np.testing.assert_array_equal(plain.position, ones.position)

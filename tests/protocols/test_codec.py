@@ -224,7 +224,7 @@ def _perception_fields(**overrides: object) -> dict[str, object]:
                 "broadcast",
                 {"sender_id": 1, "tick": 0, "kind": "formation", "values": np.array([1, 2])},
             ),
-            "a formation flag has 6 numbers",
+            "a formation flag has 6 to 8 numbers",
         ),
         (
             _raw(
@@ -377,3 +377,13 @@ def test_a_formation_flag_round_trips_through_a_broadcast() -> None:
     flag = FormationFlag(7, -1, False, 3, 179_999, 2**40)
     message = decode(encode(Broadcast(2, 5, "formation", flag.values())), Broadcast)
     assert FormationFlag.from_values(message.values) == flag
+    # Effort and a swap request travel too; a swap with slot 0 is not "none" on the wire.
+    tired = FormationFlag(1, 0, True, 0, 0, 9, effort=412, swap=0)
+    assert tired.values().tolist() == [1, 0, 1, 0, 0, 9, 412, 1]
+    assert FormationFlag.from_values(tired.values()) == tired
+    # A flag of six numbers (before effort sharing), even zero-padded, asks for no swap.
+    older = np.array([1, 2, 1, 1, 0, 3, 0, 0])
+    assert FormationFlag.from_values(older[:6]) == FormationFlag.from_values(older)
+    assert FormationFlag.from_values(older).swap == -1
+    with pytest.raises(ValueError, match="swap must be in"):
+        FormationFlag(1, 0, True, 0, 0, 9, swap=-2)

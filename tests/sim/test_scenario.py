@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
@@ -44,6 +45,12 @@ def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
         ({"channel_loss": 1.0}, "channel_loss must be a probability"),
         ({"swarm": "a b"}, "letters, digits"),
         ({"seed": -1}, "seed must be a non-negative integer"),
+        ({"flow": (0.1, math.nan, 0.0)}, r"flow must be a velocity \(x, y, z\) in m/s"),
+        ({"wake_saving": 1.0}, r"wake_saving must be a fraction in \[0, 1\)"),
+        ({"wake_width": 0.0}, "wake_length and wake_width must be positive lengths"),
+        ({"station_distance": 0.2}, r"with a landmark to hold station behind \(landmark ="),
+        ({"effort_margin": -1.0}, "effort_margin must be 0 or more"),
+        ({"rotate_effort": "yes"}, "flags and rotate_effort must be true or false"),
     ],
 )
 def test_bad_settings_say_what_is_wrong(changes: dict[str, object], message: str) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fishswarm.bluebot.parameters import fin_frequencies
+from fishswarm.bluebot.parameters import effort_rate, fin_frequencies
 from fishswarm.sim.physics import WorldParams
 from fishswarm.sim.scenario import Scenario
 from fishswarm.sim.tick import WorldSim
@@ -14,6 +14,12 @@ def test_fin_frequencies_follow_the_gains() -> None:
     fins = np.array([[1.0, 0.0, 0.5, 0.0], [0.5, 1.0, 1.0, 0.1]])
     # Caudal 1–3 Hz, dorsal 6 Hz whenever on, pectorals 1–10 Hz; gain 0 is off.
     np.testing.assert_allclose(fin_frequencies(fins), [[3.0, 0.0, 5.5, 0.0], [2.0, 6.0, 10.0, 1.9]])
+
+
+def test_effort_weighs_each_fins_beats_by_its_gain() -> None:
+    fins = np.array([[1.0, 0.0, 0.5, 0.0], [0.5, 1.0, 1.0, 0.1], [1.5, -1.0, 0.0, 0.0]])
+    # 1·3 + 0.5·5.5 = 5.75; 0.5·2 + 1·6 + 1·10 + 0.1·1.9 = 17.19; gains clipped: 1·3.
+    np.testing.assert_allclose(effort_rate(fins), [5.75, 17.19, 3.0])
 
 
 def test_effort_counts_fin_beats_and_follows_a_fish_that_leaves_and_returns() -> None:

@@ -237,7 +237,7 @@ def test_groups_compare_the_sweep_under_named_settings(tmp_path: Path) -> None:
     ("groups", "message"),
     [
         ('"a" = 3', r"must name tables of scenario settings"),
-        ('"a" = { flags = "maybe" }', r"group 'a': flags must be true or false, got 'maybe'"),
+        ('"a" = { flags = "maybe" }', r"group 'a': flags and rotate_effort must be true or false"),
     ],
 )
 def test_bad_groups_are_named(tmp_path: Path, groups: str, message: str) -> None:
