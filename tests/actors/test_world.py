@@ -71,6 +71,18 @@ async def _swarm(scenario: Scenario, *, schools: int) -> tuple[World, list[Snaps
             "spawn_radius": 0.4,
             "spacing": 0.25,
         },
+        {
+            # Flags flowing in jitter mode, a fifth of them lost, efforts in them.
+            "behavior": "formation",
+            "formation": "column",
+            "time_mode": "jitter",
+            "channel_loss": 0.2,
+            "controller": "pid",
+            "spawn_radius": 0.3,
+            "spacing": 0.25,
+            "rotate_effort": True,
+            "effort_margin": 1.0,
+        },
     ],
 )
 def test_the_actors_give_the_batch_engines_trajectory(changes: dict[str, object]) -> None:
