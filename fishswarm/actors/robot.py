@@ -11,8 +11,10 @@ collects the robots' status messages and liveliness for ``fishswarm robots``;
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Callable
+import dataclasses
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import trio
@@ -50,6 +52,8 @@ class RobotSettings:
         perception_timeout: the fish actor's own watchdog, s.
         seed: the mock cameras' sensor-noise seed.
         zenoh_config: a Zenoh configuration file to start the session from (None: defaults).
+        session_extra: further Zenoh settings of the session (a secured swarm's TLS, see
+            :func:`fishswarm.actors.security.session_security`).
     """
 
     driver: DriverSettings
@@ -60,6 +64,7 @@ class RobotSettings:
     perception_timeout: float = 3.0
     seed: int = 0
     zenoh_config: str | None = None
+    session_extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.hardware not in HARDWARE:
@@ -117,6 +122,7 @@ async def run_robot(
         connect_timeout=settings.connect_timeout,
         lease=ROBOT_LEASE,
         config_file=settings.zenoh_config,
+        extra=dict(settings.session_extra),
     )
     body = None
     if settings.hardware == "mock":

@@ -28,6 +28,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "channel": swarm.channel,
         "observe": swarm.observe,
         "router": swarm.router,
+        "secure": swarm.secure,
         "formation": swarm.formation,
         "export": swarm.export,
         "learn": learn.learn_command,

@@ -354,6 +354,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--ticks, or on Ctrl-C, and says what it saw.",
     )
     _add_connect(observe)
+    observe.add_argument(
+        "--name",
+        help="with --secure: whose observer certificate to use (observer-NAME; default the "
+        "plain observer certificate)",
+    )
     observe.add_argument("--swarm", default="default", help="swarm name (default default)")
     observe.add_argument("--record", type=Path, help="MCAP recording to write")
     observe.add_argument("--ticks", type=int, help="stop after the snapshot of this tick")
@@ -377,8 +382,49 @@ def build_parser() -> argparse.ArgumentParser:
     router.add_argument(
         "--listen",
         default="tcp/0.0.0.0:7447",
-        help="endpoint to listen on (default tcp/0.0.0.0:7447)",
+        help="endpoint to listen on (default tcp/0.0.0.0:7447; with --secure a tls/ one, "
+        "e.g. tls/0.0.0.0:7447)",
     )
+    router.add_argument(
+        "--secure",
+        type=Path,
+        metavar="DIR",
+        help="a secured swarm's folder (made by 'fishswarm secure init'): listen on TLS only, "
+        "ask every client for a certificate of its authority, and apply its access control",
+    )
+
+    secure = commands.add_parser(
+        "secure",
+        help="make the certificates and access control of a secured swarm",
+        description="Secure a swarm on Zenoh's own mechanisms: mutual TLS on the router and "
+        "access control that denies by default and allows each certificate (by its common "
+        "name) only the keys of its role. Pass the folder to every command as --secure DIR.",
+    )
+    secure_commands = secure.add_subparsers(dest="action", metavar="ACTION", required=True)
+    init = secure_commands.add_parser(
+        "init",
+        help="create an authority, a certificate and key per role, and the access control",
+        description="Write into DIR: ca.pem/ca.key (the authority: keep its key off the "
+        "robots), a certificate and key for router, world, channel, admin (fishswarm robots, "
+        "formation), observer, each --observers NAME (observer-NAME) and each --robots ID "
+        "(robot-ID: the robot's fish and driver), and access_control.json for the router.",
+    )
+    init.add_argument("folder", type=Path, metavar="DIR", help="folder to write into")
+    init.add_argument("--robots", type=int, nargs="*", default=[], metavar="ID",
+                      help="robot ids to make certificates for")  # fmt: skip
+    init.add_argument(
+        "--observers",
+        nargs="*",
+        default=[],
+        metavar="NAME",
+        help="observer names to make certificates for (besides 'observer')",
+    )
+    init.add_argument("--host", action="append", default=None, metavar="NAME_OR_ADDRESS",
+                      help="a name or address the router is reached by (repeat; default "
+                      "localhost and 127.0.0.1)")  # fmt: skip
+    init.add_argument("--swarm", default="default", help="swarm name (default default)")
+    init.add_argument("--days", type=int, default=365,
+                      help="how long the certificates are valid (default 365)")  # fmt: skip
 
     learn = commands.add_parser(
         "learn",
@@ -445,12 +491,19 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+SECURE_HELP = (
+    "a secured swarm's folder (made by 'fishswarm secure init'): connect over mutual TLS "
+    "with this command's certificate; --connect must then be a tls/ endpoint"
+)
+
+
 def _add_connect(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--connect",
         default=DEFAULT_ENDPOINT,
         help=f"router endpoint to connect to (default {DEFAULT_ENDPOINT})",
     )
+    parser.add_argument("--secure", type=Path, metavar="DIR", help=SECURE_HELP)
     parser.add_argument(
         "--connect-timeout",
         type=float,

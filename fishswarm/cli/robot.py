@@ -16,9 +16,10 @@ from fishswarm.actors.robot import (
     run_robot,
     survey_fleet,
 )
+from fishswarm.actors.security import SecurityError, robot_subject
 from fishswarm.actors.session import open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
-from fishswarm.cli.swarm import _client, _endpoint, _run_trio
+from fishswarm.cli.swarm import UserError, _client, _endpoint, _run_trio, secure_extra
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.scenario import ConfigError, Scenario
 
@@ -46,9 +47,12 @@ def robot(args: argparse.Namespace, scenario: Scenario) -> int:
             perception_timeout=args.perception_timeout,
             seed=scenario.seed,
             zenoh_config=str(args.zenoh_config) if args.zenoh_config else None,
+            session_extra=secure_extra(args, robot_subject(args.robot_id), endpoint=args.connect),
         )
     except ValueError as error:
         raise ConfigError(str(error)) from None
+    except SecurityError as error:
+        raise UserError(str(error)) from None
 
     async def main() -> None:
         async with trio.open_nursery() as nursery:
@@ -71,7 +75,7 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
         order = ("resume", args.resume)
 
     async def main() -> list[FleetEntry]:
-        async with open_session(_client(args)) as session:
+        async with open_session(_client(args, "admin")) as session:
             bus = ZenohBus(session)
             if order is not None:
                 sent = order_fleet(bus, keys, order[0], order[1])

@@ -19,6 +19,15 @@ from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.launcher import EXIT_WORKER_DIED, LaunchSettings, WorkerFailed, run_swarm
 from fishswarm.actors.observer import Observer, Progress
 from fishswarm.actors.robot import HardwareError
+from fishswarm.actors.security import (
+    ACCESS_FILE,
+    AUTHORITY,
+    SecurityError,
+    init_secure,
+    observer_subject,
+    robot_subject,
+    session_security,
+)
 from fishswarm.actors.session import ConnectError, SessionSettings, check_endpoint, open_session
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus, query
@@ -47,16 +56,52 @@ def _endpoint(value: str, flag: str) -> str:
         raise ConfigError(f"{flag}: {error}") from None
 
 
-def _client(args: argparse.Namespace) -> SessionSettings:
+def _client(args: argparse.Namespace, subject: str) -> SessionSettings:
+    """A client session to ``--connect``; with ``--secure DIR``, over mutual TLS with the
+    certificate of ``subject``."""
     return SessionSettings(
         mode="client",
         connect=[_endpoint(args.connect, "--connect")],
         connect_timeout=args.connect_timeout,
+        extra=secure_extra(args, subject, endpoint=args.connect),
     )
+
+
+def _fish_subject(args: argparse.Namespace) -> str:
+    """The certificate a ``fishswarm fish`` process uses: its robot's (one fish per process
+    in a secured swarm)."""
+    if getattr(args, "secure", None) is not None and len(args.ids) != 1:
+        raise ConfigError(
+            "with --secure, serve one fish per process (its robot's certificate, robot-ID): "
+            f"got --id {' --id '.join(map(str, args.ids))}"
+        )
+    return robot_subject(args.ids[0])
+
+
+def secure_extra(
+    args: argparse.Namespace, subject: str, *, endpoint: str, router: bool = False
+) -> dict[str, Any]:
+    """The session settings of ``--secure DIR`` for ``subject`` (none without it).
+
+    Raises:
+        ConfigError: ``--secure`` with an endpoint that is not ``tls/``.
+        SecurityError: the subject's certificate cannot be used (which file, and why).
+    """
+    folder = getattr(args, "secure", None)
+    if folder is None:
+        return {}
+    if not endpoint.startswith("tls/"):
+        flag = "--listen" if router else "--connect"
+        raise ConfigError(
+            f"{flag} {endpoint}: a secured swarm talks TLS only: give a tls/ endpoint, e.g. "
+            f"tls/{endpoint.partition('/')[2] or '127.0.0.1:7447'}"
+        )
+    return session_security(folder, subject, router=router)
 
 
 USER_ERRORS = (
     ConnectError,
+    SecurityError,
     StartTimeout,
     RecordingError,
     WorkerFailed,
@@ -268,7 +313,10 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
         raise ConfigError(str(error)) from None
 
     async def main() -> None:
-        async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
+        async with (
+            open_session(_client(args, _fish_subject(args))) as session,
+            trio.open_nursery() as nursery,
+        ):
             await nursery.start(Fish(settings).run, ZenohBus(session))
             print(f"fish {', '.join(map(str, args.ids))} up on {args.connect}", file=sys.stderr)
 
@@ -291,7 +339,10 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
             observer = Observer.of(
                 scenario, recorder=recorder, on_progress=show, observer_id="world-cli"
             )
-            async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
+            async with (
+                open_session(_client(args, "world")) as session,
+                trio.open_nursery() as nursery,
+            ):
                 bus = ZenohBus(session)
                 await nursery.start(observer.run, bus)
                 await nursery.start(serve_control, session, actor)
@@ -313,7 +364,7 @@ def channel(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm channel``: the channel alone."""
 
     async def main() -> None:
-        async with open_session(_client(args)) as session:
+        async with open_session(_client(args, "channel")) as session:
             await Channel(scenario).run(ZenohBus(session))
 
     _run_trio(main)
@@ -335,7 +386,10 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
         recorder = recorder_context.__enter__() if recorder_context else None
         try:
             observer = Observer(keys, recorder=recorder, on_progress=show, observer_id="cli")
-            async with open_session(_client(args)) as session, trio.open_nursery() as nursery:
+            async with (
+                open_session(_client(args, observer_subject(args.name))) as session,
+                trio.open_nursery() as nursery,
+            ):
                 await nursery.start(observer.run, ZenohBus(session))
                 print(f"observing swarm {args.swarm!r} on {args.connect}", file=sys.stderr)
                 # Until the snapshot of --ticks, or the end of the run (the world leaves).
@@ -381,7 +435,7 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
     request = encode(ControlRequest("formation", formation=args.shape))
 
     async def main() -> list[bytes]:
-        async with open_session(_client(args)) as session:
+        async with open_session(_client(args, "admin")) as session:
             return await query(session, keys.control, request, timeout=5.0)
 
     replies = _run_trio(main)
@@ -400,15 +454,55 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
 def router(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm router``: a Zenoh router for robots and observers."""
-    settings = SessionSettings(mode="router", listen=[_endpoint(args.listen, "--listen")])
+    settings = SessionSettings(
+        mode="router",
+        listen=[_endpoint(args.listen, "--listen")],
+        extra=_run_checked(lambda: secure_extra(args, "router", endpoint=args.listen, router=True)),
+    )
+    secured = f", secured by {args.secure}" if args.secure else ""
 
     async def main() -> None:
         async with open_session(settings):
-            print(f"router listening on {args.listen}; Ctrl-C stops it", file=sys.stderr)
+            print(f"router listening on {args.listen}{secured}; Ctrl-C stops it",
+                  file=sys.stderr)  # fmt: skip
             await trio.sleep_forever()
 
     _run_trio(main)
     return 0
+
+
+def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm secure init DIR``: a secured swarm's authority, certificates and access
+    control."""
+    try:
+        written = init_secure(
+            args.folder,
+            robots=args.robots,
+            observers=args.observers,
+            hosts=args.host or ("localhost", "127.0.0.1"),
+            swarm=args.swarm,
+            days=args.days,
+        )
+    except ValueError as error:
+        raise ConfigError(str(error)) from None
+    except OSError as error:
+        raise UserError(f"cannot write into {args.folder}: {error}") from None
+    subjects = sorted({p.stem for p in written if p.suffix == ".pem"} - {AUTHORITY})
+    print(
+        f"wrote {len(written)} files to {args.folder}: certificates for {', '.join(subjects)}; "
+        f"the router's access control in {ACCESS_FILE}. Keep ca.key off the robots; give "
+        "each machine ca.pem and its own certificate and key.",
+        file=sys.stderr,
+    )
+    return 0
+
+
+def _run_checked(make: Callable[[], dict[str, Any]]) -> dict[str, Any]:
+    """Security settings, with an unusable certificate reported as a user error."""
+    try:
+        return make()
+    except SecurityError as error:
+        raise UserError(str(error)) from None
 
 
 def export(args: argparse.Namespace, scenario: Scenario | None) -> int:

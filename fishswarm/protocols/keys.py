@@ -159,6 +159,11 @@ class KeySpace:
             return Member(parts[3], parts[4], parts[5] if len(parts) == 6 else None)
         raise ValueError(f"{key!r} is not a liveliness token of swarm {self.swarm!r}")
 
+    def every_school(self, kind: str) -> str:
+        """Key expression matching one kind of school key (``perceptions``, ``commands``,
+        ``about``) of every school."""
+        return f"{self.prefix}/school/*/{_check_name('kind', kind)}"
+
     def fish_outboxes(self) -> str:
         """Key expression matching every fish's outbox key."""
         return f"{self.prefix}/fish/*/outbox"

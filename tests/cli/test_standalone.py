@@ -100,3 +100,67 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
     assert [s.tick for s in recording.snapshots][-1] == 6
     assert recording.snapshots[-1].ids.tolist() == [0, 1, 2]
     assert any(e["role"] == "fish" for e in recording.events)
+
+
+def test_a_secured_swarm_runs_and_is_watched_as_a_plain_one(tmp_path: Path) -> None:
+    import numpy as np
+
+    from fishswarm.sim.engine import run_batch
+    from fishswarm.sim.scenario import Scenario
+
+    secure = tmp_path / "secure"
+    made = subprocess.run(
+        [*FISHSWARM, "secure", "init", str(secure), "--robots", "0", "1", "--observers", "lab"],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert made.returncode == 0, made.stderr
+    port = free_port()
+    endpoint = f"tls/127.0.0.1:{port}"
+    record = tmp_path / "observed.mcap"
+    processes: list[subprocess.Popen[str]] = []
+
+    def start(*args: str) -> subprocess.Popen[str]:
+        process = subprocess.Popen(
+            [*FISHSWARM, *args, "--secure", str(secure)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        processes.append(process)
+        return process
+
+    try:
+        start("router", "--listen", endpoint)
+        wait_for_port(port)
+        observer = start("observe", "--connect", endpoint, "--name", "lab", "--record", str(record))
+        start("fish", "--id", "0", "--connect", endpoint)
+        start("fish", "--id", "1", "--connect", endpoint)
+        start("channel", "--connect", endpoint)
+        world = subprocess.run(
+            [*FISHSWARM, "world", "--connect", endpoint, "--fish", "2", "--duration", "5",
+             "--seed", "4", "--start-timeout", "60", "--secure", str(secure)],
+            capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+        assert world.returncode == 0, world.stderr
+        statistics = json.loads(world.stderr.strip().splitlines()[-1])
+        assert statistics["ticks"] == 5 and statistics["lost_fish"] == 0
+        _, observer_errors = observer.communicate(timeout=30)
+        assert observer.returncode == 0, observer_errors
+        # Without a certificate nothing connects: the client gives up with a message.
+        bare = subprocess.run(
+            [*FISHSWARM, "observe", "--connect", endpoint, "--connect-timeout", "2"],
+            capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+        assert bare.returncode == 1 and "cannot open a client session" in bare.stderr
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.terminate()
+        for process in processes:
+            try:
+                process.communicate(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.communicate()
+    # The observer with its certificate saw the run the batch engine computes.
+    observed = read_recording(record).arrays()
+    reference = run_batch(Scenario(fish=2, duration=5, seed=4))
+    np.testing.assert_array_equal(observed["pos"], reference.position)

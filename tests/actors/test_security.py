@@ -1,0 +1,190 @@
+"""A secured swarm over real Zenoh on 127.0.0.1: mutual TLS, and access control by the
+certificate's common name."""
+
+from __future__ import annotations
+
+import datetime
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+import trio
+
+from fishswarm.actors.security import (
+    ACCESS_FILE,
+    SecurityError,
+    access_control,
+    check_subject,
+    init_secure,
+    session_security,
+)
+from fishswarm.actors.session import ConnectError, SessionSettings, open_session
+from fishswarm.actors.zenoh_bus import ZenohBus
+from fishswarm.protocols.keys import KeySpace
+from tests.conftest import free_port, run_trio, subscription
+
+pytestmark = pytest.mark.integration
+
+KEYS = KeySpace("default")
+
+
+@pytest.fixture(scope="module")
+def secure_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("secure")
+    init_secure(folder, robots=[1, 2], observers=["lab"])
+    return folder
+
+
+def _settings(
+    folder: Path, subject: str, endpoint: str, *, router: bool = False
+) -> SessionSettings:
+    extra = session_security(folder, subject, router=router)
+    if router:
+        return SessionSettings(mode="router", listen=[endpoint], extra=extra)
+    return SessionSettings(mode="client", connect=[endpoint], connect_timeout=3.0, extra=extra)
+
+
+def test_secure_init_writes_an_authority_a_certificate_per_subject_and_the_access_control(
+    secure_dir: Path,
+) -> None:
+    names = sorted(path.name for path in secure_dir.iterdir())
+    for subject in ("ca", "router", "world", "channel", "admin", "observer", "observer-lab",
+                    "robot-1", "robot-2"):  # fmt: skip
+        assert f"{subject}.pem" in names and f"{subject}.key" in names
+        if subject != "ca":
+            check_subject(secure_dir, subject)
+    assert (secure_dir / "robot-1.key").stat().st_mode & 0o077 == 0  # keys for the owner only
+    access = json.loads((secure_dir / ACCESS_FILE).read_text())
+    assert access["default_permission"] == "deny"
+    # Robot 1 may put its own command and nobody else's.
+    rules = {rule["id"]: rule for rule in access["rules"]}
+    assert rules["robot-1-publish"]["key_exprs"][0] == "fishswarm/default/fish/1/command"
+    assert not any("fish/2" in key for key in rules["robot-1-publish"]["key_exprs"])
+    # An observer publishes nothing; what it subscribes to it may also receive (egress put).
+    assert "observer-publish" not in rules
+    assert set(rules["observer-subscribe"]["messages"]) >= {"declare_subscriber", "put"}
+    assert "egress" in rules["observer-subscribe"]["flows"]
+
+
+def test_certificates_that_cannot_be_used_get_a_clear_message(
+    secure_dir: Path, tmp_path: Path
+) -> None:
+    with pytest.raises(
+        SecurityError, match=r"robot-7.pem is missing: no certificate for 'robot-7'"
+    ):
+        check_subject(secure_dir, "robot-7")
+    # Robot 1's certificate copied under robot 2's name is still robot 1's.
+    copy = tmp_path / "copy"
+    shutil.copytree(secure_dir, copy)
+    shutil.copy(copy / "robot-1.pem", copy / "robot-2.pem")
+    with pytest.raises(SecurityError, match=r"is the certificate of 'robot-1', not of 'robot-2'"):
+        check_subject(copy, "robot-2")
+    # A certificate of another authority.
+    other = tmp_path / "other"
+    init_secure(other)
+    shutil.copy(other / "world.pem", copy / "world.pem")
+    with pytest.raises(SecurityError, match=r"was not signed by the authority"):
+        check_subject(copy, "world")
+    # An expired one, signed by the right authority.
+    _expired(copy, "channel")
+    with pytest.raises(SecurityError, match=r"not now: renew it"):
+        check_subject(copy, "channel")
+    (copy / ACCESS_FILE).unlink()
+    with pytest.raises(SecurityError, match=r"access_control.json is missing"):
+        session_security(copy, "router", router=True)
+
+
+def _expired(folder: Path, subject: str) -> None:
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.x509.oid import NameOID
+
+    authority_key = serialization.load_pem_private_key((folder / "ca.key").read_bytes(), None)
+    authority = x509.load_pem_x509_certificate((folder / "ca.pem").read_bytes())
+    key = serialization.load_pem_private_key((folder / f"{subject}.key").read_bytes(), None)
+    past = datetime.datetime(2020, 1, 1, tzinfo=datetime.UTC)
+    certificate = (
+        x509.CertificateBuilder()
+        .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, subject)]))
+        .issuer_name(authority.subject)
+        .public_key(key.public_key())  # type: ignore[arg-type]
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(past)
+        .not_valid_after(past + datetime.timedelta(days=1))
+        .sign(authority_key, hashes.SHA256())  # type: ignore[arg-type]
+    )
+    (folder / f"{subject}.pem").write_bytes(certificate.public_bytes(serialization.Encoding.PEM))
+
+
+def test_only_certified_clients_connect_and_each_may_put_only_its_own_keys(
+    secure_dir: Path,
+) -> None:
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+
+    async def main() -> dict[str, list[str]]:
+        async with open_session(_settings(secure_dir, "router", endpoint, router=True)):
+            # No certificate: the router's mutual TLS refuses the client.
+            bare = SessionSettings(
+                mode="client", connect=[endpoint], connect_timeout=2.0,
+                extra={"transport/link/tls": {"root_ca_certificate": str(secure_dir / "ca.pem")}},
+            )  # fmt: skip
+            with pytest.raises(ConnectError):
+                async with open_session(bare):
+                    pass
+            async with (
+                open_session(_settings(secure_dir, "world", endpoint)) as world_session,
+                open_session(_settings(secure_dir, "observer-lab", endpoint)) as observer_session,
+                open_session(_settings(secure_dir, "robot-1", endpoint)) as robot1_session,
+                open_session(_settings(secure_dir, "robot-2", endpoint)) as robot2_session,
+            ):
+                world, observer = ZenohBus(world_session), ZenohBus(observer_session)
+                robot1, robot2 = ZenohBus(robot1_session), ZenohBus(robot2_session)
+                heard: dict[str, list[str]] = {"world": [], "observer": [], "robot-2": []}
+                async with (
+                    subscription(world, KEYS.command("*")) as commands,
+                    subscription(observer, KEYS.snapshot) as snapshots,
+                    subscription(robot2, KEYS.perception(2)) as perceptions,
+                ):
+                    # Wait until the routes are up: the world's snapshots reach the observer.
+                    with trio.fail_after(10):
+                        while True:
+                            world.put(KEYS.snapshot, b"snapshot")
+                            with trio.move_on_after(0.1):
+                                await snapshots.receive()
+                                break
+                    snapshots.drain()
+                    # Not allowed: robot 1 commanding fish 2, the observer commanding fish 1,
+                    # feeding robot 2 a perception, or putting on the world's control key.
+                    robot1.put(KEYS.command(2), b"robot-1 as fish 2")
+                    observer.put(KEYS.command(1), b"observer as fish 1")
+                    observer.put(KEYS.perception(2), b"observer as the world")
+                    observer.put(KEYS.control, b"observer stops the run")
+                    # Allowed: robot 1 commanding its own fish, the world a perception.
+                    robot1.put(KEYS.command(1), b"robot-1 as fish 1")
+                    world.put(KEYS.perception(2), b"world to fish 2")
+                    world.put(KEYS.snapshot, b"snapshot")
+                    with trio.fail_after(10):
+                        heard["world"].append((await commands.receive())[1].decode())
+                        heard["robot-2"].append((await perceptions.receive())[1].decode())
+                        heard["observer"].append((await snapshots.receive())[1].decode())
+                    # Whatever else was coming has come by now.
+                    await trio.sleep(0.5)
+                    heard["world"] += [payload.decode() for _, payload in commands.drain()]
+                    heard["robot-2"] += [payload.decode() for _, payload in perceptions.drain()]
+                    return heard
+
+    heard = run_trio(main)
+    assert heard == {
+        "world": ["robot-1 as fish 1"],
+        "observer": ["snapshot"],
+        "robot-2": ["world to fish 2"],
+    }
+
+
+def test_the_access_control_names_every_subject_once() -> None:
+    access = access_control(["router", "world", "observer", "robot-3"], KEYS)
+    assert [subject["id"] for subject in access["subjects"]] == ["world", "observer", "robot-3"]
+    assert all(policy["rules"][-1] == "liveliness" for policy in access["policies"])
+    with pytest.raises(ValueError, match="unknown subject 'stranger'"):
+        access_control(["stranger"], KEYS)
