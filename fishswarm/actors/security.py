@@ -100,8 +100,10 @@ def rights_of(subject: str, keys: KeySpace) -> Rights:
                 keys.command(robot), keys.outbox(robot), keys.about(robot),
                 keys.robot_status(robot),
             ),
+            # A mock robot's body (docs/robot.md) sees the tank through the snapshots.
             subscribes=(
                 keys.perception(robot), keys.inbox(robot), keys.world_pulse, keys.robot_order,
+                keys.snapshot,
             ),
         )  # fmt: skip
     raise ValueError(f"unknown subject {subject!r}")
