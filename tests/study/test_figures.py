@@ -104,7 +104,8 @@ def test_a_formation_runs_figure_colours_fish_by_role_and_lays_the_target_on_the
     figure = run_figure(
         np.arange(2.0), position, metrics, (1.78, 1.78, 1.17), title="f", formation=target
     )
-    above, side, error, joined, crowded = figure.axes
+    axes: list[Any] = figure.axes
+    above, side, error, joined, crowded = axes
     assert _labels(error) == ("time (s)", "shape error (m)")
     assert len(side.collections) == 2  # the slots and the fish, seen from the side too
     assert _labels(joined) == ("time (s)", "in their places (%)")
