@@ -14,6 +14,7 @@ import dataclasses
 import json
 import logging
 import signal
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -26,8 +27,16 @@ import trio
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.control import serve_control
 from fishswarm.actors.observer import Observer, Progress
+from fishswarm.actors.security import secure_run
 from fishswarm.actors.session import SessionSettings, open_session
-from fishswarm.actors.workers import Worker, WorkerSpec, split_fish, start_worker, stop_worker
+from fishswarm.actors.workers import (
+    Worker,
+    WorkerSpec,
+    school_of,
+    split_fish,
+    start_worker,
+    stop_worker,
+)
 from fishswarm.actors.world import World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.sim.scenario import Scenario
@@ -67,6 +76,9 @@ class LaunchSettings:
         log_level: logging level of the workers.
         handle_signals: stop cleanly on SIGINT (Ctrl-C) and SIGTERM, recording the run as
             interrupted (needs the main thread; the command line sets it).
+        secure: a secured swarm's folder (:mod:`fishswarm.actors.security`): the router
+            listens on TLS only with its access control, extended for this run's schools,
+            and each worker connects with a certificate signed for the run (None: open).
     """
 
     scenario: Scenario
@@ -79,6 +91,7 @@ class LaunchSettings:
     perception_timeout: float = 5.0
     log_level: str = "WARNING"
     handle_signals: bool = False
+    secure: Path | None = None
 
 
 @dataclass
@@ -96,7 +109,7 @@ async def run_swarm(
     """Run a whole swarm to the end of its scenario and return the summary."""
     scenario = settings.scenario
     started = time.perf_counter()
-    router = SessionSettings(mode="router", listen=[settings.listen])
+    schools = split_fish(list(range(scenario.fish)), settings.procs)
     workers: list[Worker] = []
     died: list[str] = []
     status = "failed"
@@ -111,6 +124,13 @@ async def run_swarm(
     channel = Channel(scenario)
     interrupted = trio.Event()
     with contextlib.ExitStack() as files:
+        router_extra: dict[str, Any] = {}
+        worker_extra: dict[str, dict[str, Any]] = {}
+        if settings.secure is not None:
+            signed = Path(files.enter_context(tempfile.TemporaryDirectory(prefix="fishswarm-")))
+            names = {school_of(index): ids for index, ids in enumerate(schools)}
+            router_extra, worker_extra = secure_run(settings.secure, scenario.keys, names, signed)
+        router = SessionSettings(mode="router", listen=[settings.listen], extra=router_extra)
         recorder = (
             files.enter_context(open_recorder(settings.record, scenario.to_dict()))
             if settings.record is not None
@@ -124,7 +144,7 @@ async def run_swarm(
                 await nursery.start(channel.run, bus)
                 await nursery.start(serve_control, session, world)
                 params = scenario.fish_params()
-                for index, ids in enumerate(split_fish(list(range(scenario.fish)), settings.procs)):
+                for index, ids in enumerate(schools):
                     spec = WorkerSpec(
                         index,
                         ids,
@@ -133,6 +153,7 @@ async def run_swarm(
                         _connect_to(settings.listen),
                         perception_timeout=settings.perception_timeout,
                         log_level=settings.log_level,
+                        session_extra=worker_extra.get(school_of(index), {}),
                     )
                     workers.append(start_worker(spec))
                 nursery.start_soon(_watch_workers, workers, died, world)

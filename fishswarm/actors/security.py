@@ -22,7 +22,7 @@ from __future__ import annotations
 import datetime
 import ipaddress
 import json
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -54,12 +54,35 @@ def observer_subject(name: str | None) -> str:
 @dataclass(frozen=True)
 class Rights:
     """What one subject may do: keys it publishes, keys it subscribes to, and keys it may
-    query (or serve queries on, ``serves``)."""
+    query (or serve queries on, ``serves``); a subscription it may declare wide
+    (``declares``) while it receives only some of the keys under it (``receives``)."""
 
     publishes: tuple[str, ...] = ()
     subscribes: tuple[str, ...] = ()
     queries: tuple[str, ...] = ()
     serves: tuple[str, ...] = ()
+    declares: tuple[str, ...] = ()
+    receives: tuple[str, ...] = ()
+
+
+def school_subject(school: str) -> str:
+    """The subject of a school's worker process (``run --secure`` signs one per run)."""
+    return f"school-{school}"
+
+
+def school_rights(keys: KeySpace, school: str, fish_ids: Sequence[int]) -> Rights:
+    """The rights of a school's worker: its school's keys and its fish's outboxes out; its
+    school's perceptions, the pulse and its own fish's deliveries in (it subscribes to every
+    fish's inbox at once, and the router passes it only its own: SPEC §7's egress rule)."""
+    return Rights(
+        publishes=(
+            keys.school_commands(school), keys.about(fish_ids[0], school),
+            *(keys.outbox(fish_id) for fish_id in fish_ids),
+        ),
+        subscribes=(keys.school_perceptions(school), keys.world_pulse),
+        declares=(keys.fish_inboxes(),),
+        receives=tuple(keys.inbox(fish_id) for fish_id in fish_ids),
+    )  # fmt: skip
 
 
 def rights_of(subject: str, keys: KeySpace) -> Rights:
@@ -109,8 +132,11 @@ def rights_of(subject: str, keys: KeySpace) -> Rights:
     raise ValueError(f"unknown subject {subject!r}")
 
 
-def access_control(subjects: Iterable[str], keys: KeySpace) -> dict[str, Any]:
-    """The router's access control: deny by default; each subject allowed its :func:`rights_of`.
+def access_control(
+    subjects: Iterable[str], keys: KeySpace, schools: Mapping[str, Sequence[int]] | None = None
+) -> dict[str, Any]:
+    """The router's access control: deny by default; each subject allowed its
+    :func:`rights_of`, and each school (name → its fish ids) its :func:`school_rights`.
 
     A subscriber only receives what its subject may also ``put`` on egress (measured, SPEC
     §7), so subscribing grants both; liveliness is allowed on the swarm's ``alive`` keys (the
@@ -127,10 +153,12 @@ def access_control(subjects: Iterable[str], keys: KeySpace) -> dict[str, Any]:
         "key_exprs": [keys.alive_all()],
     }
     rules.append(liveliness)
-    for subject in subjects:
-        if subject == "router":
-            continue
-        rights = rights_of(subject, keys)
+    granted = [(s, rights_of(s, keys)) for s in subjects if s != "router"]
+    granted += [
+        (school_subject(school), school_rights(keys, school, ids))
+        for school, ids in (schools or {}).items()
+    ]
+    for subject, rights in granted:
         mine: list[str] = []
         kinds = (
             ("publish", ["put", "delete"], ["ingress"], rights.publishes),
@@ -139,6 +167,8 @@ def access_control(subjects: Iterable[str], keys: KeySpace) -> dict[str, Any]:
             ("query", ["query", "reply"], ["ingress", "egress"], rights.queries),
             ("serve", ["declare_queryable", "query", "reply"], ["ingress", "egress"],
              rights.serves),
+            ("declare", ["declare_subscriber"], ["ingress"], rights.declares),
+            ("receive", ["put", "delete"], ["egress"], rights.receives),
         )  # fmt: skip
         for name, messages, flows, exprs in kinds:
             if not exprs:
@@ -192,7 +222,7 @@ def init_secure(
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes
     from cryptography.hazmat.primitives.asymmetric import ec
-    from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+    from cryptography.x509.oid import NameOID
 
     if days < 1:
         raise ValueError(f"certificates must be valid for at least a day, got {days}")
@@ -237,33 +267,85 @@ def init_secure(
     )
     written = _write(folder, AUTHORITY, authority_key, authority)
     for subject in subjects:
-        key = ec.generate_private_key(ec.SECP256R1())
-        certificate = (
-            x509.CertificateBuilder()
-            .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, subject)]))
-            .issuer_name(authority_name)
-            .public_key(key.public_key())
-            .serial_number(x509.random_serial_number())
-            .not_valid_before(start)
-            .not_valid_after(end)
-            .add_extension(x509.SubjectAlternativeName(names), critical=False)
-            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-            .add_extension(
-                x509.ExtendedKeyUsage(
-                    [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]
-                ),
-                critical=False,
-            )
-            .add_extension(
-                x509.AuthorityKeyIdentifier.from_issuer_public_key(authority_key.public_key()),
-                critical=False,
-            )
-            .sign(authority_key, hashes.SHA256())
-        )
-        written += _write(folder, subject, key, certificate)
+        written += _issue(folder, subject, authority_key, authority_name, names, start, end)
     access = folder / ACCESS_FILE
     access.write_text(json.dumps(access_control(subjects, keys), indent=2), encoding="utf-8")
     return [*written, access]
+
+
+def _issue(
+    folder: Path,
+    subject: str,
+    authority_key: Any,
+    authority_name: Any,
+    names: Sequence[Any],
+    start: datetime.datetime,
+    end: datetime.datetime,
+) -> list[Path]:
+    """Write a certificate and key for ``subject`` signed by the authority, for client and
+    server use under ``names``."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+    key = ec.generate_private_key(ec.SECP256R1())
+    certificate = (
+        x509.CertificateBuilder()
+        .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, subject)]))
+        .issuer_name(authority_name)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(start)
+        .not_valid_after(end)
+        .add_extension(x509.SubjectAlternativeName(list(names)), critical=False)
+        .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+        .add_extension(
+            x509.ExtendedKeyUsage(
+                [ExtendedKeyUsageOID.SERVER_AUTH, ExtendedKeyUsageOID.CLIENT_AUTH]
+            ),
+            critical=False,
+        )
+        .add_extension(
+            x509.AuthorityKeyIdentifier.from_issuer_public_key(authority_key.public_key()),
+            critical=False,
+        )
+        .sign(authority_key, hashes.SHA256())
+    )
+    return _write(folder, subject, key, certificate)
+
+
+def issue_for_run(folder: Path, subjects: Sequence[str], out: Path, *, hours: float = 48.0) -> None:
+    """Sign short-lived certificates for ``subjects`` with the authority of ``folder`` into
+    ``out`` (with a copy of the authority's certificate): what ``run --secure`` gives its
+    worker processes.
+
+    Raises:
+        SecurityError: the authority's key or certificate is missing or unreadable.
+    """
+    from cryptography import x509
+    from cryptography.hazmat.primitives import serialization
+
+    key_path, certificate_path = folder / f"{AUTHORITY}.key", folder / f"{AUTHORITY}.pem"
+    for path in (key_path, certificate_path):
+        if not path.is_file():
+            raise SecurityError(
+                f"{path} is missing: a secured run signs certificates for its worker "
+                "processes with the authority's key (run it where 'fishswarm secure init' "
+                "wrote its files)"
+            )
+    try:
+        authority_key = serialization.load_pem_private_key(key_path.read_bytes(), None)
+        authority = x509.load_pem_x509_certificate(certificate_path.read_bytes())
+    except ValueError as error:
+        raise SecurityError(f"{key_path} or {certificate_path} is unreadable: {error}") from None
+    now = datetime.datetime.now(datetime.UTC)
+    start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(hours=hours)
+    names = [x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{AUTHORITY}.pem").write_bytes(certificate_path.read_bytes())
+    for subject in subjects:
+        _issue(out, subject, authority_key, authority.subject, names, start, end)
 
 
 def _write(folder: Path, name: str, key: Any, certificate: Any) -> list[Path]:
@@ -360,3 +442,25 @@ def session_security(folder: Path, subject: str, *, router: bool = False) -> dic
         except json.JSONDecodeError as error:
             raise SecurityError(f"{access} is not valid JSON: {error}") from None
     return extra
+
+
+def secure_run(
+    folder: Path, keys: KeySpace, schools: Mapping[str, Sequence[int]], out: Path
+) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """The session settings of a secured ``fishswarm run``: its router's (the folder's
+    access control, extended with a rule set for each of the run's schools) and each
+    school's worker's (a certificate signed for this run into ``out``).
+
+    Raises:
+        SecurityError: see :func:`session_security` and :func:`issue_for_run`.
+    """
+    router = session_security(folder, "router", router=True)
+    issue_for_run(folder, [school_subject(school) for school in schools], out)
+    extra = access_control([], keys, schools)
+    access = router["access_control"]
+    known = {rule["id"] for rule in access["rules"]}
+    access["rules"] += [rule for rule in extra["rules"] if rule["id"] not in known]
+    access["subjects"] += extra["subjects"]
+    access["policies"] += extra["policies"]
+    workers = {school: session_security(out, school_subject(school)) for school in schools}
+    return router, workers

@@ -11,8 +11,9 @@ import contextlib
 import logging
 import multiprocessing
 import signal
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
+from typing import Any
 
 import trio
 
@@ -37,6 +38,7 @@ class WorkerSpec:
         log_level: logging level name.
         schooled: serve the fish as one school (batched keys) rather than each on its own
             keys as a robot would.
+        session_extra: further Zenoh settings of its session (a secured run's TLS).
     """
 
     index: int
@@ -47,18 +49,24 @@ class WorkerSpec:
     perception_timeout: float = 5.0
     log_level: str = "WARNING"
     schooled: bool = True
+    session_extra: dict[str, Any] = field(default_factory=dict)
 
     @property
     def school(self) -> str | None:
         """The school its fish are served under (one message per tick each way), or None
         when each fish has its own keys."""
-        return f"worker-{self.index}" if self.schooled else None
+        return school_of(self.index) if self.schooled else None
 
     def describe(self) -> str:
         """``worker 1 (fish 13–24)``."""
         ids = self.fish_ids
         span = f"fish {ids[0]}" if len(ids) == 1 else f"fish {ids[0]}–{ids[-1]}"
         return f"worker {self.index} ({span})"
+
+
+def school_of(index: int) -> str:
+    """The school name of worker ``index``."""
+    return f"worker-{index}"
 
 
 def split_fish(ids: list[int], procs: int) -> list[tuple[int, ...]]:
@@ -92,7 +100,7 @@ async def _serve(spec: WorkerSpec, connection: Connection) -> FishStatistics:
             school=spec.school,
         )
     )
-    settings = SessionSettings(mode="client", connect=[spec.connect])
+    settings = SessionSettings(mode="client", connect=[spec.connect], extra=spec.session_extra)
     async with open_session(settings) as session, trio.open_nursery() as nursery:
         await nursery.start(fish.run, ZenohBus(session))
         connection.send(("ready", spec.index))

@@ -193,6 +193,14 @@ def build_parser() -> argparse.ArgumentParser:
         "tcp/0.0.0.0:7447 lets observers on other machines attach)",
     )
     run.add_argument(
+        "--secure",
+        type=Path,
+        metavar="DIR",
+        help="a secured swarm's folder (made by 'fishswarm secure init', with the authority's "
+        "key): listen on TLS only (--listen tls/...), apply its access control, and give each "
+        "worker process a certificate signed for this run",
+    )
+    run.add_argument(
         "--start-timeout",
         type=float,
         default=60.0,

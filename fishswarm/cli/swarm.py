@@ -193,7 +193,13 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         perception_timeout=args.perception_timeout,
         log_level=args.log_level,
         handle_signals=True,
+        secure=args.secure,
     )
+    if args.secure is not None and not settings.listen.startswith("tls/"):
+        raise ConfigError(
+            f"--listen {settings.listen}: a secured run listens on TLS only: give a tls/ "
+            f"endpoint, e.g. tls/{settings.listen.partition('/')[2]}"
+        )
     print(
         f"fishswarm: {scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
         f"{1 / scenario.control_period:g} Hz, seed {scenario.seed}, {args.procs} worker "

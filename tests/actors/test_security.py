@@ -7,6 +7,7 @@ import datetime
 import json
 import shutil
 from pathlib import Path
+from typing import Any
 
 import pytest
 import trio
@@ -188,3 +189,61 @@ def test_the_access_control_names_every_subject_once() -> None:
     assert all(policy["rules"][-1] == "liveliness" for policy in access["policies"])
     with pytest.raises(ValueError, match="unknown subject 'stranger'"):
         access_control(["stranger"], KEYS)
+
+
+def test_a_secured_run_with_an_observer_that_tries_to_steer_it_equals_a_clean_run(
+    secure_dir: Path, tmp_path: Path
+) -> None:
+    import numpy as np
+
+    from fishswarm.actors.launcher import LaunchSettings, run_swarm
+    from fishswarm.protocols.codec import encode
+    from fishswarm.protocols.messages import Command
+    from fishswarm.sim.engine import run_batch
+    from fishswarm.sim.scenario import Scenario
+    from fishswarm.study.recording import read_recording
+
+    # A formation with flags flowing over two worker processes: each worker has only a
+    # certificate signed for this run, and receives only its own fish's deliveries.
+    scenario = Scenario(
+        fish=6, behavior="formation", formation="column", duration=6.0, seed=3,
+        controller="pid", control_period=0.5, spawn_radius=0.4, spacing=0.25,
+    )  # fmt: skip
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    record = tmp_path / "secured.mcap"
+    settings = LaunchSettings(scenario, procs=2, listen=endpoint, record=record, secure=secure_dir)
+    keys = scenario.keys
+    forged = encode(Command(0, 0, np.array([1.0, 0.0, 1.0, 0.0]), True))
+
+    async def main() -> tuple[Any, int]:
+        result: list[Any] = []
+        attempts = 0
+
+        async def launch() -> None:
+            result.append(await run_swarm(settings))
+
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(launch)
+            # An observer (a certificate of this swarm) tries to command fish 0, to feed
+            # fish 1 a perception and to stop the run, over and over while it runs.
+            await trio.sleep(0.5)
+            async with open_session(_settings(secure_dir, "observer-lab", endpoint)) as session:
+                bus = ZenohBus(session)
+                while not result:
+                    for _ in range(20):
+                        bus.put(keys.command(0), forged)
+                        bus.put(keys.school_commands("worker-0"), forged)
+                        bus.put(keys.school_perceptions("worker-1"), b"\x93\x01\x02\x03")
+                        bus.put(keys.outbox(2), b"\x93\x01\x02\x03")
+                        attempts += 1
+                    await trio.sleep(0.05)
+        return result[0], attempts
+
+    result, attempts = run_trio(main, timeout=120)
+    assert result.exit_code == 0 and attempts > 0
+    # Had anything forged reached the world, the channel or a worker, it would be rejected
+    # there and counted.
+    assert set(result.summary["counts"]["rejected"].values()) == {0}
+    assert result.summary["counts"]["deliveries"] > 0
+    observed = read_recording(record).arrays()
+    np.testing.assert_array_equal(observed["pos"], run_batch(scenario).position)
