@@ -19,6 +19,7 @@ import argparse
 import multiprocessing
 import threading
 import time
+from typing import Any
 
 import numpy as np
 import trio
@@ -32,9 +33,11 @@ from fishswarm.actors.zenoh_bus import ZenohBus
 PING, PONG = "bench/ping", "bench/pong"
 
 
-def zenoh_echo(endpoint: str) -> None:
-    """Echo in Zenoh's callback thread until killed."""
-    session = zenoh.open(SessionSettings(mode="client", connect=[endpoint]).to_config())
+def zenoh_echo(endpoint: str, extra: dict[str, Any] | None = None) -> None:
+    """Echo in Zenoh's callback thread until killed (``extra``: further session settings,
+    e.g. TLS)."""
+    settings = SessionSettings(mode="client", connect=[endpoint], extra=extra or {})
+    session = zenoh.open(settings.to_config())
     pong = session.declare_keyexpr(PONG)
     session.declare_subscriber(PING, lambda sample: session.put(pong, sample.payload))
     threading.Event().wait()
@@ -54,10 +57,20 @@ def trio_echo(endpoint: str) -> None:
     trio.run(serve)
 
 
-def echo_round_trips(target: str, samples: int) -> np.ndarray:
-    """Round trips in ms to an echo process running ``target`` (``zenoh`` or ``trio``)."""
-    endpoint = free_loopback_endpoint()
-    session = zenoh.open(SessionSettings(mode="router", listen=[endpoint]).to_config())
+def echo_round_trips(
+    target: str,
+    samples: int,
+    *,
+    endpoint: str | None = None,
+    router_extra: dict[str, Any] | None = None,
+    echo_extra: dict[str, Any] | None = None,
+) -> np.ndarray:
+    """Round trips in ms to an echo process running ``target`` (``zenoh`` or ``trio``),
+    over a router on ``endpoint`` (default a free loopback TCP port) with further router
+    and echo-session settings (e.g. TLS and access control; ``zenoh`` echo only)."""
+    endpoint = endpoint or free_loopback_endpoint()
+    router = SessionSettings(mode="router", listen=[endpoint], extra=router_extra or {})
+    session = zenoh.open(router.to_config())
     arrived = threading.Event()
     stamp = [0.0]
 
@@ -66,8 +79,9 @@ def echo_round_trips(target: str, samples: int) -> np.ndarray:
         arrived.set()
 
     subscriber = session.declare_subscriber(PONG, on_pong)
+    arguments: tuple[Any, ...] = (endpoint, echo_extra) if target == "zenoh" else (endpoint,)
     main = zenoh_echo if target == "zenoh" else trio_echo
-    process = multiprocessing.get_context("spawn").Process(target=main, args=(endpoint,))
+    process = multiprocessing.get_context("spawn").Process(target=main, args=arguments)
     process.start()
     times: list[float] = []
     try:
