@@ -34,7 +34,7 @@ import trio
 from numpy.typing import NDArray
 
 from fishswarm import __version__
-from fishswarm.actors.bus import Bus, open_subscriber, open_token
+from fishswarm.actors.bus import Bus, open_alive_events, open_subscriber, open_token
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.behaviors.core import (
@@ -71,7 +71,7 @@ log = logging.getLogger(__name__)
 
 Rows = NDArray[np.intp]
 
-PERCEPTION, BATCH, DELIVERY, PULSE = "perception", "batch", "delivery", "pulse"
+PERCEPTION, BATCH, DELIVERY, PULSE, WORLD = "perception", "batch", "delivery", "pulse", "world"
 
 MAX_WAITING_DELIVERIES = 10_000
 """Most deliveries one fish keeps waiting for their perception."""
@@ -252,6 +252,17 @@ class Fish:
                 await stack.enter_async_context(
                     open_token(bus, keys.alive("fish", fish_id, school))
                 )
+            # Say who the fish are on their own keys (which a secured router lets only them
+            # put), now and whenever a world comes up: a secured world admits only fish
+            # vouched for so, not whoever shows a liveliness token.
+            self._hello(bus)
+            await stack.enter_async_context(
+                open_alive_events(
+                    bus,
+                    keys.alive_all("world"),
+                    lambda key, alive: events.push((-1, WORLD, key, b"")) if alive else None,
+                )
+            )
             nursery = await stack.enter_async_context(trio.open_nursery())
             self._last_seen[:] = trio.current_time()
             nursery.start_soon(self._watchdog, bus)
@@ -268,6 +279,8 @@ class Fish:
                         self._take_batch(key, payload)
                     elif kind == PULSE:
                         self._take_pulse(key, payload)
+                    elif kind == WORLD:
+                        self._hello(bus)
                     else:
                         self._take_delivery(index, key, payload)
                 self._announce(bus)
@@ -370,6 +383,17 @@ class Fish:
         self._params = self.settings.params  # a new run starts as configured
         fresh = FishMemory.fresh(self._params, rows.size)
         self._memory = put_rows(self._memory, rows, fresh)
+
+    def _hello(self, bus: Bus) -> None:
+        """Vouch for the fish on their own about keys (run 0: before any run)."""
+        keys, school, params = self.settings.keys, self.settings.school, self.settings.params
+        groups = [self._sorted_ids] if school is not None else [[i] for i in self._sorted_ids]
+        for ids in groups:
+            about = FishAbout(
+                np.asarray(ids, dtype=np.int64), params.behavior.name, __version__, 0,
+                rules_of(params),
+            )  # fmt: skip
+            bus.put(keys.about(int(ids[0]), school), encode(about))
 
     def _announce(self, bus: Bus) -> None:
         """Tell the world what the fish that started a run run (behaviour, version, rules),

@@ -119,6 +119,7 @@ async def run_swarm(
             expected_fish=tuple(range(scenario.fish)),
             start_timeout=settings.start_timeout,
             command_timeout=settings.command_timeout,
+            vouched_only=settings.secure is not None,
         )
     )
     channel = Channel(scenario)

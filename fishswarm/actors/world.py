@@ -87,6 +87,10 @@ class WorldSettings:
             router first when the world runs as a client).
         pulse_period: how often the world says it is alive while a run goes on, s (fish
             take the pulse as a sign of life, so a slow world does not trip their watchdog).
+        vouched_only: admit only fish vouched for on their own about keys (their own, or
+            their school's listing them): in a secured swarm only a fish's own certificate
+            may put there, while anyone certified can show a liveliness token (Zenoh's
+            access control does not filter liveliness).
     """
 
     scenario: Scenario
@@ -96,6 +100,7 @@ class WorldSettings:
     channel_timeout: float = 5.0
     admit_delay: float = 0.1
     pulse_period: float = 1.0
+    vouched_only: bool = False
 
     def __post_init__(self) -> None:
         if self.pulse_period <= 0:
@@ -203,6 +208,8 @@ class World:
         self._messages_out = 0
         self._current = _Tick()
         self.mismatched: set[int] = set()
+        self.vouched: set[tuple[int, str | None]] = set()
+        """(fish id, school or None) pairs vouched for on their own about keys."""
         """Fish that said they run another behaviour, version or rules than this world's."""
         self._fish_rules = rules_of(settings.scenario.fish_params())
         """The rules this world's scenario says its fish decide by (FishAbout.rules)."""
@@ -333,12 +340,19 @@ class World:
             return None
         return encode(self.control(request))
 
+    def _admissible(self) -> set[int]:
+        """Live fish the world may admit: all of them, or (``vouched_only``) those vouched
+        for under the school their liveliness token names."""
+        if not self.settings.vouched_only:
+            return self.roster.alive
+        return {i for i in self.roster.alive if (i, self.roster.school_of.get(i)) in self.vouched}
+
     async def _wait_for_fish(self) -> None:
         expected = set(self.settings.expected_fish)
         with trio.move_on_after(self.settings.start_timeout):
-            while not expected <= self.roster.alive:
+            while not expected <= self._admissible():
                 self._handle(await self._events.receive())
-        missing = sorted(expected - self.roster.alive)
+        missing = sorted(expected - self._admissible())
         if missing:
             raise StartTimeout(
                 f"{len(missing)} of {len(expected)} fish did not come up within "
@@ -486,10 +500,17 @@ class World:
             self._take_command(key, payload)
 
     def _take_about(self, key: str, payload: bytes) -> None:
-        """Warn, once for each kind of difference, about fish that run another behaviour,
-        version or rules than this world's."""
+        """Note the fish vouched for; warn, once for each kind of difference, about fish
+        that run another behaviour, version or rules than this world's."""
         about = self.intake.decode(key, payload, FishAbout)
-        if about is None or about.run != self.run_id:
+        if about is None:
+            return
+        school = self.keys.school_of_key(key)
+        if key == self.keys.about(int(about.ids[0]), school) and (
+            school is not None or about.ids.size == 1
+        ):
+            self.vouched.update((int(fish_id), school) for fish_id in about.ids)
+        if about.run != self.run_id:
             return
         differences = []
         if about.behavior != self.scenario.behavior:
@@ -568,6 +589,8 @@ class World:
         ``tick``."""
         present = set(self.sim.ids.tolist())
         new = self.roster.ready(present, trio.current_time(), self.settings.admit_delay)
+        admissible = self._admissible()
+        new = [fish_id for fish_id in new if fish_id in admissible]
         if not new:
             return
         if tick > 0:

@@ -332,7 +332,14 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
 
 def world(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm world``: the world alone."""
-    actor = World(WorldSettings(scenario, tuple(range(scenario.fish)), args.start_timeout))
+    actor = World(
+        WorldSettings(
+            scenario,
+            tuple(range(scenario.fish)),
+            args.start_timeout,
+            vouched_only=args.secure is not None,
+        )
+    )
     show = None if args.quiet else progress_printer(scenario.ticks)
 
     async def main() -> None:

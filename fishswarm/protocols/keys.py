@@ -172,6 +172,13 @@ class KeySpace:
         """Key expression matching every fish's inbox key."""
         return f"{self.prefix}/fish/*/inbox"
 
+    def school_of_key(self, key: str) -> str | None:
+        """The school a ``school/<name>/<kind>`` key of this swarm names (None for others)."""
+        parts = key.split("/")
+        if len(parts) == 5 and "/".join(parts[:2]) == self.prefix and parts[2] == "school":
+            return parts[3]
+        return None
+
     def member_of(self, key: str) -> tuple[str, str]:
         """Split a per-member key: ``.../fish/3/command`` → ("3", "command").
 

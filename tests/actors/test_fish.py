@@ -237,16 +237,18 @@ def test_fish_waits_for_announced_deliveries_then_broadcasts_before_its_command(
         for at, key, _ in order
         if not key.endswith(("perception", "inbox"))
     ]
-    # On the first perception of a run the fish says what it runs; then it waits, broadcasts,
-    # and commands.
+    # Up, the fish vouches for itself (run 0); on the first perception of a run it says what
+    # it runs; then it waits, broadcasts, and commands.
     assert sent == [
+        (0.0, "about"),
         (0.0, "about"),
         (1.5, "outbox"),
         (1.5, "command"),
         (3.5, "outbox"),
         (3.5, "command"),
     ]
-    about = decode(next(p for _, k, p in order if k.endswith("about")), FishAbout)
+    hello, about = (decode(p, FishAbout) for _, k, p in order if k.endswith("about"))
+    assert hello.run == 0 and hello.ids.tolist() == [4]
     assert about.ids.tolist() == [4] and about.behavior == "test-signal"
     assert about.version == __version__
     outputs = [payload for _, key, payload in order if key.endswith(("outbox", "command"))]

@@ -247,3 +247,63 @@ def test_a_secured_run_with_an_observer_that_tries_to_steer_it_equals_a_clean_ru
     assert result.summary["counts"]["deliveries"] > 0
     observed = read_recording(record).arrays()
     np.testing.assert_array_equal(observed["pos"], run_batch(scenario).position)
+
+
+@pytest.mark.parametrize("vouched_only", [True, False])
+def test_a_fake_fish_shown_by_a_liveliness_token_is_not_admitted_to_a_secured_run(
+    secure_dir: Path, tmp_path: Path, vouched_only: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import numpy as np
+
+    from fishswarm.actors.launcher import LaunchSettings, run_swarm
+    from fishswarm.sim.engine import run_batch
+    from fishswarm.sim.scenario import Scenario
+    from fishswarm.study.recording import read_recording
+
+    # Zenoh's access control does not filter liveliness: any certified client (here an
+    # observer) can show a token saying "fish 9 is alive", on its own keys or as a fish of a
+    # run's school. A secured world admits only fish vouched for on their own about keys.
+    # Without that defence (vouched_only False, forced here) the fake fish gets in.
+    if not vouched_only:
+        from fishswarm.actors.world import WorldSettings
+
+        monkeypatch.setattr(
+            "fishswarm.actors.launcher.WorldSettings",
+            lambda *a, **k: WorldSettings(*a, **{**k, "vouched_only": False}),
+        )
+    scenario = Scenario(fish=4, duration=4.0, seed=5)
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    record = tmp_path / "run.mcap"
+    settings = LaunchSettings(scenario, listen=endpoint, record=record, secure=secure_dir,
+                              command_timeout=1.0)  # fmt: skip
+    keys = scenario.keys
+
+    async def main() -> Any:
+        result: list[Any] = []
+
+        async def launch() -> None:
+            result.append(await run_swarm(settings))
+
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(launch)
+            await trio.sleep(0.3)
+            async with open_session(_settings(secure_dir, "observer-lab", endpoint)) as session:
+                bus = ZenohBus(session)
+                own = bus.declare_token(keys.alive("fish", 9))
+                schooled = bus.declare_token(keys.alive("fish", 8, "worker-0"))
+                while not result:
+                    await trio.sleep(0.05)
+                own.undeclare()
+                schooled.undeclare()
+        return result[0]
+
+    result = run_trio(main, timeout=120)
+    ids = {int(i) for s in read_recording(record).snapshots for i in s.ids}
+    if vouched_only:
+        assert result.exit_code == 0 and ids == {0, 1, 2, 3}
+        assert result.summary["counts"]["joined_fish"] == 0
+        assert result.summary["counts"]["lost_fish"] == 0
+        positions = read_recording(record).arrays()["pos"]
+        np.testing.assert_array_equal(positions, run_batch(scenario).position)
+    else:
+        assert ids & {8, 9}  # the threat is real: the world took a fish nobody runs
