@@ -39,6 +39,7 @@ from fishswarm.actors.perceptions import perception_messages
 from fishswarm.actors.roster import LostFish, Roster
 from fishswarm.behaviors.registry import rules_of
 from fishswarm.protocols.codec import MessageError, decode, encode
+from fishswarm.protocols.keys import fish_id_of
 from fishswarm.protocols.messages import (
     ChannelReport,
     Command,
@@ -210,6 +211,9 @@ class World:
         self.mismatched: set[int] = set()
         self.vouched: set[tuple[int, str | None]] = set()
         """(fish id, school or None) pairs vouched for on their own about keys."""
+        self._unvouched: dict[tuple[int, str | None], str] = {}
+        """With ``vouched_only``: live fish tokens not (yet) vouched for, held back from the
+        roster until they are (a fish's token may come before its vouching)."""
         """Fish that said they run another behaviour, version or rules than this world's."""
         self._fish_rules = rules_of(settings.scenario.fish_params())
         """The rules this world's scenario says its fish decide by (FishAbout.rules)."""
@@ -339,6 +343,26 @@ class World:
             self.intake.reject(key, "malformed", str(error))
             return None
         return encode(self.control(request))
+
+    def _held_back(self, key: str, alive: bool) -> bool:
+        """Whether a fish's liveliness token waits for its vouching instead of reaching the
+        roster: a token nobody vouched for neither adds a fish nor takes one away (a token
+        naming a real fish under another school would otherwise re-route or drop it)."""
+        try:
+            member = self.keys.parse_alive(key)
+        except ValueError:
+            return False
+        fish_id = fish_id_of(member.member_id)
+        if member.role != "fish" or fish_id is None:
+            return False
+        pair = (fish_id, member.school)
+        if pair in self.vouched:
+            return False
+        if alive:
+            self._unvouched[pair] = key
+        else:
+            self._unvouched.pop(pair, None)
+        return True
 
     def _admissible(self) -> set[int]:
         """Live fish the world may admit: all of them, or (``vouched_only``) those vouched
@@ -483,6 +507,8 @@ class World:
         kind, key, payload = event
         if kind == "alive":
             assert isinstance(payload, bool)
+            if self.settings.vouched_only and self._held_back(key, payload):
+                return
             left = self.roster.on_alive(key, payload, trio.current_time())
             if left is not None and left in self.sim.ids:
                 self._lose(left, "left (liveliness token gone)")
@@ -509,7 +535,11 @@ class World:
         if key == self.keys.about(int(about.ids[0]), school) and (
             school is not None or about.ids.size == 1
         ):
-            self.vouched.update((int(fish_id), school) for fish_id in about.ids)
+            for fish_id in about.ids.tolist():
+                self.vouched.add((fish_id, school))
+                held = self._unvouched.pop((fish_id, school), None)
+                if held is not None:
+                    self.roster.on_alive(held, True, trio.current_time())
         if about.run != self.run_id:
             return
         differences = []

@@ -271,7 +271,8 @@ def test_a_fake_fish_shown_by_a_liveliness_token_is_not_admitted_to_a_secured_ru
             "fishswarm.actors.launcher.WorldSettings",
             lambda *a, **k: WorldSettings(*a, **{**k, "vouched_only": False}),
         )
-    scenario = Scenario(fish=4, duration=4.0, seed=5)
+    # In real time, so that the tokens come and go while the world waits and runs.
+    scenario = Scenario(fish=4, duration=3.0, seed=5, control_period=0.5, time_mode="realtime")
     endpoint = f"tls/127.0.0.1:{free_port()}"
     record = tmp_path / "run.mcap"
     settings = LaunchSettings(scenario, listen=endpoint, record=record, secure=secure_dir,
@@ -291,6 +292,11 @@ def test_a_fake_fish_shown_by_a_liveliness_token_is_not_admitted_to_a_secured_ru
                 bus = ZenohBus(session)
                 own = bus.declare_token(keys.alive("fish", 9))
                 schooled = bus.declare_token(keys.alive("fish", 8, "worker-0"))
+                # A real fish (1, served by the run's school) shown on its own keys, then
+                # gone: it would re-route the fish's commands, then lose it.
+                impostor = bus.declare_token(keys.alive("fish", 1))
+                await trio.sleep(1.0)
+                impostor.undeclare()
                 while not result:
                     await trio.sleep(0.05)
                 own.undeclare()
