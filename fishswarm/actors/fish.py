@@ -386,25 +386,27 @@ class Fish:
 
     def _hello(self, bus: Bus) -> None:
         """Vouch for the fish on their own about keys (run 0: before any run)."""
-        keys, school, params = self.settings.keys, self.settings.school, self.settings.params
-        groups = [self._sorted_ids] if school is not None else [[i] for i in self._sorted_ids]
+        groups = (
+            [self._sorted_ids] if self.settings.school is not None else self._sorted_ids[:, None]
+        )
         for ids in groups:
-            about = FishAbout(
-                np.asarray(ids, dtype=np.int64), params.behavior.name, __version__, 0,
-                rules_of(params),
-            )  # fmt: skip
-            bus.put(keys.about(int(ids[0]), school), encode(about))
+            self._say_about(bus, ids, 0)
 
     def _announce(self, bus: Bus) -> None:
         """Tell the world what the fish that started a run run (behaviour, version, rules),
         so that it can warn when that is not what its scenario says."""
-        keys, school = self.settings.keys, self.settings.school
         for rows, run in self._unannounced:
-            ids = np.sort(self._ids[rows])
-            params = self.settings.params
-            about = FishAbout(ids, params.behavior.name, __version__, run, rules_of(params))
-            bus.put(keys.about(int(ids[0]), school), encode(about))
+            self._say_about(bus, np.sort(self._ids[rows]), run)
         self._unannounced = []
+
+    def _say_about(self, bus: Bus, ids: NDArray[np.int64], run: int) -> None:
+        """Put what fish ``ids`` (ascending) run, for ``run``, on their about key."""
+        params = self.settings.params
+        about = FishAbout(
+            np.asarray(ids, dtype=np.int64), params.behavior.name, __version__, run,
+            rules_of(params),
+        )  # fmt: skip
+        bus.put(self.settings.keys.about(int(ids[0]), self.settings.school), encode(about))
 
     def _take_delivery(self, index: int, key: str, payload: bytes) -> None:
         delivery = self._intake.decode_addressed(

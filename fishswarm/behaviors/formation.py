@@ -352,13 +352,17 @@ def share_effort(
     arrived = memory.joined & (memory.place == memory.swap_to)
     busy = (memory.swap_to >= 0) & ~arrived & (now - memory.swap_since < SWAP_TIMEOUT)
     place = memory.place
+    if not slot.shape[1]:  # nothing heard: nobody to ask or answer; swaps under way go on
+        swap_to = np.where(busy, memory.swap_to, STAY)
+        swap_from = np.where(busy, memory.swap_from, STAY)
+        return _Swaps(swap_to, swap_from, memory.swap_since, np.where(busy, swap_from, STAY))
     holds = memory.joined & (place >= 0) & ~busy
     asked = in_map & heard.joined & (told_swap == place[:, None]) & holds[:, None]
     answered = in_map & ~heard.joined & (slot == place[:, None]) & (told_swap >= 0) & holds[:, None]
     agree, go = asked.any(axis=1), answered.any(axis=1) & ~asked.any(axis=1)
     new_slot = np.where(
         agree, slot[rows, np.argmax(asked, axis=1)], told_swap[rows, np.argmax(answered, axis=1)]
-    ) if slot.shape[1] else np.full(count, STAY)  # fmt: skip
+    )
     starting = agree | go
     swap_to = np.where(busy, memory.swap_to, np.where(starting, new_slot, STAY))
     swap_from = np.where(busy, memory.swap_from, np.where(starting, place, STAY))
@@ -368,13 +372,11 @@ def share_effort(
     near = np.linalg.norm(inbox.sender, axis=2) <= NEIGHBOUR_SPACINGS * params.spacing
     rested = in_map & heard.joined & (told_swap < 0) & near
     lowest = np.where(rested, told_effort, np.iinfo(np.int64).max)
-    pick = np.argmin(lowest, axis=1) if lowest.shape[1] else np.zeros(count, dtype=np.int64)
-    least = lowest[rows, pick] if lowest.shape[1] else np.full(count, np.iinfo(np.int64).max)
+    pick = np.argmin(lowest, axis=1)
+    least = lowest[rows, pick]
     tired = holds & ~starting & ~resting & rested.any(axis=1)
     tired &= effort - least > params.effort_margin
-    asking = np.where(
-        swap_to >= 0, swap_from, np.where(tired, slot[rows, pick] if slot.shape[1] else STAY, STAY)
-    )
+    asking = np.where(swap_to >= 0, swap_from, np.where(tired, slot[rows, pick], STAY))
     return _Swaps(
         swap_to.astype(np.int64), swap_from.astype(np.int64), since, asking.astype(np.int64)
     )

@@ -467,15 +467,12 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
 def router(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm router``: a Zenoh router for robots and observers."""
-    settings = SessionSettings(
-        mode="router",
-        listen=[_endpoint(args.listen, "--listen")],
-        extra=_run_checked(lambda: secure_extra(args, "router", endpoint=args.listen, router=True)),
-    )
+    listen = _endpoint(args.listen, "--listen")
     secured = f", secured by {args.secure}" if args.secure else ""
 
     async def main() -> None:
-        async with open_session(settings):
+        extra = secure_extra(args, "router", endpoint=listen, router=True)
+        async with open_session(SessionSettings(mode="router", listen=[listen], extra=extra)):
             print(f"router listening on {args.listen}{secured}; Ctrl-C stops it",
                   file=sys.stderr)  # fmt: skip
             await trio.sleep_forever()
@@ -508,14 +505,6 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
         file=sys.stderr,
     )
     return 0
-
-
-def _run_checked(make: Callable[[], dict[str, Any]]) -> dict[str, Any]:
-    """Security settings, with an unusable certificate reported as a user error."""
-    try:
-        return make()
-    except SecurityError as error:
-        raise UserError(str(error)) from None
 
 
 def export(args: argparse.Namespace, scenario: Scenario | None) -> int:

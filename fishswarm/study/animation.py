@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.bluebot.vision import Vision, perceive
-from fishswarm.study.figures import ROLE_COLOURS, role_colours
+from fishswarm.study.figures import role_colours, role_key
 from fishswarm.study.metrics import FormationTarget
 from fishswarm.study.progress import ids_text
 
@@ -205,13 +205,8 @@ def animation_figure(
     eye = figure.add_subplot(grid[1, 1])
     _eye_axes(eye)
     if formation is not None:
-        from matplotlib.lines import Line2D
-
         above.legend(
-            handles=[
-                Line2D([], [], marker="o", linestyle="none", color=colour, label=role)
-                for role, colour in ROLE_COLOURS.items()
-            ],
+            handles=role_key(),
             fontsize=7,
             loc="lower right",
             framealpha=0.8,

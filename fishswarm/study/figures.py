@@ -195,6 +195,17 @@ def role_colours(joined: NDArray[np.bool_], leader: NDArray[np.bool_]) -> list[s
     ]
 
 
+def role_key(*, leader: bool = True) -> list[Any]:
+    """Legend entries of the role colours (without the leader's for a local shape)."""
+    from matplotlib.lines import Line2D
+
+    return [
+        Line2D([], [], marker="o", linestyle="none", color=colour, label=role)
+        for role, colour in ROLE_COLOURS.items()
+        if leader or role != "leader"
+    ]
+
+
 def draw_formation(
     overhead: Axes, side: Axes, position: FloatArray, formation: FormationTarget
 ) -> list[Any]:
@@ -235,11 +246,7 @@ def _formation_panels(
     draw_formation(overhead, side, position[-1], formation)
     key = [
         _key_entry("o", "start", markersize=4),
-        *(
-            Line2D([], [], marker="o", linestyle="none", color=colour, label=role)
-            for role, colour in ROLE_COLOURS.items()
-            if role != "leader" or formation.slots is not None
-        ),
+        *role_key(leader=formation.slots is not None),
     ]
     if formation.slots is not None:
         key.append(
