@@ -1,8 +1,13 @@
-"""Shared test helpers: free loopback ports and running trio code with a bound."""
+"""Shared test helpers: free loopback ports, running trio code with a bound, reading a
+process's messages as they come."""
 
 from __future__ import annotations
 
+import queue
+import re
 import socket
+import subprocess
+import threading
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
@@ -90,3 +95,37 @@ async def open_client_bus(endpoint: str, connect_timeout: float = 10.0) -> Async
     settings = SessionSettings(mode="client", connect=(endpoint,), connect_timeout=connect_timeout)
     async with open_session(settings) as session:
         yield ZenohBus(session)
+
+
+class Lines:
+    """The stderr lines of a process, read as they come."""
+
+    def __init__(self, process: subprocess.Popen[str]) -> None:
+        self.seen: list[str] = []
+        self._queue: queue.Queue[str] = queue.Queue()
+        assert process.stderr is not None
+        self._stream = process.stderr
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        for line in self._stream:
+            self._queue.put(line.rstrip("\n"))
+
+    def close(self) -> None:
+        """Stop reading (the process has ended)."""
+        self._reader.join(timeout=10)
+        self._stream.close()
+
+    def wait_for(self, pattern: str, *, timeout: float = 60.0) -> re.Match[str]:
+        """The first line (from now on) that matches ``pattern``."""
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                line = self._queue.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                raise TimeoutError(f"no line matching {pattern!r} in {self.seen}") from None
+            self.seen.append(line)
+            found = re.search(pattern, line)
+            if found:
+                return found

@@ -43,6 +43,7 @@ from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import ORBIT_SUMMARIES
 from fishswarm.study.metrics import METRIC_NAMES, formation_summary
 from fishswarm.study.recording import open_recorder
+from fishswarm.study.scene import Scene
 
 log = logging.getLogger(__name__)
 
@@ -104,9 +105,13 @@ class RunResult:
 
 
 async def run_swarm(
-    settings: LaunchSettings, *, on_progress: Callable[[Progress], None] | None = None
+    settings: LaunchSettings,
+    *,
+    on_progress: Callable[[Progress], None] | None = None,
+    on_scene: Callable[[Scene, dict[str, float]], None] | None = None,
 ) -> RunResult:
-    """Run a whole swarm to the end of its scenario and return the summary."""
+    """Run a whole swarm to the end of its scenario and return the summary; the observer
+    calls ``on_progress`` and ``on_scene`` (e.g. a live view) after every snapshot."""
     scenario = settings.scenario
     started = time.perf_counter()
     schools = split_fish(list(range(scenario.fish)), settings.procs)
@@ -137,7 +142,9 @@ async def run_swarm(
             if settings.record is not None
             else None
         )
-        observer = Observer.of(scenario, recorder=recorder, on_progress=on_progress)
+        observer = Observer.of(
+            scenario, recorder=recorder, on_progress=on_progress, on_scene=on_scene
+        )
         try:
             async with open_session(router) as session, trio.open_nursery() as nursery:
                 bus = ZenohBus(session)

@@ -29,8 +29,14 @@ from fishswarm.study.metrics import (
     swarm_metrics,
 )
 from fishswarm.study.recording import Recorder
+from fishswarm.study.scene import Scene, Stage, scene_of, scene_update, stage_of
 
 log = logging.getLogger(__name__)
+
+
+RECORDED_SCENE_FISH = 1000
+"""Recordings carry the scene of swarms up to this size; beyond, its JSON (about 300 bytes
+a fish) would outweigh the snapshots several times over and slow the observer."""
 
 
 @dataclass(frozen=True)
@@ -68,6 +74,9 @@ class Observer:
         observer_id: id of this observer's liveliness token.
         formation: a target shape to measure formation metrics against (formation runs).
         orbit: a post and radius to measure orbit metrics against (orbit, milling, waltz).
+        stage: the tank and landmark, drawn in the recorded scenes (optional).
+        on_scene: called after every snapshot with what the swarm looks like and the
+            snapshot's metrics (e.g. a live view).
     """
 
     def __init__(
@@ -79,8 +88,12 @@ class Observer:
         observer_id: str = "0",
         formation: FormationTarget | None = None,
         orbit: OrbitTarget | None = None,
+        stage: Stage | None = None,
+        on_scene: Callable[[Scene, dict[str, float]], None] | None = None,
     ) -> None:
         self.keys = keys
+        self.stage = stage
+        self.on_scene = on_scene
         self.recorder = recorder
         self.on_progress = on_progress
         self.observer_id = observer_id
@@ -104,6 +117,7 @@ class Observer:
         recorder: Recorder | None = None,
         on_progress: Callable[[Progress], None] | None = None,
         observer_id: str = "0",
+        on_scene: Callable[[Scene, dict[str, float]], None] | None = None,
     ) -> Observer:
         """An observer of a run of ``scenario``, measuring what its behaviour aims at (a
         formation's shape, an orbit's post and radius) besides the distances."""
@@ -114,7 +128,17 @@ class Observer:
             observer_id=observer_id,
             formation=formation_target_of(scenario),
             orbit=orbit_target_of(scenario),
+            stage=stage_of(scenario),
+            on_scene=on_scene,
         )
+
+    def measure_as(self, scenario: Scenario) -> None:
+        """From the next snapshot on, measure and draw the run of ``scenario`` (for an
+        observer that attached before it knew what runs)."""
+        self.formation = formation_target_of(scenario)
+        self.orbit = orbit_target_of(scenario)
+        self._orbit_tracker = None if self.orbit is None else OrbitTracker(self.orbit)
+        self.stage = stage_of(scenario)
 
     def statistics(self) -> ObserverStatistics:
         """The observer's counters so far."""
@@ -202,6 +226,14 @@ class Observer:
                 snapshot.time,
                 {"tick": snapshot.tick, "time": snapshot.time, "fish": progress.fish, **metrics},
             )
+        recording_scene = self.recorder is not None and progress.fish <= RECORDED_SCENE_FISH
+        if recording_scene or self.on_scene is not None:
+            scene = scene_of(snapshot, self.formation)
+            if recording_scene:
+                assert self.recorder is not None
+                self.recorder.scene(snapshot.time, scene_update(scene, self.stage))
+            if self.on_scene is not None:
+                self.on_scene(scene, metrics)
         self._last_tick = snapshot.tick
         # Wake every waiter, and give later waiters a fresh event.
         self._tick_reached.set()

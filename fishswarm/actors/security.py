@@ -101,7 +101,7 @@ def rights_of(subject: str, keys: KeySpace) -> Rights:
                 keys.command("*"), keys.every_school("commands"), keys.channel_report,
                 *keys.abouts(),
             ),
-            serves=(keys.control,),
+            serves=(keys.control, keys.scenario),
         )  # fmt: skip
     if subject == "channel":
         return Rights(
@@ -112,10 +112,10 @@ def rights_of(subject: str, keys: KeySpace) -> Rights:
         return Rights(
             publishes=(keys.robot_order,),
             subscribes=(keys.robot_statuses(), keys.snapshot),
-            queries=(keys.control,),
+            queries=(keys.control, keys.scenario),
         )
     if subject == "observer" or subject.startswith("observer-"):
-        return Rights(subscribes=(keys.snapshot, keys.robot_statuses()))
+        return Rights(subscribes=(keys.snapshot, keys.robot_statuses()), queries=(keys.scenario,))
     if subject.startswith("robot-") and subject[6:].isdigit():
         robot = int(subject[6:])
         return Rights(

@@ -17,7 +17,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level, format="%(levelname)s %(name)s: %(message)s")
-    from fishswarm.cli import learn, robot, study, swarm
+    from fishswarm.cli import learn, robot, study, swarm, view
 
     handlers: dict[str, Any] = {
         "run": swarm.run,
@@ -27,6 +27,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "world": swarm.world,
         "channel": swarm.channel,
         "observe": swarm.observe,
+        "view": view.view,
         "router": swarm.router,
         "secure": swarm.secure,
         "formation": swarm.formation,

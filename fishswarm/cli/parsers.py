@@ -18,6 +18,7 @@ from fishswarm.sim.scenario import (
     Scenario,
     switch_names,
 )
+from fishswarm.study.view_settings import GRPC_PORT, WEB_PORT
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 
@@ -214,6 +215,13 @@ def build_parser() -> argparse.ArgumentParser:
         "a pulse of the world, s (default 5); a run in which it fired ends 'degraded', exit 4",
     )
     run.add_argument("--quiet", action="store_true", help="no progress lines")
+    run.add_argument(
+        "--view",
+        action="store_true",
+        help="serve a live 3-D view of the run in the browser (as 'fishswarm view' does; needs "
+        "pip install 'fishswarm[view]'); after the run it stays up until Ctrl-C",
+    )
+    _add_view_flags(run)
 
     fish = commands.add_parser(
         "fish",
@@ -371,6 +379,31 @@ def build_parser() -> argparse.ArgumentParser:
     observe.add_argument("--record", type=Path, help="MCAP recording to write")
     observe.add_argument("--ticks", type=int, help="stop after the snapshot of this tick")
 
+    view = commands.add_parser(
+        "view",
+        help="show a swarm in 3-D in a browser, live or from a recording",
+        description="Serve a 3-D view of a swarm from this machine, in rerun's web viewer: "
+        "the tank, the landmark, every fish as an arrow along its body (coloured by role in a "
+        "formation: leader, in its place, seeking; its fitted target as grey dots), and the "
+        "metrics over time. With a RECORDING (an MCAP file of 'run --record'), replay it; "
+        "otherwise attach to the running swarm at --connect as a read-only observer (with "
+        "--secure, with an observer's certificate) and follow it live. Needs no internet: "
+        "the viewer comes inside the rerun SDK (pip install 'fishswarm[view]'). Runs until "
+        "Ctrl-C.",
+    )
+    view.add_argument(
+        "recording", nargs="?", type=Path, help="an MCAP recording to replay (default: live)"
+    )
+    _add_connect(view)
+    view.add_argument(
+        "--name",
+        help="with --secure: whose observer certificate to use (observer-NAME; default the "
+        "plain observer certificate)",
+    )
+    view.add_argument("--swarm", default="default", help="swarm name (default default)")
+    _add_view_flags(view)
+    view.add_argument("--open", action="store_true", help="open this machine's browser on the page")
+
     formation = commands.add_parser(
         "formation",
         help="switch a running school to another formation",
@@ -503,6 +536,27 @@ SECURE_HELP = (
     "a secured swarm's folder (made by 'fishswarm secure init'): connect over mutual TLS "
     "with this command's certificate; --connect must then be a tls/ endpoint"
 )
+
+
+def _add_view_flags(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--host",
+        default="localhost",
+        help="with a live view: the name or address browsers reach this machine by; the page "
+        "streams from it (default localhost: a browser on this machine)",
+    )
+    parser.add_argument(
+        "--web-port",
+        type=int,
+        default=WEB_PORT,
+        help=f"with a live view: port of the page (default {WEB_PORT})",
+    )
+    parser.add_argument(
+        "--grpc-port",
+        type=int,
+        default=GRPC_PORT,
+        help=f"with a live view: port of the data stream the page reads (default {GRPC_PORT})",
+    )
 
 
 def _add_connect(parser: argparse.ArgumentParser) -> None:

@@ -7,6 +7,7 @@ import contextlib
 import dataclasses
 import json
 import sys
+import time
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,13 @@ import trio
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.control import serve_control
 from fishswarm.actors.fish import Fish, FishSettings
-from fishswarm.actors.launcher import EXIT_WORKER_DIED, LaunchSettings, WorkerFailed, run_swarm
+from fishswarm.actors.launcher import (
+    EXIT_WORKER_DIED,
+    LaunchSettings,
+    RunResult,
+    WorkerFailed,
+    run_swarm,
+)
 from fishswarm.actors.observer import Observer, Progress
 from fishswarm.actors.robot import HardwareError
 from fishswarm.actors.security import (
@@ -35,6 +42,7 @@ from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import ControlReply, ControlRequest
 from fishswarm.sim.scenario import ConfigError, Scenario
+from fishswarm.study.live_view import open_live_view
 from fishswarm.study.progress import ProgressLine, bar
 from fishswarm.study.recording import (
     RecordingError,
@@ -43,6 +51,8 @@ from fishswarm.study.recording import (
     open_recorder,
     read_recording,
 )
+from fishswarm.study.scene import stage_of
+from fishswarm.study.view_settings import ViewError, ViewSettings
 
 
 class UserError(RuntimeError):
@@ -107,6 +117,7 @@ USER_ERRORS = (
     WorkerFailed,
     ConfigError,
     HardwareError,
+    ViewError,
 )
 
 
@@ -207,7 +218,43 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         file=sys.stderr,
     )
     show = None if args.quiet else progress_printer(scenario.ticks)
-    result = _run_trio(lambda: run_swarm(settings, on_progress=show))
+    with contextlib.ExitStack() as serving:
+        view = None
+        if args.view:
+            try:
+                view = serving.enter_context(open_live_view(view_settings(args), name="run"))
+            except ViewError as error:
+                raise UserError(str(error)) from None
+            view.show_stage(stage_of(scenario))
+            print(f"open {view.settings.page_url} in a browser to watch", file=sys.stderr)
+        on_scene = None if view is None else view.show
+        result = _run_trio(lambda: run_swarm(settings, on_progress=show, on_scene=on_scene))
+        _report(result)
+        if view is not None:
+            print("fishswarm run: the view stays up until Ctrl-C", file=sys.stderr)
+            with contextlib.suppress(KeyboardInterrupt):
+                wait_for_ctrl_c()
+    return int(result.exit_code)
+
+
+def wait_for_ctrl_c() -> None:
+    """Sleep until Ctrl-C (KeyboardInterrupt) while other threads serve."""
+    while True:
+        # Plain sleeps: a KeyboardInterrupt inside threading.Event.wait can leave its lock
+        # broken ("release unlocked lock").
+        time.sleep(3600)
+
+
+def view_settings(args: argparse.Namespace) -> ViewSettings:
+    """Where ``--host``, ``--web-port`` and ``--grpc-port`` say to serve a live view."""
+    try:
+        return ViewSettings(host=args.host, web_port=args.web_port, grpc_port=args.grpc_port)
+    except ValueError as error:
+        raise ConfigError(str(error)) from None
+
+
+def _report(result: RunResult) -> None:
+    """Say how a run ended."""
     summary = result.summary
     if summary["status"] == "interrupted":
         print(
@@ -223,7 +270,6 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
             "(see 'lost' in the summary)",
             file=sys.stderr,
         )
-    return int(result.exit_code)
 
 
 def _summary_text(summary: dict[str, Any]) -> str:

@@ -101,6 +101,12 @@ class KeySpace:
         return f"{self.prefix}/world/control"
 
     @property
+    def scenario(self) -> str:
+        """Queryable of the world: the run's settings, as JSON (what an observer needs to
+        draw the tank and measure the formation)."""
+        return f"{self.prefix}/world/scenario"
+
+    @property
     def world_pulse(self) -> str:
         """World → fish: the world is alive and the run goes on (:class:`WorldPulse`)."""
         return f"{self.prefix}/world/pulse"

@@ -225,7 +225,7 @@ def animation_figure(
         present = ~np.isnan(position[:, 0])
         mine = int(present[:column].sum()) if present[column] else None
         here, heading = position[present], yaw[present]
-        colours = _colours(here.shape[0])
+        colours: list[Any] = _colours(here.shape[0])
         if formation is not None:
             roles = formation.roles(here)
             colours = role_colours(roles.joined, roles.leader)

@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 
 from fishswarm.study.experiment import METRIC_LABELS
 from fishswarm.study.metrics import FormationTarget, OrbitTarget, orbit_target_of
+from fishswarm.study.scene import ROLE_RGB, role_names
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -183,16 +184,19 @@ def _orbit_panels(
     speed.set(xlabel="time (s)", ylabel=METRIC_LABELS["speed"])
 
 
-ROLE_COLOURS = {"joined": "tab:green", "seeking": "tab:orange", "leader": "tab:purple"}
-"""How fish in a formation are coloured: in their place, still seeking one, the leader."""
+ROLE_COLOURS: dict[str, tuple[float, float, float]] = {
+    role: (ROLE_RGB[role][0] / 255, ROLE_RGB[role][1] / 255, ROLE_RGB[role][2] / 255)
+    for role in ("joined", "seeking", "leader")
+}
+"""How fish in a formation are coloured: in their place, still seeking one, the leader (the
+live view's colours, :data:`~fishswarm.study.scene.ROLE_RGB`)."""
 
 
-def role_colours(joined: NDArray[np.bool_], leader: NDArray[np.bool_]) -> list[str]:
+def role_colours(
+    joined: NDArray[np.bool_], leader: NDArray[np.bool_]
+) -> list[tuple[float, float, float]]:
     """Each fish's colour by its role in a formation (:data:`ROLE_COLOURS`)."""
-    return [
-        ROLE_COLOURS["leader" if lead else "joined" if inside else "seeking"]
-        for inside, lead in zip(joined.tolist(), leader.tolist(), strict=True)
-    ]
+    return [ROLE_COLOURS[role] for role in role_names(joined, leader)]
 
 
 def role_key(*, leader: bool = True) -> list[Any]:

@@ -2,8 +2,10 @@
 
 A recording holds the run's scenario (metadata ``scenario``), every world snapshot exactly
 as it went over the wire (topic ``snapshot``, msgpack), the metrics of each snapshot (topic
-``metrics``, JSON) and events such as fish joining or getting lost (topic ``events``, JSON).
-Because snapshots are stored as received, a recording replays a run exactly.
+``metrics``, JSON), events such as fish joining or getting lost (topic ``events``, JSON), and
+what the run looked like (topic ``scene``: Foxglove ``SceneUpdate`` messages, JSON, which
+Foxglove and Lichtblick draw in 3-D). Because snapshots are stored as received, a recording
+replays a run exactly.
 
 Recordings survive a crash: messages go out in small chunks, each written to the file
 (unbuffered) as soon as it is full, so a run killed outright leaves a file readable up to
@@ -29,13 +31,15 @@ from mcap.writer import Writer
 
 from fishswarm.protocols.codec import MessageError, decode
 from fishswarm.protocols.messages import Snapshot
+from fishswarm.study.scene import FRAME, SCENE_SCHEMA, scene_json_schema
 
 CHUNK_SIZE = 32 * 1024
-"""Bytes of messages per chunk: what a killed run can lose at most (about ten snapshots of
-25 fish with their metrics)."""
+"""Bytes of messages per chunk: what a killed run can lose at most (about four snapshots of
+25 fish with their metrics and scenes)."""
 SNAPSHOT_TOPIC = "snapshot"
 METRICS_TOPIC = "metrics"
 EVENTS_TOPIC = "events"
+SCENE_TOPIC = "scene"
 
 
 class RecordingError(ValueError):
@@ -62,6 +66,12 @@ class Recorder:
             METRICS_TOPIC: self._writer.register_channel(METRICS_TOPIC, "json", json_schema),
             EVENTS_TOPIC: self._writer.register_channel(EVENTS_TOPIC, "json", json_schema),
         }
+        scene_schema = self._writer.register_schema(
+            name=SCENE_SCHEMA, encoding="jsonschema", data=json.dumps(scene_json_schema()).encode()
+        )
+        self._channels[SCENE_TOPIC] = self._writer.register_channel(
+            SCENE_TOPIC, "json", scene_schema, metadata={"frame_id": FRAME}
+        )
         self._sequence = 0
 
     def _add(self, topic: str, time: float, data: bytes) -> None:
@@ -76,6 +86,10 @@ class Recorder:
     def metrics(self, time: float, values: dict[str, Any]) -> None:
         """Record the metrics of one snapshot."""
         self._add(METRICS_TOPIC, time, json.dumps(values).encode())
+
+    def scene(self, time: float, update: dict[str, Any]) -> None:
+        """Record what the swarm looked like (a Foxglove ``SceneUpdate`` as JSON data)."""
+        self._add(SCENE_TOPIC, time, json.dumps(update, separators=(",", ":")).encode())
 
     def event(self, time: float, values: dict[str, Any]) -> None:
         """Record an event (fish joined, fish lost, …)."""

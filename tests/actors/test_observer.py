@@ -3,8 +3,12 @@ wait for a tick."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import trio
+from mcap.reader import make_reader
 
 from fishswarm.actors.bus import MemoryBus
 from fishswarm.actors.observer import Observer
@@ -56,3 +60,40 @@ def test_every_task_waiting_for_a_tick_wakes() -> None:
     assert [p.tick for p in observer.history] == [0, 1, 2, 3]
     assert observer.history[-1].metrics["pairwise_distance"] == 1.0
     assert observer.statistics().rejected == 1 and observer.statistics().snapshots == 4
+
+
+def test_an_observer_hands_each_scene_to_a_view_and_records_it(tmp_path: Path) -> None:
+    from fishswarm.study.recording import open_recorder
+    from fishswarm.study.scene import Scene, Stage
+
+    shown: list[tuple[Scene, dict[str, float]]] = []
+    path = tmp_path / "observed.mcap"
+
+    async def main() -> None:
+        bus = MemoryBus()
+        with open_recorder(path, {}) as recorder:
+            observer = Observer(
+                KEYS,
+                recorder=recorder,
+                stage=Stage((2.0, 1.0, 1.0)),
+                on_scene=lambda scene, metrics: shown.append((scene, metrics)),
+            )
+            async with trio.open_nursery() as nursery:
+                await nursery.start(observer.run, bus)
+                for tick in range(3):
+                    bus.put(KEYS.snapshot, _snapshot(tick))
+                    await observer.wait_for_tick(tick)
+                nursery.cancel_scope.cancel()
+
+    run_mock(main)
+    assert [scene.time for scene, _ in shown] == [0.0, 1.0, 2.0]
+    scene, metrics = shown[-1]
+    np.testing.assert_array_equal(scene.position, [[0.5, 0.5, 0.5], [1.5, 0.5, 0.5]])
+    np.testing.assert_array_equal(scene.heading, [[1.0, 0.0, 0.0]] * 2)
+    assert metrics["pairwise_distance"] == 1.0
+    with path.open("rb") as stream:
+        scenes = [json.loads(m.data) for _, _, m in make_reader(stream).iter_messages(["scene"])]
+    assert len(scenes) == 3
+    fish, tank = scenes[-1]["entities"]
+    assert [a["pose"]["position"]["x"] for a in fish["arrows"]] == [0.5, 1.5]
+    assert max(p["x"] for p in tank["lines"][0]["points"]) == 2.0

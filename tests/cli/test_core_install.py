@@ -16,7 +16,7 @@ pytestmark = pytest.mark.integration
 # Blocks the extras as if they were not installed: importing them raises ImportError.
 WITHOUT_EXTRAS = (
     "import sys\n"
-    "for name in ('cma', 'matplotlib', 'imageio_ffmpeg', 'hypothesis'):\n"
+    "for name in ('cma', 'matplotlib', 'imageio_ffmpeg', 'hypothesis', 'rerun'):\n"
     "    sys.modules[name] = None\n"
     "from fishswarm.cli import main\n"
     "sys.exit(main(sys.argv[1:]))\n"
@@ -58,7 +58,8 @@ def test_a_swarm_runs_with_the_core_dependencies_only(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    "command", ["run", "fish", "world", "observe", "experiment", "plot", "animate", "learn"]
+    "command",
+    ["run", "fish", "world", "observe", "view", "experiment", "plot", "animate", "learn"],
 )
 def test_every_help_works_with_the_core_dependencies_only(command: str) -> None:
     result = _core(command, "--help")
@@ -109,3 +110,12 @@ def test_an_experiment_without_matplotlib_writes_its_tables(tmp_path: Path) -> N
     assert result.returncode == 0, result.stderr
     assert (out / "table.md").exists() and not (out / "tracks.png").exists()
     assert "tables written, no pictures: pictures need matplotlib" in result.stderr
+
+
+def test_a_view_without_the_rerun_sdk_says_how_to_get_it(tmp_path: Path) -> None:
+    ran = _core(
+        "run", "--fish", "2", "--duration", "1", "--quiet", "--view",
+        "--listen", f"tcp/127.0.0.1:{free_port()}", "--record", str(tmp_path / "r.mcap"),
+    )  # fmt: skip
+    assert ran.returncode == 1 and "Traceback" not in ran.stderr
+    assert "the live view needs the rerun SDK: pip install 'fishswarm[view]'" in ran.stderr

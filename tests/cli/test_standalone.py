@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -12,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from fishswarm.study.recording import read_recording
-from tests.conftest import free_port, wait_for_port
+from tests.conftest import Lines, free_port, wait_for_port
 
 pytestmark = pytest.mark.integration
 
@@ -131,19 +132,35 @@ def test_a_secured_swarm_runs_and_is_watched_as_a_plain_one(tmp_path: Path) -> N
         start("router", "--listen", endpoint)
         wait_for_port(port)
         observer = start("observe", "--connect", endpoint, "--name", "lab", "--record", str(record))
+        # The live view attaches as an observer too; it learns the run from the world.
+        view = subprocess.Popen(
+            [*FISHSWARM, "view", "--connect", endpoint, "--secure", str(secure), "--name", "lab",
+             "--web-port", str(free_port()), "--grpc-port", str(free_port())],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        view_lines = Lines(view)
+        view_lines.wait_for(r"following swarm 'default' on tls/127\.0\.0\.1:\d+$")
+        # The world first: it waits for its fish, and meanwhile tells the view what runs.
+        world = subprocess.Popen(
+            [*FISHSWARM, "world", "--connect", endpoint, "--fish", "2", "--duration", "5",
+             "--seed", "4", "--start-timeout", "60", "--secure", str(secure)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        processes.append(world)
+        view_lines.wait_for(r"the world runs 2 fish, dispersion, 5 s")
         start("fish", "--id", "0", "--connect", endpoint)
         start("fish", "--id", "1", "--connect", endpoint)
         start("channel", "--connect", endpoint)
-        world = subprocess.run(
-            [*FISHSWARM, "world", "--connect", endpoint, "--fish", "2", "--duration", "5",
-             "--seed", "4", "--start-timeout", "60", "--secure", str(secure)],
-            capture_output=True, text=True, timeout=120, check=False,
-        )  # fmt: skip
-        assert world.returncode == 0, world.stderr
-        statistics = json.loads(world.stderr.strip().splitlines()[-1])
+        _, world_errors = world.communicate(timeout=120)
+        assert world.returncode == 0, world_errors
+        statistics = json.loads(world_errors.strip().splitlines()[-1])
         assert statistics["ticks"] == 5 and statistics["lost_fish"] == 0
         _, observer_errors = observer.communicate(timeout=30)
         assert observer.returncode == 0, observer_errors
+        shown = view_lines.wait_for(r"the run has ended \((\d+) snapshots shown\)")
+        assert int(shown[1]) == 6  # ticks 0–5
+        view.send_signal(signal.SIGINT)
+        assert view.wait(timeout=30) == 0
         # Without a certificate nothing connects: the client gives up with a message.
         bare = subprocess.run(
             [*FISHSWARM, "observe", "--connect", endpoint, "--connect-timeout", "2"],
@@ -151,6 +168,10 @@ def test_a_secured_swarm_runs_and_is_watched_as_a_plain_one(tmp_path: Path) -> N
         )  # fmt: skip
         assert bare.returncode == 1 and "cannot open a client session" in bare.stderr
     finally:
+        if view.poll() is None:
+            view.kill()
+        view.wait(timeout=10)
+        view_lines.close()
         for process in processes:
             if process.poll() is None:
                 process.terminate()

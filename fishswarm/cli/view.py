@@ -1,0 +1,136 @@
+"""``fishswarm view``: a swarm in 3-D in the browser, attached live to a running swarm (as
+an observer) or replaying a recording."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+import trio
+import zenoh
+
+from fishswarm.actors.control import ask_scenario
+from fishswarm.actors.observer import Observer
+from fishswarm.actors.security import observer_subject
+from fishswarm.actors.session import open_session
+from fishswarm.actors.zenoh_bus import ZenohBus
+from fishswarm.bluebot.parameters import Tank
+from fishswarm.cli.swarm import UserError, _client, _run_trio, view_settings, wait_for_ctrl_c
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.sim.scenario import ConfigError, Scenario
+from fishswarm.study.live_view import LiveView, open_live_view
+from fishswarm.study.metrics import formation_target_of
+from fishswarm.study.recording import RecordingError, read_recording
+from fishswarm.study.scene import Stage, scene_of, stage_of
+from fishswarm.study.view_settings import ViewError, ViewSettings
+
+ASK_TIMEOUT = 2.0
+"""How long the view waits for the world's answer, s."""
+ASK_EVERY = 0.2
+"""How long the view waits before asking again when no world answered, s (a query no
+queryable matches comes back at once: asking often costs the router little)."""
+
+NOT_METRICS = ("tick", "time", "fish")
+"""Entries of a recorded metrics record that are not metrics."""
+
+
+def view(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm view``: serve the view until Ctrl-C."""
+    settings = dataclasses.replace(view_settings(args), open_browser=args.open)
+    try:
+        if args.recording is not None:
+            _replay(args.recording, settings)
+        else:
+            _attach(args, settings)
+    except (ViewError, RecordingError) as error:
+        raise UserError(str(error)) from None
+    except KeyboardInterrupt:
+        print("fishswarm view: closed", file=sys.stderr)
+    return 0
+
+
+def _announce(view: LiveView, what: str) -> None:
+    print(f"fishswarm view: {what}", file=sys.stderr)
+    print(f"open {view.settings.page_url} in a browser; Ctrl-C to stop", file=sys.stderr)
+    sys.stderr.flush()
+
+
+def _replay(path: Path, settings: ViewSettings) -> None:
+    recording = read_recording(path)
+    try:
+        ran: Scenario | None = Scenario.from_mapping(recording.scenario, source=str(path))
+    except ConfigError:  # an observer's recording does not say what ran
+        ran = None
+    formation = None if ran is None else formation_target_of(ran)
+    stage = stage_of(ran) if ran is not None else Stage(Tank().size)
+    with open_live_view(settings, name=path.stem) as view:
+        view.show_stage(stage)
+        for snapshot, record in zip(recording.snapshots, recording.metrics, strict=False):
+            metrics = {k: v for k, v in record.items() if k not in NOT_METRICS}
+            view.show(scene_of(snapshot, formation), metrics)
+        if not recording.snapshots:
+            raise UserError(f"{path} holds no snapshots: nothing to show")
+        first, last = recording.snapshots[0].time, recording.snapshots[-1].time
+        note = "" if recording.complete else " (cut short: the run did not finish)"
+        _announce(
+            view,
+            f"replaying {path}: {view.scenes} snapshots, t = {first:g}–{last:g} s{note}",
+        )
+        wait_for_ctrl_c()
+
+
+def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
+    keys = KeySpace(args.swarm)
+
+    async def main() -> None:
+        with open_live_view(settings, name=f"swarm {args.swarm}") as view:
+            # The study's tank until the world says which (a world may be slow to answer, or
+            # be gone before it can: the view shows what it sees meanwhile).
+            view.show_stage(Stage(Tank().size))
+            async with (
+                open_session(_client(args, observer_subject(args.name))) as session,
+                trio.open_nursery() as nursery,
+            ):
+                observer = Observer(keys, on_scene=view.show, observer_id="view")
+                await nursery.start(observer.run, ZenohBus(session))
+                _announce(view, f"following swarm {args.swarm!r} on {args.connect}")
+
+                async def learn_the_run() -> None:
+                    ran = await _wait_for_world(session, keys, args.connect)
+                    observer.measure_as(ran)
+                    view.show_stage(stage_of(ran))
+                    print(
+                        f"fishswarm view: the world runs {ran.fish} fish, {ran.behavior}, "
+                        f"{ran.duration:g} s",
+                        file=sys.stderr,
+                    )
+
+                nursery.start_soon(learn_the_run)
+                await observer.wait_for_world_end()
+                print(
+                    f"fishswarm view: the run has ended ({view.scenes} snapshots shown); "
+                    "the view stays up until Ctrl-C",
+                    file=sys.stderr,
+                )
+                await trio.sleep_forever()
+
+    _run_trio(main)
+
+
+async def _wait_for_world(session: zenoh.Session, keys: KeySpace, endpoint: str) -> Scenario:
+    """The scenario of the swarm's world, asking until a world answers."""
+    waiting = False
+    while True:
+        ran = await ask_scenario(session, keys, timeout=ASK_TIMEOUT)
+        if ran is not None:
+            return ran
+        if not waiting:
+            print(
+                f"fishswarm view: waiting for the world of swarm {keys.swarm!r} on {endpoint} "
+                "(is a run going?)",
+                file=sys.stderr,
+            )
+            waiting = True
+        await trio.sleep(ASK_EVERY)

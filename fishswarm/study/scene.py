@@ -1,0 +1,251 @@
+"""What a swarm looks like at one moment in 3-D: the fish, their roles, the target, the tank.
+
+One description for every viewer: the live view in the browser (:mod:`.live_view`) draws it,
+and recordings carry it as Foxglove ``SceneUpdate`` messages (JSON), so that a run opens in
+Foxglove or Lichtblick as it does in ``fishswarm view``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.protocols.messages import Snapshot
+from fishswarm.sim.scenario import Scenario
+from fishswarm.study.metrics import FormationTarget
+
+FloatArray = NDArray[np.float64]
+
+ROLE_RGB = {
+    "fish": (31, 119, 180),
+    "joined": (44, 160, 44),
+    "seeking": (255, 127, 14),
+    "leader": (148, 103, 189),
+}
+"""Each role's colour (8-bit RGB): any fish outside a formation, a formation fish in its
+place, one still seeking it, the leader (matplotlib's tab palette, as in the figures)."""
+
+TARGET_RGB = (150, 150, 150)
+"""The colour of a formation's target slots (8-bit RGB)."""
+
+LANDMARK_RGB = (214, 39, 40)
+"""The colour of the landmark (8-bit RGB)."""
+
+WALL_RGB = (128, 128, 128)
+"""The colour of the tank's edges (8-bit RGB)."""
+
+SCENE_SCHEMA = "foxglove.SceneUpdate"
+"""The schema name under which Foxglove and Lichtblick recognise a scene."""
+
+FRAME = "tank"
+"""The frame every scene entity is drawn in: the tank's, x and y along its walls, z up."""
+
+
+@dataclass(frozen=True)
+class Stage:
+    """What does not move: the tank and the landmark.
+
+    Attributes:
+        tank: tank size (x, y, z), m; the tank spans from the origin to it.
+        landmark: the landmark's position (x, y, z), m, or None.
+    """
+
+    tank: tuple[float, float, float]
+    landmark: tuple[float, float, float] | None = None
+
+
+def stage_of(scenario: Scenario) -> Stage:
+    """The tank and landmark of a run."""
+    return Stage(scenario.tank, scenario.landmark)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """The swarm at one moment.
+
+    Attributes:
+        time: simulated time, s.
+        ids: (N,) fish ids.
+        position: (N, 3) positions in the tank frame, m.
+        heading: (N, 3) unit vectors along each fish's body, in the tank frame.
+        roles: (N,) each fish's role, a key of :data:`ROLE_RGB`.
+        slots: (M, 3) a global formation's target laid onto the school, m, or None.
+    """
+
+    time: float
+    ids: NDArray[np.int64]
+    position: FloatArray
+    heading: FloatArray
+    roles: tuple[str, ...]
+    slots: FloatArray | None = None
+
+    def colours(self) -> NDArray[np.uint8]:
+        """(N, 3) each fish's colour by its role, 8-bit RGB."""
+        table = np.array([ROLE_RGB[role] for role in self.roles], dtype=np.uint8)
+        return table.reshape(len(self.roles), 3)
+
+
+def role_names(joined: NDArray[np.bool_], leader: NDArray[np.bool_]) -> tuple[str, ...]:
+    """(N,) each formation fish's role: the leader, in its place (joined) or seeking."""
+    return tuple(
+        "leader" if lead else "joined" if inside else "seeking"
+        for inside, lead in zip(joined.tolist(), leader.tolist(), strict=True)
+    )
+
+
+def scene_of(snapshot: Snapshot, formation: FormationTarget | None = None) -> Scene:
+    """The scene of a snapshot; in a formation run, the fish's roles (as
+    :meth:`FormationTarget.roles` sees them from the positions) and the fitted target."""
+    yaw = snapshot.yaw
+    heading = np.stack([np.cos(yaw), np.sin(yaw), np.zeros_like(yaw)], axis=1)
+    count = int(snapshot.ids.size)
+    roles: tuple[str, ...] = ("fish",) * count
+    slots = None
+    if formation is not None and count:
+        found = formation.roles(snapshot.position)
+        roles = role_names(found.joined, found.leader)
+        slots = found.slots
+    return Scene(snapshot.time, snapshot.ids, snapshot.position, heading, roles, slots)
+
+
+def tank_edges(tank: tuple[float, float, float]) -> FloatArray:
+    """(12, 2, 3) the tank's edges, each from one corner to another, m."""
+    x, y, z = tank
+    corners = np.array(
+        [[i * x, j * y, k * z] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=np.float64
+    )
+    # Corners differ in one coordinate along an edge: their indices differ in one bit.
+    pairs = [(a, a | bit) for a in range(8) for bit in (1, 2, 4) if not a & bit]
+    return np.stack([corners[[a, b]] for a, b in pairs])
+
+
+def yaw_quaternion(yaw: float) -> dict[str, float]:
+    """The rotation by ``yaw`` (rad) about z as a unit quaternion, Foxglove's field names."""
+    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}
+
+
+DIGITS = 5
+"""Decimals kept in scene messages: 10 µm, and 1e-5 of a quaternion or colour channel (the
+messages are JSON; every digit is a byte in the recording)."""
+
+
+def _stamp(time: float) -> dict[str, int]:
+    nanoseconds = round(time * 1e9)
+    return {"sec": nanoseconds // 1_000_000_000, "nsec": nanoseconds % 1_000_000_000}
+
+
+def _colour(rgb: tuple[int, int, int], alpha: float = 1.0) -> dict[str, float]:
+    r, g, b = (round(channel / 255, DIGITS) for channel in rgb)
+    return {"r": r, "g": g, "b": b, "a": alpha}
+
+
+def _point(xyz: Any) -> dict[str, float]:
+    return {"x": round(float(xyz[0]), DIGITS), "y": round(float(xyz[1]), DIGITS),
+            "z": round(float(xyz[2]), DIGITS)}  # fmt: skip
+
+
+def _pose(xyz: Any, yaw: float = 0.0) -> dict[str, Any]:
+    turn = {k: round(v, DIGITS) for k, v in yaw_quaternion(yaw).items()}
+    return {"position": _point(xyz), "orientation": turn}
+
+
+def _entity(name: str, time: float, **primitives: list[dict[str, Any]]) -> dict[str, Any]:
+    return {
+        "timestamp": _stamp(time),
+        "frame_id": FRAME,
+        "id": name,
+        "lifetime": {"sec": 0, "nsec": 0},  # until replaced
+        "frame_locked": False,
+        "metadata": [],
+        **primitives,
+    }
+
+
+def scene_update(scene: Scene, stage: Stage | None = None) -> dict[str, Any]:
+    """A Foxglove ``SceneUpdate`` (as JSON data) drawing ``scene``: an arrow a body length
+    long per fish (tail at the fish, pointing along its body, coloured by role), the fitted
+    target's slots as hollow spheres, and with ``stage`` the tank's edges and the landmark.
+
+    Each entity keeps its id from update to update, so every update replaces the last."""
+    arrows = [
+        {
+            "pose": _pose(xyz, math.atan2(float(h[1]), float(h[0]))),
+            "shaft_length": 0.6 * BODY_LENGTH,
+            "shaft_diameter": 0.15 * BODY_LENGTH,
+            "head_length": 0.4 * BODY_LENGTH,
+            "head_diameter": 0.35 * BODY_LENGTH,
+            "color": _colour(ROLE_RGB[role]),
+        }
+        for xyz, h, role in zip(scene.position, scene.heading, scene.roles, strict=True)
+    ]
+    entities = [_entity("fish", scene.time, arrows=arrows)]
+    if scene.slots is not None:
+        size = {"x": 0.5 * BODY_LENGTH, "y": 0.5 * BODY_LENGTH, "z": 0.5 * BODY_LENGTH}
+        spheres = [
+            {"pose": _pose(xyz), "size": size, "color": _colour(TARGET_RGB, 0.5)}
+            for xyz in scene.slots
+        ]
+        entities.append(_entity("target", scene.time, spheres=spheres))
+    if stage is not None:
+        points = [_point(xyz) for edge in tank_edges(stage.tank) for xyz in edge]
+        line = {
+            "type": 2,  # LINE_LIST: each pair of points one segment
+            "pose": _pose((0.0, 0.0, 0.0)),
+            "thickness": 0.005,
+            "scale_invariant": False,
+            "points": points,
+            "color": _colour(WALL_RGB),
+            "colors": [],
+            "indices": [],
+        }
+        entities.append(_entity("tank", scene.time, lines=[line]))
+        if stage.landmark is not None:
+            size = {"x": 0.04, "y": 0.04, "z": 0.04}
+            landmark = {"pose": _pose(stage.landmark), "size": size, "color": _colour(LANDMARK_RGB)}
+            entities.append(_entity("landmark", scene.time, spheres=[landmark]))
+    return {"deletions": [], "entities": entities}
+
+
+def _object(**properties: Any) -> dict[str, Any]:
+    return {"type": "object", "properties": properties}
+
+
+def _array(items: dict[str, Any]) -> dict[str, Any]:
+    return {"type": "array", "items": items}
+
+
+def scene_json_schema() -> dict[str, Any]:
+    """The JSON schema of the scene messages: the parts of Foxglove's ``SceneUpdate`` that
+    fishswarm writes (field names and meanings as Foxglove defines them)."""
+    number = {"type": "number"}
+    integer = {"type": "integer"}
+    vector = _object(x=number, y=number, z=number)
+    pose = _object(position=vector, orientation=_object(x=number, y=number, z=number, w=number))
+    colour = _object(r=number, g=number, b=number, a=number)
+    time = _object(sec=integer, nsec=integer)
+    arrow = _object(
+        pose=pose, shaft_length=number, shaft_diameter=number, head_length=number,
+        head_diameter=number, color=colour,
+    )  # fmt: skip
+    sphere = _object(pose=pose, size=vector, color=colour)
+    line = _object(
+        type=integer, pose=pose, thickness=number, scale_invariant={"type": "boolean"},
+        points=_array(vector), color=colour, colors=_array(colour), indices=_array(integer),
+    )  # fmt: skip
+    entity = _object(
+        timestamp=time, frame_id={"type": "string"}, id={"type": "string"}, lifetime=time,
+        frame_locked={"type": "boolean"}, metadata=_array(_object()),
+        arrows=_array(arrow), spheres=_array(sphere), lines=_array(line),
+    )  # fmt: skip
+    return {
+        "title": SCENE_SCHEMA,
+        **_object(
+            deletions=_array(_object(timestamp=time, type=integer, id={"type": "string"})),
+            entities=_array(entity),
+        ),
+    }

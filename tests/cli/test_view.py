@@ -1,0 +1,148 @@
+"""``fishswarm view``: a recording replayed and a running swarm followed in the browser, as
+separate processes on 127.0.0.1, looked at by a real browser."""
+
+from __future__ import annotations
+
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.cli.browser import browser_missing, fish_pixels, open_page, screenshot, wait_for_fish
+from tests.conftest import Lines, free_port, wait_for_port
+
+pytestmark = pytest.mark.integration
+
+FISHSWARM = [sys.executable, "-m", "fishswarm"]
+
+
+def _view(*args: str) -> tuple[subprocess.Popen[str], Lines]:
+    process = subprocess.Popen(
+        [*FISHSWARM, "view", *args, "--web-port", str(free_port()), "--grpc-port",
+         str(free_port())],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    return process, Lines(process)
+
+
+def _close(process: subprocess.Popen[str], lines: Lines) -> None:
+    """Ctrl-C, as a person ends a view: it says so and exits 0."""
+    process.send_signal(signal.SIGINT)
+    assert process.wait(timeout=30) == 0
+    lines.wait_for("fishswarm view: closed", timeout=10)
+
+
+def _stop(process: subprocess.Popen[str], lines: Lines) -> None:
+    process.kill()
+    process.wait(timeout=10)
+    lines.close()
+
+
+@pytest.mark.parametrize(
+    ("args", "code", "message"),
+    [
+        (["--web-port", "0"], 2, "web_port must be a port number 1–65535, got 0"),
+        (["--web-port", "9300", "--grpc-port", "9300"], 2, "need two ports, got 9300"),
+        (["missing.mcap"], 1, "cannot open recording missing.mcap"),
+    ],
+)
+def test_bad_view_arguments_are_explained(args: list[str], code: int, message: str) -> None:
+    done = subprocess.run(
+        [*FISHSWARM, "view", *args], capture_output=True, text=True, timeout=60, check=False
+    )
+    assert done.returncode == code and message in done.stderr
+
+
+def test_a_view_on_a_taken_port_says_so(tmp_path: Path) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        done = subprocess.run(
+            [*FISHSWARM, "view", "--web-port", str(port), "--grpc-port", str(free_port())],
+            capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+    assert done.returncode == 1
+    assert f"port {port} for the view's page is taken" in done.stderr
+    assert "choose another with --web-port" in done.stderr
+
+
+def test_a_recording_is_replayed_on_a_page_served_from_this_machine(tmp_path: Path) -> None:
+    record = tmp_path / "run.mcap"
+    ran = subprocess.run(
+        [*FISHSWARM, "run", "--fish", "5", "--duration", "4", "--quiet", "--record",
+         str(record), "--listen", f"tcp/127.0.0.1:{free_port()}"],
+        capture_output=True, text=True, timeout=120, check=False,
+    )  # fmt: skip
+    assert ran.returncode == 0, ran.stderr
+    process, lines = _view(str(record))
+    try:
+        lines.wait_for(r"replaying .*run\.mcap: 5 snapshots, t = 0–4 s$")
+        page = lines.wait_for(r"^open (http://localhost:(\d+)/\?url=(\S+)) in a browser")
+        stream = re.fullmatch(r"rerun%2Bhttp%3A%2F%2Flocalhost%3A(\d+)%2Fproxy", page[3])
+        assert stream is not None
+        wait_for_port(int(stream[1]))
+        with urllib.request.urlopen(page[1], timeout=10) as answer:
+            assert answer.status == 200 and b"rerun" in answer.read().lower()
+        _close(process, lines)
+    finally:
+        _stop(process, lines)
+
+
+@pytest.mark.skipif(browser_missing() is not None, reason=str(browser_missing()))
+def test_the_live_view_shows_the_fish_moving_in_a_real_browser(tmp_path: Path) -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    run = subprocess.Popen(
+        [*FISHSWARM, "run", "--behavior", "formation", "--fish", "10", "--time", "realtime",
+         "--duration", "120", "--quiet", "--listen", endpoint],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True,
+    )  # fmt: skip
+    process, lines = _view("--connect", endpoint)
+    try:
+        lines.wait_for(r"following swarm 'default' on tcp/127\.0\.0\.1:\d+$")
+        page_url = lines.wait_for(r"^open (\S+) in a browser")[1]
+        lines.wait_for(r"the world runs 10 fish, formation, 120 s")
+        with open_page(page_url) as page:
+            wait_for_fish(page, tmp_path / "loading.png")
+            before = fish_pixels(screenshot(page, tmp_path / "before.png"))
+            time.sleep(5.0)  # five ticks of the run, in real time
+            after = fish_pixels(screenshot(page, tmp_path / "after.png"))
+        # Ten fish of a few hundred pixels each, in both pictures, and not in the same places.
+        assert before.sum() > 500 and after.sum() > 500
+        moved = np.logical_xor(before, after).sum()
+        assert moved > 0.2 * min(before.sum(), after.sum()), (moved, before.sum(), after.sum())
+        _close(process, lines)
+    finally:
+        _stop(process, lines)
+        run.kill()
+        run.wait(timeout=10)
+
+
+def test_a_run_serves_its_own_view_and_keeps_it_up_after_the_run(tmp_path: Path) -> None:
+    web, grpc = free_port(), free_port()
+    process = subprocess.Popen(
+        [*FISHSWARM, "run", "--fish", "5", "--duration", "3", "--quiet", "--view",
+         "--web-port", str(web), "--grpc-port", str(grpc), "--record", str(tmp_path / "r.mcap"),
+         "--summary", str(tmp_path / "r.json"), "--listen", f"tcp/127.0.0.1:{free_port()}"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    lines = Lines(process)
+    try:
+        url = lines.wait_for(rf"^open (http://localhost:{web}/\S+) in a browser to watch$")[1]
+        lines.wait_for("^status: finished$")
+        lines.wait_for("the view stays up until Ctrl-C")
+        with urllib.request.urlopen(url, timeout=10) as answer:
+            assert answer.status == 200
+        wait_for_port(grpc)
+        process.send_signal(signal.SIGINT)
+        assert process.wait(timeout=30) == 0  # the run's own exit code
+    finally:
+        _stop(process, lines)

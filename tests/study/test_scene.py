@@ -1,0 +1,153 @@
+"""The scene of a moment: fish arrows, roles and target, the tank, and the Foxglove messages
+recordings carry."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from mcap.reader import make_reader
+
+from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.formations.maps import target_map
+from fishswarm.protocols.messages import Snapshot
+from fishswarm.study.metrics import FormationTarget
+from fishswarm.study.recording import SCENE_TOPIC, open_recorder, read_recording
+from fishswarm.study.scene import (
+    ROLE_RGB,
+    SCENE_SCHEMA,
+    Stage,
+    scene_json_schema,
+    scene_of,
+    scene_update,
+    tank_edges,
+    yaw_quaternion,
+)
+
+
+def _snapshot(position: np.ndarray, yaw: list[float], time: float = 2.0) -> Snapshot:
+    count = len(yaw)
+    return Snapshot(
+        tick=2,
+        time=time,
+        ids=np.arange(count, dtype=np.int64),
+        position=np.asarray(position, dtype=np.float64),
+        velocity=np.zeros((count, 3)),
+        yaw=np.asarray(yaw, dtype=np.float64),
+        neighbors_seen=np.zeros(count, dtype=np.int64),
+        broadcasts=np.zeros(count, dtype=np.int64),
+    )
+
+
+def test_the_tanks_twelve_edges_run_between_its_corners() -> None:
+    edges = tank_edges((2.0, 1.0, 0.5))
+    assert edges.shape == (12, 2, 3)
+    steps = edges[:, 1] - edges[:, 0]
+    # Every edge runs along one axis, from a corner towards +axis: four edges per axis.
+    lengths = sorted(steps.sum(axis=1).tolist())
+    assert lengths == [0.5] * 4 + [1.0] * 4 + [2.0] * 4
+    assert ((steps > 0).sum(axis=1) == 1).all()
+    corners = {tuple(p) for p in edges.reshape(-1, 3).tolist()}
+    assert len(corners) == 8 and (0.0, 0.0, 0.0) in corners and (2.0, 1.0, 0.5) in corners
+
+
+def _rotate(q: dict[str, float], v: np.ndarray) -> np.ndarray:
+    """v rotated by the unit quaternion q (q v q*)."""
+    w, u = q["w"], np.array([q["x"], q["y"], q["z"]])
+    turned: np.ndarray = 2 * (u @ v) * u + (w * w - u @ u) * v + 2 * w * np.cross(u, v)
+    return turned
+
+
+def test_a_quarter_turn_left_turns_the_body_axis_from_x_to_y() -> None:
+    q = yaw_quaternion(math.pi / 2)
+    half = math.sqrt(0.5)
+    assert q == pytest.approx({"x": 0.0, "y": 0.0, "z": half, "w": half})
+    np.testing.assert_allclose(_rotate(q, np.array([1.0, 0.0, 0.0])), [0.0, 1.0, 0.0], atol=1e-12)
+
+
+@given(st.floats(-10.0, 10.0))
+def test_a_yaw_quaternion_turns_the_body_axis_to_the_heading(yaw: float) -> None:
+    q = yaw_quaternion(yaw)
+    assert sum(v * v for v in q.values()) == pytest.approx(1.0)
+    turned = _rotate(q, np.array([1.0, 0.0, 0.0]))
+    np.testing.assert_allclose(turned, [math.cos(yaw), math.sin(yaw), 0.0], atol=1e-9)
+
+
+def test_a_fish_points_along_its_yaw_and_outside_a_formation_has_no_role() -> None:
+    position = np.array([[0.1, 0.2, 0.3], [0.4, 0.5, 0.6], [0.7, 0.8, 0.9]])
+    scene = scene_of(_snapshot(position, [0.0, math.pi / 2, math.pi]))
+    np.testing.assert_allclose(
+        scene.heading, [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]], atol=1e-12
+    )
+    assert scene.roles == ("fish",) * 3 and scene.slots is None
+    assert scene.colours().tolist() == [list(ROLE_RGB["fish"])] * 3
+
+
+def test_a_formations_roles_and_target_come_from_the_positions() -> None:
+    slots = target_map("pyramid", 6, spacing=0.3)
+    position = slots + np.array([0.9, 0.9, 0.5])
+    position[5, 1] += 0.4  # one fish far from its place
+    scene = scene_of(_snapshot(position, [0.0] * 6), FormationTarget(slots, 0.3, 0.1))
+    # The pyramid's apex is furthest along +x (the map's orientation): the leader.
+    assert scene.roles == ("leader", "joined", "joined", "joined", "joined", "seeking")
+    assert scene.slots is not None and scene.slots.shape == (6, 3)
+    near = np.linalg.norm(scene.slots[:, None] - position[None], axis=2).min(axis=0)
+    assert (near[:5] < 0.1).all() and near[5] > 0.2
+
+
+def test_a_scene_update_draws_each_fish_the_tank_and_the_landmark() -> None:
+    jsonschema = pytest.importorskip("jsonschema")
+    position = np.array([[0.5, 0.5, 0.2], [1.0, 0.25, 0.4]])
+    scene = scene_of(_snapshot(position, [0.0, math.pi / 2], time=2.5))
+    update = scene_update(scene, Stage((1.78, 1.78, 1.17), (0.89, 0.89, 0.3)))
+    data = json.loads(json.dumps(update))
+    jsonschema.validate(data, scene_json_schema())
+    entities = {e["id"]: e for e in data["entities"]}
+    assert set(entities) == {"fish", "tank", "landmark"}
+    for entity in entities.values():
+        assert entity["frame_id"] == "tank"
+        assert entity["timestamp"] == {"sec": 2, "nsec": 500_000_000}
+    arrows = entities["fish"]["arrows"]
+    assert [a["pose"]["position"] for a in arrows] == [
+        {"x": 0.5, "y": 0.5, "z": 0.2}, {"x": 1.0, "y": 0.25, "z": 0.4},
+    ]  # fmt: skip
+    # Five decimals kept: a quarter turn's quaternion to 1e-5.
+    quarter = yaw_quaternion(math.pi / 2)
+    assert arrows[1]["pose"]["orientation"] == pytest.approx(quarter, abs=1e-5)
+    assert arrows[0]["shaft_length"] + arrows[0]["head_length"] == pytest.approx(BODY_LENGTH)
+    assert arrows[0]["color"] == pytest.approx(
+        {"r": 31 / 255, "g": 119 / 255, "b": 180 / 255, "a": 1.0}, abs=1e-5
+    )
+    (walls,) = entities["tank"]["lines"]
+    assert walls["type"] == 2 and len(walls["points"]) == 24
+    (landmark,) = entities["landmark"]["spheres"]
+    assert landmark["pose"]["position"] == {"x": 0.89, "y": 0.89, "z": 0.3}
+    # Without a stage, the fish alone; with a formation target, its slots too.
+    slots = target_map("pyramid", 2, spacing=0.3) + 0.5
+    alone = scene_update(scene_of(_snapshot(slots, [0.0, 0.0]), FormationTarget(slots, 0.3, 0.1)))
+    assert [e["id"] for e in alone["entities"]] == ["fish", "target"]
+    assert len(alone["entities"][1]["spheres"]) == 2
+
+
+def test_a_recording_carries_the_scene_for_foxglove(tmp_path: Path) -> None:
+    path = tmp_path / "run.mcap"
+    position = np.array([[0.5, 0.5, 0.2]])
+    update = scene_update(scene_of(_snapshot(position, [0.3])), Stage((1.0, 1.0, 1.0)))
+    with open_recorder(path, {"fish": 1}) as recorder:
+        recorder.scene(2.0, update)
+    with path.open("rb") as stream:
+        reader = make_reader(stream)
+        ((schema, channel, message),) = list(reader.iter_messages(topics=[SCENE_TOPIC]))
+    assert schema is not None
+    assert (schema.name, schema.encoding, channel.message_encoding) == (
+        SCENE_SCHEMA, "jsonschema", "json",
+    )  # fmt: skip
+    assert json.loads(schema.data) == scene_json_schema()
+    assert message.log_time == 2_000_000_000
+    assert json.loads(message.data) == json.loads(json.dumps(update))
+    assert read_recording(path).snapshots == []  # readers of snapshots pass over scenes
