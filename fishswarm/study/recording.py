@@ -87,9 +87,9 @@ class Recorder:
         """Record the metrics of one snapshot."""
         self._add(METRICS_TOPIC, time, json.dumps(values).encode())
 
-    def scene(self, time: float, update: dict[str, Any]) -> None:
-        """Record what the swarm looked like (a Foxglove ``SceneUpdate`` as JSON data)."""
-        self._add(SCENE_TOPIC, time, json.dumps(update, separators=(",", ":")).encode())
+    def scene(self, time: float, message: bytes) -> None:
+        """Record what the swarm looked like (a Foxglove ``SceneUpdate``, JSON)."""
+        self._add(SCENE_TOPIC, time, message)
 
     def event(self, time: float, values: dict[str, Any]) -> None:
         """Record an event (fish joined, fish lost, …)."""

@@ -7,6 +7,7 @@ Foxglove or Lichtblick as it does in ``fishswarm view``.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -166,24 +167,37 @@ def _entity(name: str, time: float, **primitives: list[dict[str, Any]]) -> dict[
     }
 
 
-def scene_update(scene: Scene, stage: Stage | None = None) -> dict[str, Any]:
-    """A Foxglove ``SceneUpdate`` (as JSON data) drawing ``scene``: an arrow a body length
-    long per fish (tail at the fish, pointing along its body, coloured by role), the fitted
-    target's slots as hollow spheres, and with ``stage`` the tank's edges and the landmark.
-
-    Each entity keeps its id from update to update, so every update replaces the last."""
-    arrows = [
+def _fish_arrows(scene: Scene) -> str:
+    """The JSON of one arrow per fish, written row by row from a template (a dict and
+    ``json.dumps`` per fish took 20 ms a snapshot at 1 000 fish; this takes a tenth)."""
+    dimensions = json.dumps(
         {
-            "pose": _pose(xyz, math.atan2(float(h[1]), float(h[0]))),
             "shaft_length": 0.6 * BODY_LENGTH,
             "shaft_diameter": 0.15 * BODY_LENGTH,
             "head_length": 0.4 * BODY_LENGTH,
             "head_diameter": 0.35 * BODY_LENGTH,
-            "color": _colour(ROLE_RGB[role]),
-        }
-        for xyz, h, role in zip(scene.position, scene.heading, scene.roles, strict=True)
-    ]
-    entities = [_entity("fish", scene.time, arrows=arrows)]
+        },
+        separators=(",", ":"),
+    )[1:-1]
+    colours = {
+        role: json.dumps(_colour(rgb), separators=(",", ":")) for role, rgb in ROLE_RGB.items()
+    }
+    half_yaw = np.arctan2(scene.heading[:, 1], scene.heading[:, 0]) / 2
+    rows = np.column_stack([scene.position, np.sin(half_yaw), np.cos(half_yaw)]).round(DIGITS)
+    return ",".join(
+        f'{{"pose":{{"position":{{"x":{x!r},"y":{y!r},"z":{z!r}}},"orientation":'
+        f'{{"x":0.0,"y":0.0,"z":{qz!r},"w":{qw!r}}}}},{dimensions},"color":{colours[role]}}}'
+        for (x, y, z, qz, qw), role in zip(rows.tolist(), scene.roles, strict=True)
+    )
+
+
+def scene_message(scene: Scene, stage: Stage | None = None) -> bytes:
+    """A Foxglove ``SceneUpdate`` (JSON) drawing ``scene``: an arrow a body length long per
+    fish (tail at the fish, pointing along its body, coloured by role), the fitted target's
+    slots as translucent spheres, and with ``stage`` the tank's edges and the landmark.
+
+    Each entity keeps its id from message to message, so every message replaces the last."""
+    entities: list[dict[str, Any]] = []
     if scene.slots is not None:
         size = {"x": 0.5 * BODY_LENGTH, "y": 0.5 * BODY_LENGTH, "z": 0.5 * BODY_LENGTH}
         spheres = [
@@ -208,7 +222,11 @@ def scene_update(scene: Scene, stage: Stage | None = None) -> dict[str, Any]:
             size = {"x": 0.04, "y": 0.04, "z": 0.04}
             landmark = {"pose": _pose(stage.landmark), "size": size, "color": _colour(LANDMARK_RGB)}
             entities.append(_entity("landmark", scene.time, spheres=[landmark]))
-    return {"deletions": [], "entities": entities}
+    # The fish entity with an empty arrow list, its arrows spliced in as text.
+    fish = json.dumps(_entity("fish", scene.time, arrows=[]), separators=(",", ":"))
+    texts = [fish.replace('"arrows":[]', f'"arrows":[{_fish_arrows(scene)}]')]
+    texts += [json.dumps(entity, separators=(",", ":")) for entity in entities]
+    return f'{{"deletions":[],"entities":[{",".join(texts)}]}}'.encode()
 
 
 def _object(**properties: Any) -> dict[str, Any]:

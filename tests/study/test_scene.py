@@ -23,8 +23,8 @@ from fishswarm.study.scene import (
     SCENE_SCHEMA,
     Stage,
     scene_json_schema,
+    scene_message,
     scene_of,
-    scene_update,
     tank_edges,
     yaw_quaternion,
 )
@@ -100,12 +100,11 @@ def test_a_formations_roles_and_target_come_from_the_positions() -> None:
     assert (near[:5] < 0.1).all() and near[5] > 0.2
 
 
-def test_a_scene_update_draws_each_fish_the_tank_and_the_landmark() -> None:
+def test_a_scene_message_draws_each_fish_the_tank_and_the_landmark() -> None:
     jsonschema = pytest.importorskip("jsonschema")
     position = np.array([[0.5, 0.5, 0.2], [1.0, 0.25, 0.4]])
     scene = scene_of(_snapshot(position, [0.0, math.pi / 2], time=2.5))
-    update = scene_update(scene, Stage((1.78, 1.78, 1.17), (0.89, 0.89, 0.3)))
-    data = json.loads(json.dumps(update))
+    data = json.loads(scene_message(scene, Stage((1.78, 1.78, 1.17), (0.89, 0.89, 0.3))))
     jsonschema.validate(data, scene_json_schema())
     entities = {e["id"]: e for e in data["entities"]}
     assert set(entities) == {"fish", "tank", "landmark"}
@@ -129,7 +128,8 @@ def test_a_scene_update_draws_each_fish_the_tank_and_the_landmark() -> None:
     assert landmark["pose"]["position"] == {"x": 0.89, "y": 0.89, "z": 0.3}
     # Without a stage, the fish alone; with a formation target, its slots too.
     slots = target_map("pyramid", 2, spacing=0.3) + 0.5
-    alone = scene_update(scene_of(_snapshot(slots, [0.0, 0.0]), FormationTarget(slots, 0.3, 0.1)))
+    target = FormationTarget(slots, 0.3, 0.1)
+    alone = json.loads(scene_message(scene_of(_snapshot(slots, [0.0, 0.0]), target)))
     assert [e["id"] for e in alone["entities"]] == ["fish", "target"]
     assert len(alone["entities"][1]["spheres"]) == 2
 
@@ -137,7 +137,7 @@ def test_a_scene_update_draws_each_fish_the_tank_and_the_landmark() -> None:
 def test_a_recording_carries_the_scene_for_foxglove(tmp_path: Path) -> None:
     path = tmp_path / "run.mcap"
     position = np.array([[0.5, 0.5, 0.2]])
-    update = scene_update(scene_of(_snapshot(position, [0.3])), Stage((1.0, 1.0, 1.0)))
+    update = scene_message(scene_of(_snapshot(position, [0.3])), Stage((1.0, 1.0, 1.0)))
     with open_recorder(path, {"fish": 1}) as recorder:
         recorder.scene(2.0, update)
     with path.open("rb") as stream:
@@ -149,5 +149,16 @@ def test_a_recording_carries_the_scene_for_foxglove(tmp_path: Path) -> None:
     )  # fmt: skip
     assert json.loads(schema.data) == scene_json_schema()
     assert message.log_time == 2_000_000_000
-    assert json.loads(message.data) == json.loads(json.dumps(update))
+    assert message.data == update
     assert read_recording(path).snapshots == []  # readers of snapshots pass over scenes
+
+
+def test_every_arrow_points_along_its_fish_whatever_the_yaw() -> None:
+    yaw = np.random.default_rng(5).uniform(-10.0, 10.0, 50)
+    position = np.random.default_rng(6).uniform(0.0, 1.0, (50, 3))
+    message = json.loads(scene_message(scene_of(_snapshot(position, yaw.tolist()))))
+    arrows = message["entities"][0]["arrows"]
+    for arrow, angle, xyz in zip(arrows, yaw, position, strict=True):
+        turned = _rotate(arrow["pose"]["orientation"], np.array([1.0, 0.0, 0.0]))
+        np.testing.assert_allclose(turned, [math.cos(angle), math.sin(angle), 0.0], atol=1e-4)
+        np.testing.assert_allclose(list(arrow["pose"]["position"].values()), xyz, atol=1e-5)
