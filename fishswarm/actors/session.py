@@ -74,6 +74,9 @@ class SessionSettings:
         config.insert_json5("connect/timeout_ms", json.dumps(timeout_ms))
         config.insert_json5("scouting/multicast/enabled", "false")
         config.insert_json5("scouting/gossip/enabled", "false")
+        # Peers and routers wait this long in open() for scouting to find others (500 ms by
+        # default); with scouting off there is nothing to wait for (a run started 0.5 s later).
+        config.insert_json5("scouting/delay", "0")
         config.insert_json5("transport/link/tx/lease", json.dumps(int(self.lease * 1000)))
         for key, value in self.extra.items():
             config.insert_json5(key, json.dumps(value))
