@@ -83,7 +83,8 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         f"  final spacing  ideal {ideal['final_spacing']:.1f}  replica "
         f"{replica['final_spacing']:.1f}\n"
         f"  final speed    ideal {ideal['final_speed']:.2f}  replica {replica['final_speed']:.2f}\n"
-        f"  learned radii  {radii_text(summary['radii'])}",
+        f"  learned radii  {radii_text(summary['radii'])}\n"
+        f"  {target_text(summary['target'])}",
         file=sys.stderr,
     )
     return 0
@@ -95,3 +96,14 @@ def radii_text(radii: dict[str, list[float]]) -> str:
         return "none (the classifiers did not count neighbours)"
     pairs = zip(radii["mean"], radii["sd"], strict=True)
     return ", ".join(f"r{n} {m:.1f} ± {sd:.1f}" for n, (m, sd) in enumerate(pairs, 1)) + " units"
+
+
+def target_text(target: dict[str, Any]) -> str:
+    """The replica against the target (spacing within 15 % from 5 to 15 s, final speed within
+    0.5 units/s of the ideal fish's), in one line."""
+    verdict = "met" if target["met"] else "missed"
+    return (
+        f"target {verdict}: spacing at most {100 * target['spacing_error']:.0f} % off the "
+        f"ideal's from 5 to 15 s (≤ 15 %), final speed {target['speed_difference']:.2f} "
+        "units/s apart (≤ 0.5)"
+    )

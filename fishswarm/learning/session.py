@@ -87,6 +87,36 @@ def evaluate(
     return Evaluation(np.mean(spacing, axis=0), np.mean(speed, axis=0), first)
 
 
+SPACING_TOLERANCE = 0.15
+"""The target (issue 13): the replica's mean neighbour distance within this share of the
+ideal fish's at every second from 5 s to 15 s of a trial."""
+SPEED_TOLERANCE = 0.5
+"""The target: the replica's final mean speed within this many units/s of the ideal's."""
+JUDGED_FROM, JUDGED_UNTIL = 5.0, 15.0
+"""The seconds of a trial over which the spacing is judged."""
+
+
+def target_report(evaluation: Evaluation, arena: Arena) -> dict[str, Any]:
+    """How close a replica comes to the ideal fish, by the target's two measures: the
+    largest relative spacing error over whole seconds 5–15 s and the final speed difference,
+    and whether both are within their tolerances."""
+    steps = np.arange(evaluation.spacing.shape[1])
+    seconds = steps * arena.period
+    judged = (
+        (seconds >= JUDGED_FROM)
+        & (seconds <= JUDGED_UNTIL)
+        & np.isclose(seconds, np.round(seconds))
+    )
+    ideal, replica = evaluation.spacing[0, judged], evaluation.spacing[1, judged]
+    spacing_error = float(np.max(np.abs(replica - ideal) / ideal))
+    speed_difference = float(abs(evaluation.speed[1, -1] - evaluation.speed[0, -1]))
+    return {
+        "spacing_error": spacing_error,
+        "speed_difference": speed_difference,
+        "met": spacing_error <= SPACING_TOLERANCE and speed_difference <= SPEED_TOLERANCE,
+    }
+
+
 def learn(
     settings: LearningSettings,
     *,
@@ -202,6 +232,7 @@ def write_results(run: Coevolution, out: Path) -> dict[str, Any]:
             "final_spacing": float(evaluation.spacing[1, -1]),
             "final_speed": float(evaluation.speed[1, -1]),
         },
+        "target": target_report(evaluation, settings.arena),
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     _pictures(run, evaluation, out)

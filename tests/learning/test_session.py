@@ -92,6 +92,14 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     assert "generation 4/4" in straight.stderr
     (radii,) = [line for line in straight.stderr.splitlines() if "learned radii" in line]
     assert radii.startswith("  learned radii  r1 ") and radii.endswith(" units")
+    # Four generations of six replicas do not learn to aggregate: the target is missed, and
+    # the line says by how much, as summary.json does.
+    target = json.loads((tmp_path / "a" / "summary.json").read_text())["target"]
+    assert not target["met"]
+    assert (
+        f"target missed: spacing at most {100 * target['spacing_error']:.0f} % off the ideal's"
+        in straight.stderr
+    )
     first = subprocess.run(
         [*base, "--generations", "2", "--out", str(tmp_path / "b")],
         capture_output=True,
@@ -147,3 +155,27 @@ def test_learned_radii_print_as_mean_and_spread_with_their_unit() -> None:
         "r1 45.2 ± 3.1, r2 80.0 ± 5.4 units"
     )
     assert radii_text({"mean": [], "sd": []}).startswith("none")
+
+
+def test_the_target_judges_spacing_at_whole_seconds_5_to_15_and_the_final_speed() -> None:
+    from fishswarm.learning.arena import Arena
+    from fishswarm.learning.session import Evaluation, target_report
+
+    arena = Arena()  # one step a second
+    ideal = np.full(16, 35.0)
+    replica = ideal.copy()
+    replica[3] = 100.0  # before 5 s: not judged
+    replica[7] = 35.0 * 1.15  # exactly 15 % off: within
+    speed = np.array([np.full(15, 0.2), np.full(15, 0.6)])  # 0.4 apart at the end
+    tracks = np.zeros((2, 16, 1, 2))
+    report = target_report(Evaluation(np.stack([ideal, replica]), speed, tracks), arena)
+    assert report["spacing_error"] == pytest.approx(0.15)
+    assert report["speed_difference"] == pytest.approx(0.4)
+    assert report["met"]
+    replica[10] = 41.0  # 17 % off at 10 s
+    missed = target_report(Evaluation(np.stack([ideal, replica]), speed, tracks), arena)
+    assert missed["spacing_error"] == pytest.approx(6 / 35) and not missed["met"]
+    speed[1, -1] = 0.8  # 0.6 apart at the end
+    slow = target_report(Evaluation(np.stack([ideal, ideal]), speed, tracks), arena)
+    assert slow["spacing_error"] == 0.0 and slow["speed_difference"] == pytest.approx(0.6)
+    assert not slow["met"]
