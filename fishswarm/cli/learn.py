@@ -25,6 +25,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         "classifiers": args.classifiers,
         "seed": args.seed,
         "hall_of_fame": args.hall_of_fame,
+        "soft_weight": args.soft_weight,
     }
     given = {name: value for name, value in named.items() if value is not None}
     try:
@@ -40,7 +41,8 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             f"fishswarm learn: {chosen.behavior} ideal fish; classifier inputs "
             f"{','.join(chosen.inputs)}, radii {chosen.radii}; {chosen.models} replicas × "
             f"{chosen.classifiers} classifiers, seed {chosen.seed}, hall of fame "
-            f"{chosen.hall_of_fame}; up to generation {args.generations}; output {args.out}",
+            f"{chosen.hall_of_fame}, soft weight {chosen.soft_weight:g}; up to generation "
+            f"{args.generations}; output {args.out}",
             file=sys.stderr,
         )
         if resumed:

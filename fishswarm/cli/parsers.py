@@ -483,9 +483,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     learn.add_argument(
         "--inputs",
-        help="classifier inputs, comma-separated, from speed, angular-speed, "
-        "neighbors (one learned radius), neighbors2 (two) (default "
-        "speed,neighbors)",
+        help="classifier inputs, comma-separated, from speed, angular-speed, nearest "
+        "(distance to the nearest schoolmate), neighbors (count within one learned radius), "
+        "neighbors2 (two) (default speed,neighbors)",
     )
     learn.add_argument(
         "--radii",
@@ -501,6 +501,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--hall-of-fame",
         type=int,
         help="past champions drawn into every generation (default 0: the study's method)",
+    )
+    learn.add_argument(
+        "--soft-weight",
+        type=float,
+        help="weight of the classifiers' soft judgement (the probability they give a sample "
+        "of being an ideal fish) beside the thresholded one in both fitnesses (default 0.001: "
+        "it only breaks ties, as in the study)",
     )
     learn.add_argument(
         "--out", type=Path, default=Path("runs/learn"), help="output folder (default runs/learn)"

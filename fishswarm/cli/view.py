@@ -59,6 +59,8 @@ def _announce(view: LiveView, what: str) -> None:
 
 def _replay(path: Path, settings: ViewSettings) -> None:
     recording = read_recording(path)
+    if not recording.snapshots:
+        raise UserError(f"{path} holds no snapshots: nothing to show")
     try:
         ran: Scenario | None = Scenario.from_mapping(recording.scenario, source=str(path))
     except ConfigError:  # an observer's recording does not say what ran
@@ -70,8 +72,6 @@ def _replay(path: Path, settings: ViewSettings) -> None:
         for snapshot, record in zip(recording.snapshots, recording.metrics, strict=False):
             metrics = {k: v for k, v in record.items() if k not in NOT_METRICS}
             view.show(scene_of(snapshot, formation), metrics)
-        if not recording.snapshots:
-            raise UserError(f"{path} holds no snapshots: nothing to show")
         first, last = recording.snapshots[0].time, recording.snapshots[-1].time
         note = "" if recording.complete else " (cut short: the run did not finish)"
         _announce(

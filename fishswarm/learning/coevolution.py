@@ -94,6 +94,8 @@ class LearningSettings:
             raise ValueError("models and classifiers need populations of at least 2")
         if self.seed < 0:
             raise ValueError(f"seed must be non-negative, got {self.seed}")
+        if not self.soft_weight >= 0:
+            raise ValueError(f"soft_weight must be 0 or more, got {self.soft_weight}")
         if self.hall_of_fame < 0:
             raise ValueError(f"hall_of_fame must be 0 or more, got {self.hall_of_fame}")
 

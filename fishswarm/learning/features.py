@@ -1,9 +1,11 @@
 """What a classifier sees of one fish's track, per time step.
 
-Inputs, in any combination (SPEC.md §4): ``speed``; ``angular-speed``; ``neighbors``, the
-number of schoolmates within a radius the classifier learns; ``neighbors2``, the numbers
-within two learned radii. Inputs are scaled to about [0, 1]: speed by the speed cap, angular
-speed by π, counts by the number of schoolmates.
+Inputs, in any combination (SPEC.md §4): ``speed``; ``angular-speed``; ``nearest``, the
+distance to the nearest schoolmate (not in the study: a swarm-level view of spacing that
+needs no learned radius); ``neighbors``, the number of schoolmates within a radius the
+classifier learns; ``neighbors2``, the numbers within two learned radii. Inputs are scaled to
+about [0, 1]: speed by the speed cap, angular speed by π, the nearest distance by the
+communication range (capped at 1), counts by the number of schoolmates.
 
 A sample is one fish's track in one trial; a trial of N fish gives N samples.
 """
@@ -19,7 +21,10 @@ from fishswarm.learning.arena import Arena
 
 FloatArray = NDArray[np.float64]
 
-INPUTS = ("speed", "angular-speed", "neighbors", "neighbors2")
+INPUTS = ("speed", "angular-speed", "nearest", "neighbors", "neighbors2")
+
+FIXED_INPUTS = ("speed", "angular-speed", "nearest")
+"""Inputs that do not depend on the classifier (no learned radius)."""
 
 
 def check_inputs(inputs: tuple[str, ...]) -> tuple[str, ...]:
@@ -41,7 +46,7 @@ def radii_count(inputs: tuple[str, ...]) -> int:
 
 def feature_count(inputs: tuple[str, ...]) -> int:
     """How many numbers per step a classifier with these inputs sees."""
-    return sum(1 for name in inputs if name in ("speed", "angular-speed")) + radii_count(inputs)
+    return sum(1 for name in inputs if name in FIXED_INPUTS) + radii_count(inputs)
 
 
 @dataclass(frozen=True)
@@ -49,7 +54,8 @@ class Samples:
     """The part of S samples that does not depend on the classifier.
 
     Attributes:
-        fixed: (S, T, K) speed and/or angular speed, scaled (K may be 0).
+        fixed: (S, T, K) speed, angular speed and nearest distance as chosen, scaled (K may
+            be 0).
         mate_distance: (S, T, N − 1) distances to the schoolmates at each step.
     """
 
@@ -70,6 +76,11 @@ def samples_from(tracks: FloatArray, inputs: tuple[str, ...], *, arena: Arena) -
     """
     models, frames, count, _ = tracks.shape
     steps = np.diff(tracks, axis=1)  # (M, T, N, 2)
+    later = tracks[:, 1:]  # positions after each step
+    difference = later[:, :, None, :, :] - later[:, :, :, None, :]
+    distance = np.sqrt(np.einsum("mtijd,mtijd->mtij", difference, difference))
+    others = ~np.eye(count, dtype=bool)
+    mates = distance[..., others].reshape(models, frames - 1, count, count - 1)
     columns = []
     if "speed" in inputs:
         speed = np.sqrt(np.einsum("mtnd,mtnd->mtn", steps, steps)) / arena.period
@@ -79,13 +90,10 @@ def samples_from(tracks: FloatArray, inputs: tuple[str, ...], *, arena: Arena) -
         turn = np.zeros_like(heading)
         turn[:, 1:] = np.abs(np.angle(np.exp(1j * np.diff(heading, axis=1))))
         columns.append(turn / np.pi)
+    if "nearest" in inputs:
+        columns.append(np.minimum(mates.min(axis=-1) / arena.communication_range, 1.0))
     fixed = np.stack(columns, axis=-1) if columns else np.zeros((models, frames - 1, count, 0))
     fixed = fixed.transpose(0, 2, 1, 3).reshape(models * count, frames - 1, -1)
-    later = tracks[:, 1:]  # positions after each step
-    difference = later[:, :, None, :, :] - later[:, :, :, None, :]
-    distance = np.sqrt(np.einsum("mtijd,mtijd->mtij", difference, difference))
-    others = ~np.eye(count, dtype=bool)
-    mates = distance[..., others].reshape(models, frames - 1, count, count - 1)
     mate_distance = mates.transpose(0, 2, 1, 3).reshape(models * count, frames - 1, count - 1)
     return Samples(np.ascontiguousarray(fixed), np.ascontiguousarray(mate_distance))
 

@@ -95,6 +95,8 @@ def test_bad_settings_are_explained() -> None:
         LearningSettings(inputs=("neighbors", "neighbors2"))
     with pytest.raises(ValueError, match="behavior must be one of"):
         LearningSettings(behavior="schooling")
+    with pytest.raises(ValueError, match="soft_weight must be 0 or more, got nan"):
+        LearningSettings(soft_weight=float("nan"))
 
 
 def test_hall_of_fame_keeps_champions_and_resumes_exactly(tmp_path: Path) -> None:

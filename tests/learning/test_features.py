@@ -1,0 +1,65 @@
+"""What a classifier sees of a track: speed, turning, the nearest schoolmate, counts within
+learned radii — on tracks drawn by hand."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fishswarm.learning.arena import Arena
+from fishswarm.learning.features import (
+    check_inputs,
+    feature_count,
+    neighbor_counts,
+    samples_from,
+)
+
+
+def _line_of_three() -> np.ndarray:
+    """One trial, three fish on the x axis at 0, 10 and 30; over one step the first moves
+    3 along x and 4 along y (speed 5), the others stay."""
+    start = np.array([[0.0, 0.0], [10.0, 0.0], [30.0, 0.0]])
+    after = start.copy()
+    after[0] = [3.0, 4.0]
+    return np.stack([start, after])[None]  # (1, 2, 3, 2)
+
+
+def test_speed_and_the_nearest_schoolmate_by_hand() -> None:
+    arena = Arena()
+    samples = samples_from(_line_of_three(), ("speed", "nearest"), arena=arena)
+    assert feature_count(("speed", "nearest")) == 2
+    assert samples.fixed.shape == (3, 1, 2)
+    # Speeds 5, 0, 0 over the cap; nearest distances after the step: fish 0 at (3, 4) is
+    # √(7² + 4²) from fish 1, fish 1 the same from fish 0, fish 2 is 20 from fish 1.
+    np.testing.assert_allclose(samples.fixed[:, 0, 0], [5 / arena.speed_cap, 0.0, 0.0])
+    nearest = [math.hypot(7, 4), math.hypot(7, 4), 20.0]
+    np.testing.assert_allclose(
+        samples.fixed[:, 0, 1], np.array(nearest) / arena.communication_range
+    )
+
+
+def test_the_nearest_distance_is_capped_at_the_communication_range() -> None:
+    arena = Arena()
+    far = _line_of_three() * 100.0
+    samples = samples_from(far, ("nearest",), arena=arena)
+    assert samples.fixed[:, 0, 0].tolist() == [1.0, 1.0, 1.0]
+
+
+def test_counts_within_a_learned_radius_by_hand() -> None:
+    samples = samples_from(_line_of_three(), ("neighbors",), arena=Arena())
+    assert samples.fixed.shape == (3, 1, 0)
+    counts = neighbor_counts(samples, np.array([[9.0], [21.0]]))
+    # Radius 9: fish 0 and 1, √65 ≈ 8.06 apart, see each other; fish 2 is 20 from anyone.
+    assert counts[0, :, 0, 0].tolist() == [0.5, 0.5, 0.0]
+    # Radius 21: fish 1 sees both (20 < 21); fish 0 and fish 2 are √745 ≈ 27.3 apart.
+    assert counts[1, :, 0, 0].tolist() == [0.5, 1.0, 0.5]
+
+
+def test_inputs_are_checked() -> None:
+    assert check_inputs(("nearest", "neighbors")) == ("nearest", "neighbors")
+    with pytest.raises(ValueError, match="distinct names"):
+        check_inputs(("nearest", "nearest"))
+    with pytest.raises(ValueError, match="distinct names"):
+        check_inputs(("closest",))
