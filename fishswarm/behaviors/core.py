@@ -211,6 +211,7 @@ class Behavior:
         spawn_radius: default distance from the tank centre within which fish start, m.
         circles_landmark: whether it needs a landmark (by default a post at the tank centre).
         pid_gains: the gains its fish use with the pid controller (None: the defaults).
+        controller: the controller its fish use unless a scenario names one.
     """
 
     name: str
@@ -221,6 +222,7 @@ class Behavior:
     spawn_radius: float
     circles_landmark: bool = False
     pid_gains: PidGains | None = None
+    controller: str = "homing"
 
 
 @dataclass(frozen=True)

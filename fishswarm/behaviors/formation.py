@@ -529,6 +529,9 @@ FORMATION = Behavior(
     # fish (pyramid, 2 Hz, seeds 0–4, lead 2.5 s) 5 of 5 seeds 90 % joined within 30 s,
     # against 4 of 5 without it.
     pid_gains=PidGains(speed=(2.0, 0.0, 1.0)),
+    # The homing controller's bang-bang turns overshoot a place: measured with 15 fish
+    # (pyramid, 1 Hz, seed 0, 30 s) 27 % joined with homing against 80 % with pid.
+    controller="pid",
 )
 
 

@@ -71,7 +71,7 @@ def fish_params(settings: Mapping[str, Any]) -> FishParams:
     return FishParams(
         family,
         family.parameters(settings),
-        controller=str(settings.get("controller", "homing")),
+        controller=str(settings.get("controller") or family.controller),
         control_period=float(settings.get("control_period", 1.0)),
         caudal_cap=float(settings.get("caudal_cap", 1.0)),
         pid_gains=family.pid_gains or PidGains(),

@@ -32,7 +32,11 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
     "duration": ("--duration", float, "simulated seconds (default 15)"),
     "seed": ("--seed", int, "master seed; the same seed gives the same run (default 0)"),
     "control_period": ("--period", float, "control period in s (default 1: 1 Hz)"),
-    "controller": ("--controller", str, "homing (default, the research code's) or pid"),
+    "controller": (
+        "--controller",
+        str,
+        "homing (the research code's) or pid (default: pid for formation, homing otherwise)",
+    ),
     "target_distance": (
         "--target-distance",
         float,

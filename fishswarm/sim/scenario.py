@@ -90,7 +90,8 @@ class Scenario:
         duration: simulated time, s.
         control_period: time between two decisions of a fish, s (1 Hz in the study).
         seed: master seed; every random stream derives from (seed, role, id).
-        controller: ``homing`` (the research code's) or ``pid``.
+        controller: ``homing`` (the research code's) or ``pid``; default: the behaviour's
+            (``pid`` for ``formation``, ``homing`` for the others).
         caudal_cap: largest caudal gain the homing controller uses.
         target_distance: Lennard-Jones r_t, m; default 0.26 for aggregation, the tank
             diagonal for dispersion.
@@ -155,7 +156,7 @@ class Scenario:
     duration: float = 15.0
     control_period: float = 1.0
     seed: int = 0
-    controller: str = "homing"
+    controller: str | None = None
     caudal_cap: float = 1.0
     target_distance: float | None = None
     spawn_radius: float | None = None
@@ -235,6 +236,8 @@ class Scenario:
             self.behavior in names(),
             f"behavior must be one of {', '.join(names())}, got {self.behavior!r}",
         )
+        if self.controller is None:
+            object.__setattr__(self, "controller", behavior_named(self.behavior).controller)
         need(
             self.controller in CONTROLLERS,
             f"controller must be one of {', '.join(CONTROLLERS)}, got {self.controller!r}",

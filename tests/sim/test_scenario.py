@@ -24,6 +24,20 @@ def test_defaults_follow_the_study() -> None:
     assert aggregation.resolved_spawn_radius() == pytest.approx(1.3)
 
 
+def test_the_controller_defaults_to_the_behaviours_and_a_named_one_stays() -> None:
+    from fishswarm.behaviors.registry import fish_params
+
+    assert Scenario().controller == "homing"
+    assert Scenario(behavior="formation").controller == "pid"
+    assert Scenario(behavior="formation", controller="homing").controller == "homing"
+    assert Scenario(behavior="dispersion", controller="pid").controller == "pid"
+    # What a recording holds reads back as what ran; settings without one get the default.
+    formation = Scenario(behavior="formation")
+    assert Scenario.from_mapping(formation.to_dict()).controller == "pid"
+    assert fish_params({"behavior": "formation"}).controller == "pid"
+    assert fish_params({"behavior": "orbit", "orbit_radius": 0.45}).controller == "homing"
+
+
 def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
     path = tmp_path / "s.toml"
     path.write_text("[scenario]\nfish = 10\ntank = [3, 3, 1]\nblind_width = 0\n")
