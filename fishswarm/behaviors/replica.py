@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from fishswarm.behaviors.core import Behavior, Inbox, Perception, Steering, steady
 from fishswarm.bluebot.parameters import BODY_LENGTH
-from fishswarm.learning.arena import Arena, cap_speed
+from fishswarm.learning.arena import Arena, arena_from, cap_speed
 from fishswarm.learning.networks import REPLICA_SIZE, replica_outputs
 from fishswarm.learning.replica_file import load_replica
 
@@ -56,7 +56,7 @@ def replica_motion(
     relative = neighbors[:, :, :2] / scale
     distance = np.sqrt(np.einsum("bkd,bkd->bk", relative, relative))
     within = mask & (distance <= arena.communication_range)
-    outputs = replica_outputs(weights[None, :], relative[None] / arena.communication_range)[0]
+    outputs = replica_outputs(weights[None, :], relative[None] / arena.replica_input_scale)[0]
     direction = 2.0 * outputs[..., :2] - 1.0
     speed = outputs[..., 2] * arena.speed_cap
     contribution = direction * (speed * within)[..., None]
@@ -80,11 +80,13 @@ class ReplicaParams:
         weights: the replica network's 21 weights.
         scale: metres per arena unit.
         period: the arena step the replica was learned with, as a control period, s.
+        arena: the arena it was learned in (range, speed cap, input scale).
     """
 
     weights: tuple[float, ...]
     scale: float = STUDY_SCALE
     period: float = 1.0
+    arena: Arena = Arena()
 
     def __post_init__(self) -> None:
         if len(self.weights) != REPLICA_SIZE:
@@ -117,9 +119,11 @@ def replica_params(settings: Mapping[str, Any]) -> ReplicaParams:
             "the replica behavior needs a learned model: --model runs/learn/best_replica.npz "
             "(make one with 'fishswarm learn')"
         )
-    weights, _ = load_replica(Path(model))
+    weights, learned = load_replica(Path(model))
     return ReplicaParams(
-        tuple(float(w) for w in weights), period=float(settings.get("control_period", 1.0))
+        tuple(float(w) for w in weights),
+        period=float(settings.get("control_period", 1.0)),
+        arena=arena_from(learned.get("arena", {})),
     )
 
 
@@ -135,6 +139,7 @@ def steer_replica(
         weights=np.asarray(params.weights),
         scale=params.scale,
         period=params.period,
+        arena=params.arena,
     )
     target = np.concatenate([planar, (hold - depth)[:, None]], axis=1)
     return ReplicaMemory(hold), steady(target)

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from fishswarm.learning.arena import Arena
+from fishswarm.learning.arena import arena_from
 from fishswarm.learning.coevolution import Coevolution, Fitness, LearningSettings
 
 FORMAT = "fishswarm-learning-checkpoint/1"
@@ -111,5 +111,5 @@ def _settings_data(settings: LearningSettings) -> dict[str, Any]:
 def _settings_from(data: dict[str, Any]) -> LearningSettings:
     values = dict(data)
     values["inputs"] = tuple(values["inputs"])
-    values["arena"] = Arena(**values["arena"])
+    values["arena"] = arena_from(values["arena"])
     return LearningSettings(**values)

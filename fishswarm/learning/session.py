@@ -10,7 +10,8 @@ Everything a run writes goes to one folder:
   :func:`fishswarm.learning.replica_file.load_replica` reads it back.
 - ``radii.md``: the learned radii, mean and s.d. over the final classifier population (the
   study's Table I).
-- ``summary.json``: settings, final fitness, spacing and speed of ideal vs best replica.
+- ``summary.json``: settings, final fitness, spacing and speed over time of ideal vs best
+  replica (means over 20 fresh trials), the target's judgement.
 - ``fitness.png``, ``spacing_speed.png`` (the study's Figures 10–11) and
   ``trajectories.png`` (Figures 12–13), when matplotlib is installed.
 """
@@ -224,13 +225,14 @@ def write_results(run: Coevolution, out: Path) -> dict[str, Any]:
         "generations": run.generation,
         "final_fitness": final,
         "radii": {"mean": radii.mean(axis=0).tolist(), "sd": radii.std(axis=0, ddof=1).tolist()},
-        "ideal": {
-            "final_spacing": float(evaluation.spacing[0, -1]),
-            "final_speed": float(evaluation.speed[0, -1]),
-        },
-        "replica": {
-            "final_spacing": float(evaluation.spacing[1, -1]),
-            "final_speed": float(evaluation.speed[1, -1]),
+        **{
+            who: {
+                "final_spacing": float(evaluation.spacing[row, -1]),
+                "final_speed": float(evaluation.speed[row, -1]),
+                "spacing": evaluation.spacing[row].tolist(),
+                "speed": evaluation.speed[row].tolist(),
+            }
+            for row, who in enumerate(("ideal", "replica"))
         },
         "target": target_report(evaluation, settings.arena),
     }

@@ -205,6 +205,28 @@ def test_replica_motion_by_hand() -> None:
     np.testing.assert_array_equal(far, [[0.0, 0.0]])
 
 
+def test_a_replica_runs_with_the_input_scale_it_was_learned_with(tmp_path: Path) -> None:
+    import json
+
+    weights = np.random.default_rng(3).normal(0, 1, 21)
+    for name, arena, scale in (
+        ("new.npz", {"side": 300.0, "replica_input_scale": 40.0}, 40.0),
+        ("old.npz", {"side": 300.0}, 100.0),  # written before the scale was a setting
+    ):
+        path = tmp_path / name
+        np.savez(path, weights=weights, settings=np.array(json.dumps({"arena": arena})))
+        params = fish_params({"behavior": "replica", "model": str(path), "tank": TANK})
+        assert params.steering.arena.replica_input_scale == scale
+    # Seen over 100 or over 40, one neighbour 0.5 m off moves the fish differently.
+    neighbors, mask = np.array([[[0.5, 0.0, 0.0]]]), np.ones((1, 1), bool)
+    old = fish_params({"behavior": "replica", "model": str(tmp_path / "old.npz"), "tank": TANK})
+    new = fish_params({"behavior": "replica", "model": str(tmp_path / "new.npz"), "tank": TANK})
+    assert not np.allclose(
+        replica_motion(neighbors, mask, weights=weights, arena=old.steering.arena),
+        replica_motion(neighbors, mask, weights=weights, arena=new.steering.arena),
+    )
+
+
 def test_bad_behaviours_and_parameters_are_explained(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="behavior must be one of dispersion, aggregation"):
         behavior_named("schooling")

@@ -10,6 +10,7 @@ import pytest
 from fishswarm.learning.arena import (
     SPREADS,
     Arena,
+    arena_from,
     cap_speed,
     ideal_velocity,
     initial_positions,
@@ -65,3 +66,24 @@ def test_models_in_a_batch_run_as_if_alone() -> None:
         alone = simulate(velocity, start[model : model + 1], arena=ARENA)
         np.testing.assert_allclose(alone[0], together[model], rtol=0, atol=1e-9)
     assert np.all((together >= 0) & (together <= ARENA.side))
+
+
+def test_a_replica_sees_positions_over_the_input_scale() -> None:
+    # The same network, a neighbour 40 units away seen over 40 and one 100 away over 100:
+    # both are input (1, 0), so both fish move alike.
+    weights = np.random.default_rng(2).normal(0, 2, (1, 21))
+    near = np.array([[[100.0, 100.0], [140.0, 100.0]]])
+    far = np.array([[[100.0, 100.0], [200.0, 100.0]]])
+    seen_over_40 = replica_velocity(near, weights, arena=ARENA)
+    seen_over_100 = replica_velocity(
+        far, weights, arena=dataclasses.replace(ARENA, replica_input_scale=100.0)
+    )
+    np.testing.assert_allclose(seen_over_40, seen_over_100, rtol=0, atol=1e-12)
+    assert np.abs(seen_over_40).max() > 0.1
+
+
+def test_files_from_before_the_input_scale_keep_the_old_one() -> None:
+    saved = dataclasses.asdict(ARENA)
+    assert arena_from(saved) == ARENA and ARENA.replica_input_scale == 40.0
+    del saved["replica_input_scale"]
+    assert arena_from(saved).replica_input_scale == 100.0

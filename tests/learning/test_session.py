@@ -35,7 +35,16 @@ def test_learn_writes_every_output(tmp_path: Path) -> None:
     weights, saved = load_replica(tmp_path / "best_replica.npz")
     assert weights.shape == (21,)
     assert saved["inputs"] == ["speed", "neighbors2"]
-    assert json.loads((tmp_path / "summary.json").read_text())["settings"]["seed"] == 2
+    written = json.loads((tmp_path / "summary.json").read_text())
+    assert written["settings"]["seed"] == 2
+    assert written["settings"]["arena"]["replica_input_scale"] == 40.0
+    # The curves: 16 spacings (start and 15 steps) and 15 speeds, from the same starts;
+    # the ideal fish end near their spacing of about 35 (sigma 40).
+    for who in ("ideal", "replica"):
+        assert len(written[who]["spacing"]) == 16 and len(written[who]["speed"]) == 15
+        assert written[who]["spacing"][-1] == written[who]["final_spacing"]
+    assert written["ideal"]["spacing"][0] == written["replica"]["spacing"][0]
+    assert 30 < written["ideal"]["final_spacing"] < 40
 
 
 def test_resuming_with_other_settings_is_refused_and_with_the_same_allowed(
