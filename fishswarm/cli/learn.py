@@ -26,6 +26,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         "seed": args.seed,
         "hall_of_fame": args.hall_of_fame,
         "soft_weight": args.soft_weight,
+        "virulence": args.virulence,
     }
     given = {name: value for name, value in named.items() if value is not None}
     try:
@@ -41,7 +42,8 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             f"fishswarm learn: {chosen.behavior} ideal fish; classifier inputs "
             f"{','.join(chosen.inputs)}, radii {chosen.radii}; {chosen.models} replicas × "
             f"{chosen.classifiers} classifiers, seed {chosen.seed}, hall of fame "
-            f"{chosen.hall_of_fame}, soft weight {chosen.soft_weight:g}; up to generation "
+            f"{chosen.hall_of_fame}, soft weight {chosen.soft_weight:g}, virulence "
+            f"{chosen.virulence:g}; up to generation "
             f"{args.generations}; output {args.out}",
             file=sys.stderr,
         )

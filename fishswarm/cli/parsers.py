@@ -514,6 +514,13 @@ def build_parser() -> argparse.ArgumentParser:
         "it only breaks ties, as in the study)",
     )
     learn.add_argument(
+        "--virulence",
+        type=float,
+        help="in (0, 1]: classifiers are fittest at this score rather than at the highest, "
+        "so they leave replicas something to learn from (reduced virulence; default 1: the "
+        "study's method)",
+    )
+    learn.add_argument(
         "--out", type=Path, default=Path("runs/learn"), help="output folder (default runs/learn)"
     )
     learn.add_argument(

@@ -72,6 +72,11 @@ class LearningSettings:
             Models are also judged by this many past best classifiers, and classifiers also
             judge the tracks of this many past best models, against cycling and against
             disengagement (one side winning so completely that the other gets no signal).
+        virulence: λ in (0, 1]: classifiers are fittest when their score (thresholded plus
+            soft, scaled to [0, 1]) is λ, not when it is highest (1: the study's method).
+            Cartlidge and Bullock's reduced virulence (Evolutionary Computation 12(2),
+            2004): a classifier that leaves replicas no way to score is less fit than one
+            they can learn from.
     """
 
     behavior: str = "aggregation"
@@ -83,6 +88,7 @@ class LearningSettings:
     arena: Arena = field(default_factory=Arena)
     soft_weight: float = 1e-3
     hall_of_fame: int = 0
+    virulence: float = 1.0
 
     def __post_init__(self) -> None:
         if self.behavior not in SPREADS:
@@ -96,6 +102,8 @@ class LearningSettings:
             raise ValueError(f"seed must be non-negative, got {self.seed}")
         if not self.soft_weight >= 0:
             raise ValueError(f"soft_weight must be 0 or more, got {self.soft_weight}")
+        if not 0 < self.virulence <= 1:
+            raise ValueError(f"virulence must be in (0, 1], got {self.virulence}")
         if self.hall_of_fame < 0:
             raise ValueError(f"hall_of_fame must be 0 or more, got {self.hall_of_fame}")
 
@@ -145,6 +153,14 @@ def fitness(judgement: FloatArray) -> Fitness:
         models_soft=judgement[:, 1:].mean(axis=(0, 2)),
         classifiers_soft=0.5 * (soft_sensitivity + soft_specificity),
     )
+
+
+def reduced_virulence(score: FloatArray, virulence: float) -> FloatArray:
+    """Cartlidge and Bullock's fitness of a score in [0, 1]: 2s/λ − s²/λ², which is 1 at
+    s = λ and falls on both sides (at λ = 1 it only rescales, keeping the order)."""
+    ratio = score / virulence
+    result: FloatArray = 2 * ratio - ratio * ratio
+    return result
 
 
 def radii_of(genomes: FloatArray, settings: LearningSettings) -> FloatArray:
@@ -267,7 +283,10 @@ class Coevolution:
         models, classifiers = models[:current_models], classifiers[:current_classifiers]
         weight = settings.soft_weight
         model_score = result.models + weight * result.models_soft
-        classifier_score = result.classifiers + weight * result.classifiers_soft
+        classifier_score = reduced_virulence(
+            (result.classifiers + weight * result.classifiers_soft) / (1 + weight),
+            settings.virulence,
+        )
         self._tell(models, classifiers, model_score, classifier_score)
         if settings.hall_of_fame:
             self.model_champions.append(models[int(np.argmax(model_score))])

@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from fishswarm.learning.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
-from fishswarm.learning.coevolution import Coevolution, LearningSettings, fitness, radii_of
+from fishswarm.learning.coevolution import (
+    Coevolution,
+    LearningSettings,
+    fitness,
+    radii_of,
+    reduced_virulence,
+)
 
 SMALL = LearningSettings(models=6, classifiers=5, seed=3)
 
@@ -95,6 +101,8 @@ def test_bad_settings_are_explained() -> None:
         LearningSettings(inputs=("neighbors", "neighbors2"))
     with pytest.raises(ValueError, match="behavior must be one of"):
         LearningSettings(behavior="schooling")
+    with pytest.raises(ValueError, match=r"virulence must be in \(0, 1\], got 0"):
+        LearningSettings(virulence=0.0)
     with pytest.raises(ValueError, match="soft_weight must be 0 or more, got nan"):
         LearningSettings(soft_weight=float("nan"))
 
@@ -124,3 +132,26 @@ def test_a_checkpoint_is_plain_data_and_a_truncated_one_is_explained(tmp_path: P
         load_checkpoint(path)
     with pytest.raises(CheckpointError, match="does not exist"):
         load_checkpoint(tmp_path / "missing.npz")
+
+
+def test_reduced_virulence_peaks_at_lambda_and_keeps_the_order_at_one() -> None:
+    # λ = 0.75: 2s/λ − s²/λ² is 1 at s = 0.75, and 0.8889 at both 0.5 and 1 (by hand:
+    # 1.3333 − 0.4444 and 2.6667 − 1.7778).
+    scores = np.array([0.5, 0.75, 1.0])
+    np.testing.assert_allclose(reduced_virulence(scores, 0.75), [8 / 9, 1.0, 8 / 9])
+    ranked = np.array([0.2, 0.9, 0.5, 1.0])
+    full = reduced_virulence(ranked, 1.0)
+    assert list(np.argsort(full)) == list(np.argsort(ranked))
+
+
+def test_a_virulent_classifier_population_is_told_it_overshot() -> None:
+    settings = LearningSettings(models=6, classifiers=6, seed=4, virulence=0.6)
+    run = Coevolution(settings)
+    run.step()
+    fitness = run.last_fitness
+    assert fitness is not None
+    share = (fitness.classifiers + settings.soft_weight * fitness.classifiers_soft) / (
+        1 + settings.soft_weight
+    )
+    np.testing.assert_allclose(run.told_classifiers[0], reduced_virulence(share, 0.6))
+    assert np.all(run.told_classifiers[0] <= 1.0)
