@@ -173,7 +173,11 @@ def radii_of(genomes: FloatArray, settings: LearningSettings) -> FloatArray:
     return radii
 
 
-_TRIALS, _MODELS, _CLASSIFIERS, _HALL = 1, 2, 3, 4
+_TRIALS, _MODELS, _CLASSIFIERS, _HALL, _TOURNAMENT = 1, 2, 3, 4, 5
+
+TOURNAMENT_GENERATIONS = 100
+"""The master tournament pits the champions of this many last generations against each
+other."""
 
 
 def _stream(seed: int, role: int, *key: int) -> np.random.Generator:
@@ -248,7 +252,7 @@ class Coevolution:
 
     def step(self) -> dict[str, float]:
         """Run one generation: simulate, judge, tell both optimisers; returns its record."""
-        settings, arena = self.settings, self.settings.arena
+        settings = self.settings
         models = np.array(self._models.ask())
         classifiers = np.array(self._classifiers.ask())
         current_models, current_classifiers = len(models), len(classifiers)
@@ -260,19 +264,7 @@ class Coevolution:
             chosen = rng.choice(len(self.classifier_champions), picks, replace=False)
             classifiers = np.concatenate([classifiers, np.array(self.classifier_champions)[chosen]])
         start = self.trial_start(self.generation, 1 + len(models))
-        ideal = simulate(lambda p: ideal_velocity(p, arena=arena), start[:1], arena=arena)
-        replicas = simulate(
-            lambda p: replica_velocity(p, models, arena=arena), start[1:], arena=arena
-        )
-        tracks = np.concatenate([ideal, replicas])
-        samples = samples_from(tracks, settings.inputs, arena=arena)
-        own = (
-            neighbor_counts(samples, radii_of(classifiers, settings))
-            if settings.radius_count
-            else np.zeros((len(classifiers), *samples.fixed.shape[:2], 0))
-        )
-        judgement = classify(classifiers[:, : settings.network_size], samples.fixed, own)
-        everything = fitness(judgement.reshape(len(classifiers), 1 + len(models), arena.fish))
+        everything = self._judge(self._trial(start, models), classifiers)
         # Champions only judge and are judged: the optimisers hear about the current ones.
         result = Fitness(
             everything.models[:current_models],
@@ -311,6 +303,46 @@ class Coevolution:
         score = self.last_fitness.models + self.settings.soft_weight * self.last_fitness.models_soft
         best: FloatArray = self.population[int(np.argmax(score))]
         return best
+
+    def tournament_model(self) -> FloatArray:
+        """The replica to keep: with a hall of fame, the model champion of the last
+        :data:`TOURNAMENT_GENERATIONS` generations that fooled their classifier champions
+        most, all judging one fresh start (Nolfi and Floreano's master tournament, 1998:
+        co-evolution cycles, so the last generation's best is often not the best there
+        was); without one, :meth:`best_model`."""
+        if not self.model_champions:
+            return self.best_model()
+        settings, arena = self.settings, self.settings.arena
+        models = np.array(self.model_champions[-TOURNAMENT_GENERATIONS:])
+        classifiers = np.array(self.classifier_champions[-TOURNAMENT_GENERATIONS:])
+        rng = _stream(settings.seed, _TOURNAMENT, self.generation)
+        spread = SPREADS[settings.behavior]
+        start = initial_positions(rng, arena=arena, spread=spread, models=1 + len(models))
+        scores = self._judge(self._trial(start, models), classifiers)
+        score = scores.models + settings.soft_weight * scores.models_soft
+        best: FloatArray = models[int(np.argmax(score))]
+        return best
+
+    def _trial(self, start: FloatArray, models: FloatArray) -> FloatArray:
+        """Tracks (1 + M, T + 1, N, 2): the ideal fish from ``start[0]``, then each model's."""
+        arena = self.settings.arena
+        ideal = simulate(lambda p: ideal_velocity(p, arena=arena), start[:1], arena=arena)
+        replicas = simulate(
+            lambda p: replica_velocity(p, models, arena=arena), start[1:], arena=arena
+        )
+        return np.concatenate([ideal, replicas])
+
+    def _judge(self, tracks: FloatArray, classifiers: FloatArray) -> Fitness:
+        """Every classifier judges every fish of ``tracks`` (the ideal fish's trial first)."""
+        settings = self.settings
+        samples = samples_from(tracks, settings.inputs, arena=settings.arena)
+        own = (
+            neighbor_counts(samples, radii_of(classifiers, settings))
+            if settings.radius_count
+            else np.zeros((len(classifiers), *samples.fixed.shape[:2], 0))
+        )
+        judgement = classify(classifiers[:, : settings.network_size], samples.fixed, own)
+        return fitness(judgement.reshape(len(classifiers), len(tracks), settings.arena.fish))
 
     def final_radii(self) -> FloatArray:
         """(C, R) radii of the last classifier population."""

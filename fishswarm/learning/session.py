@@ -196,7 +196,7 @@ def write_results(run: Coevolution, out: Path) -> dict[str, Any]:
     """Write every output of a run that has done at least one generation."""
     out.mkdir(parents=True, exist_ok=True)
     settings = run.settings
-    best = run.best_model()
+    best = run.tournament_model()
     settings_json = json.dumps(_settings_dict(settings))
     np.savez(out / "best_replica.npz", weights=best, settings=np.array(settings_json))
     with (out / "history.csv").open("w", newline="", encoding="utf-8") as stream:

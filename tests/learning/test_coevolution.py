@@ -155,3 +155,25 @@ def test_a_virulent_classifier_population_is_told_it_overshot() -> None:
     )
     np.testing.assert_allclose(run.told_classifiers[0], reduced_virulence(share, 0.6))
     assert np.all(run.told_classifiers[0] <= 1.0)
+
+
+def test_the_master_tournament_keeps_the_champion_that_fooled_most() -> None:
+    plain = Coevolution(LearningSettings(models=5, classifiers=5, seed=6))
+    plain.step()
+    np.testing.assert_array_equal(plain.tournament_model(), plain.best_model())
+    # Two planted champions: zero weights give direction 0 (a fish at rest); output biases
+    # of +50 give direction (1, 1) at full speed (a drifting fish). The classifier calls a
+    # fish ideal when its hidden unit sees a low speed: sigmoid(20 h - 10) with
+    # h = sigmoid(-20 speed + 5), near 1 at rest and near 0 at full speed.
+    settings = LearningSettings(models=4, classifiers=4, seed=6, hall_of_fame=2, inputs=("speed",))
+    rest, drift = np.zeros(21), np.zeros(21)
+    drift[18:21] = 50.0
+    judge = np.zeros(settings.network_size)
+    judge[0], judge[5 + 25], judge[5 + 25 + 5], judge[-1] = -20.0, 5.0, 20.0, -10.0
+    run = Coevolution(settings)
+    run.step()
+    run.model_champions = [rest, drift]
+    run.classifier_champions = [judge, judge]
+    np.testing.assert_array_equal(run.tournament_model(), rest)
+    run.model_champions = [drift, rest]
+    np.testing.assert_array_equal(run.tournament_model(), rest)
