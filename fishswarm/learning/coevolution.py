@@ -175,6 +175,10 @@ def radii_of(genomes: FloatArray, settings: LearningSettings) -> FloatArray:
 
 _TRIALS, _MODELS, _CLASSIFIERS, _HALL, _TOURNAMENT = 1, 2, 3, 4, 5
 
+FLAT_GENERATIONS = 10
+"""After this many generations in which every model scored the same, the model optimiser
+starts again (see :meth:`Coevolution.step`)."""
+
 TOURNAMENT_GENERATIONS = 100
 """The master tournament pits the champions of this many last generations against each
 other."""
@@ -243,6 +247,9 @@ class Coevolution:
         """The scores each generation told the model optimiser (what a replay needs)."""
         self.told_classifiers: list[FloatArray] = []
         """The scores each generation told the classifier optimiser."""
+        self.model_restarts = 0
+        """How often the model optimiser started again on flat fitness."""
+        self._flat = 0
 
     def trial_start(self, generation: int, trials: int) -> FloatArray:
         """The start positions of a generation (shared by the ideal fish and every model)."""
@@ -360,6 +367,20 @@ class Coevolution:
         self._classifiers.tell(list(classifiers), list(-classifier_score))
         self.told_models.append(model_score)
         self.told_classifiers.append(classifier_score)
+        # Replicas whose speed output has saturated at 0 all stand still, whatever their
+        # weights: every model scores the same, and CMA-ES drifts on that plateau without a
+        # way back (measured: 5 of 9 runs at the study's size ended that way).
+        # pycma's own answer to flat fitness is to stop (tolflatfitness); a run restarts
+        # the model optimiser from where it began, with a fresh generator, instead.
+        self._flat = self._flat + 1 if np.ptp(model_score) <= 1e-12 else 0
+        if self._flat >= FLAT_GENERATIONS:
+            self.model_restarts += 1
+            self._flat = 0
+            self._models = _strategy(
+                np.zeros(REPLICA_SIZE),
+                self.settings.models,
+                _stream(self.settings.seed, _MODELS, self.model_restarts),
+            )
 
     def replay(self, told_models: FloatArray, told_classifiers: FloatArray) -> None:
         """Bring a fresh run's optimisers to where a run stood after telling these scores:

@@ -225,6 +225,7 @@ def write_results(run: Coevolution, out: Path) -> dict[str, Any]:
         "generations": run.generation,
         "final_fitness": final,
         "radii": {"mean": radii.mean(axis=0).tolist(), "sd": radii.std(axis=0, ddof=1).tolist()},
+        "model_restarts": run.model_restarts,
         **{
             who: {
                 "final_spacing": float(evaluation.spacing[row, -1]),

@@ -9,6 +9,7 @@ import pytest
 
 from fishswarm.learning.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from fishswarm.learning.coevolution import (
+    FLAT_GENERATIONS,
     Coevolution,
     LearningSettings,
     fitness,
@@ -177,3 +178,29 @@ def test_the_master_tournament_keeps_the_champion_that_fooled_most() -> None:
     np.testing.assert_array_equal(run.tournament_model(), rest)
     run.model_champions = [drift, rest]
     np.testing.assert_array_equal(run.tournament_model(), rest)
+
+
+def test_models_start_again_after_ten_flat_generations_and_a_replay_does_too() -> None:
+    settings = LearningSettings(models=4, classifiers=4, seed=8)
+    flat = np.full((FLAT_GENERATIONS, 4), 0.25)
+    varied = np.random.default_rng(0).uniform(0, 1, (FLAT_GENERATIONS, 4))
+    run = Coevolution(settings)
+    run.replay(flat[:-1], varied[:-1])
+    assert run.model_restarts == 0
+    assert np.abs(run._models.mean).max() > 0.1  # the optimiser has moved on
+    run = Coevolution(settings)
+    run.replay(flat, varied)
+    assert run.model_restarts == 1
+    # A fresh optimiser, back at zero weights with step 1.
+    np.testing.assert_array_equal(run._models.mean, np.zeros(21))
+    assert run._models.sigma == 1.0
+    after = np.array(run._models.ask())
+    again = Coevolution(settings)
+    again.replay(flat, varied)
+    np.testing.assert_array_equal(np.array(again._models.ask()), after)
+    # A single generation with different scores resets the count.
+    broken = flat.copy()
+    broken[5, 0] = 0.5
+    once = Coevolution(settings)
+    once.replay(broken, varied)
+    assert once.model_restarts == 0
