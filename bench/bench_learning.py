@@ -7,7 +7,8 @@ generations, then times the next ones, for each classifier input choice given.
 Usage:
     python bench/bench_learning.py
     python bench/bench_learning.py --generations 20 --inputs speed,neighbors2
-    python bench/bench_learning.py --inputs speed,neighbors --hall-of-fame 10
+    python bench/bench_learning.py --inputs speed,neighbors --hall-of-fame 0 --soft-weight 0.001
+        (the study's method; the defaults are fishswarm learn's)
 
 Results and conditions are kept in docs/benchmarks.md.
 """
@@ -34,7 +35,13 @@ def main() -> None:
         default=["speed", "speed,neighbors", "speed,angular-speed,neighbors2"],
     )
     parser.add_argument(
-        "--hall-of-fame", type=int, default=0, help="past champions kept (0: no hall of fame)"
+        "--hall-of-fame", type=int, default=10, help="past champions kept (0: no hall of fame)"
+    )
+    parser.add_argument(
+        "--soft-weight",
+        type=float,
+        default=1.0,
+        help="weight of the soft judgement (0.001: the study's)",
     )
     args = parser.parse_args()
     print(
@@ -44,7 +51,11 @@ def main() -> None:
     print("| classifier inputs | s/generation (mean) | min | 500 generations |")
     print("|---|---:|---:|---:|")
     for inputs in args.inputs:
-        settings = LearningSettings(inputs=tuple(inputs.split(",")), hall_of_fame=args.hall_of_fame)
+        settings = LearningSettings(
+            inputs=tuple(inputs.split(",")),
+            hall_of_fame=args.hall_of_fame,
+            soft_weight=args.soft_weight,
+        )
         run = Coevolution(settings)
         for _ in range(args.warm_up):
             run.step()

@@ -504,14 +504,15 @@ def build_parser() -> argparse.ArgumentParser:
     learn.add_argument(
         "--hall-of-fame",
         type=int,
-        help="past champions drawn into every generation (default 0: the study's method)",
+        help="past champions drawn into every generation, and the pool the kept replica is "
+        "picked from (default 10; 0: the study's method)",
     )
     learn.add_argument(
         "--soft-weight",
         type=float,
         help="weight of the classifiers' soft judgement (the probability they give a sample "
-        "of being an ideal fish) beside the thresholded one in both fitnesses (default 0.001: "
-        "it only breaks ties, as in the study)",
+        "of being an ideal fish) beside the thresholded one in both fitnesses (default 1; "
+        "0.001 only breaks ties, as in the study)",
     )
     learn.add_argument(
         "--virulence",

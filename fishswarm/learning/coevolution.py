@@ -67,7 +67,8 @@ class LearningSettings:
         classifiers: classifier population size.
         seed: master seed.
         arena: the 2-D world.
-        soft_weight: share of the soft output added to the thresholded fitness.
+        soft_weight: share of the soft output added to the thresholded fitness (1: as much
+            as the thresholded one; 0.001: it only breaks ties, the study's method).
         hall_of_fame: past champions drawn into each generation (0: the study's method).
             Models are also judged by this many past best classifiers, and classifiers also
             judge the tracks of this many past best models, against cycling and against
@@ -86,8 +87,8 @@ class LearningSettings:
     classifiers: int = 100
     seed: int = 0
     arena: Arena = field(default_factory=Arena)
-    soft_weight: float = 1e-3
-    hall_of_fame: int = 0
+    soft_weight: float = 1.0
+    hall_of_fame: int = 10
     virulence: float = 1.0
 
     def __post_init__(self) -> None:

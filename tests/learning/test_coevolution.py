@@ -17,7 +17,7 @@ from fishswarm.learning.coevolution import (
     reduced_virulence,
 )
 
-SMALL = LearningSettings(models=6, classifiers=5, seed=3)
+SMALL = LearningSettings(models=6, classifiers=5, seed=3, hall_of_fame=0, soft_weight=1e-3)
 
 
 def test_fitness_on_a_hand_made_example() -> None:
@@ -159,7 +159,7 @@ def test_a_virulent_classifier_population_is_told_it_overshot() -> None:
 
 
 def test_the_master_tournament_keeps_the_champion_that_fooled_most() -> None:
-    plain = Coevolution(LearningSettings(models=5, classifiers=5, seed=6))
+    plain = Coevolution(LearningSettings(models=5, classifiers=5, seed=6, hall_of_fame=0))
     plain.step()
     np.testing.assert_array_equal(plain.tournament_model(), plain.best_model())
     # Two planted champions: zero weights give direction 0 (a fish at rest); output biases

@@ -126,7 +126,7 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     assert first.returncode == 0 and second.returncode == 0, second.stderr
     header = (
         "fishswarm learn: aggregation ideal fish; classifier inputs speed,neighbors, radii "
-        "bounded; 6 replicas × 6 classifiers, seed 5, hall of fame 0, soft weight 0.001, "
+        "bounded; 6 replicas × 6 classifiers, seed 5, hall of fame 10, soft weight 1, "
         "virulence 1; "
         "up to generation 2"
     )
