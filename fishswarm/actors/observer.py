@@ -34,6 +34,9 @@ from fishswarm.study.scene import Scene, Stage, scene_message, scene_of, stage_o
 log = logging.getLogger(__name__)
 
 
+WORLD_END_SETTLE = 1.0
+"""How long an observer goes on listening for snapshots after the world has left, s."""
+
 RECORDED_SCENE_FISH = 1000
 """Recordings carry the scene of swarms up to this size; beyond, its JSON (about 270 bytes
 a fish, 3 ms a snapshot at 1 000 fish) would outweigh the snapshots several times over and
@@ -173,9 +176,20 @@ class Observer:
         while self._last_tick < tick:
             await self._tick_reached.wait()
 
-    async def wait_for_world_end(self) -> None:
-        """Wait until the world leaves the swarm: its run is over (bound it with a timeout)."""
+    async def wait_for_world_end(self, *, settle: float = WORLD_END_SETTLE) -> None:
+        """Wait until the world leaves the swarm and its last snapshots are in (bound it with
+        a timeout).
+
+        The world's snapshots travel apart from its liveliness token, and the last of them
+        may arrive just after the token is gone (seen under load): once the world has left,
+        this waits until no snapshot has come for ``settle`` seconds."""
         await self._world_left.wait()
+        while True:
+            arrived = self._tick_reached
+            with trio.move_on_after(settle) as quiet:
+                await arrived.wait()
+            if quiet.cancelled_caught:
+                return
 
     def _on_alive(self, key: str, alive: bool) -> None:
         try:

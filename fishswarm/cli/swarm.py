@@ -431,7 +431,7 @@ def channel(args: argparse.Namespace, scenario: Scenario) -> int:
 
 
 WORLD_END_GRACE = 1.0
-"""How long an observer keeps listening after the world has left, s."""
+"""How long the world's own observer waits for the run's last snapshot to come back, s."""
 
 
 def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
@@ -458,16 +458,7 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                         await wait()
                         waiting.cancel_scope.cancel()
 
-                    async def until_the_world_ends() -> None:
-                        await observer.wait_for_world_end()
-                        # The world's last snapshots travel apart from its liveliness token
-                        # and may arrive just after the token is gone: let them in.
-                        with trio.move_on_after(WORLD_END_GRACE):
-                            if ticks is None:
-                                await trio.sleep_forever()
-                            await observer.wait_for_tick(ticks)
-
-                    waiting.start_soon(wait_then_stop, until_the_world_ends)
+                    waiting.start_soon(wait_then_stop, observer.wait_for_world_end)
                     if ticks is not None:
                         waiting.start_soon(wait_then_stop, lambda: observer.wait_for_tick(ticks))
                 nursery.cancel_scope.cancel()

@@ -62,6 +62,38 @@ def test_every_task_waiting_for_a_tick_wakes() -> None:
     assert observer.statistics().rejected == 1 and observer.statistics().snapshots == 4
 
 
+def test_the_end_of_a_run_waits_for_snapshots_that_come_after_the_world_has_left() -> None:
+    # Zenoh carries the world's snapshots apart from its liveliness token: under load the
+    # last one can arrive after the token is gone, and must still count.
+    async def main() -> tuple[float, list[int]]:
+        bus = MemoryBus()
+        observer = Observer(KEYS)
+        ended: list[tuple[float, list[int]]] = []
+
+        async def wait_for_the_end() -> None:
+            await observer.wait_for_world_end(settle=1.0)
+            ended.append((trio.current_time(), [p.tick for p in observer.history]))
+
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            nursery.start_soon(wait_for_the_end)
+            world = bus.declare_token(KEYS.alive("world", 0))
+            bus.put(KEYS.snapshot, _snapshot(0))
+            await trio.sleep(1.0)
+            world.undeclare()
+            await trio.sleep(0.5)
+            bus.put(KEYS.snapshot, _snapshot(1))  # late, within the settle time
+            await trio.sleep(0.75)
+            bus.put(KEYS.snapshot, _snapshot(2))  # late again, 0.75 s after the one before
+            await trio.sleep(5.0)
+            nursery.cancel_scope.cancel()
+        return ended[0]
+
+    ended, ticks = run_mock(main)
+    assert ticks == [0, 1, 2]
+    assert ended == 3.25  # quiet for 1 s after the last snapshot, at 2.25 s
+
+
 def test_an_observer_hands_each_scene_to_a_view_and_records_it(tmp_path: Path) -> None:
     from fishswarm.study.recording import open_recorder
     from fishswarm.study.scene import Scene, Stage
