@@ -20,8 +20,8 @@ from numpy.typing import NDArray
 
 from fishswarm.behaviors.core import Behavior, Inbox, Perception, Steering, steady
 from fishswarm.bluebot.parameters import BODY_LENGTH
-from fishswarm.learning.arena import Arena, arena_from, cap_speed
-from fishswarm.learning.networks import REPLICA_SIZE, replica_outputs
+from fishswarm.learning.arena import Arena, arena_from, cap_speed, replica_contributions
+from fishswarm.learning.networks import REPLICA_SIZE
 from fishswarm.learning.replica_file import load_replica
 
 FloatArray = NDArray[np.float64]
@@ -56,10 +56,9 @@ def replica_motion(
     relative = neighbors[:, :, :2] / scale
     distance = np.sqrt(np.einsum("bkd,bkd->bk", relative, relative))
     within = mask & (distance <= arena.communication_range)
-    outputs = replica_outputs(weights[None, :], relative[None] / arena.replica_input_scale)[0]
-    direction = 2.0 * outputs[..., :2] - 1.0
-    speed = outputs[..., 2] * arena.speed_cap
-    contribution = direction * (speed * within)[..., None]
+    contribution = replica_contributions(
+        weights[None, :], relative[None], within[None], arena=arena
+    )[0]
     # Summed in neighbour order (running sum) so padding never changes a fish's result.
     # + 0.0: a padded batch's −0.0 becomes the +0.0 of a fish alone (see lennard_jones).
     total = (

@@ -24,7 +24,7 @@ from fishswarm.actors.launcher import (
     WorkerFailed,
     run_swarm,
 )
-from fishswarm.actors.observer import Observer, Progress
+from fishswarm.actors.observer import WORLD_END_SETTLE, Observer, Progress
 from fishswarm.actors.robot import HardwareError
 from fishswarm.actors.security import (
     ACCESS_FILE,
@@ -407,7 +407,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                 await nursery.start(serve_control, session, actor)
                 await actor.run(bus)
                 # Its own last snapshot comes back through the session: record it too.
-                with trio.move_on_after(WORLD_END_GRACE):
+                with trio.move_on_after(WORLD_END_SETTLE):
                     await observer.wait_for_tick(actor.tick)
                 nursery.cancel_scope.cancel()
 
@@ -428,10 +428,6 @@ def channel(args: argparse.Namespace, scenario: Scenario) -> int:
 
     _run_trio(main)
     return 0
-
-
-WORLD_END_GRACE = 1.0
-"""How long the world's own observer waits for the run's last snapshot to come back, s."""
 
 
 def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:

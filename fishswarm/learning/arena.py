@@ -131,11 +131,29 @@ def replica_velocity(positions: FloatArray, weights: FloatArray, *, arena: Arena
         (M, N, 2) velocities.
     """
     relative, _, within = neighbors(positions, arena=arena)
+    contribution = replica_contributions(weights, relative, within, arena=arena)
+    return cap_speed(contribution.sum(axis=2), arena.speed_cap)
+
+
+def replica_contributions(
+    weights: FloatArray, relative: FloatArray, within: BoolArray, *, arena: Arena
+) -> FloatArray:
+    """What each neighbour adds to a replica fish's velocity, before summing and capping.
+
+    Args:
+        weights: (M, 21) one replica network per model.
+        relative: (M, ..., 2) neighbours' positions relative to the fish, arena units.
+        within: (M, ...) which neighbours count (in range, and real).
+        arena: the arena (input scale and speed cap).
+
+    Returns:
+        (M, ..., 2) speed × direction of each neighbour, zero where not ``within``.
+    """
     outputs = replica_outputs(weights, relative / arena.replica_input_scale)
     direction = 2.0 * outputs[..., :2] - 1.0
     speed = outputs[..., 2] * arena.speed_cap
-    contribution = direction * (speed * within)[..., None]
-    return cap_speed(contribution.sum(axis=2), arena.speed_cap)
+    contribution: FloatArray = direction * (speed * within)[..., None]
+    return contribution
 
 
 def simulate(

@@ -254,7 +254,11 @@ class Coevolution:
 
     def trial_start(self, generation: int, trials: int) -> FloatArray:
         """The start positions of a generation (shared by the ideal fish and every model)."""
-        rng = _stream(self.settings.seed, _TRIALS, generation)
+        return self._start(_TRIALS, generation, trials)
+
+    def _start(self, role: int, generation: int, trials: int) -> FloatArray:
+        """``trials`` start positions from the stream of ``role`` at ``generation``."""
+        rng = _stream(self.settings.seed, role, generation)
         spread = SPREADS[self.settings.behavior]
         return initial_positions(rng, arena=self.settings.arena, spread=spread, models=trials)
 
@@ -282,7 +286,7 @@ class Coevolution:
         )
         models, classifiers = models[:current_models], classifiers[:current_classifiers]
         weight = settings.soft_weight
-        model_score = result.models + weight * result.models_soft
+        model_score = self._model_score(result)
         classifier_score = reduced_virulence(
             (result.classifiers + weight * result.classifiers_soft) / (1 + weight),
             settings.virulence,
@@ -320,16 +324,17 @@ class Coevolution:
         was); without one, :meth:`best_model`."""
         if not self.model_champions:
             return self.best_model()
-        settings, arena = self.settings, self.settings.arena
         models = np.array(self.model_champions[-TOURNAMENT_GENERATIONS:])
         classifiers = np.array(self.classifier_champions[-TOURNAMENT_GENERATIONS:])
-        rng = _stream(settings.seed, _TOURNAMENT, self.generation)
-        spread = SPREADS[settings.behavior]
-        start = initial_positions(rng, arena=arena, spread=spread, models=1 + len(models))
-        scores = self._judge(self._trial(start, models), classifiers)
-        score = scores.models + settings.soft_weight * scores.models_soft
+        start = self._start(_TOURNAMENT, self.generation, 1 + len(models))
+        score = self._model_score(self._judge(self._trial(start, models), classifiers))
         best: FloatArray = models[int(np.argmax(score))]
         return best
+
+    def _model_score(self, scores: Fitness) -> FloatArray:
+        """What the model optimiser maximises: fooled verdicts plus the weighted soft ones."""
+        score: FloatArray = scores.models + self.settings.soft_weight * scores.models_soft
+        return score
 
     def _trial(self, start: FloatArray, models: FloatArray) -> FloatArray:
         """Tracks (1 + M, T + 1, N, 2): the ideal fish from ``start[0]``, then each model's."""
