@@ -50,6 +50,7 @@ from fishswarm.behaviors.core import (
     put_rows,
     take_rows,
 )
+from fishswarm.behaviors.core import Inbox as HeardInbox
 from fishswarm.behaviors.formation import apply_directive
 from fishswarm.behaviors.registry import rules_of
 from fishswarm.bluebot.control import stop_fins
@@ -430,14 +431,15 @@ class Fish:
 
     def _complete(self, pending: _Pending, now: float) -> list[list[Delivery]] | None:
         """The deliveries of the pending fish if all have arrived (or waited long enough),
-        else None."""
+        else None; an empty list when none was announced to any of them."""
         rows, tick = pending.rows.tolist(), pending.tick
+        if not pending.inbox_counts.any():
+            if any(self._mail.values()):  # nothing announced: what waits for this tick is stale
+                for row in rows:
+                    if self._mail[row]:
+                        self._mail[row] = [d for d in self._mail[row] if d.tick > tick]
+            return []
         wanted = pending.inbox_counts.tolist()
-        if not any(wanted):
-            for row in rows:  # nothing announced: whatever waits for this tick is stale
-                if self._mail[row]:
-                    self._mail[row] = [d for d in self._mail[row] if d.tick > tick]
-            return [[] for _ in rows]
         mail = [[d for d in self._mail[row] if d.tick == tick] for row in rows]
         if now < pending.deadline and any(len(m) < w for m, w in zip(mail, wanted, strict=True)):
             return None
@@ -453,7 +455,7 @@ class Fish:
             return
         now = trio.current_time()
         ready: list[_Pending] = []
-        mail: list[list[Delivery]] = []
+        mail: list[list[list[Delivery]]] = []
         waiting: list[_Pending] = []
         for pending in self._pending:
             delivered = self._complete(pending, now)
@@ -461,7 +463,7 @@ class Fish:
                 waiting.append(pending)
             else:
                 ready.append(pending)
-                mail += delivered
+                mail.append(delivered)
         if not ready:
             return
         self._pending = waiting
@@ -473,14 +475,12 @@ class Fish:
         rows = np.concatenate([p.rows for p in ready]) if len(ready) > 1 else ready[0].rows
         whole = rows.size == self._ids.size and bool((rows == self._all_rows).all())
         memory = self._memory if whole else take_rows(self._memory, rows)
-        heard: list[list[Heard]] = [
-            [(BROADCAST_KINDS.index(d.kind), d.values, d.sender_position) for d in fish_mail]
-            for fish_mail in mail
-        ]
-        memory, decision = decide(memory, _perception(ready), inbox_of(heard), params=self._params)
+        memory, decision = decide(
+            memory, _perception(ready), _inbox(ready, mail), params=self._params
+        )
         self._memory = memory if whole else put_rows(self._memory, rows, memory)
         self._counts["batches"] += 1
-        self._counts["deliveries"] += sum(len(m) for m in mail)
+        self._counts["deliveries"] += sum(len(m) for part in mail for m in part)
         start = 0
         for pending in ready:
             end = start + pending.rows.size
@@ -559,6 +559,23 @@ class Fish:
                 broadcasts=int(broadcasts[n]),
             )
             bus.put(keys.command(fish_id), encode(command))
+
+
+def _inbox(ready: list[_Pending], mail: list[list[list[Delivery]]]) -> HeardInbox:
+    """What the ready fish heard (each part's mail, an empty list: nothing), as one inbox."""
+    count = sum(pending.rows.size for pending in ready)
+    if not any(mail):
+        return HeardInbox.empty(count)
+    heard: list[list[Heard]] = []
+    for pending, part in zip(ready, mail, strict=True):
+        if not part:
+            heard += [[] for _ in range(pending.rows.size)]
+            continue
+        heard += [
+            [(BROADCAST_KINDS.index(d.kind), d.values, d.sender_position) for d in fish_mail]
+            for fish_mail in part
+        ]
+    return inbox_of(heard)
 
 
 def _perception(ready: list[_Pending]) -> Perception:

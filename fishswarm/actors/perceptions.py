@@ -11,14 +11,22 @@ decides exactly as a loop of single fish, the parts give the whole's commands.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.behaviors.core import stack_rows
 from fishswarm.bluebot.vision import Perceived
 from fishswarm.protocols.checks import MAX_ROWS
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import Message, Perception, PerceptionBatch
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+Rows = NDArray[np.intp]
+Item = TypeVar("Item", bound=np.generic)
 
 
 def perception_messages(
@@ -83,29 +91,78 @@ def perception_messages(
             formation,
         )
         messages.append((keys.perception(fish_id), perception))
+    if not schools:
+        return messages
+    neighbors, seen = _Stacked.of(perceived), _Stacked.of(landmarks)
     for school, school_rows in sorted(schools.items()):
         everyone = np.array(school_rows, dtype=np.intp)
-        sizes = np.maximum(perceived.counts[everyone], landmarks.counts[everyone])
+        sizes = np.maximum(neighbors.counts[everyone], seen.counts[everyone])
         for members in _parts(everyone, sizes, row_limit):
-            messages.append(
-                (
-                    keys.school_perceptions(school),
-                    _batch(
-                        members,
-                        ids=ids,
-                        depth=depth,
-                        perceived=perceived,
-                        landmarks=landmarks,
-                        inbox_counts=inbox_counts,
-                        tick=tick,
-                        time=time,
-                        run=run,
-                        heading=heading,
-                        formation=formation,
-                    ),
-                )
+            batch = PerceptionBatch(
+                tick,
+                time,
+                _taken(ids, members),
+                _taken(depth, members),
+                _taken(neighbors.counts, members),
+                neighbors.of_fish(members),
+                _taken(seen.counts, members),
+                seen.of_fish(members),
+                _taken(inbox_counts, members),
+                run,
+                None if heading is None else _taken(heading, members),
+                formation,
             )
+            messages.append((keys.school_perceptions(school), batch))
     return messages
+
+
+@dataclass(frozen=True)
+class _Stacked:
+    """What every fish sees, stacked fish after fish as a batch carries it (read-only).
+
+    Attributes:
+        rows: (sum of counts, 3) the seen rows, fish after fish.
+        counts: (N,) how many rows are each fish's.
+        starts: (N + 1,) where each fish's rows start (and, last, where they end).
+    """
+
+    rows: FloatArray
+    counts: IntArray
+    starts: Rows
+
+    @classmethod
+    def of(cls, perceived: Perceived) -> _Stacked:
+        """Stack what each fish sees (once a tick, for every batch of it)."""
+        rows = stack_rows(perceived.neighbors, perceived.mask)
+        rows.setflags(write=False)
+        counts = perceived.counts
+        starts = np.zeros(counts.size + 1, dtype=np.intp)
+        np.cumsum(counts, out=starts[1:])
+        return cls(rows, counts, starts)
+
+    def of_fish(self, members: Rows) -> FloatArray:
+        """The rows of the fish at ``members`` (ascending), fish after fish."""
+        if members.size == 0:
+            return self.rows[:0]
+        first, last = int(members[0]), int(members[-1])
+        if last - first + 1 == members.size:  # consecutive fish: a view, no copy
+            view: FloatArray = self.rows[self.starts[first] : self.starts[last + 1]]
+            return view
+        counts = self.counts[members]
+        ends = np.cumsum(counts)
+        # Each row's index: its fish's start, plus its place among that fish's rows.
+        place = np.arange(int(ends[-1])) - np.repeat(ends - counts, counts)
+        taken: FloatArray = self.rows[np.repeat(self.starts[members], counts) + place]
+        taken.setflags(write=False)
+        return taken
+
+
+def _taken(values: NDArray[Item], members: Rows) -> NDArray[Item]:
+    """A read-only copy of ``values`` at ``members``: a message built from it takes it as
+    it is, without a copy of its own (it is nobody else's to change)."""
+    taken = values[members]
+    taken.setflags(write=False)
+    return taken
 
 
 def _parts(
@@ -124,36 +181,3 @@ def _parts(
         total += size
     parts.append(members[start:])
     return parts
-
-
-def _batch(
-    members: NDArray[np.intp],
-    *,
-    ids: NDArray[np.int64],
-    depth: NDArray[np.float64],
-    perceived: Perceived,
-    landmarks: Perceived,
-    inbox_counts: NDArray[np.int64],
-    tick: int,
-    time: float,
-    run: int,
-    heading: NDArray[np.float64] | None,
-    formation: str | None,
-) -> PerceptionBatch:
-    """The perception batch of some fish of a school."""
-    counts = perceived.counts[members]
-    seen = np.arange(perceived.neighbors.shape[1]) < counts[:, None]
-    return PerceptionBatch(
-        tick,
-        time,
-        ids[members],
-        depth[members],
-        counts,
-        perceived.neighbors[members][seen],
-        landmarks.counts[members],
-        landmarks.neighbors[members][landmarks.mask[members]],
-        inbox_counts[members],
-        run,
-        None if heading is None else heading[members],
-        formation,
-    )

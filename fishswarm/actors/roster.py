@@ -14,6 +14,9 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numpy as np
+from numpy.typing import NDArray
+
 from fishswarm.actors.bus import Declared
 from fishswarm.protocols.keys import KeySpace, fish_id_of
 
@@ -56,6 +59,8 @@ class Roster:
         self.joined: list[tuple[int, int]] = []
         self._subscribe = subscribe_commands
         self._subscriptions: dict[str, tuple[Declared, float]] = {}
+        self._senders: dict[str, NDArray[np.int64]] = {}
+        """Per command key, the fish whose commands come on it, ascending (built on demand)."""
 
     def on_alive(self, key: str, alive: bool, now: float) -> int | None:
         """A liveliness token came or went; the fish that left, if one did."""
@@ -82,10 +87,20 @@ class Roster:
             return None
         self.alive.add(fish_id)
         self.school_of[fish_id] = member.school
-        self.command_key[fish_id] = command_key
+        if self.command_key.get(fish_id) != command_key:
+            self.command_key[fish_id] = command_key
+            self._senders.clear()
         if command_key not in self._subscriptions:
             self._subscriptions[command_key] = (self._subscribe(command_key, kind), now)
         return None
+
+    def all_on(self, command_key: str, fish_ids: NDArray[np.int64]) -> bool:
+        """Whether each of ``fish_ids`` sends its commands on ``command_key``."""
+        senders = self._senders.get(command_key)
+        if senders is None:
+            on_key = [i for i, key in self.command_key.items() if key == command_key]
+            senders = self._senders[command_key] = np.array(sorted(on_key), dtype=np.int64)
+        return bool(np.isin(fish_ids, senders).all())
 
     def ready(self, present: set[int], now: float, admit_delay: float) -> list[int]:
         """Live fish not yet in the world whose commands have been subscribed long enough."""

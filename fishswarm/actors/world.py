@@ -29,7 +29,7 @@ from typing import TypeVar
 
 import numpy as np
 import trio
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from fishswarm import __version__
 from fishswarm.actors.bus import Bus, Declared, open_alive_events, open_subscriber, open_token
@@ -60,13 +60,24 @@ log = logging.getLogger(__name__)
 
 BusEvent = tuple[str, str, bytes | bool]
 T = TypeVar("T")
+BoolArray = NDArray[np.bool_]
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+Rows = NDArray[np.intp]
 
 OFFLOAD_AFTER = 0.25
-"""A simulation step that once took longer than this (s) runs in a worker thread from then
-on: the hop costs about 0.1 ms, worth it only when the world would otherwise be deaf for long
-(and under a test's MockClock, whose time jumps while a thread runs, never at small sizes)."""
+"""A simulation step whose last run took longer than this (s) runs in a worker thread: worth
+it only when the world would otherwise be deaf for long (and under a test's MockClock, whose
+time jumps while a thread runs, never at small sizes)."""
 OFFLOAD_FISH = 200
-"""From this many fish on, every step runs in a worker thread (the first one included)."""
+"""From this many fish on, a step's first run goes to a worker thread (the compiled kernels
+load then, for up to seconds), and later runs whenever the last took over OFFLOAD_LONG."""
+OFFLOAD_LONG = 0.03
+"""With OFFLOAD_FISH fish or more: a step whose last run took longer than this (s) runs in a
+worker thread, where the observer's work on the last snapshot (in this process) overlaps
+it. A shorter step stays in the event loop: handing it over would cost more than it frees
+(measured at 1000 fish, one worker: a tick 1–2 ms slower with every step handed over, the
+observer's decoding and the step's numpy then contend for the GIL and the two cores)."""
 
 
 class StartTimeout(RuntimeError):
@@ -149,30 +160,65 @@ class WorldStatistics:
 
 @dataclass
 class _Tick:
-    """The commands of one event as they come in, row by row in the order of ``ids``."""
+    """The commands of one event as they come in, row by row in the order of ``ids``.
+
+    Arrays over the fish asked, not sets and dictionaries of them: a tick of thousands of
+    fish is taken in and handed on with a few vectorised operations.
+    """
 
     tick: int = -1
-    ids: list[int] = field(default_factory=list)
-    rows: dict[int, int] = field(default_factory=dict)
-    waiting: set[int] = field(default_factory=set)
-    fins: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    broadcasts: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    ids: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    waiting: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    answered: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    fins: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
+    broadcasts: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    left: int = 0
+    """How many fish the tick still waits for."""
 
     @classmethod
-    def of(cls, tick: int, ids: list[int]) -> _Tick:
-        """An event waiting for a command of each of ``ids`` answering ``tick``."""
+    def of(cls, tick: int, ids: IntArray) -> _Tick:
+        """An event waiting for a command of each of ``ids`` (ascending) answering ``tick``."""
+        count = ids.size
         return cls(
             tick,
             ids,
-            {fish_id: row for row, fish_id in enumerate(ids)},
-            set(ids),
-            np.zeros((len(ids), 4)),
-            np.zeros(len(ids), dtype=np.int64),
+            np.ones(count, dtype=bool),
+            np.zeros(count, dtype=bool),
+            np.zeros((count, 4)),
+            np.zeros(count, dtype=np.int64),
+            count,
         )
 
-    def answered(self) -> list[int]:
-        """The fish that answered, ascending."""
-        return [fish_id for fish_id in self.ids if fish_id not in self.waiting]
+    def rows_awaited(self, fish_ids: IntArray) -> Rows | None:
+        """The rows of ``fish_ids`` (distinct) if the tick waits for every one of them."""
+        rows: Rows = np.searchsorted(self.ids, fish_ids).astype(np.intp)
+        if rows.size == 0:
+            return rows
+        if int(rows.max()) >= self.ids.size:
+            return None
+        if not (self.ids[rows] == fish_ids).all() or not self.waiting[rows].all():
+            return None
+        return rows
+
+    def take(self, rows: Rows, fins: FloatArray, broadcasts: ArrayLike) -> None:
+        """The fish at ``rows`` (awaited, distinct) answered."""
+        self.fins[rows] = fins
+        self.broadcasts[rows] = broadcasts
+        self.waiting[rows] = False
+        self.answered[rows] = True
+        self.left -= rows.size
+
+    def give_up(self, fish_id: int) -> None:
+        """Wait no more for ``fish_id`` (lost)."""
+        row = int(np.searchsorted(self.ids, fish_id))
+        if row < self.ids.size and self.ids[row] == fish_id and self.waiting[row]:
+            self.waiting[row] = False
+            self.left -= 1
+
+    def waiting_ids(self) -> list[int]:
+        """The fish not heard from, ascending."""
+        waiting: list[int] = self.ids[self.waiting].tolist()
+        return waiting
 
 
 class World:
@@ -198,7 +244,10 @@ class World:
         self._bus: Bus | None = None
         self.roster = Roster(self.keys, self._subscribe_commands)
         self._leaving: set[int] = set()
-        self._broadcasts: dict[int, int] = {}
+        self._broadcasters = np.zeros(0, dtype=np.int64)
+        """The fish that answered the last tick, ascending (who may have broadcast)."""
+        self._broadcasts = np.zeros(0, dtype=np.int64)
+        """How many broadcasts each of them sent (rows alike)."""
         self._announced = 0
         self._formation: str | None = None
         """The formation an operator asked for (it overrides the scenario's switch)."""
@@ -218,9 +267,9 @@ class World:
         self._fish_rules = rules_of(settings.scenario.fish_params())
         """The rules this world's scenario says its fish decide by (FishAbout.rules)."""
         self._warned: set[str] = set()
-        self._slow_steps: set[str] = set()
-        """Steps of the simulation that took long once: from then on they run in a worker
-        thread, so that the world keeps pulsing meanwhile."""
+        self._step_times: dict[str, float] = {}
+        """How long each step of the simulation took the last time, s: a long one runs in a
+        worker thread, so that the world keeps pulsing meanwhile."""
 
     @property
     def lost(self) -> list[LostFish]:
@@ -299,14 +348,15 @@ class World:
             self._put(bus, self.keys.world_pulse, encode(WorldPulse(self.run_id, self.tick, state)))
 
     async def _compute(self, step: Callable[[], T]) -> T:
-        """Run one step of the simulation; in a worker thread when the last step took long
-        enough that the fish would otherwise hear nothing from the world meanwhile."""
+        """Run one step of the simulation; in a worker thread when the last run took long
+        enough that the world would otherwise hear nothing meanwhile."""
         name = step.__name__
-        offload = name in self._slow_steps or self.sim.ids.size >= OFFLOAD_FISH
+        many = self.sim.ids.size >= OFFLOAD_FISH
+        last = self._step_times.get(name)
+        offload = many if last is None else last > (OFFLOAD_LONG if many else OFFLOAD_AFTER)
         started = time.perf_counter()
         result = await trio.to_thread.run_sync(step) if offload else step()
-        if time.perf_counter() - started > OFFLOAD_AFTER:
-            self._slow_steps.add(name)
+        self._step_times[name] = time.perf_counter() - started
         return result
 
     def _subscribe_commands(self, key: str, kind: str) -> Declared:
@@ -397,7 +447,7 @@ class World:
             if event.snapshot is not None:
                 self.tick = event.snapshot
                 ids = self.sim.ids
-                broadcasts = np.array([self._broadcasts.get(i, 0) for i in ids.tolist()])
+                broadcasts = _values_at(self._broadcasters, self._broadcasts, ids)
                 # The channel delivers what the snapshot announces, and reports only then.
                 self._announced = int(broadcasts.sum())
                 snapshot = Snapshot(
@@ -408,7 +458,7 @@ class World:
                     self.sim.state.tank_velocity(),
                     self.sim.state.yaw,
                     perceived.counts,
-                    broadcasts.astype(np.int64),
+                    broadcasts,
                     self.sim.effort,
                 )
                 self._put(bus, self.keys.snapshot, encode(snapshot))
@@ -422,9 +472,11 @@ class World:
             inbox_counts = await self._inbox_counts(event)
             # Fish lost while the world waited for the channel decide no more.
             due, rows = self.sim.due()
-            keep = [n for n, fish_id in enumerate(due) if fish_id not in self._leaving]
-            due, rows = [due[n] for n in keep], rows[keep]
-            self._current = _Tick.of(event.number, due)
+            due_ids = np.array(due, dtype=np.int64)
+            if self._leaving:
+                staying = ~np.isin(due_ids, np.array(sorted(self._leaving), dtype=np.int64))
+                due_ids, rows = due_ids[staying], rows[staying]
+            self._current = _Tick.of(event.number, due_ids)
             for key, message in perception_messages(
                 self.keys,
                 ids=self.sim.ids,
@@ -451,13 +503,14 @@ class World:
     def _hold(self) -> None:
         """Hand the fins of the fish that answered (and are still here) to the simulation."""
         current = self._current
-        present = set(self.sim.ids.tolist())
-        answered = [i for i in current.answered() if i in present and i not in self._leaving]
-        rows = [current.rows[i] for i in answered]
-        self.sim.hold(answered, current.fins[rows])
+        held = current.answered & np.isin(current.ids, self.sim.ids)
+        if self._leaving:
+            held &= ~np.isin(current.ids, np.array(sorted(self._leaving), dtype=np.int64))
+        answered = current.ids[held]
+        self.sim.hold(answered.tolist(), current.fins[held])
         if self.scenario.time_mode == "jitter":
             return  # broadcasts are not delivered in jitter mode: nothing to announce
-        self._broadcasts = {i: int(current.broadcasts[current.rows[i]]) for i in answered}
+        self._broadcasters, self._broadcasts = answered, current.broadcasts[held]
 
     def _put(self, bus: Bus, key: str, payload: bytes) -> None:
         bus.put(key, payload)
@@ -478,25 +531,24 @@ class World:
         if report is None or report.tick != self.tick:
             log.warning("no channel report for tick %d: deliveries not announced", self.tick)
             return counts
-        by_id = dict(zip(report.ids.tolist(), report.inbox_counts.tolist(), strict=True))
-        return np.array([by_id.get(i, 0) for i in self.sim.ids.tolist()], dtype=np.int64)
+        return _values_at(report.ids, report.inbox_counts, self.sim.ids)
 
     async def _collect_until(self, deadline: float) -> None:
         """Realtime mode: take commands until the tick's wall-clock end."""
         with trio.move_on_at(deadline):
             while True:
                 self._handle(await self._events.receive())
-        self.late_commands += len(self._current.waiting)
+        self.late_commands += self._current.left
 
     async def _collect(self) -> None:
         asked = trio.current_time()
         deadline = asked + self.settings.command_timeout
         with trio.move_on_at(deadline):
-            while self._current.waiting:
+            while self._current.left:
                 self._handle(await self._events.receive())
-        if not self._current.waiting:
+        if not self._current.left:
             self._answer_times.append(trio.current_time() - asked)
-        for fish_id in sorted(self._current.waiting):
+        for fish_id in self._current.waiting_ids():
             self._lose(fish_id, f"no command within {self.settings.command_timeout:g} s")
 
     def _drain(self) -> None:
@@ -573,40 +625,45 @@ class World:
         )
         if command is not None:
             self._accept(
-                key, command.tick, [command.fish_id], command.fins[None], [command.broadcasts]
+                key,
+                command.tick,
+                np.array([command.fish_id], dtype=np.int64),
+                command.fins[None],
+                [command.broadcasts],
             )
 
     def _take_batch(self, key: str, payload: bytes) -> None:
         batch = self.intake.decode(key, payload, CommandBatch)
         if batch is None:
             return
-        ids = batch.ids.tolist()
-        if any(self.roster.command_key.get(fish_id) != key for fish_id in ids):
-            self.intake.reject(key, "misaddressed", f"fish {ids} are not all of this school")
+        if not self.roster.all_on(key, batch.ids):
+            self.intake.reject(
+                key,
+                "misaddressed",
+                f"fish {ids_text(batch.ids.tolist())} are not all of this school",
+            )
             return
-        self._accept(key, batch.tick, ids, batch.fins, batch.broadcasts)
+        self._accept(key, batch.tick, batch.ids, batch.fins, batch.broadcasts)
 
     def _accept(
-        self, key: str, tick: int, ids: list[int], fins: np.ndarray, broadcasts: ArrayLike
+        self, key: str, tick: int, ids: IntArray, fins: FloatArray, broadcasts: ArrayLike
     ) -> None:
-        """Take the commands of fish ``ids`` for ``tick``, unless late or stale."""
+        """Take the commands of fish ``ids`` (distinct) for ``tick``, unless late or stale."""
         current = self._current
         if self.scenario.time_mode == "realtime" and tick < current.tick:
             # A command for a tick already integrated came late: normal in realtime mode
             # (counted in late_commands when its tick closed), not bad input.
             return
-        if tick != current.tick or not current.waiting.issuperset(ids):
+        rows = current.rows_awaited(ids) if tick == current.tick else None
+        if rows is None:
             self.intake.reject(key, "stale", f"commands for tick {tick} at {current.tick}")
             return
-        rows = [current.rows[fish_id] for fish_id in ids]
-        current.fins[rows] = fins
-        current.broadcasts[rows] = broadcasts
-        current.waiting.difference_update(ids)
+        current.take(rows, fins, broadcasts)
 
     def _lose(self, fish_id: int, reason: str) -> None:
         if self.roster.mark_lost(fish_id, self.tick, reason):
             self._leaving.add(fish_id)
-        self._current.waiting.discard(fish_id)
+        self._current.give_up(fish_id)
 
     def _leave(self) -> None:
         """Lost fish leave the world."""
@@ -628,6 +685,17 @@ class World:
                 self.joined.append((fish_id, tick))
                 log.info("fish %d joined at tick %d", fish_id, tick)
         self.sim.join(new)
+
+
+def _values_at(ids: IntArray, values: IntArray, at: IntArray) -> IntArray:
+    """``values`` (rows alike ``ids``, ascending) of the fish ``at``; 0 for fish not in ``ids``."""
+    result = np.zeros(at.size, dtype=np.int64)
+    if ids.size == 0:
+        return result
+    rows = np.minimum(np.searchsorted(ids, at), ids.size - 1)
+    found = ids[rows] == at
+    result[found] = values[rows[found]]
+    return result
 
 
 def _quantile(values: list[float], share: float) -> float:

@@ -8,6 +8,7 @@ coincident fish are handled: nothing divides by a zero distance.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
@@ -136,7 +137,7 @@ class Perceived:
     mask: BoolArray
     index: NDArray[np.intp]
 
-    @property
+    @functools.cached_property
     def counts(self) -> NDArray[np.int64]:
         """(B,) how many neighbours each fish sees."""
         counts: NDArray[np.int64] = self.mask.sum(axis=1).astype(np.int64)

@@ -5,6 +5,8 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fishswarm.actors.perceptions import perception_messages
 from fishswarm.bluebot.vision import Perceived
@@ -102,3 +104,54 @@ def test_a_school_too_large_for_one_batch_gets_consecutive_parts_within_the_limi
         [11],
         [12],
     ]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    seen=st.lists(st.integers(0, 4), min_size=1, max_size=12),
+    schools=st.data(),
+    row_limit=st.integers(4, 30),
+)
+def test_every_batch_carries_exactly_its_fishs_rows(
+    seen: list[int], schools: st.DataObject, row_limit: int
+) -> None:
+    # Fish spread over two schools and their own keys at random: every fish's neighbours
+    # and landmarks reach it, in its own rows, whichever batch or part carries it.
+    count = len(seen)
+    rows = [[[float(fish), float(k), 1.0] for k in range(n)] for fish, n in enumerate(seen)]
+    perceived = _perceived(rows, width=max(seen) or 1)
+    landmarks = _perceived([[[float(fish), 0.0, 2.0]] * (fish % 2) for fish in range(count)], 1)
+    school_of = {
+        fish_id: schools.draw(st.sampled_from(["a", "b", None])) for fish_id in range(count)
+    }
+    messages = perception_messages(
+        KeySpace(),
+        ids=np.arange(count),
+        school_of=school_of,
+        depth=np.arange(count) / 10,
+        perceived=perceived,
+        landmarks=landmarks,
+        inbox_counts=np.arange(count),
+        tick=1,
+        time=1.0,
+        row_limit=row_limit,
+    )
+    got: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
+    for _, message in messages:
+        if isinstance(message, Perception):
+            got[message.fish_id] = (message.neighbors, message.landmarks, message.depth)
+            continue
+        assert isinstance(message, PerceptionBatch)
+        starts = np.concatenate([[0], np.cumsum(message.neighbor_counts)])
+        marks = np.concatenate([[0], np.cumsum(message.landmark_counts)])
+        for n, fish_id in enumerate(message.ids.tolist()):
+            got[fish_id] = (
+                message.neighbors[starts[n] : starts[n + 1]],
+                message.landmarks[marks[n] : marks[n + 1]],
+                float(message.depth[n]),
+            )
+    assert sorted(got) == list(range(count))
+    for fish_id, (neighbors, seen_landmarks, depth) in got.items():
+        np.testing.assert_array_equal(neighbors, np.array(rows[fish_id]).reshape(-1, 3))
+        assert seen_landmarks.shape == (fish_id % 2, 3)
+        assert depth == fish_id / 10

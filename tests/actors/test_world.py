@@ -18,10 +18,12 @@ from fishswarm.protocols.messages import (
     FORMATION_SHAPES,
     Broadcast,
     Command,
+    CommandBatch,
     ControlRequest,
     Delivery,
     FormationFlag,
     Perception,
+    PerceptionBatch,
     Snapshot,
 )
 from fishswarm.sim.engine import run_batch
@@ -189,6 +191,63 @@ def test_the_world_waits_for_a_slow_fish_at_every_tick() -> None:
 
     # Snapshots were taken as the world moved on: tick k+1 only after the answer to tick k.
     assert run_mock(main) == [0.0, 4.0, 8.0, 12.0]
+
+
+def test_a_schools_commands_are_taken_only_for_its_own_awaited_fish() -> None:
+    # School "t" holds fish 0, 1 and 2; fish 3 is on its own keys. At tick 0 the school
+    # sends a batch naming fish 3 (misaddressed), one for tick 1 (stale), fish 0 and 2
+    # (taken), fish 2 again (stale: answered already), then fish 1 (taken): the world
+    # moves on to tick 1 holding the fins of the batches it took, row by row.
+    scenario = Scenario(fish=4, duration=1.0, seed=2, behavior="aggregation")
+    keys = scenario.keys
+
+    def batch(tick: int, ids: list[int], gains: list[float]) -> bytes:
+        fins = np.zeros((len(ids), 4))
+        fins[:, 0] = gains  # caudal only
+        return encode(
+            CommandBatch(
+                tick,
+                np.array(ids),
+                fins,
+                np.zeros(len(ids), dtype=bool),
+                np.zeros(len(ids), dtype=np.int64),
+            )
+        )
+
+    async def main() -> tuple[World, Snapshot]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2, 3), admit_delay=0.0))
+        async with (
+            subscription(bus, keys.school_perceptions("t")) as school,
+            subscription(bus, keys.perception(3)) as alone,
+            subscription(bus, keys.snapshot) as snapshots,
+            open_token(bus, keys.alive("fish", 0, "t")),
+            open_token(bus, keys.alive("fish", 1, "t")),
+            open_token(bus, keys.alive("fish", 2, "t")),
+            open_token(bus, keys.alive("fish", 3)),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(world.run, bus)
+            perceived = decode((await school.receive())[1], PerceptionBatch)
+            assert perceived.ids.tolist() == [0, 1, 2]
+            await alone.receive()
+            to_world = keys.school_commands("t")
+            bus.put(to_world, batch(0, [2, 3], [0.5, 0.5]))
+            bus.put(to_world, batch(1, [0, 1, 2], [0.5, 0.5, 0.5]))
+            bus.put(to_world, batch(0, [0, 2], [0.2, 0.6]))
+            bus.put(to_world, batch(0, [2], [1.0]))
+            bus.put(to_world, batch(0, [1], [0.4]))
+            bus.put(keys.command(3), encode(Command(3, 0, np.zeros(4))))
+            while world.state_name != "finished":
+                await trio.sleep(0.1)
+            nursery.cancel_scope.cancel()
+        return world, decode(snapshots.drain()[-1][1], Snapshot)
+
+    world, last = run_mock(main)
+    assert world.statistics().rejected == {"misaddressed": 1, "stale": 2}
+    assert world.lost == []
+    np.testing.assert_array_equal(world.sim.fins[:, 0], [0.2, 0.4, 0.6, 0.0])
+    assert last.tick == 1
 
 
 def test_silent_and_departed_fish_are_lost_and_the_run_goes_on() -> None:
@@ -509,3 +568,30 @@ def test_fish_that_run_the_worlds_behaviour_raise_no_warning(
         world = run_mock(main)
     assert world.statistics().mismatched_fish == 0
     assert not [r for r in caplog.records if r.name == "fishswarm.actors.world"]
+
+
+def test_a_step_runs_in_a_worker_thread_only_while_its_last_run_took_long(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import threading
+    import time
+
+    from fishswarm.actors import world as world_module
+
+    monkeypatch.setattr(world_module, "OFFLOAD_AFTER", 0.05)
+    world = World(WorldSettings(Scenario(fish=3, duration=1.0)))
+    durations = iter([0.0, 0.1, 0.0, 0.0])
+    threads: list[bool] = []
+
+    def step() -> None:
+        threads.append(threading.current_thread() is threading.main_thread())
+        time.sleep(next(durations))
+
+    async def main() -> None:
+        for _ in range(4):
+            await world._compute(step)
+
+    trio.run(main)
+    # Runs 1 and 2 in the event loop (no run before; a quick one before), run 2 slow: run 3
+    # goes to a worker thread; it was quick, so run 4 is back in the loop.
+    assert threads == [True, True, False, True]

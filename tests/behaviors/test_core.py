@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from fishswarm.behaviors.core import (
     FishMemory,
@@ -17,6 +19,7 @@ from fishswarm.behaviors.core import (
     inbox_of,
     pad_rows,
     put_rows,
+    stack_rows,
     take_rows,
 )
 from fishswarm.behaviors.registry import BEHAVIORS, behavior_named, fish_params, register
@@ -265,6 +268,21 @@ def test_pad_rows_unstacks_fish_after_fish() -> None:
     np.testing.assert_array_equal(neighbors[2], [stacked[2], [0.0, 0.0, 0.0]])
     empty, empty_mask = pad_rows(np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
     assert empty.shape == (0, 0, 3) and empty_mask.shape == (0, 0)
+
+
+@settings(max_examples=80, deadline=None)
+@given(counts=st.lists(st.integers(0, 6), min_size=2, max_size=20), columns=st.integers(1, 4))
+def test_stacking_and_padding_rows_undo_each_other(counts: list[int], columns: int) -> None:
+    # Against numpy's boolean indexing, the plain statement of both.
+    rng = np.random.default_rng(len(counts))
+    stacked = rng.normal(size=(sum(counts), 3))
+    padded, mask = pad_rows(np.array(counts), stacked)
+    expected = np.zeros((len(counts), max(counts), 3))
+    expected[np.arange(max(counts)) < np.array(counts)[:, None]] = stacked
+    np.testing.assert_array_equal(padded, expected)
+    np.testing.assert_array_equal(stack_rows(padded, mask), stacked)
+    wide = rng.normal(size=(len(counts), max(counts), columns))
+    np.testing.assert_array_equal(stack_rows(wide, mask), wide[mask])
 
 
 def test_inbox_of_pads_what_each_fish_heard() -> None:
