@@ -203,7 +203,7 @@ first and near to far; K' the most any fish sees. Rows past a fish's count are n
 
 
 class VisionKernels(Protocol):
-    """Another implementation of the two costly steps of :func:`perceive`."""
+    """Another implementation of the three costly steps of :func:`perceive`."""
 
     def in_range(
         self, position: FloatArray, visual_range: float
@@ -221,6 +221,11 @@ class VisionKernels(Protocol):
         vision: Vision,
     ) -> Sifted:
         """As :func:`sift`."""
+        ...
+
+    def body_frame(self, relative: FloatArray, yaw: FloatArray, seen: BoolArray) -> FloatArray:
+        """The rows ``seen`` of ``relative`` (B, K, 3) rotated into each fish's body frame
+        (:func:`to_body`), zero elsewhere."""
         ...
 
 
@@ -283,8 +288,9 @@ def perceive(
         rngs: one generator per fish for the position noise (needed when ``vision.noise``
             > 0; fish i's noise comes from ``rngs[i]`` only, so results do not depend on the
             other fish's draws).
-        kernels: other implementations of the range search and of :func:`sift` (the
-            simulator's compiled ones for large swarms); None: this module's.
+        kernels: other implementations of the range search, :func:`sift` and the rotation
+            into the body frames (the simulator's compiled ones for large swarms); None:
+            this module's.
 
     Returns:
         The visible neighbours of each fish, nearest first, in its body frame.
@@ -304,8 +310,11 @@ def perceive(
             rows = int(seen[fish].sum())
             scale = vision.noise * distance_seen[fish, :rows, None]
             relative_seen[fish, :rows] += rngs[fish].normal(0.0, 1.0, (rows, 3)) * scale
-    body = to_body(relative_seen, yaw)
-    body[~seen] = 0.0
+    if kernels is None:
+        body = to_body(relative_seen, yaw)
+        body[~seen] = 0.0
+    else:
+        body = kernels.body_frame(relative_seen, yaw, seen)
     return Perceived(body, seen, np.where(seen, chosen, -1))
 
 

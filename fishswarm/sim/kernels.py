@@ -1,5 +1,5 @@
 """Compiled kernels for large swarms: the BlueBot's Euler integration and the vision
-model's sifting, fish by fish.
+model's range search, sifting and rotation into the body frames, fish by fish.
 
 The numpy references (:func:`fishswarm.bluebot.dynamics.step`,
 :func:`fishswarm.bluebot.vision.sift`) work on the whole swarm at once; at thousands of fish
@@ -58,6 +58,12 @@ class CompiledVision:
     ) -> Sifted:
         """See :func:`sift`."""
         return sift(position, yaw, index, distance, vision)
+
+    def body_frame(
+        self, relative: FloatArray, yaw: FloatArray, seen: NDArray[np.bool_]
+    ) -> FloatArray:
+        """See :func:`body_frame`."""
+        return body_frame(relative, yaw, seen)
 
 
 COMPILED_MIN_FISH = 200
@@ -241,6 +247,41 @@ def sift(
     )
     keep = int(visible.max(initial=0))
     return seen[:, :keep], chosen[:, :keep], relative[:, :keep], reach[:, :keep]
+
+
+def body_frame(relative: FloatArray, yaw: FloatArray, seen: NDArray[np.bool_]) -> FloatArray:
+    """:func:`fishswarm.bluebot.vision.to_body` of the rows ``seen`` of ``relative``
+    (B, K, 3), zero elsewhere, compiled: one sine and cosine per fish, no (B, K) temporaries
+    (at 10 000 fish the numpy rotation and masking took 14 ms a tick, a sixth of it)."""
+    body = np.zeros(relative.shape)
+    _call(
+        _rotate(),
+        np.ascontiguousarray(relative, dtype=np.float64),
+        np.ascontiguousarray(yaw, dtype=np.float64),
+        np.ascontiguousarray(seen, dtype=np.bool_),
+        body,
+    )
+    return body
+
+
+@functools.cache
+def _rotate() -> Callable[..., None]:
+    """The compiled rotation into the body frames (compiled on first use, cached on disk)."""
+    import numba
+
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def rotate_all(relative: Any, yaw: Any, seen: Any, body: Any) -> None:
+        for fish in numba.prange(relative.shape[0]):
+            # The reference's arithmetic, in its order: x' = cos·x + sin·y, y' = −sin·x + cos·y.
+            cos, sin = math.cos(yaw[fish]), math.sin(yaw[fish])
+            for k in range(relative.shape[1]):
+                if seen[fish, k]:
+                    x, y = relative[fish, k, 0], relative[fish, k, 1]
+                    body[fish, k, 0] = cos * x + sin * y
+                    body[fish, k, 1] = -sin * x + cos * y
+                    body[fish, k, 2] = relative[fish, k, 2]
+
+    return rotate_all
 
 
 @functools.cache
