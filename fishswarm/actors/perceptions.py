@@ -70,14 +70,13 @@ def perception_messages(
         pass ``row_limit``), schools in name order.
     """
     messages: list[tuple[str, Message]] = []
-    schools: dict[str, list[int]] = {}
-    fish_ids = ids.tolist()
-    for row in range(len(fish_ids)) if rows is None else rows:
-        fish_id = fish_ids[row]
-        school = school_of.get(fish_id)
-        if school is not None:
-            schools.setdefault(school, []).append(row)
-            continue
+    chosen = np.arange(ids.size, dtype=np.intp) if rows is None else np.asarray(rows, np.intp)
+    fish_ids = ids[chosen].tolist()
+    labels = [school_of.get(fish_id) for fish_id in fish_ids]
+    schools = sorted({label for label in labels if label is not None})
+    school_array = np.array(labels, dtype=object)
+    for n in np.flatnonzero([label is None for label in labels]).tolist():
+        row, fish_id = int(chosen[n]), fish_ids[n]
         perception = Perception(
             fish_id,
             tick,
@@ -94,8 +93,8 @@ def perception_messages(
     if not schools:
         return messages
     neighbors, seen = _Stacked.of(perceived), _Stacked.of(landmarks)
-    for school, school_rows in sorted(schools.items()):
-        everyone = np.array(school_rows, dtype=np.intp)
+    for school in schools:
+        everyone = chosen[np.equal(school_array, school)]
         sizes = np.maximum(neighbors.counts[everyone], seen.counts[everyone])
         for members in _parts(everyone, sizes, row_limit):
             batch = PerceptionBatch(
@@ -148,11 +147,9 @@ class _Stacked:
         if last - first + 1 == members.size:  # consecutive fish: a view, no copy
             view: FloatArray = self.rows[self.starts[first] : self.starts[last + 1]]
             return view
-        counts = self.counts[members]
-        ends = np.cumsum(counts)
-        # Each row's index: its fish's start, plus its place among that fish's rows.
-        place = np.arange(int(ends[-1])) - np.repeat(ends - counts, counts)
-        taken: FloatArray = self.rows[np.repeat(self.starts[members], counts) + place]
+        wanted = np.zeros(self.counts.size, dtype=np.bool_)
+        wanted[members] = True
+        taken: FloatArray = np.compress(np.repeat(wanted, self.counts), self.rows, axis=0)
         taken.setflags(write=False)
         return taken
 
@@ -171,13 +168,16 @@ def _parts(
     """Consecutive runs of ``members`` whose fish and rows (``sizes`` each) stay within
     ``limit``; one fish alone is never split (a fish's own rows are far below the limit)."""
     if members.size <= limit and int(sizes.sum()) <= limit:
-        return [members]  # the usual case: one batch, without a loop over the fish
+        return [members]  # the usual case: one batch
+    total = np.cumsum(sizes)
     parts: list[NDArray[np.intp]] = []
-    start, total = 0, 0
-    for index, size in enumerate(sizes.tolist()):
-        if index > start and (total + size > limit or index - start >= limit):
-            parts.append(members[start:index])
-            start, total = index, 0
-        total += size
-    parts.append(members[start:])
+    start = 0
+    while start < members.size:
+        before = int(total[start - 1]) if start else 0
+        # The longest run from ``start`` within the limit: up to the first fish whose rows
+        # would pass it, at most ``limit`` fish, and at least the one fish.
+        end = int(np.searchsorted(total, before + limit, side="right"))
+        end = min(max(end, start + 1), start + limit)
+        parts.append(members[start:end])
+        start = end
     return parts
