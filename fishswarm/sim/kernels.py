@@ -373,7 +373,6 @@ def _scan_in_range() -> Callable[..., None]:
     ) -> None:
         width = index.shape[1]
         for fish in numba.prange(points.shape[0]):
-            others = np.empty(width, dtype=np.intp)
             total = 0
             for row in range(max(cell[fish, 1] - 1, 0), min(cell[fish, 1] + 2, rows)):
                 for column in range(max(cell[fish, 0] - 1, 0), min(cell[fish, 0] + 2, columns)):
@@ -385,26 +384,28 @@ def _scan_in_range() -> Callable[..., None]:
                         dx = points[other, 0] - points[fish, 0]
                         dy = points[other, 1] - points[fish, 1]
                         dz = points[other, 2] - points[fish, 2]
-                        if math.sqrt(dx * dx + dy * dy + dz * dz) <= reach:
-                            if width:
-                                others[total] = other
-                            total += 1
+                        gap = math.sqrt(dx * dx + dy * dy + dz * dz)
+                        if gap > reach:
+                            continue
+                        if width:
+                            # Insertion into the row kept nearest first, ties by index: the
+                            # order of a stable sort by distance of the others in index order,
+                            # without a buffer or a sort per fish.
+                            place = total
+                            while place > 0 and (
+                                distance[fish, place - 1] > gap
+                                or (
+                                    distance[fish, place - 1] == gap
+                                    and index[fish, place - 1] > other
+                                )
+                            ):
+                                index[fish, place] = index[fish, place - 1]
+                                distance[fish, place] = distance[fish, place - 1]
+                                place -= 1
+                            index[fish, place] = other
+                            distance[fish, place] = gap
+                        total += 1
             found[fish] = total
-            if not width:
-                continue
-            # Index order first, then a stable sort by distance: ties go by index.
-            chosen = np.sort(others[:total])
-            gaps = np.empty(total)
-            for k in range(total):
-                other = chosen[k]
-                dx = points[other, 0] - points[fish, 0]
-                dy = points[other, 1] - points[fish, 1]
-                dz = points[other, 2] - points[fish, 2]
-                gaps[k] = math.sqrt(dx * dx + dy * dy + dz * dz)
-            ranked = np.argsort(gaps, kind="mergesort")
-            for k in range(total):
-                index[fish, k] = chosen[ranked[k]]
-                distance[fish, k] = gaps[ranked[k]]
 
     return scan_all
 
