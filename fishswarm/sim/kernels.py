@@ -66,6 +66,9 @@ class CompiledVision:
         return body_frame(relative, yaw, seen)
 
 
+SIFT_CHUNK = 64
+"""Fish sifted one after another by one thread, sharing its scratch arrays."""
+
 COMPILED_MIN_FISH = 200
 """From this many fish on, a scenario's world integrates and sees with the compiled kernels,
 and the swarm metrics take the compiled pairwise distance (below, loading the kernels takes
@@ -305,48 +308,59 @@ def _sift() -> Callable[..., None]:
         reach: Any,
         visible: Any,
     ) -> None:
-        width = index.shape[1]
-        for fish in numba.prange(index.shape[0]):
-            heading_x, heading_y = np.cos(yaw[fish]), np.sin(yaw[fish])
-            # Each kept neighbour's direction and its blocking threshold, near to far.
+        width, count = index.shape[1], index.shape[0]
+        chunks = (count + SIFT_CHUNK - 1) // SIFT_CHUNK
+        for chunk in numba.prange(chunks):
+            # Each kept neighbour's direction and its blocking threshold, near to far: one
+            # scratch per chunk of fish (rows beyond a fish's kept ones are never read).
             directions = np.zeros((width, 3))
             limits = np.zeros(width)
-            kept = 0
-            for k in range(width):
-                other = index[fish, k]
-                if other < 0:
-                    break
-                offset = position[other] - position[fish]
-                if manhattan and abs(offset[0]) + abs(offset[1]) + abs(offset[2]) > visual_range:
-                    continue
-                if blind_width > 0:
-                    along = heading_x * offset[0] + heading_y * offset[1]
-                    lateral = heading_x * offset[1] - heading_y * offset[0]
-                    if along < 0.0 and abs(lateral) < blind_width / 2:
+            for fish in range(chunk * SIFT_CHUNK, min((chunk + 1) * SIFT_CHUNK, count)):
+                heading_x, heading_y = np.cos(yaw[fish]), np.sin(yaw[fish])
+                kept = 0
+                for k in range(width):
+                    other = index[fish, k]
+                    if other < 0:
+                        break
+                    # The offset as three numbers, not an array: no allocation per neighbour.
+                    ox = position[other, 0] - position[fish, 0]
+                    oy = position[other, 1] - position[fish, 1]
+                    oz = position[other, 2] - position[fish, 2]
+                    if manhattan and abs(ox) + abs(oy) + abs(oz) > visual_range:
                         continue
-                gap = distance[fish, k]
-                direction = offset / gap if gap > 0 else np.zeros(3)
-                hidden = False
-                if sphere_radius > 0:
-                    for m in range(kept):
-                        cosine = (
-                            direction[0] * directions[m, 0]
-                            + direction[1] * directions[m, 1]
-                            + direction[2] * directions[m, 2]
-                        )
-                        if cosine > limits[m]:
-                            hidden = True
-                            break
-                if hidden:
-                    continue
-                directions[kept] = direction
-                limits[kept] = gap / math.sqrt(gap * gap + sphere_radius**2) if gap > 0 else 1.0
-                seen[fish, kept] = True
-                chosen[fish, kept] = other
-                relative[fish, kept] = offset
-                reach[fish, kept] = gap
-                kept += 1
-            visible[fish] = kept
+                    if blind_width > 0:
+                        along = heading_x * ox + heading_y * oy
+                        lateral = heading_x * oy - heading_y * ox
+                        if along < 0.0 and abs(lateral) < blind_width / 2:
+                            continue
+                    gap = distance[fish, k]
+                    if gap > 0:
+                        dx, dy, dz = ox / gap, oy / gap, oz / gap
+                    else:
+                        dx, dy, dz = 0.0, 0.0, 0.0
+                    hidden = False
+                    if sphere_radius > 0:
+                        for m in range(kept):
+                            cosine = (
+                                dx * directions[m, 0]
+                                + dy * directions[m, 1]
+                                + dz * directions[m, 2]
+                            )
+                            if cosine > limits[m]:
+                                hidden = True
+                                break
+                    if hidden:
+                        continue
+                    directions[kept, 0], directions[kept, 1], directions[kept, 2] = dx, dy, dz
+                    limits[kept] = gap / math.sqrt(gap * gap + sphere_radius**2) if gap > 0 else 1.0
+                    seen[fish, kept] = True
+                    chosen[fish, kept] = other
+                    relative[fish, kept, 0] = ox
+                    relative[fish, kept, 1] = oy
+                    relative[fish, kept, 2] = oz
+                    reach[fish, kept] = gap
+                    kept += 1
+                visible[fish] = kept
 
     return sift_all
 

@@ -142,7 +142,8 @@ class WorldSim:
 
     def sense(self) -> Perceived:
         """What every fish sees of the others now (each with its own vision-noise stream)."""
-        rngs = [self._vision_rngs[fish_id] for fish_id in self.ids.tolist()]
+        noisy = self.params.cameras is not None or self.params.vision.noise > 0
+        rngs = [self._vision_rngs[fish_id] for fish_id in self.ids.tolist()] if noisy else None
         perceived = observe(self.params, self.state, rngs)
         if self.params.cameras is not None:
             truth = perceive(self.state.position, self.state.yaw, vision=self._exact_vision)
