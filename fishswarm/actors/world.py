@@ -24,7 +24,7 @@ import logging
 import secrets
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TypeVar
 
 import numpy as np
@@ -37,6 +37,7 @@ from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.actors.perceptions import perception_messages
 from fishswarm.actors.roster import LostFish, Roster
+from fishswarm.actors.tick_commands import TickCommands, values_at
 from fishswarm.behaviors.registry import rules_of
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import fish_id_of
@@ -60,10 +61,8 @@ log = logging.getLogger(__name__)
 
 BusEvent = tuple[str, str, bytes | bool]
 T = TypeVar("T")
-BoolArray = NDArray[np.bool_]
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-Rows = NDArray[np.intp]
 
 OFFLOAD_AFTER = 0.25
 """A simulation step whose last run took longer than this (s) runs in a worker thread: worth
@@ -158,69 +157,6 @@ class WorldStatistics:
         return sum(self.rejected.values())
 
 
-@dataclass
-class _Tick:
-    """The commands of one event as they come in, row by row in the order of ``ids``.
-
-    Arrays over the fish asked, not sets and dictionaries of them: a tick of thousands of
-    fish is taken in and handed on with a few vectorised operations.
-    """
-
-    tick: int = -1
-    ids: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    waiting: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
-    answered: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
-    fins: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
-    broadcasts: IntArray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    left: int = 0
-    """How many fish the tick still waits for."""
-
-    @classmethod
-    def of(cls, tick: int, ids: IntArray) -> _Tick:
-        """An event waiting for a command of each of ``ids`` (ascending) answering ``tick``."""
-        count = ids.size
-        return cls(
-            tick,
-            ids,
-            np.ones(count, dtype=bool),
-            np.zeros(count, dtype=bool),
-            np.zeros((count, 4)),
-            np.zeros(count, dtype=np.int64),
-            count,
-        )
-
-    def rows_awaited(self, fish_ids: IntArray) -> Rows | None:
-        """The rows of ``fish_ids`` (distinct) if the tick waits for every one of them."""
-        rows: Rows = np.searchsorted(self.ids, fish_ids).astype(np.intp)
-        if rows.size == 0:
-            return rows
-        if int(rows.max()) >= self.ids.size:
-            return None
-        if not (self.ids[rows] == fish_ids).all() or not self.waiting[rows].all():
-            return None
-        return rows
-
-    def take(self, rows: Rows, fins: FloatArray, broadcasts: ArrayLike) -> None:
-        """The fish at ``rows`` (awaited, distinct) answered."""
-        self.fins[rows] = fins
-        self.broadcasts[rows] = broadcasts
-        self.waiting[rows] = False
-        self.answered[rows] = True
-        self.left -= rows.size
-
-    def give_up(self, fish_id: int) -> None:
-        """Wait no more for ``fish_id`` (lost)."""
-        row = int(np.searchsorted(self.ids, fish_id))
-        if row < self.ids.size and self.ids[row] == fish_id and self.waiting[row]:
-            self.waiting[row] = False
-            self.left -= 1
-
-    def waiting_ids(self) -> list[int]:
-        """The fish not heard from, ascending."""
-        waiting: list[int] = self.ids[self.waiting].tolist()
-        return waiting
-
-
 class World:
     """The simulated world. ``await world.run(bus)`` runs the scenario to its end."""
 
@@ -256,7 +192,7 @@ class World:
         self._resume.set()
         self._stop_requested = False
         self._messages_out = 0
-        self._current = _Tick()
+        self._current = TickCommands()
         self.mismatched: set[int] = set()
         self.vouched: set[tuple[int, str | None]] = set()
         """(fish id, school or None) pairs vouched for on their own about keys."""
@@ -447,7 +383,7 @@ class World:
             if event.snapshot is not None:
                 self.tick = event.snapshot
                 ids = self.sim.ids
-                broadcasts = _values_at(self._broadcasters, self._broadcasts, ids)
+                broadcasts = values_at(self._broadcasters, self._broadcasts, ids)
                 # The channel delivers what the snapshot announces, and reports only then.
                 self._announced = int(broadcasts.sum())
                 snapshot = Snapshot(
@@ -476,7 +412,7 @@ class World:
             if self._leaving:
                 staying = ~np.isin(due_ids, np.array(sorted(self._leaving), dtype=np.int64))
                 due_ids, rows = due_ids[staying], rows[staying]
-            self._current = _Tick.of(event.number, due_ids)
+            self._current = TickCommands.of(event.number, due_ids)
             for key, message in perception_messages(
                 self.keys,
                 ids=self.sim.ids,
@@ -531,7 +467,7 @@ class World:
         if report is None or report.tick != self.tick:
             log.warning("no channel report for tick %d: deliveries not announced", self.tick)
             return counts
-        return _values_at(report.ids, report.inbox_counts, self.sim.ids)
+        return values_at(report.ids, report.inbox_counts, self.sim.ids)
 
     async def _collect_until(self, deadline: float) -> None:
         """Realtime mode: take commands until the tick's wall-clock end."""
@@ -685,17 +621,6 @@ class World:
                 self.joined.append((fish_id, tick))
                 log.info("fish %d joined at tick %d", fish_id, tick)
         self.sim.join(new)
-
-
-def _values_at(ids: IntArray, values: IntArray, at: IntArray) -> IntArray:
-    """``values`` (rows alike ``ids``, ascending) of the fish ``at``; 0 for fish not in ``ids``."""
-    result = np.zeros(at.size, dtype=np.int64)
-    if ids.size == 0:
-        return result
-    rows = np.minimum(np.searchsorted(ids, at), ids.size - 1)
-    found = ids[rows] == at
-    result[found] = values[rows[found]]
-    return result
 
 
 def _quantile(values: list[float], share: float) -> float:
