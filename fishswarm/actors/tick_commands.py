@@ -50,12 +50,8 @@ class TickCommands:
 
     def rows_awaited(self, fish_ids: IntArray) -> Rows | None:
         """The rows of ``fish_ids`` (distinct) if the tick waits for every one of them."""
-        rows: Rows = np.searchsorted(self.ids, fish_ids).astype(np.intp)
-        if rows.size == 0:
-            return rows
-        if int(rows.max()) >= self.ids.size:
-            return None
-        if not (self.ids[rows] == fish_ids).all() or not self.waiting[rows].all():
+        rows, found = _rows_of(self.ids, fish_ids)
+        if not found.all() or not self.waiting[rows].all():
             return None
         return rows
 
@@ -69,9 +65,9 @@ class TickCommands:
 
     def give_up(self, fish_id: int) -> None:
         """Wait no more for ``fish_id`` (lost)."""
-        row = int(np.searchsorted(self.ids, fish_id))
-        if row < self.ids.size and self.ids[row] == fish_id and self.waiting[row]:
-            self.waiting[row] = False
+        rows, found = _rows_of(self.ids, np.array([fish_id], dtype=np.int64))
+        if found[0] and self.waiting[rows[0]]:
+            self.waiting[rows[0]] = False
             self.left -= 1
 
     def waiting_ids(self) -> list[int]:
@@ -83,9 +79,16 @@ class TickCommands:
 def values_at(ids: IntArray, values: IntArray, at: IntArray) -> IntArray:
     """``values`` (rows alike ``ids``, ascending) of the fish ``at``; 0 for fish not in ``ids``."""
     result = np.zeros(at.size, dtype=np.int64)
-    if ids.size == 0:
-        return result
-    rows = np.minimum(np.searchsorted(ids, at), ids.size - 1)
-    found = ids[rows] == at
+    rows, found = _rows_of(ids, at)
     result[found] = values[rows[found]]
     return result
+
+
+def _rows_of(ids: IntArray, wanted: IntArray) -> tuple[Rows, BoolArray]:
+    """Where each of ``wanted`` is in ``ids`` (ascending), and whether it is there at all
+    (a row of a fish not there is any valid row, or 0 when ``ids`` is empty)."""
+    if ids.size == 0:
+        return np.zeros(wanted.size, dtype=np.intp), np.zeros(wanted.size, dtype=np.bool_)
+    rows: Rows = np.minimum(np.searchsorted(ids, wanted), ids.size - 1).astype(np.intp)
+    found: BoolArray = ids[rows] == wanted
+    return rows, found

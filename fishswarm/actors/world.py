@@ -410,7 +410,7 @@ class World:
             due, rows = self.sim.due()
             due_ids = np.array(due, dtype=np.int64)
             if self._leaving:
-                staying = ~np.isin(due_ids, np.array(sorted(self._leaving), dtype=np.int64))
+                staying = ~np.isin(due_ids, self._leaving_ids())
                 due_ids, rows = due_ids[staying], rows[staying]
             self._current = TickCommands.of(event.number, due_ids)
             for key, message in perception_messages(
@@ -441,12 +441,16 @@ class World:
         current = self._current
         held = current.answered & np.isin(current.ids, self.sim.ids)
         if self._leaving:
-            held &= ~np.isin(current.ids, np.array(sorted(self._leaving), dtype=np.int64))
+            held &= ~np.isin(current.ids, self._leaving_ids())
         answered = current.ids[held]
         self.sim.hold(answered.tolist(), current.fins[held])
         if self.scenario.time_mode == "jitter":
             return  # broadcasts are not delivered in jitter mode: nothing to announce
         self._broadcasters, self._broadcasts = answered, current.broadcasts[held]
+
+    def _leaving_ids(self) -> IntArray:
+        """The fish lost this tick, about to leave the world, ascending."""
+        return np.array(sorted(self._leaving), dtype=np.int64)
 
     def _put(self, bus: Bus, key: str, payload: bytes) -> None:
         bus.put(key, payload)
