@@ -431,7 +431,9 @@ def steer_formation(
     heard = _heard_flags(inbox, params)
     rank = np.zeros(count, dtype=np.int64)
     if params.is_local:
-        places, valid = local_spots(params.shape, neighbors, mask, spacing=params.spacing)
+        places, valid, preference = local_spots(
+            params.shape, neighbors, mask, spacing=params.spacing
+        )
         rivals = nearest_only(neighbors, mask, skip=LOCAL_SHAPES[params.shape])
         # A spot is claimed when a neighbour that flagged itself joined stands on it.
         gaps = np.linalg.norm(places[:, :, None, :] - inbox.sender[:, None, :, :], axis=3)
@@ -439,6 +441,7 @@ def steer_formation(
         chosen = choose_spot(
             places, valid, neighbors, mask, tolerance=params.tolerance, rivals=rivals,
             claimed=claimed,
+            preference=preference,
         )  # fmt: skip
     else:
         slots = target_map(params.shape, params.count, spacing=params.spacing)

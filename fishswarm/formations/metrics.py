@@ -24,6 +24,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.spatial.distance import cdist, pdist
 
 from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.formations.groups import Completion, completion, ideal_local_shape
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -162,44 +163,34 @@ def shape_error(
     return fit.rms, float(np.mean(fit.joined(tolerance)))
 
 
-def ideal_local_shape(shape: str, *, spacing: float) -> FloatArray:
-    """(k + 1, 3) the points of a local shape: an equilateral triangle, a trigonal-planar
-    star (centre and three arms at 120°), or a regular tetrahedron, edges (arms) ``spacing``."""
-    if shape == "triangle":
-        return spacing * np.array([[0.0, 0, 0], [1.0, 0, 0], [0.5, math.sqrt(3) / 2, 0]])
-    if shape == "trigonal-planar":
-        arms = [[math.cos(a), math.sin(a), 0.0] for a in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)]
-        return spacing * np.array([[0.0, 0.0, 0.0], *arms])
-    if shape == "tetrahedron":
-        corners = [[1.0, 1, 1], [1.0, -1, -1], [-1.0, 1, -1], [-1.0, -1, 1]]
-        return spacing / (2 * math.sqrt(2)) * np.array(corners)
-    raise ValueError(f"no local shape {shape!r}")
-
-
-def local_shape_errors(position: FloatArray, shape: str, *, spacing: float) -> FloatArray:
-    """(N,) each fish's local-shape error: the RMS error of its group (the fish and its k
-    nearest neighbours) after the best rigid alignment to the ideal shape, m (NaN for all
-    when there are no more than k fish)."""
-    ideal = ideal_local_shape(shape, spacing=spacing)
-    k = ideal.shape[0] - 1
+def local_shape_errors(
+    position: FloatArray, shape: str, *, spacing: float, tolerance: float
+) -> Completion:
+    """How well each of N fish completes its local shape where it is
+    (:func:`fishswarm.formations.groups.completion`): (N,) the largest and the RMS distance
+    of its best group from the ideal shape, m (NaN for all when there are no more than k
+    fish)."""
     count = position.shape[0]
-    if count <= k:
-        return np.full(count, math.nan)
-    apart = cdist(position, position)
-    nearest = np.argsort(apart, axis=1, kind="stable")[:, : k + 1]  # itself first
-    return np.array([align(position[group], ideal, starts=4).rms for group in nearest])
+    if count <= ideal_local_shape(shape, spacing=spacing).shape[0] - 1:
+        return Completion(np.full(count, math.nan), np.full(count, math.nan))
+    others = np.broadcast_to(position[None], (count, count, 3))
+    mask = ~np.eye(count, dtype=np.bool_)
+    fit = completion(
+        position[:, None, :], others, mask, shape, spacing=spacing, tolerance=tolerance
+    )
+    return Completion(fit.largest[:, 0], fit.rms[:, 0])
 
 
 def local_shape_error(
     position: FloatArray, shape: str, *, spacing: float, tolerance: float
 ) -> tuple[float, float]:
     """How well every fish completes its local shape with its nearest neighbours: the mean
-    over fish of :func:`local_shape_errors`, and the fraction of fish whose group is within
-    ``tolerance`` (RMS)."""
-    errors = local_shape_errors(position, shape, spacing=spacing)
-    if errors.size == 0 or np.isnan(errors).all():
+    over fish of their best group's RMS distance from the ideal shape (:func:`local_shape_errors`),
+    m, and the fraction of fish whose group lies within ``tolerance`` point by point."""
+    fit = local_shape_errors(position, shape, spacing=spacing, tolerance=tolerance)
+    if fit.rms.size == 0 or np.isnan(fit.rms).all():
         return math.nan, 0.0
-    return float(errors.mean()), float(np.mean(errors <= tolerance))
+    return float(np.mean(fit.rms)), float(np.mean(fit.joined(tolerance)))
 
 
 def deviation_energy(position: FloatArray, *, spacing: float) -> float:

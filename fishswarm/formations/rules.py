@@ -94,6 +94,7 @@ def choose_spot(
     rivals: BoolArray | None = None,
     claimed: BoolArray | None = None,
     first: IntArray | None = None,
+    preference: FloatArray | None = None,
     share: bool = False,
 ) -> IntArray:
     """The spot each fish takes, by the study's conflict rule (:data:`STAY` if none).
@@ -111,8 +112,9 @@ def choose_spot(
         share: share the free spots out at once (nearest pairs first) instead of the study's
             order; see below.
         first: (B,) the spot to try first (a global map: the fish's rank); spots are tried
-            from there on in order, then from the first. None: nearest spot first, then by
-            distance (local shapes).
+            from there on in order, then from the first. None: by ``preference``.
+        preference: (B, S) spots are tried in increasing order of this (a local shape:
+            groups of neighbours in turn); None: nearest spot first, then by distance.
 
     Returns:
         (B,) the index of the chosen spot, or STAY.
@@ -131,7 +133,8 @@ def choose_spot(
         free &= ~claimed
     usable = free & (rival >= own)
     if first is None:
-        order = np.argsort(np.where(valid, own, np.inf), axis=1, kind="stable")
+        key = own if preference is None else preference
+        order = np.argsort(np.where(valid, key, np.inf), axis=1, kind="stable")
     else:
         order = (first[:, None] + np.arange(options)[None, :]) % max(options, 1)
     rows = np.arange(count)[:, None]

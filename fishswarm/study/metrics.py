@@ -332,9 +332,12 @@ class FormationTarget:
         formation's orientation (a global map's; a local shape has none)."""
         count = position.shape[0]
         if self.local_shape is not None:
-            errors = local_shape_errors(position, self.local_shape, spacing=self.spacing)
-            joined = ~np.isnan(errors) & (errors <= self.tolerance)
-            return FormationRoles(joined, np.zeros(count, dtype=np.bool_), None)
+            local = local_shape_errors(
+                position, self.local_shape, spacing=self.spacing, tolerance=self.tolerance
+            )
+            return FormationRoles(
+                local.joined(self.tolerance), np.zeros(count, dtype=np.bool_), None
+            )
         assert self.slots is not None
         if self.slots.shape[0] < count or count == 0:
             return FormationRoles(

@@ -25,12 +25,13 @@ def test_a_fish_with_two_neighbours_takes_the_near_apex_of_their_triangle() -> N
     # Two neighbours side by side 0.3 m ahead, 0.3 m apart: the apexes of the equilateral
     # triangles on them are on the x axis, at 0.3 ± H; the fish takes the near one.
     neighbors, mask = _one((0.3, -0.15, 0.0), (0.3, 0.15, 0.0))
-    spots, valid = local_spots("triangle", neighbors, mask, spacing=L)
-    assert valid.tolist() == [[True, True]]
-    assert sorted(spots[0, :, 0].round(12).tolist()) == [round(0.3 - H, 12), round(0.3 + H, 12)]
-    np.testing.assert_allclose(spots[0, :, 1:], 0.0, atol=1e-12)
+    spots, valid, preference = local_spots("triangle", neighbors, mask, spacing=L)
+    assert valid.tolist() == [[True, True, False, False, False, False]]
+    np.testing.assert_allclose(spots[0, :2], [[0.3 - H, 0, 0], [0.3 + H, 0, 0]], atol=1e-12)
     rivals = np.zeros_like(mask)  # the pair is the shape, not rivals
-    choice = choose_spot(spots, valid, neighbors, mask, tolerance=0.25 * L, rivals=rivals)
+    choice = choose_spot(
+        spots, valid, neighbors, mask, tolerance=0.25 * L, rivals=rivals, preference=preference
+    )
     np.testing.assert_allclose(spots[0, choice[0]], [0.3 - H, 0.0, 0.0], atol=1e-12)
 
 
@@ -38,7 +39,7 @@ def test_an_occupied_spot_and_a_nearer_rival_send_a_fish_on_or_keep_it_still() -
     # As above, plus a third fish right on the near apex: occupied. The far apex has a rival
     # (that third fish) nearer to it than our fish: taken too. No spot left: stay.
     pair, pair_mask = _one((0.3, -0.15, 0.0), (0.3, 0.15, 0.0))
-    spots, valid = local_spots("triangle", pair, pair_mask, spacing=L)
+    spots, valid, _ = local_spots("triangle", pair, pair_mask, spacing=L)
     neighbors, mask = _one((0.3, -0.15, 0.0), (0.3, 0.15, 0.0), (0.3 - H + 0.01, 0.0, 0.0))
     rivals = np.array([[False, False, True]])
     assert choose_spot(spots, valid, neighbors, mask, tolerance=0.25 * L, rivals=rivals) == [STAY]
@@ -63,7 +64,7 @@ def test_trigonal_planar_completes_the_star_around_its_centre() -> None:
         centre + L * np.array([math.cos(a), math.sin(a), 0.0]) for a in map(math.radians, (90, 210))
     ]
     neighbors, mask = _one(tuple(arm[0]), tuple(centre), tuple(arm[1]))
-    spots, valid = local_spots("trigonal-planar", neighbors, mask, spacing=L)
+    spots, valid, _ = local_spots("trigonal-planar", neighbors, mask, spacing=L)
     assert valid.tolist() == [[True, False]]
     missing = centre + L * np.array([math.cos(math.radians(330)), math.sin(math.radians(330)), 0])
     np.testing.assert_allclose(spots[0, 0], missing, atol=1e-12)
@@ -73,9 +74,33 @@ def test_trigonal_planar_completes_the_star_around_its_centre() -> None:
         for a in map(math.radians, (90, 210, 330))
     ]
     neighbors, mask = _one(*(tuple(p) for p in ring))
-    spots, valid = local_spots("trigonal-planar", neighbors, mask, spacing=L)
-    assert valid.tolist() == [[False, True]]
-    np.testing.assert_allclose(spots[0, 1], centre, atol=1e-12)
+    spots, valid, _ = local_spots("trigonal-planar", neighbors, mask, spacing=L)
+    assert valid.tolist() == [[True, False]]  # the spot that applies comes first
+    np.testing.assert_allclose(spots[0, 0], centre, atol=1e-12)
+
+
+def test_a_triangle_is_also_tried_with_the_nearest_and_a_neighbour_a_spacing_from_it() -> None:
+    # Nearest A 0.2 m ahead, B 0.22 m behind (0.42 m from A: their spots are the points
+    # 0.3 m from both, at x = -0.01, y = ±0.214), C 0.5 m ahead — 0.3 m from A, so A and C
+    # already make an edge of the shape: their spots are at x = 0.35, y = ±H. D, 0.66 m
+    # ahead, is 0.46 m from A: more than half a spacing off an edge, no spots.
+    neighbors, mask = _one((0.2, 0, 0), (-0.22, 0, 0), (0.5, 0, 0), (0.66, 0, 0))
+    spots, valid, preference = local_spots("triangle", neighbors, mask, spacing=L)
+    assert valid.tolist() == [[True, True, True, True, False, False]]
+    side = math.sqrt(L**2 - 0.21**2)
+    np.testing.assert_allclose(np.abs(spots[0, :2]), [[0.01, side, 0]] * 2, atol=1e-12)
+    np.testing.assert_allclose(np.abs(spots[0, 2:4]), [[0.35, H, 0]] * 2, atol=1e-12)
+    assert preference[0, 1] < preference[0, 2]  # the two nearest first
+    # Both spots of the nearest pair claimed by flags: the fish goes for the A–C edge's.
+    claimed = np.array([[True, True, False, False, False, False]])
+    choice = choose_spot(
+        spots, valid, neighbors, mask, tolerance=0.25 * L, rivals=np.zeros_like(mask),
+        claimed=claimed, preference=preference,
+    )  # fmt: skip
+    np.testing.assert_allclose(np.abs(spots[0, choice[0]]), [0.35, H, 0], atol=1e-12)
+    # Only the two nearest: no other spots.
+    spots, valid, _ = local_spots("triangle", neighbors, mask, spacing=L, among=2)
+    assert spots.shape == (1, 2, 3) and valid.all()
 
 
 def test_tetrahedron_apexes_stand_above_and_below_the_triangle() -> None:
@@ -84,7 +109,7 @@ def test_tetrahedron_apexes_stand_above_and_below_the_triangle() -> None:
     corners = [(1.0 + L / math.sqrt(3) * math.cos(a), L / math.sqrt(3) * math.sin(a), 0.5)
                for a in (0, 2 * math.pi / 3, 4 * math.pi / 3)]  # fmt: skip
     neighbors, mask = _one(*corners)
-    spots, valid = local_spots("tetrahedron", neighbors, mask, spacing=L)
+    spots, valid, _ = local_spots("tetrahedron", neighbors, mask, spacing=L)
     assert valid.all()
     np.testing.assert_allclose(
         sorted(spots[0, :, 2]), [0.5 - L * math.sqrt(2 / 3), 0.5 + L * math.sqrt(2 / 3)]
@@ -96,7 +121,7 @@ def test_tetrahedron_apexes_stand_above_and_below_the_triangle() -> None:
 def test_too_few_neighbours_means_no_spot_and_a_fish_stays() -> None:
     neighbors, mask = _one((0.3, 0.0, 0.0))
     for shape in LOCAL_SHAPES:
-        spots, valid = local_spots(shape, neighbors, mask, spacing=L)
+        spots, valid, _ = local_spots(shape, neighbors, mask, spacing=L)
         assert not valid.any()
         assert choose_spot(spots, valid, neighbors, mask, tolerance=0.1) == [STAY]
     with pytest.raises(ValueError, match="local shape must be one of"):

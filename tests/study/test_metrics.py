@@ -177,7 +177,8 @@ def test_formation_metrics_against_the_target_and_their_summary() -> None:
 def test_local_shape_error_around_every_fish() -> None:
     import math
 
-    from fishswarm.formations.metrics import ideal_local_shape, local_shape_error
+    from fishswarm.formations.groups import ideal_local_shape
+    from fishswarm.formations.metrics import local_shape_error
 
     # A strip of equilateral triangles (side 0.3): every fish and its two nearest form one.
     h = 0.3 * math.sqrt(3) / 2
