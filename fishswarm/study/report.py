@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from fishswarm.formations.local import LOCAL_SHAPES
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import Experiment, RunOutcome
 from fishswarm.study.figures import FiguresUnavailable, experiment_figures
@@ -129,7 +130,16 @@ def write_report(
 def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
     """The table of an experiment in Markdown, mean ± s.d. over seeds."""
     scenario = experiment.scenario
-    if experiment.forming:
+    if experiment.forming and scenario.formation in LOCAL_SHAPES:
+        explain = (
+            "Shape error: the RMS distance of each fish's group (it and the nearest "
+            "neighbours it makes the shape with) from the ideal shape after the best rigid "
+            "alignment, averaged over fish; in their slots: every fish of the group within "
+            "the tolerance of its place; lattice energy: mean squared relative deviation of "
+            "neighbour distances from the spacing; collisions: pairs closer than one body "
+            "length, summed over snapshots."
+        )
+    elif experiment.forming:
         explain = (
             "Shape error: RMS distance of the fish from the target map after the best rigid "
             "alignment and assignment; in their slots: within the tolerance of their slot; "
