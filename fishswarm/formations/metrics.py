@@ -21,10 +21,16 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import orthogonal_procrustes
 from scipy.optimize import linear_sum_assignment
+from scipy.spatial import cKDTree
 from scipy.spatial.distance import cdist, pdist
 
 from fishswarm.bluebot.parameters import BODY_LENGTH
-from fishswarm.formations.groups import Completion, completion, ideal_local_shape
+from fishswarm.formations.groups import (
+    NEAREST_CONSIDERED,
+    Completion,
+    completion,
+    ideal_local_shape,
+)
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -169,12 +175,15 @@ def local_shape_errors(
     """How well each of N fish completes its local shape where it is
     (:func:`fishswarm.formations.groups.completion`): (N,) the largest and the RMS distance
     of its best group from the ideal shape, m (NaN for all when there are no more than k
-    fish)."""
+    fish). Each fish is judged with its nearest few (a k-d tree finds them), so a school of
+    thousands costs thousands of small fits, not a table of every pair."""
     count = position.shape[0]
     if count <= ideal_local_shape(shape, spacing=spacing).shape[0] - 1:
         return Completion(np.full(count, math.nan), np.full(count, math.nan))
-    others = np.broadcast_to(position[None], (count, count, 3))
-    mask = ~np.eye(count, dtype=np.bool_)
+    wanted = min(NEAREST_CONSIDERED[shape] + 2, count)  # itself, its candidates, one left out
+    _, nearest = cKDTree(position).query(position, k=wanted)
+    others = position[nearest[:, 1:]]
+    mask = np.ones(others.shape[:2], dtype=np.bool_)
     fit = completion(
         position[:, None, :], others, mask, shape, spacing=spacing, tolerance=tolerance
     )

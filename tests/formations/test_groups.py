@@ -129,3 +129,17 @@ def test_candidate_spots_are_judged_with_the_fish_that_would_surround_them() -> 
         tolerance=TOLERANCE,
     )  # fmt: skip
     assert np.isinf(lone.largest).all()
+
+
+def test_judging_each_fish_with_its_nearest_few_equals_judging_it_with_all() -> None:
+    rng = np.random.default_rng(3)
+    school = rng.uniform(0.0, 1.0, (40, 3))
+    everyone = np.broadcast_to(school[None], (40, 40, 3))
+    for shape in _MATCHINGS:
+        few = local_shape_errors(school, shape, spacing=L, tolerance=TOLERANCE)
+        every = completion(
+            school[:, None, :], everyone, ~np.eye(40, dtype=np.bool_), shape, spacing=L,
+            tolerance=TOLERANCE,
+        )  # fmt: skip
+        np.testing.assert_array_equal(few.largest, every.largest[:, 0])
+        np.testing.assert_array_equal(few.rms, every.rms[:, 0])
