@@ -279,11 +279,12 @@ def test_broadcasts_cross_processes_and_are_counted_in_the_summary(
     np.testing.assert_array_equal(arrays["pos"], run_batch(scenario).position)
 
 
+@pytest.mark.parametrize("shape", ["tetrahedral-pyramid", "triangle"])
 def test_a_formation_with_flags_flowing_is_the_same_across_processes_and_engines(
-    endpoint: str, tmp_path: Path
+    endpoint: str, tmp_path: Path, shape: str
 ) -> None:
     scenario = Scenario(
-        fish=8, behavior="formation", formation="tetrahedral-pyramid", duration=4.0, seed=6,
+        fish=8, behavior="formation", formation=shape, duration=4.0, seed=6,
         control_period=0.5, controller="pid", spawn_radius=0.4, spacing=0.25, channel_loss=0.2,
     )  # fmt: skip
     reference = run_batch(scenario)
