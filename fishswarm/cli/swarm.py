@@ -306,8 +306,8 @@ def _summary_text(summary: dict[str, Any]) -> str:
         ninety = formation["time_to_90_percent_joined"]
         lines.append(
             f"  formation: shape error {formation['shape_error']:.3f} m, "
-            f"{100 * formation['joined_fraction']:.0f} % in their slots, "
-            f"90 % joined {'never' if ninety is None else f'at {ninety:g} s'}, "
+            f"{100 * formation['joined_fraction']:.0f} % joined "
+            f"({'never 90 %' if ninety is None else f'90 % first at {ninety:g} s'}), "
             f"lattice energy {formation['lattice_energy']:.3f}, "
             f"collisions at most {formation['most_collisions']:.0f}"
         )

@@ -96,10 +96,12 @@ def group_errors(
 class Completion:
     """How well fish (at candidate spots) complete a local shape, each (...) m: the largest
     distance of a point of its best group from its place in the ideal shape (inf: no group
-    allowed), and that group's RMS distance."""
+    allowed), and that group's RMS distance; and (..., k) which of the other fish make that
+    group with it (indices into them; −1: no group)."""
 
     largest: FloatArray
     rms: FloatArray
+    members: NDArray[np.intp]
 
     def joined(self, tolerance: float) -> BoolArray:
         """Which complete the shape: every point of the group within ``tolerance``."""
@@ -131,7 +133,7 @@ def completion(
 
     Returns:
         (B, S) the best group's largest and RMS distances (the group with the smallest
-        largest distance).
+        largest distance), and (B, S, k) its members among ``others``.
     """
     ideal = ideal_local_shape(shape, spacing=spacing)
     k = ideal.shape[0] - 1
@@ -159,12 +161,12 @@ def completion(
     groups = np.concatenate([here, np.where(allowed[..., None, None], members, 0.0)], axis=3)
     rms, largest = group_errors(groups, ideal, orders=_MATCHINGS.get(shape))
     largest = np.where(allowed, largest, np.inf)
-    best = np.argmin(largest, axis=2)[..., None]
+    best = np.argmin(largest, axis=2)
+    best_largest = np.take_along_axis(largest, best[..., None], axis=2)[..., 0]
+    found = np.isfinite(best_largest)
+    chosen = np.take_along_axis(order, combos[best].reshape(count, options, k), axis=2)
     return Completion(
-        np.take_along_axis(largest, best, axis=2)[..., 0],
-        np.where(
-            np.isfinite(np.take_along_axis(largest, best, axis=2)[..., 0]),
-            np.take_along_axis(rms, best, axis=2)[..., 0],
-            np.inf,
-        ),
+        best_largest,
+        np.where(found, np.take_along_axis(rms, best[..., None], axis=2)[..., 0], np.inf),
+        np.where(found[..., None], chosen, -1),
     )

@@ -14,6 +14,7 @@ Base station only (scipy): nothing a robot runs imports this module.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -174,12 +175,16 @@ def local_shape_errors(
 ) -> Completion:
     """How well each of N fish completes its local shape where it is
     (:func:`fishswarm.formations.groups.completion`): (N,) the largest and the RMS distance
-    of its best group from the ideal shape, m (NaN for all when there are no more than k
-    fish). Each fish is judged with its nearest few (a k-d tree finds them), so a school of
-    thousands costs thousands of small fits, not a table of every pair."""
+    of its best group from the ideal shape, m, and (N, k) the fish it makes that group with
+    (NaN and −1 for all when there are no more than k fish). Each fish is judged with its
+    nearest few (a k-d tree finds them), so a school of thousands costs thousands of small
+    fits, not a table of every pair."""
     count = position.shape[0]
     if count <= ideal_local_shape(shape, spacing=spacing).shape[0] - 1:
-        return Completion(np.full(count, math.nan), np.full(count, math.nan))
+        k = ideal_local_shape(shape, spacing=spacing).shape[0] - 1
+        return Completion(
+            np.full(count, math.nan), np.full(count, math.nan), np.full((count, k), -1)
+        )
     wanted = min(NEAREST_CONSIDERED[shape] + 2, count)  # itself, its candidates, one left out
     _, nearest = cKDTree(position).query(position, k=wanted)
     others = position[nearest[:, 1:]]
@@ -187,7 +192,23 @@ def local_shape_errors(
     fit = completion(
         position[:, None, :], others, mask, shape, spacing=spacing, tolerance=tolerance
     )
-    return Completion(fit.largest[:, 0], fit.rms[:, 0])
+    members = np.take_along_axis(nearest[:, 1:], np.maximum(fit.members[:, 0], 0), axis=1)
+    return Completion(
+        fit.largest[:, 0], fit.rms[:, 0], np.where(fit.members[:, 0] >= 0, members, -1)
+    )
+
+
+def shape_edges(fit: Completion, tolerance: float) -> NDArray[np.intp]:
+    """(E, 2) the pairs of fish that make a completed local shape together (each pair once,
+    the lower index first): the edges a picture draws."""
+    joined = np.flatnonzero(fit.joined(tolerance))
+    if joined.size == 0 or fit.members.shape[1] == 0:
+        return np.zeros((0, 2), dtype=np.intp)
+    groups = np.concatenate([joined[:, None], fit.members[joined]], axis=1)
+    pairs = np.array(list(itertools.combinations(range(groups.shape[1]), 2)), dtype=np.intp)
+    edges = np.sort(groups[:, pairs].reshape(-1, 2), axis=1)
+    unique: NDArray[np.intp] = np.unique(edges, axis=0)
+    return unique
 
 
 def local_shape_error(

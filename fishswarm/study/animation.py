@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.bluebot.vision import Vision, perceive
-from fishswarm.study.figures import role_colours, role_key
+from fishswarm.study.figures import draw_edges, role_colours, role_key
 from fishswarm.study.metrics import FormationTarget
 from fishswarm.study.progress import ids_text
 
@@ -232,6 +232,8 @@ def animation_figure(
             if roles.slots is not None:
                 drawn.append(_hollow(above, roles.slots[:, 0], roles.slots[:, 1]))
                 drawn.append(_hollow(side, roles.slots[:, 0], roles.slots[:, 2]))
+            drawn.extend(draw_edges(above, here, roles.edges, (0, 1)))
+            drawn.extend(draw_edges(side, here, roles.edges, (0, 2)))
         if mine is not None:
             colours[mine] = "tab:red"
         drawn.append(_flat_arrows(above, here[:, 0], here[:, 1], heading, colours))

@@ -228,8 +228,24 @@ def draw_formation(
                 )
             )  # fmt: skip
     for ax, (a, b) in ((overhead, (0, 1)), (side, (0, 2))):
+        drawn.extend(draw_edges(ax, here, roles.edges, (a, b)))
         drawn.append(ax.scatter(here[:, a], here[:, b], s=22, c=colours, zorder=4))
     return drawn
+
+
+def draw_edges(
+    ax: Axes, position: FloatArray, edges: NDArray[np.intp], axes: tuple[int, int]
+) -> list[Any]:
+    """The edges of completed local shapes (pairs of fish, (E, 2)) as thin lines between
+    the fish (N, 3), in the plane of two coordinates; returns the artists drawn."""
+    if edges.shape[0] == 0:
+        return []
+    from matplotlib.collections import LineCollection
+
+    segments = position[edges][:, :, list(axes)]
+    lines = LineCollection(list(segments), colors=ROLE_COLOURS["joined"], linewidths=0.8, zorder=3)
+    ax.add_collection(lines)
+    return [lines]
 
 
 def _formation_panels(
@@ -257,6 +273,8 @@ def _formation_panels(
             Line2D([], [], marker="o", linestyle="none", markerfacecolor="none",
                    markeredgecolor="black", label="target, best fit")
         )  # fmt: skip
+    else:
+        key.append(Line2D([], [], color=ROLE_COLOURS["joined"], label="shape completed"))
     overhead.legend(handles=key, fontsize=7, loc="lower right", framealpha=0.8)
     error = figure.add_subplot(grid[0, 1])
     error.plot(t, metrics["shape_error"], color="tab:blue")

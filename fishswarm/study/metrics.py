@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -22,6 +22,7 @@ from fishswarm.formations.metrics import (
     deviation_energy,
     local_shape_error,
     local_shape_errors,
+    shape_edges,
     shape_error,
 )
 from fishswarm.sim import kernels
@@ -336,7 +337,10 @@ class FormationTarget:
                 position, self.local_shape, spacing=self.spacing, tolerance=self.tolerance
             )
             return FormationRoles(
-                local.joined(self.tolerance), np.zeros(count, dtype=np.bool_), None
+                local.joined(self.tolerance),
+                np.zeros(count, dtype=np.bool_),
+                None,
+                shape_edges(local, self.tolerance),
             )
         assert self.slots is not None
         if self.slots.shape[0] < count or count == 0:
@@ -360,11 +364,14 @@ class FormationRoles:
             shape).
         slots: (N, 3) the map's slots laid onto the school by the best rigid motion, m (None
             for a local shape).
+        edges: (E, 2) pairs of fish (indices) that make a completed local shape together;
+            none for a global map.
     """
 
     joined: NDArray[np.bool_]
     leader: NDArray[np.bool_]
     slots: FloatArray | None
+    edges: NDArray[np.intp] = field(default_factory=lambda: np.zeros((0, 2), dtype=np.intp))
 
 
 def formation_target_of(scenario: Scenario) -> FormationTarget | None:

@@ -143,3 +143,18 @@ def test_judging_each_fish_with_its_nearest_few_equals_judging_it_with_all() -> 
         )  # fmt: skip
         np.testing.assert_array_equal(few.largest, every.largest[:, 0])
         np.testing.assert_array_equal(few.rms, every.rms[:, 0])
+
+
+def test_the_edges_of_completed_shapes_are_the_sides_of_their_triangles() -> None:
+    from fishswarm.formations.metrics import shape_edges
+
+    # Two triangles of side L sharing the edge 1–2, and a fifth fish far off (no shape).
+    height = L * math.sqrt(3) / 2
+    school = np.array(
+        [[0, 0, 0], [L, 0, 0], [L / 2, height, 0], [1.5 * L, height, 0], [5.0, 5.0, 0]]
+    )
+    fit = local_shape_errors(school, "triangle", spacing=L, tolerance=TOLERANCE)
+    assert fit.joined(TOLERANCE).tolist() == [True, True, True, True, False]
+    assert sorted(fit.members[0].tolist()) == [1, 2] and sorted(fit.members[3].tolist()) == [1, 2]
+    edges = shape_edges(fit, TOLERANCE)
+    assert edges.tolist() == [[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]]
