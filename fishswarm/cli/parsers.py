@@ -394,7 +394,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="show a swarm in 3-D in a browser, live or from a recording",
         description="Serve a 3-D view of a swarm from this machine, in rerun's web viewer: "
         "the tank, the landmark, every fish as an arrow along its body (coloured by role in a "
-        "formation: leader, in its place, seeking; its fitted target as grey dots), and the "
+        "formation: leader, in its place, seeking; a global map's fitted target as grey dots, "
+        "a local shape's completed sides as green lines), and the "
         "metrics over time. With a RECORDING (an MCAP file of 'run --record'), replay it; "
         "otherwise attach to the running swarm at --connect as a read-only observer (with "
         "--secure, with an observer's certificate) and follow it live. Needs no internet: "

@@ -17,7 +17,15 @@ from typing import TYPE_CHECKING, Any
 
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.study.experiment import METRIC_LABELS
-from fishswarm.study.scene import LANDMARK_RGB, TARGET_RGB, WALL_RGB, Scene, Stage, tank_edges
+from fishswarm.study.scene import (
+    LANDMARK_RGB,
+    ROLE_RGB,
+    TARGET_RGB,
+    WALL_RGB,
+    Scene,
+    Stage,
+    tank_edges,
+)
 from fishswarm.study.view_settings import ViewError, ViewSettings
 
 if TYPE_CHECKING:
@@ -110,7 +118,8 @@ class LiveView:
 
     def show(self, scene: Scene, metrics: dict[str, float]) -> None:
         """Draw the swarm at one moment (fish as arrows along their bodies, coloured by
-        role; a formation's fitted target) and its metrics, at the scene's time."""
+        role; a formation's fitted target, or its completed local shapes' sides) and its
+        metrics, at the scene's time."""
         rr, log = self._rr, self._recording.log
         self._recording.set_time(TIMELINE, duration=scene.time)
         colours = scene.colours()
@@ -129,6 +138,11 @@ class LiveView:
             log(
                 "tank/target",
                 rr.Points3D(scene.slots, colors=TARGET_RGB, radii=0.1 * BODY_LENGTH),
+            )
+        if scene.edges is not None:
+            log(
+                "tank/shapes",
+                rr.LineStrips3D(list(scene.edges), colors=ROLE_RGB["joined"], radii=0.002),
             )
         for name, value in metrics.items():
             if value is None or not math.isfinite(value):

@@ -76,6 +76,8 @@ class Scene:
         heading: (N, 3) unit vectors along each fish's body, in the tank frame.
         roles: (N,) each fish's role, a key of :data:`ROLE_RGB`.
         slots: (M, 3) a global formation's target laid onto the school, m, or None.
+        edges: (E, 2, 3) the sides of a local formation's completed shapes, each from one
+            fish to another, m, or None.
     """
 
     time: float
@@ -84,6 +86,7 @@ class Scene:
     heading: FloatArray
     roles: tuple[str, ...]
     slots: FloatArray | None = None
+    edges: FloatArray | None = None
 
     def colours(self) -> NDArray[np.uint8]:
         """(N, 3) each fish's colour by its role, 8-bit RGB."""
@@ -101,17 +104,20 @@ def role_names(joined: NDArray[np.bool_], leader: NDArray[np.bool_]) -> tuple[st
 
 def scene_of(snapshot: Snapshot, formation: FormationTarget | None = None) -> Scene:
     """The scene of a snapshot; in a formation run, the fish's roles (as
-    :meth:`FormationTarget.roles` sees them from the positions) and the fitted target."""
+    :meth:`FormationTarget.roles` sees them from the positions) and the fitted target, or
+    the sides of the completed local shapes."""
     yaw = snapshot.yaw
     heading = np.stack([np.cos(yaw), np.sin(yaw), np.zeros_like(yaw)], axis=1)
     count = int(snapshot.ids.size)
     roles: tuple[str, ...] = ("fish",) * count
-    slots = None
+    slots = edges = None
     if formation is not None and count:
         found = formation.roles(snapshot.position)
         roles = role_names(found.joined, found.leader)
         slots = found.slots
-    return Scene(snapshot.time, snapshot.ids, snapshot.position, heading, roles, slots)
+        if formation.local_shape is not None:
+            edges = snapshot.position[found.edges]
+    return Scene(snapshot.time, snapshot.ids, snapshot.position, heading, roles, slots, edges)
 
 
 def tank_edges(tank: tuple[float, float, float]) -> FloatArray:
@@ -194,7 +200,8 @@ def _fish_arrows(scene: Scene) -> str:
 def scene_message(scene: Scene, stage: Stage | None = None) -> bytes:
     """A Foxglove ``SceneUpdate`` (JSON) drawing ``scene``: an arrow a body length long per
     fish (tail at the fish, pointing along its body, coloured by role), the fitted target's
-    slots as translucent spheres, and with ``stage`` the tank's edges and the landmark.
+    slots as translucent spheres or the sides of completed local shapes as lines, and with
+    ``stage`` the tank's edges and the landmark.
 
     Each entity keeps its id from message to message, so every message replaces the last."""
     entities: list[dict[str, Any]] = []
@@ -205,6 +212,18 @@ def scene_message(scene: Scene, stage: Stage | None = None) -> bytes:
             for xyz in scene.slots
         ]
         entities.append(_entity("target", scene.time, spheres=spheres))
+    if scene.edges is not None:
+        sides = {
+            "type": 2,  # LINE_LIST: each pair of points one segment
+            "pose": _pose((0.0, 0.0, 0.0)),
+            "thickness": 0.004,
+            "scale_invariant": False,
+            "points": [_point(xyz) for edge in scene.edges for xyz in edge],
+            "color": _colour(ROLE_RGB["joined"]),
+            "colors": [],
+            "indices": [],
+        }
+        entities.append(_entity("shapes", scene.time, lines=[sides]))
     if stage is not None:
         points = [_point(xyz) for edge in tank_edges(stage.tank) for xyz in edge]
         line = {

@@ -3,6 +3,7 @@ recordings carry."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from pathlib import Path
@@ -98,6 +99,26 @@ def test_a_formations_roles_and_target_come_from_the_positions() -> None:
     assert scene.slots is not None and scene.slots.shape == (6, 3)
     near = np.linalg.norm(scene.slots[:, None] - position[None], axis=2).min(axis=0)
     assert (near[:5] < 0.1).all() and near[5] > 0.2
+
+
+def test_a_local_formations_scene_draws_the_sides_of_its_completed_shapes() -> None:
+    jsonschema = pytest.importorskip("jsonschema")
+    # Three fish in an equilateral triangle of side 0.3 and a fourth far off.
+    height = 0.3 * math.sqrt(3) / 2
+    position = np.array(
+        [[0.5, 0.5, 0.5], [0.8, 0.5, 0.5], [0.65, 0.5 + height, 0.5], [1.5, 1.5, 0.5]]
+    )
+    target = FormationTarget(None, 0.3, 0.05, "triangle")
+    scene = scene_of(_snapshot(position, [0.0] * 4), target)
+    assert scene.roles == ("joined", "joined", "joined", "seeking")
+    assert scene.slots is None and scene.edges is not None
+    sides = {tuple(sorted(map(tuple, edge.round(6).tolist()))) for edge in scene.edges}
+    corners = [tuple(p) for p in position[:3].round(6).tolist()]
+    assert sides == {tuple(sorted((a, b))) for a, b in itertools.combinations(corners, 2)}
+    data = json.loads(scene_message(scene))
+    jsonschema.validate(data, scene_json_schema())
+    (lines,) = next(e for e in data["entities"] if e["id"] == "shapes")["lines"]
+    assert lines["type"] == 2 and len(lines["points"]) == 6
 
 
 def test_a_scene_message_draws_each_fish_the_tank_and_the_landmark() -> None:
