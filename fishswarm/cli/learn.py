@@ -27,6 +27,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         "hall_of_fame": args.hall_of_fame,
         "soft_weight": args.soft_weight,
         "virulence": args.virulence,
+        "trials": args.trials,
     }
     given = {name: value for name, value in named.items() if value is not None}
     try:
@@ -43,7 +44,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             f"{','.join(chosen.inputs)}, radii {chosen.radii}; {chosen.models} replicas × "
             f"{chosen.classifiers} classifiers, seed {chosen.seed}, hall of fame "
             f"{chosen.hall_of_fame}, soft weight {chosen.soft_weight:g}, virulence "
-            f"{chosen.virulence:g}; up to generation "
+            f"{chosen.virulence:g}, {chosen.trials} start(s) a generation; up to generation "
             f"{args.generations}; output {args.out}",
             file=sys.stderr,
         )

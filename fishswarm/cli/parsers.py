@@ -529,6 +529,12 @@ def build_parser() -> argparse.ArgumentParser:
         "study's method)",
     )
     learn.add_argument(
+        "--trials",
+        type=int,
+        help="starts each generation is judged on, every fitness averaged over them (default "
+        "1, as in the study; the time per generation grows with it)",
+    )
+    learn.add_argument(
         "--out", type=Path, default=Path("runs/learn"), help="output folder (default runs/learn)"
     )
     learn.add_argument(

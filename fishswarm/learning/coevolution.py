@@ -78,6 +78,10 @@ class LearningSettings:
             Cartlidge and Bullock's reduced virulence (Evolutionary Computation 12(2),
             2004): a classifier that leaves replicas no way to score is less fit than one
             they can learn from.
+        trials: starts each generation is judged on (1: the study's method); the ideal fish
+            and every model swim from each, and every fitness is averaged over them, so that
+            a model is not ranked by one lucky or unlucky start. Each start costs a
+            simulation and a judgement of every sample: the time per generation grows with it.
     """
 
     behavior: str = "aggregation"
@@ -90,6 +94,7 @@ class LearningSettings:
     soft_weight: float = 1.0
     hall_of_fame: int = 10
     virulence: float = 1.0
+    trials: int = 1
 
     def __post_init__(self) -> None:
         if self.behavior not in SPREADS:
@@ -107,6 +112,8 @@ class LearningSettings:
             raise ValueError(f"virulence must be in (0, 1], got {self.virulence}")
         if self.hall_of_fame < 0:
             raise ValueError(f"hall_of_fame must be 0 or more, got {self.hall_of_fame}")
+        if self.trials < 1:
+            raise ValueError(f"trials must be 1 or more, got {self.trials}")
 
     @property
     def network_size(self) -> int:
@@ -252,13 +259,15 @@ class Coevolution:
         """How often the model optimiser started again on flat fitness."""
         self._flat = 0
 
-    def trial_start(self, generation: int, trials: int) -> FloatArray:
-        """The start positions of a generation (shared by the ideal fish and every model)."""
-        return self._start(_TRIALS, generation, trials)
+    def trial_start(self, generation: int, trials: int, start: int = 0) -> FloatArray:
+        """The positions of a generation's ``start``-th start, repeated ``trials`` times
+        (shared by the ideal fish and every model)."""
+        extra = (start,) if start else ()  # the first start is the one a single trial had
+        return self._start(_TRIALS, generation, trials, *extra)
 
-    def _start(self, role: int, generation: int, trials: int) -> FloatArray:
+    def _start(self, role: int, generation: int, trials: int, *key: int) -> FloatArray:
         """``trials`` start positions from the stream of ``role`` at ``generation``."""
-        rng = _stream(self.settings.seed, role, generation)
+        rng = _stream(self.settings.seed, role, generation, *key)
         spread = SPREADS[self.settings.behavior]
         return initial_positions(rng, arena=self.settings.arena, spread=spread, models=trials)
 
@@ -275,8 +284,19 @@ class Coevolution:
             models = np.concatenate([models, np.array(self.model_champions)[chosen]])
             chosen = rng.choice(len(self.classifier_champions), picks, replace=False)
             classifiers = np.concatenate([classifiers, np.array(self.classifier_champions)[chosen]])
-        start = self.trial_start(self.generation, 1 + len(models))
-        everything = self._judge(self._trial(start, models), classifiers)
+        # Each start's judgements (C, 1 + M, N), side by side: every fitness is a mean over
+        # fish, so over fish of all the starts.
+        judgement = np.concatenate(
+            [
+                self._judgement(
+                    self._trial(self.trial_start(self.generation, 1 + len(models), n), models),
+                    classifiers,
+                )
+                for n in range(settings.trials)
+            ],
+            axis=2,
+        )
+        everything = fitness(judgement)
         # Champions only judge and are judged: the optimisers hear about the current ones.
         result = Fitness(
             everything.models[:current_models],
@@ -347,6 +367,11 @@ class Coevolution:
 
     def _judge(self, tracks: FloatArray, classifiers: FloatArray) -> Fitness:
         """Every classifier judges every fish of ``tracks`` (the ideal fish's trial first)."""
+        return fitness(self._judgement(tracks, classifiers))
+
+    def _judgement(self, tracks: FloatArray, classifiers: FloatArray) -> FloatArray:
+        """(C, 1 + M, N) each classifier's probability that each fish of ``tracks`` (the
+        ideal fish's trial first) is an ideal fish."""
         settings = self.settings
         samples = samples_from(tracks, settings.inputs, arena=settings.arena)
         own = (
@@ -355,7 +380,8 @@ class Coevolution:
             else np.zeros((len(classifiers), *samples.fixed.shape[:2], 0))
         )
         judgement = classify(classifiers[:, : settings.network_size], samples.fixed, own)
-        return fitness(judgement.reshape(len(classifiers), len(tracks), settings.arena.fish))
+        result: FloatArray = judgement.reshape(len(classifiers), len(tracks), settings.arena.fish)
+        return result
 
     def final_radii(self) -> FloatArray:
         """(C, R) radii of the last classifier population."""

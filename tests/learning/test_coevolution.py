@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -204,3 +205,34 @@ def test_models_start_again_after_ten_flat_generations_and_a_replay_does_too() -
     once = Coevolution(settings)
     once.replay(broken, varied)
     assert once.model_restarts == 0
+
+
+def test_several_starts_a_generation_judge_every_model_on_each(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    settings = LearningSettings(models=6, classifiers=5, seed=3, hall_of_fame=0, trials=2)
+    run = Coevolution(settings)
+    starts: list[np.ndarray] = []
+    judge = Coevolution._judgement
+
+    def recording(self: Coevolution, tracks: np.ndarray, classifiers: np.ndarray) -> np.ndarray:
+        starts.append(tracks[:, 0])
+        result: np.ndarray = judge(self, tracks, classifiers)
+        return result
+
+    monkeypatch.setattr(Coevolution, "_judgement", recording)
+    run.step()
+    assert len(starts) == 2
+    # The first start is the one a run of one trial has; the second another.
+    np.testing.assert_array_equal(starts[0], run.trial_start(0, 7))
+    np.testing.assert_array_equal(starts[1], run.trial_start(0, 7, 1))
+    assert not np.array_equal(starts[0], starts[1])
+    monkeypatch.undo()
+    # Two starts are not one: the scores told differ; and a run of two resumes exactly.
+    two, one = _run(settings, 2), _run(dataclasses.replace(settings, trials=1), 2)
+    assert not np.array_equal(np.array(two.told_models), np.array(one.told_models))
+    straight = _run(settings, 4)
+    resumed = _resumed(settings, tmp_path / "checkpoint.npz", before=2, after=2)
+    assert resumed.settings.trials == 2 and resumed.history == straight.history
+    with pytest.raises(ValueError, match="trials must be 1 or more, got 0"):
+        LearningSettings(trials=0)

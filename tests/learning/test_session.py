@@ -127,8 +127,7 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     header = (
         "fishswarm learn: aggregation ideal fish; classifier inputs speed,neighbors, radii "
         "bounded; 6 replicas × 6 classifiers, seed 5, hall of fame 10, soft weight 1, "
-        "virulence 1; "
-        "up to generation 2"
+        "virulence 1, 1 start(s) a generation; up to generation 2"
     )
     assert header in first.stderr.splitlines()[0]
     assert "resumed from generation" not in first.stderr
