@@ -51,6 +51,7 @@ EDGE_SLACK = 0.5
 shape to within this fraction of the spacing (for a triangle: stand l ± l/2 apart)."""
 
 _TINY = 1e-9
+_GROUP_RANK = 1e6
 
 
 def nearest_neighbors(
@@ -225,14 +226,11 @@ def local_spots(
         applies = np.take_along_axis(applies, order, axis=1)
         spots.append(found)
         valid.append(applies & exists[:, None])
-        # Spots of an earlier group first; within a group, the nearer first (a spot is
-        # never 2·spacing·k away: the group's index dominates).
+        # Spots of an earlier group first; within a group, the nearer first (a group's
+        # rank, a million spacings, outweighs any distance a fish can see).
         preference.append(index * _GROUP_RANK * spacing + np.linalg.norm(found, axis=2))
     return (
         np.concatenate(spots, axis=1),
         np.concatenate(valid, axis=1),
         np.concatenate(preference, axis=1),
     )
-
-
-_GROUP_RANK = 1e6

@@ -5,6 +5,8 @@
   best assignment of fish to slots (rotation by Kabsch/Procrustes, assignment by the
   Hungarian method, alternated from several starting turns), and the fraction of fish then
   within a tolerance of their slot ("joined");
+- for a local shape, how well each fish completes it with its nearest neighbours
+  (:mod:`fishswarm.formations.groups`), and the sides of the completed shapes;
 - the deviation energy of an α-lattice (Olfati-Saber 2006): mean squared deviation of the
   distances between neighbours (pairs closer than 1.2 spacings) from the spacing;
 - collisions: pairs closer than one body length.
