@@ -77,7 +77,7 @@ distance; larger ones an estimate from :data:`SAMPLED_PAIRS` pairs."""
 SAMPLED_PAIRS = 250_000
 """How many pairs the mean pairwise distance of a swarm beyond :data:`EXACT_PAIRS_MAX` pairs
 is estimated from: a standard error near 0.1 % of the mean (the distances' spread over their
-mean, about 0.5 in a school spread over a tank, over √250 000), for 16 ms at 10 000 fish
+mean, about 0.5 in a school spread over a tank, over √250 000), for 2 ms at 10 000 fish
 where all 50 million pairs take 90 ms compiled — more than the world's own tick, and the
 observer measures every snapshot."""
 
@@ -95,8 +95,13 @@ def pairwise_distance(position: FloatArray) -> float:
         return 0.0
     if count * (count - 1) // 2 > EXACT_PAIRS_MAX:
         first, second = _sampled_pairs(count)
-        offset = position[first] - position[second]
-        return float(np.sqrt(np.einsum("ij,ij->i", offset, offset)).mean())
+        # Coordinate by coordinate: taking from one contiguous column is five times as
+        # fast as gathering whole rows (2 against 10 ms at 10 000 fish), the sum the same.
+        squared = np.zeros(first.shape[0])
+        for column in np.ascontiguousarray(position.T):
+            step = column.take(first) - column.take(second)
+            squared += step * step
+        return float(np.sqrt(squared).mean())
     if count >= kernels.COMPILED_MIN_FISH and kernels.available():
         return kernels.mean_pairwise_distance(position)
     return float(pdist(position).mean())
