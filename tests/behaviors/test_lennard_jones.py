@@ -116,3 +116,24 @@ def test_study_form_equals_the_study_codes_millimetre_arithmetic() -> None:
         centre /= len(neighbors)
         ours = _study(neighbors.tolist(), target_distance)
         np.testing.assert_allclose(ours, centre / 1000, rtol=1e-10)
+
+
+def test_a_large_batch_sums_neighbours_as_each_fish_alone_does() -> None:
+    from fishswarm.behaviors.lennard_jones import RUNNING_SUM_LOOP_MIN
+
+    # A batch large enough to be summed neighbour by neighbour, padded with zero rows as
+    # batches are, some fish seeing nobody: every row equals the fish deciding alone, bit
+    # for bit.
+    rng = np.random.default_rng(8)
+    count, rows = RUNNING_SUM_LOOP_MIN + 72, 30
+    seen = rng.integers(0, rows + 1, count)
+    mask = np.arange(rows)[None, :] < seen[:, None]
+    neighbors = np.where(mask[..., None], rng.normal(0.0, 0.4, (count, rows, 3)), 0.0)
+    together = lennard_jones(neighbors, mask, target_distance=0.26)
+    for fish in range(count):
+        alone = lennard_jones(
+            neighbors[fish : fish + 1, : seen[fish]], mask[fish : fish + 1, : seen[fish]],
+            target_distance=0.26,
+        )  # fmt: skip
+        np.testing.assert_array_equal(together[fish], alone[0])
+    assert not np.signbit(together[seen == 0]).any()  # +0.0, not −0.0, for the lonely
