@@ -9,8 +9,11 @@ may be any of its ``among`` nearest (:data:`NEAREST_CONSIDERED`), as long as no 
 is nearer to it than the farthest of them by more than the tolerance: a stranger closer than
 the shape's own members spoils the shape.
 
-The same test serves the observer's metrics (each fish where it is) and a fish's decision
-(each spot it could go to, with the neighbours it sees). Numpy only: it runs on the robot.
+The observer's metrics judge each fish where it stands (:func:`completion` takes any spots,
+so a fish could judge the spots it might go to with the neighbours it sees; holding fish
+where they complete a shape was measured and dropped, docs/formations.md). The fish's own
+rule uses the fit (:func:`group_errors`) to tell whether neighbours already make part of a
+shape. Numpy only: it runs on the robot.
 """
 
 from __future__ import annotations
@@ -154,11 +157,11 @@ def completion(
     farthest = combos.max(axis=1)
     allowed = np.isfinite(distance[:, :, farthest])
     allowed &= distance[:, :, left_out] >= distance[:, :, farthest] - tolerance  # (B, S, C)
-    members = np.take_along_axis(
+    partners = np.take_along_axis(
         others[:, None, :, :], order[:, :, combos.reshape(-1), None], axis=2
     ).reshape(count, options, len(combos), k, 3)
     here = np.broadcast_to(spots[:, :, None, None, :], (count, options, len(combos), 1, 3))
-    groups = np.concatenate([here, np.where(allowed[..., None, None], members, 0.0)], axis=3)
+    groups = np.concatenate([here, np.where(allowed[..., None, None], partners, 0.0)], axis=3)
     rms, largest = group_errors(groups, ideal, orders=_MATCHINGS.get(shape))
     largest = np.where(allowed, largest, np.inf)
     best = np.argmin(largest, axis=2)

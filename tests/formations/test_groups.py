@@ -103,9 +103,8 @@ def test_a_stranger_nearer_than_the_members_spoils_the_shape() -> None:
     school = np.vstack([triangle, stranger])
     fit = local_shape_errors(school, "triangle", spacing=L, tolerance=TOLERANCE)
     assert not fit.joined(TOLERANCE)[0]  # the stranger is nearer than its corners
-    # The two other corners: the stranger is farther from them than their partners (by
-    # more than the tolerance)... unless it is within the tolerance of their farthest:
-    # corner 1 is L from corner 0 and L + 0.1 from the stranger: it completes its triangle.
+    # Corner 1 has its partners at L and the stranger at L + 0.1: farther than both, so it
+    # spoils nothing there.
     assert fit.joined(TOLERANCE)[1]
     # Far enough away, the stranger spoils nothing.
     school[3] = triangle[0] + [-1.0, 0.0, 0.0]
