@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.bluebot.vision import Vision, perceive
-from fishswarm.study.figures import draw_edges, role_colours, role_key
+from fishswarm.study.figures import ROLE_COLOURS, draw_edges, role_colours, role_key
 from fishswarm.study.metrics import FormationTarget
 from fishswarm.study.progress import ids_text
 
@@ -205,12 +205,12 @@ def animation_figure(
     eye = figure.add_subplot(grid[1, 1])
     _eye_axes(eye)
     if formation is not None:
-        above.legend(
-            handles=role_key(),
-            fontsize=7,
-            loc="lower right",
-            framealpha=0.8,
-        )
+        key = role_key(leader=formation.slots is not None)
+        if formation.slots is None:
+            from matplotlib.lines import Line2D
+
+            key.append(Line2D([], [], color=ROLE_COLOURS["joined"], label="shape completed"))
+        above.legend(handles=key, fontsize=7, loc="lower right", framealpha=0.8)
     column = ids.index(viewer)
     count = frames.t.size
     drawn: list[Any] = []
