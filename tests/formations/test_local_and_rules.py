@@ -75,8 +75,8 @@ def test_trigonal_planar_completes_the_star_around_its_centre() -> None:
     ]
     neighbors, mask = _one(*(tuple(p) for p in ring))
     spots, valid, _ = local_spots("trigonal-planar", neighbors, mask, spacing=L)
-    assert valid.tolist() == [[True, False]]  # the spot that applies comes first
-    np.testing.assert_allclose(spots[0, 0], centre, atol=1e-12)
+    assert valid.tolist() == [[False, True]]
+    np.testing.assert_allclose(spots[0, 1], centre, atol=1e-12)
 
 
 def test_a_triangle_is_also_tried_with_the_nearest_and_a_neighbour_a_spacing_from_it() -> None:
