@@ -220,6 +220,12 @@ def local_shape_error(
     over fish of their best group's RMS distance from the ideal shape (:func:`local_shape_errors`),
     m, and the fraction of fish whose group lies within ``tolerance`` point by point."""
     fit = local_shape_errors(position, shape, spacing=spacing, tolerance=tolerance)
+    return local_shape_summary(fit, tolerance)
+
+
+def local_shape_summary(fit: Completion, tolerance: float) -> tuple[float, float]:
+    """A school's local-shape fit (:func:`local_shape_errors`) in two numbers: the mean of
+    the fish's RMS errors, m, and the fraction of fish that complete the shape."""
     if fit.rms.size == 0 or np.isnan(fit.rms).all():
         return math.nan, 0.0
     return float(np.mean(fit.rms)), float(np.mean(fit.joined(tolerance)))

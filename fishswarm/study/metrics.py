@@ -15,15 +15,16 @@ from scipy.spatial.distance import pdist
 
 from fishswarm.behaviors.formation import FormationParams
 from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.formations.groups import Completion
 from fishswarm.formations.maps import target_map
 from fishswarm.formations.metrics import (
+    Alignment,
     align,
     collisions,
     deviation_energy,
-    local_shape_error,
     local_shape_errors,
+    local_shape_summary,
     shape_edges,
-    shape_error,
 )
 from fishswarm.sim import kernels
 from fishswarm.sim.scenario import Scenario
@@ -305,6 +306,27 @@ class FormationTarget:
     tolerance: float
     local_shape: str | None = None
     orientation: float = 0.0
+    _last: dict[bytes, Alignment | Completion] = field(
+        default_factory=dict, init=False, repr=False, compare=False
+    )
+
+    def _fit(self, position: FloatArray) -> Alignment | Completion:
+        """The school (N, 3) fitted to the target: a global map's alignment to its first N
+        slots, or how each fish completes its local shape. The last snapshot's is kept: an
+        observer asks for the metrics and the roles of each snapshot, one fit serves both."""
+        key = position.tobytes()
+        fit = self._last.get(key)
+        if fit is None:
+            if self.local_shape is not None:
+                fit = local_shape_errors(
+                    position, self.local_shape, spacing=self.spacing, tolerance=self.tolerance
+                )
+            else:
+                assert self.slots is not None
+                fit = align(position, self.slots[: position.shape[0]], starts=6)
+            self._last.clear()
+            self._last[key] = fit
+        return fit
 
     def metrics(self, position: FloatArray) -> dict[str, float]:
         """The formation metrics of one snapshot. A global map: the school against its
@@ -313,16 +335,15 @@ class FormationTarget:
         count = position.shape[0]
         if count == 0:
             return dict.fromkeys(FORMATION_METRIC_NAMES, math.nan)
-        if self.local_shape is not None:
-            rms, joined = local_shape_error(
-                position, self.local_shape, spacing=self.spacing, tolerance=self.tolerance
-            )
-        else:
+        if self.local_shape is None:
             assert self.slots is not None
-            slots = self.slots[:count]
-            if slots.shape[0] < count:
+            if self.slots.shape[0] < count:
                 return dict.fromkeys(FORMATION_METRIC_NAMES, math.nan)
-            rms, joined = shape_error(position, slots, tolerance=self.tolerance, starts=6)
+        fit = self._fit(position)
+        if isinstance(fit, Completion):
+            rms, joined = local_shape_summary(fit, self.tolerance)
+        else:
+            rms, joined = fit.rms, float(np.mean(fit.joined(self.tolerance)))
         return {
             "shape_error": rms,
             "joined_fraction": joined,
@@ -338,9 +359,8 @@ class FormationTarget:
         formation's orientation (a global map's; a local shape has none)."""
         count = position.shape[0]
         if self.local_shape is not None:
-            local = local_shape_errors(
-                position, self.local_shape, spacing=self.spacing, tolerance=self.tolerance
-            )
+            local = self._fit(position)
+            assert isinstance(local, Completion)
             return FormationRoles(
                 local.joined(self.tolerance),
                 np.zeros(count, dtype=np.bool_),
@@ -352,7 +372,8 @@ class FormationTarget:
             return FormationRoles(
                 np.zeros(count, dtype=np.bool_), np.zeros(count, dtype=np.bool_), None
             )
-        fit = align(position, self.slots[:count], starts=6)
+        fit = self._fit(position)
+        assert isinstance(fit, Alignment)
         along = position[:, :2] @ np.array([math.cos(self.orientation), math.sin(self.orientation)])
         leader = np.zeros(count, dtype=np.bool_)
         leader[np.argmax(along)] = True
