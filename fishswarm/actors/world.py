@@ -380,6 +380,7 @@ class World:
             event = await self._compute(self.sim.next_event)
             self._admit(self.tick if event.snapshot is None else event.snapshot)
             perceived = await self._compute(self.sim.sense)
+            deferred: Snapshot | None = None
             if event.snapshot is not None:
                 self.tick = event.snapshot
                 ids = self.sim.ids
@@ -397,7 +398,10 @@ class World:
                     broadcasts,
                     self.sim.effort,
                 )
-                self._put(bus, self.keys.snapshot, encode(snapshot))
+                if self._defers(event):
+                    deferred = snapshot
+                else:
+                    self._put(bus, self.keys.snapshot, encode(snapshot))
                 if event.last or self._stop_requested:
                     return
             if not event.deciding:
@@ -429,12 +433,27 @@ class World:
                 rows=rows.tolist(),
             ):
                 self._put(bus, key, encode(message))
+            if deferred is not None:
+                self._put(bus, self.keys.snapshot, encode(deferred))
             if realtime:
                 tick_start += period
                 await self._collect_until(tick_start)
             else:
                 await self._collect()
             self._hold()
+
+    def _defers(self, event: Event) -> bool:
+        """Whether this tick's snapshot can wait until the perceptions are out, so that it
+        is encoded and sent while the fish decide: not when the channel needs it first (it
+        announces broadcasts to deliver), when the run ends or pauses here, or when no fish
+        decide this tick."""
+        return (
+            not self._announced
+            and event.deciding
+            and not event.last
+            and not self._stop_requested
+            and self._resume.is_set()
+        )
 
     def _hold(self) -> None:
         """Hand the fins of the fish that answered (and are still here) to the simulation."""

@@ -166,6 +166,47 @@ def test_broadcasts_decided_at_a_tick_are_heard_at_the_next_and_match_the_batch_
     assert world.statistics().rejected_total == 0
 
 
+@pytest.mark.parametrize("broadcasting", [False, True])
+def test_a_snapshot_goes_out_while_the_fish_decide_unless_the_channel_needs_it_first(
+    broadcasting: bool,
+) -> None:
+    behavior = registered().name if broadcasting else "aggregation"
+    scenario = Scenario(fish=3, duration=4.0, seed=2, behavior=behavior)
+    keys = scenario.keys
+
+    async def main() -> list[tuple[str, int]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2)))
+        sent: list[tuple[str, int]] = []
+        bus.subscribe(
+            keys.snapshot, lambda k, p: sent.append(("snapshot", decode(p, Snapshot).tick))
+        )
+        bus.subscribe(
+            keys.perception(0), lambda k, p: sent.append(("perception", decode(p, Perception).tick))
+        )
+        async with trio.open_nursery() as nursery:
+            await nursery.start(Channel(scenario).run, bus)
+            for fish_id in range(3):
+                settings = FishSettings((fish_id,), scenario.fish_params(), keys)
+                await nursery.start(Fish(settings).run, bus)
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return sent
+
+    sent = run_mock(main)
+    if broadcasting:
+        # From tick 1 on the channel delivers what the snapshot announces before the fish
+        # perceive: the snapshot leads.
+        expected = [("perception", 0), ("snapshot", 0)]
+        for tick in range(1, 4):
+            expected += [("snapshot", tick), ("perception", tick)]
+    else:
+        expected = []
+        for tick in range(4):
+            expected += [("perception", tick), ("snapshot", tick)]
+    assert sent == [*expected, ("snapshot", 4)]  # the last one ends the run
+
+
 def test_the_world_waits_for_a_slow_fish_at_every_tick() -> None:
     scenario = Scenario(fish=1, duration=3.0, seed=1)
     keys = scenario.keys
