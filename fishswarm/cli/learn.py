@@ -12,6 +12,7 @@ from fishswarm.study.progress import ProgressLine, bar
 
 def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm learn``."""
+    from fishswarm.learning.arena import Arena
     from fishswarm.learning.coevolution import LearningSettings
     from fishswarm.learning.session import LearningError, learn
 
@@ -28,10 +29,14 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         "soft_weight": args.soft_weight,
         "virulence": args.virulence,
         "trials": args.trials,
+        "replica": args.replica,
     }
     given = {name: value for name, value in named.items() if value is not None}
+    values = dict(given)
+    if "replica" in values:
+        values["arena"] = Arena(replica_reciprocal=values.pop("replica") == "reciprocal")
     try:
-        settings = LearningSettings(**given)
+        settings = LearningSettings(**values)
     except ValueError as error:
         raise ConfigError(str(error)) from None
     every = max(1, args.generations // 50)
@@ -44,7 +49,8 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             f"{','.join(chosen.inputs)}, radii {chosen.radii}; {chosen.models} replicas × "
             f"{chosen.classifiers} classifiers, seed {chosen.seed}, hall of fame "
             f"{chosen.hall_of_fame}, soft weight {chosen.soft_weight:g}, virulence "
-            f"{chosen.virulence:g}, {chosen.trials} start(s) a generation; up to generation "
+            f"{chosen.virulence:g}, {chosen.trials} start(s) a generation, {chosen.replica} "
+            f"replicas; up to generation "
             f"{args.generations}; output {args.out}",
             file=sys.stderr,
         )

@@ -535,6 +535,13 @@ def build_parser() -> argparse.ArgumentParser:
         "1, as in the study; the time per generation grows with it)",
     )
     learn.add_argument(
+        "--replica",
+        choices=("reciprocal", "study"),
+        help="how a replica's network makes a neighbour's contribution: study (default): the "
+        "network's answer as it is (its replicas can drift as one school); reciprocal: its "
+        "odd part, so that neighbours on opposite sides push opposite ways",
+    )
+    learn.add_argument(
         "--out", type=Path, default=Path("runs/learn"), help="output folder (default runs/learn)"
     )
     learn.add_argument(

@@ -43,6 +43,15 @@ class Arena:
             replica's weights must grow 2.5 times as large for the same turn, and CMA-ES
             found no replica that disperses even when fitted to the ideal fish's spacing
             directly (57 % off, against 9 % at 40; docs/learning.md).
+        replica_reciprocal: a neighbour's contribution is the odd part of the replica
+            network's answer, ½(f(r) − f(−r)) for a neighbour at r, so that neighbours on
+            opposite sides push opposite ways; False: the network's answer as it is (the
+            study's replica). The study's replica can give every neighbour the same push
+            (its output biases alone do), and a school of 25 then drifts as one at full
+            speed: the dispersion replicas learned that way swam as fast as the ideal fish
+            while their spacing grew a tenth as fast (docs/learning.md). An option: over
+            three seeds it met the dispersion target once (the first run to) but missed
+            the others by more than the study's replica does.
     """
 
     side: float = 300.0
@@ -54,6 +63,7 @@ class Arena:
     spacing: float = 40.0
     communication_range: float = 100.0
     replica_input_scale: float = 40.0
+    replica_reciprocal: bool = False
 
 
 EARLIER_REPLICA_INPUT_SCALE = 100.0
@@ -62,9 +72,11 @@ EARLIER_REPLICA_INPUT_SCALE = 100.0
 
 def arena_from(data: Mapping[str, Any]) -> Arena:
     """The arena a checkpoint or replica file names (its ``arena`` settings); a file from
-    before ``replica_input_scale`` existed had replicas see positions over 100."""
+    before ``replica_input_scale`` existed had replicas see positions over 100, one from
+    before ``replica_reciprocal`` existed had the study's replica (the default)."""
     values = dict(data)
     values.setdefault("replica_input_scale", EARLIER_REPLICA_INPUT_SCALE)
+    values.setdefault("replica_reciprocal", False)
     return Arena(**values)
 
 
@@ -119,8 +131,8 @@ def replica_velocity(positions: FloatArray, weights: FloatArray, *, arena: Arena
 
     The network sees the neighbour's relative position divided by the arena's
     ``replica_input_scale`` and returns a direction (x, y in (−1, 1)) and a speed (in
-    (0, 1) × speed cap); a neighbour contributes speed × direction. Contributions are summed
-    and the sum is capped.
+    (0, 1) × speed cap); a neighbour contributes speed × direction (its odd part with
+    ``arena.replica_reciprocal``). Contributions are summed and the sum is capped.
 
     Args:
         positions: (M, N, 2), one row of fish per model.
@@ -147,13 +159,24 @@ def replica_contributions(
         arena: the arena (input scale and speed cap).
 
     Returns:
-        (M, ..., 2) speed × direction of each neighbour, zero where not ``within``.
+        (M, ..., 2) speed × direction of each neighbour (the odd part of it, ½(f(r) − f(−r)),
+        when ``arena.replica_reciprocal``), zero where not ``within``.
     """
-    outputs = replica_outputs(weights, relative / arena.replica_input_scale)
+    scaled = relative / arena.replica_input_scale
+    contribution = _network_push(replica_outputs(weights, scaled), arena)
+    if arena.replica_reciprocal:
+        contribution = 0.5 * (
+            contribution - _network_push(replica_outputs(weights, -scaled), arena)
+        )
+    result: FloatArray = contribution * within[..., None]
+    return result
+
+
+def _network_push(outputs: FloatArray, arena: Arena) -> FloatArray:
+    """Speed × direction from replica network outputs (..., 3)."""
     direction = 2.0 * outputs[..., :2] - 1.0
-    speed = outputs[..., 2] * arena.speed_cap
-    contribution: FloatArray = direction * (speed * within)[..., None]
-    return contribution
+    push: FloatArray = direction * (outputs[..., 2] * arena.speed_cap)[..., None]
+    return push
 
 
 def simulate(

@@ -116,6 +116,12 @@ class LearningSettings:
             raise ValueError(f"trials must be 1 or more, got {self.trials}")
 
     @property
+    def replica(self) -> str:
+        """How a replica's network makes a neighbour's contribution: ``reciprocal`` (its odd
+        part) or ``study`` (as it is); see :class:`~fishswarm.learning.arena.Arena`."""
+        return "reciprocal" if self.arena.replica_reciprocal else "study"
+
+    @property
     def network_size(self) -> int:
         """Parameters of a classifier network (radii excluded)."""
         return classifier_size(feature_count(self.inputs))

@@ -24,6 +24,7 @@ from fishswarm.behaviors.core import (
 )
 from fishswarm.behaviors.registry import BEHAVIORS, behavior_named, fish_params, register
 from fishswarm.behaviors.replica import STUDY_SCALE, replica_motion
+from fishswarm.learning.arena import Arena
 from fishswarm.protocols.messages import BROADCAST_WIDTH
 from tests.behaviors.signal_behavior import SIGNAL, registered
 
@@ -197,15 +198,22 @@ def test_replica_holds_its_first_depth(model: Path) -> None:
 def test_replica_motion_by_hand() -> None:
     # Hidden weights 0 → hidden 0.5; output biases +50, 0, +50 → outputs (1, 0.5, 1):
     # direction (+1, 0), speed 9 per neighbour; two neighbours sum to 18, capped at 9 units/s:
-    # 9 × 1 s × 1.78/300 m = 0.0534 m straight ahead.
+    # 9 × 1 s × 1.78/300 m = 0.0534 m straight ahead (the study's replica).
     weights = np.zeros(21)
     weights[18:21] = [50.0, 0.0, 50.0]
     neighbors = np.array([[[0.3, 0.1, 0.0], [-0.2, 0.2, 0.1], [9.0, 9.0, 0.0]]])
     mask = np.array([[True, True, False]])
-    motion = replica_motion(neighbors, mask, weights=weights)
+    study = Arena()
+    motion = replica_motion(neighbors, mask, weights=weights, arena=study)
     np.testing.assert_allclose(motion, [[9 * STUDY_SCALE, 0.0]], atol=1e-15)
-    far = replica_motion(np.array([[[0.7, 0.0, 0.0]]]), np.ones((1, 1), bool), weights=weights)
+    far = replica_motion(
+        np.array([[[0.7, 0.0, 0.0]]]), np.ones((1, 1), bool), weights=weights, arena=study
+    )
     np.testing.assert_array_equal(far, [[0.0, 0.0]])
+    # A reciprocal replica pushes the other way for a neighbour on the other side: a push
+    # every neighbour gives alike cancels, and the fish stays.
+    still = replica_motion(neighbors, mask, weights=weights, arena=Arena(replica_reciprocal=True))
+    np.testing.assert_array_equal(still, [[0.0, 0.0]])
 
 
 def test_a_replica_runs_with_the_input_scale_it_was_learned_with(tmp_path: Path) -> None:

@@ -6,6 +6,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from fishswarm.learning.arena import (
     SPREADS,
@@ -14,6 +16,7 @@ from fishswarm.learning.arena import (
     cap_speed,
     ideal_velocity,
     initial_positions,
+    replica_contributions,
     replica_velocity,
     simulate,
     spacing_and_speed,
@@ -87,3 +90,43 @@ def test_files_from_before_the_input_scale_keep_the_old_one() -> None:
     assert arena_from(saved) == ARENA and ARENA.replica_input_scale == 40.0
     del saved["replica_input_scale"]
     assert arena_from(saved).replica_input_scale == 100.0
+
+
+def test_files_from_before_reciprocal_replicas_keep_the_studys() -> None:
+    saved = dataclasses.asdict(dataclasses.replace(ARENA, replica_reciprocal=True))
+    assert arena_from(saved).replica_reciprocal
+    del saved["replica_reciprocal"]
+    assert not arena_from(saved).replica_reciprocal
+
+
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    x=st.floats(-150, 150),
+    y=st.floats(-150, 150),
+)
+def test_a_reciprocal_replica_pushes_the_other_way_for_a_neighbour_on_the_other_side(
+    seed: int, x: float, y: float
+) -> None:
+    weights = np.random.default_rng(seed).normal(0, 3, (1, 21))
+    relative = np.array([[[x, y], [-x, -y]]])
+    within = np.ones((1, 2), dtype=np.bool_)
+    reciprocal = dataclasses.replace(ARENA, replica_reciprocal=True)
+    push = replica_contributions(weights, relative, within, arena=reciprocal)
+    np.testing.assert_array_equal(push[0, 0], -push[0, 1])
+    # The study's replica is half of it: its own push minus the mirrored one, halved.
+    plain = replica_contributions(weights, relative, within, arena=ARENA)
+    np.testing.assert_allclose(push[0, 0], (plain[0, 0] - plain[0, 1]) / 2, rtol=0, atol=1e-12)
+
+
+def test_a_reciprocal_replica_in_a_ring_of_neighbours_stays_where_it_is() -> None:
+    # A fish at the centre of six neighbours at 60° steps: whatever its network, the pushes
+    # of opposite neighbours cancel. The study's replica with output biases drifts.
+    angles = np.arange(6) * np.pi / 3
+    ring = 150.0 + 25.0 * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    positions = np.concatenate([[[150.0, 150.0]], ring])[None]
+    weights = np.random.default_rng(5).normal(0, 3, (1, 21))
+    weights[0, 18:21] += 4.0
+    reciprocal = dataclasses.replace(ARENA, replica_reciprocal=True)
+    centre = replica_velocity(positions, weights, arena=reciprocal)[0, 0]
+    np.testing.assert_allclose(centre, [0.0, 0.0], atol=1e-12)
+    assert np.linalg.norm(replica_velocity(positions, weights, arena=ARENA)[0, 0]) > 1.0

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -10,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fishswarm.learning.arena import Arena
 from fishswarm.learning.coevolution import LearningSettings
 from fishswarm.learning.replica_file import ReplicaFileError, load_replica
 from fishswarm.learning.session import LearningError, learn
@@ -52,7 +54,12 @@ def test_resuming_with_other_settings_is_refused_and_with_the_same_allowed(
 ) -> None:
     settings = LearningSettings(models=4, classifiers=4, seed=1, inputs=("speed",))
     learn(settings, generations=1, out=tmp_path)
-    for given in ({"inputs": ("speed", "neighbors")}, {"radii": "unbounded"}, {"seed": 2}):
+    for given in (
+        {"inputs": ("speed", "neighbors")},
+        {"radii": "unbounded"},
+        {"seed": 2},
+        {"replica": "reciprocal"},
+    ):
         with pytest.raises(LearningError, match="holds a run learned with"):
             learn(settings, generations=2, out=tmp_path, resume=True, given=given)
     resumed: list[tuple[int, bool]] = []
@@ -66,6 +73,24 @@ def test_resuming_with_other_settings_is_refused_and_with_the_same_allowed(
     )
     assert resumed == [(1, True)]
     assert summary["generations"] == 2 and summary["settings"]["models"] == 4
+
+
+def test_a_reciprocal_replica_run_resumes_as_one(tmp_path: Path) -> None:
+    arena = dataclasses.replace(Arena(), replica_reciprocal=True)
+    settings = LearningSettings(models=4, classifiers=4, seed=1, inputs=("speed",), arena=arena)
+    learn(settings, generations=1, out=tmp_path)
+    with pytest.raises(LearningError, match="drop --replica to go on with that run"):
+        learn(
+            LearningSettings(), generations=2, out=tmp_path, resume=True, given={"replica": "study"}
+        )
+    summary = learn(
+        LearningSettings(),
+        generations=2,
+        out=tmp_path,
+        resume=True,
+        given={"replica": "reciprocal"},
+    )
+    assert summary["settings"]["arena"]["replica_reciprocal"] is True
 
 
 def test_resume_needs_a_checkpoint(tmp_path: Path) -> None:
@@ -127,7 +152,7 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     header = (
         "fishswarm learn: aggregation ideal fish; classifier inputs speed,neighbors, radii "
         "bounded; 6 replicas × 6 classifiers, seed 5, hall of fame 10, soft weight 1, "
-        "virulence 1, 1 start(s) a generation; up to generation 2"
+        "virulence 1, 1 start(s) a generation, study replicas; up to generation 2"
     )
     assert header in first.stderr.splitlines()[0]
     assert "resumed from generation" not in first.stderr
