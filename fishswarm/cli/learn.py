@@ -30,6 +30,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         "virulence": args.virulence,
         "trials": args.trials,
         "replica": args.replica,
+        "radius_start": args.radius_start,
     }
     given = {name: value for name, value in named.items() if value is not None}
     values = dict(given)
@@ -46,7 +47,9 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         chosen = run.settings
         print(
             f"fishswarm learn: {chosen.behavior} ideal fish; classifier inputs "
-            f"{','.join(chosen.inputs)}, radii {chosen.radii}; {chosen.models} replicas × "
+            f"{','.join(chosen.inputs)}, radii {chosen.radii}"
+            f"{f' from {chosen.first_radius:g} units' if chosen.radius_count else ''}; "
+            f"{chosen.models} replicas × "
             f"{chosen.classifiers} classifiers, seed {chosen.seed}, hall of fame "
             f"{chosen.hall_of_fame}, soft weight {chosen.soft_weight:g}, virulence "
             f"{chosen.virulence:g}, {chosen.trials} start(s) a generation, {chosen.replica} "

@@ -535,6 +535,14 @@ def build_parser() -> argparse.ArgumentParser:
         "1, as in the study; the time per generation grows with it)",
     )
     learn.add_argument(
+        "--radius-start",
+        type=float,
+        metavar="UNITS",
+        help="where the classifiers' learned radii start (default: the middle of their range, "
+        "150 units bounded; a radius near the ideal fish's spacing, e.g. 30, lets classifiers "
+        "judge spacing early)",
+    )
+    learn.add_argument(
         "--replica",
         choices=("reciprocal", "study"),
         help="how a replica's network makes a neighbour's contribution: study (default): the "

@@ -78,6 +78,10 @@ class LearningSettings:
             Cartlidge and Bullock's reduced virulence (Evolutionary Computation 12(2),
             2004): a classifier that leaves replicas no way to score is less fit than one
             they can learn from.
+        radius_start: where the classifiers' learned radii start, units (None: the middle
+            of their range, 150 bounded or 130 unbounded). Classifiers that judge spacing
+            need a radius about the ideal fish's spacing; started at 150, the radius counts
+            nearly the whole school, and the classifiers settle on judging speed alone.
         trials: starts each generation is judged on (1: the study's method); the ideal fish
             and every model swim from each, and every fitness is averaged over them, so that
             a model is not ranked by one lucky or unlucky start. Each start costs a
@@ -95,6 +99,7 @@ class LearningSettings:
     hall_of_fame: int = 10
     virulence: float = 1.0
     trials: int = 1
+    radius_start: float | None = None
 
     def __post_init__(self) -> None:
         if self.behavior not in SPREADS:
@@ -114,6 +119,18 @@ class LearningSettings:
             raise ValueError(f"hall_of_fame must be 0 or more, got {self.hall_of_fame}")
         if self.trials < 1:
             raise ValueError(f"trials must be 1 or more, got {self.trials}")
+        low, high = RADII_MODES[self.radii]
+        if self.radius_start is not None and not low <= self.radius_start <= high:
+            raise ValueError(
+                f"radius_start must lie in [{low:g}, {high:g}] for {self.radii} radii, "
+                f"got {self.radius_start:g}"
+            )
+
+    @property
+    def first_radius(self) -> float:
+        """Where the classifiers' radii start, units."""
+        low, high = RADII_MODES[self.radii]
+        return (low + high) / 2 if self.radius_start is None else self.radius_start
 
     @property
     def replica(self) -> str:
@@ -245,8 +262,7 @@ class Coevolution:
         self._models = _strategy(
             np.zeros(REPLICA_SIZE), settings.models, _stream(settings.seed, _MODELS)
         )
-        low, high = RADII_MODES[settings.radii]
-        radii_start = np.full(settings.radius_count, (low + high) / 2 / RADIUS_SCALE)
+        radii_start = np.full(settings.radius_count, settings.first_radius / RADIUS_SCALE)
         self._classifiers = _strategy(
             np.concatenate([np.zeros(settings.network_size), radii_start]),
             settings.classifiers,

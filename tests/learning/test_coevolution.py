@@ -236,3 +236,24 @@ def test_several_starts_a_generation_judge_every_model_on_each(
     assert resumed.settings.trials == 2 and resumed.history == straight.history
     with pytest.raises(ValueError, match="trials must be 1 or more, got 0"):
         LearningSettings(trials=0)
+
+
+def test_classifier_radii_start_where_asked() -> None:
+    # The same seed draws the same steps: only the radius genes' starting point moves,
+    # by (30 - 150) / 100 before folding.
+    middle = Coevolution(LearningSettings(models=4, classifiers=4, seed=3))
+    short = Coevolution(LearningSettings(models=4, classifiers=4, seed=3, radius_start=30.0))
+    middle.step()
+    short.step()
+    size = middle.settings.network_size
+    np.testing.assert_allclose(
+        short.classifier_population[:, size:] - middle.classifier_population[:, size:],
+        -1.2,
+        atol=1e-12,
+    )
+    np.testing.assert_array_equal(
+        short.classifier_population[:, :size], middle.classifier_population[:, :size]
+    )
+    assert LearningSettings(radii="unbounded").first_radius == 130.0
+    with pytest.raises(ValueError, match=r"radius_start must lie in \[0, 300\]"):
+        LearningSettings(radius_start=-5.0)

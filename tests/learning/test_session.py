@@ -151,8 +151,9 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     assert first.returncode == 0 and second.returncode == 0, second.stderr
     header = (
         "fishswarm learn: aggregation ideal fish; classifier inputs speed,neighbors, radii "
-        "bounded; 6 replicas × 6 classifiers, seed 5, hall of fame 10, soft weight 1, "
-        "virulence 1, 1 start(s) a generation, study replicas; up to generation 2"
+        "bounded from 150 units; 6 replicas × 6 classifiers, seed 5, hall of fame 10, "
+        "soft weight 1, virulence 1, 1 start(s) a generation, study replicas; up to "
+        "generation 2"
     )
     assert header in first.stderr.splitlines()[0]
     assert "resumed from generation" not in first.stderr
