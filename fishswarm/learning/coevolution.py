@@ -78,14 +78,14 @@ class LearningSettings:
             Cartlidge and Bullock's reduced virulence (Evolutionary Computation 12(2),
             2004): a classifier that leaves replicas no way to score is less fit than one
             they can learn from.
-        radius_start: where the classifiers' learned radii start, units (None: the middle
-            of their range, 150 bounded or 130 unbounded). Classifiers that judge spacing
-            need a radius about the ideal fish's spacing; started at 150, the radius counts
-            nearly the whole school, and the classifiers settle on judging speed alone.
         trials: starts each generation is judged on (1: the study's method); the ideal fish
             and every model swim from each, and every fitness is averaged over them, so that
             a model is not ranked by one lucky or unlucky start. Each start costs a
             simulation and a judgement of every sample: the time per generation grows with it.
+        radius_start: where the classifiers' learned radii start, units (None: the middle
+            of their range, 150 bounded or 130 unbounded). Classifiers that judge spacing
+            need a radius about the ideal fish's spacing; started at 150, the radius counts
+            nearly the whole school, and the classifiers settle on judging speed alone.
     """
 
     behavior: str = "aggregation"
