@@ -495,8 +495,9 @@ def build_parser() -> argparse.ArgumentParser:
     learn.add_argument(
         "--inputs",
         help="classifier inputs, comma-separated, from speed, angular-speed, nearest "
-        "(distance to the nearest schoolmate), neighbors (count within one learned radius), "
-        "neighbors2 (two) (default speed,neighbors)",
+        "(distance to the nearest schoolmate), counts (schoolmates within 15, 30 and 60 "
+        "units), neighbors (count within one learned radius), neighbors2 (two) (default "
+        "speed,neighbors)",
     )
     learn.add_argument(
         "--radii",

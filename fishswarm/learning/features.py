@@ -2,10 +2,11 @@
 
 Inputs, in any combination (SPEC.md §4): ``speed``; ``angular-speed``; ``nearest``, the
 distance to the nearest schoolmate (not in the study: a swarm-level view of spacing that
-needs no learned radius); ``neighbors``, the number of schoolmates within a radius the
-classifier learns; ``neighbors2``, the numbers within two learned radii. Inputs are scaled to
-about [0, 1]: speed by the speed cap, angular speed by π, the nearest distance by the
-communication range (capped at 1), counts by the number of schoolmates.
+needs no learned radius); ``counts``, the numbers of schoolmates within fixed radii
+(:data:`COUNT_RADII`; not in the study either); ``neighbors``, the number of schoolmates
+within a radius the classifier learns; ``neighbors2``, the numbers within two learned radii.
+Inputs are scaled to about [0, 1]: speed by the speed cap, angular speed by π, the nearest
+distance by the communication range (capped at 1), counts by the number of schoolmates.
 
 A sample is one fish's track in one trial; a trial of N fish gives N samples.
 """
@@ -21,10 +22,16 @@ from fishswarm.learning.arena import Arena
 
 FloatArray = NDArray[np.float64]
 
-INPUTS = ("speed", "angular-speed", "nearest", "neighbors", "neighbors2")
+INPUTS = ("speed", "angular-speed", "nearest", "counts", "neighbors", "neighbors2")
 
-FIXED_INPUTS = ("speed", "angular-speed", "nearest")
+FIXED_INPUTS = ("speed", "angular-speed", "nearest", "counts")
 """Inputs that do not depend on the classifier (no learned radius)."""
+
+COUNT_RADII = (15.0, 30.0, 60.0)
+"""The radii of the ``counts`` input, arena units: inside, about and beyond the spacing the
+ideal fish keep (about 35). Learned radii stay near where they start (≈ 150 from the middle
+of their range, counting almost the whole school), so classifiers that learn theirs judge
+by speed alone; fixed ones see spacing from the first generation (docs/learning.md)."""
 
 
 def check_inputs(inputs: tuple[str, ...]) -> tuple[str, ...]:
@@ -46,7 +53,10 @@ def radii_count(inputs: tuple[str, ...]) -> int:
 
 def feature_count(inputs: tuple[str, ...]) -> int:
     """How many numbers per step a classifier with these inputs sees."""
-    return sum(1 for name in inputs if name in FIXED_INPUTS) + radii_count(inputs)
+    fixed = sum(
+        len(COUNT_RADII) if name == "counts" else 1 for name in inputs if name in FIXED_INPUTS
+    )
+    return fixed + radii_count(inputs)
 
 
 @dataclass(frozen=True)
@@ -54,8 +64,8 @@ class Samples:
     """The part of S samples that does not depend on the classifier.
 
     Attributes:
-        fixed: (S, T, K) speed, angular speed and nearest distance as chosen, scaled (K may
-            be 0).
+        fixed: (S, T, K) speed, angular speed, nearest distance and fixed-radius counts as
+            chosen, scaled (K may be 0).
         mate_distance: (S, T, N − 1) distances to the schoolmates at each step.
     """
 
@@ -92,6 +102,8 @@ def samples_from(tracks: FloatArray, inputs: tuple[str, ...], *, arena: Arena) -
         columns.append(turn / np.pi)
     if "nearest" in inputs:
         columns.append(np.minimum(mates.min(axis=-1) / arena.communication_range, 1.0))
+    if "counts" in inputs:
+        columns.extend((mates < radius).sum(axis=-1) / (count - 1) for radius in COUNT_RADII)
     fixed = np.stack(columns, axis=-1) if columns else np.zeros((models, frames - 1, count, 0))
     fixed = fixed.transpose(0, 2, 1, 3).reshape(models * count, frames - 1, -1)
     mate_distance = mates.transpose(0, 2, 1, 3).reshape(models * count, frames - 1, count - 1)

@@ -1,5 +1,5 @@
 """What a classifier sees of a track: speed, turning, the nearest schoolmate, counts within
-learned radii — on tracks drawn by hand."""
+fixed and learned radii — on tracks drawn by hand."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ import pytest
 
 from fishswarm.learning.arena import Arena
 from fishswarm.learning.features import (
+    COUNT_RADII,
     check_inputs,
     feature_count,
     neighbor_counts,
@@ -45,6 +46,18 @@ def test_the_nearest_distance_is_capped_at_the_communication_range() -> None:
     far = _line_of_three() * 100.0
     samples = samples_from(far, ("nearest",), arena=arena)
     assert samples.fixed[:, 0, 0].tolist() == [1.0, 1.0, 1.0]
+
+
+def test_counts_within_fixed_radii_by_hand() -> None:
+    samples = samples_from(_line_of_three(), ("speed", "counts"), arena=Arena())
+    assert COUNT_RADII == (15.0, 30.0, 60.0)
+    assert feature_count(("speed", "counts")) == 4
+    assert feature_count(("counts", "neighbors")) == 4
+    # After the step fish 0 and 1 are √65 ≈ 8.1 apart, 1 and 2 are 20, 0 and 2 √745 ≈ 27.3:
+    # within 15, 30 and 60 of each, out of its two schoolmates.
+    np.testing.assert_array_equal(
+        samples.fixed[:, 0, 1:], [[0.5, 1.0, 1.0], [0.5, 1.0, 1.0], [0.0, 1.0, 1.0]]
+    )
 
 
 def test_counts_within_a_learned_radius_by_hand() -> None:
