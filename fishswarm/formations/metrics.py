@@ -168,8 +168,7 @@ def shape_error(
         tolerance: a fish this close to its slot has joined, m.
         starts: starting turns about the vertical tried.
     """
-    fit = align(position, target, starts=starts)
-    return fit.rms, float(np.mean(fit.joined(tolerance)))
+    return shape_summary(align(position, target, starts=starts), tolerance)
 
 
 def local_shape_errors(
@@ -220,12 +219,15 @@ def local_shape_error(
     over fish of their best group's RMS distance from the ideal shape (:func:`local_shape_errors`),
     m, and the fraction of fish whose group lies within ``tolerance`` point by point."""
     fit = local_shape_errors(position, shape, spacing=spacing, tolerance=tolerance)
-    return local_shape_summary(fit, tolerance)
+    return shape_summary(fit, tolerance)
 
 
-def local_shape_summary(fit: Completion, tolerance: float) -> tuple[float, float]:
-    """A school's local-shape fit (:func:`local_shape_errors`) in two numbers: the mean of
-    the fish's RMS errors, m, and the fraction of fish that complete the shape."""
+def shape_summary(fit: Alignment | Completion, tolerance: float) -> tuple[float, float]:
+    """A school's fit to its formation in two numbers: the RMS error, m (a global map's
+    alignment, :func:`align`; for a local shape, :func:`local_shape_errors`, the mean of the
+    fish's RMS errors), and the fraction of fish that have joined."""
+    if isinstance(fit, Alignment):
+        return fit.rms, float(np.mean(fit.joined(tolerance)))
     if fit.rms.size == 0 or np.isnan(fit.rms).all():
         return math.nan, 0.0
     return float(np.mean(fit.rms)), float(np.mean(fit.joined(tolerance)))

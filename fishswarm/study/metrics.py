@@ -23,8 +23,8 @@ from fishswarm.formations.metrics import (
     collisions,
     deviation_energy,
     local_shape_errors,
-    local_shape_summary,
     shape_edges,
+    shape_summary,
 )
 from fishswarm.sim import kernels
 from fishswarm.sim.scenario import Scenario
@@ -339,11 +339,7 @@ class FormationTarget:
             assert self.slots is not None
             if self.slots.shape[0] < count:
                 return dict.fromkeys(FORMATION_METRIC_NAMES, math.nan)
-        fit = self._fit(position)
-        if isinstance(fit, Completion):
-            rms, joined = local_shape_summary(fit, self.tolerance)
-        else:
-            rms, joined = fit.rms, float(np.mean(fit.joined(self.tolerance)))
+        rms, joined = shape_summary(self._fit(position), self.tolerance)
         return {
             "shape_error": rms,
             "joined_fraction": joined,
