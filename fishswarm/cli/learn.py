@@ -45,10 +45,15 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
     def started(run: Any, resumed: bool) -> None:
         chosen = run.settings
+        radii_setting = (
+            f"radii {chosen.radii} from {chosen.first_radius:g} units"
+            if chosen.radius_count
+            else "no learned radii"
+        )
         print(
             f"fishswarm learn: {chosen.behavior} ideal fish; classifier inputs "
-            f"{','.join(chosen.inputs)}, radii {chosen.radii}"
-            f"{f' from {chosen.first_radius:g} units' if chosen.radius_count else ''}; "
+            f"{','.join(chosen.inputs)}, "
+            f"{radii_setting}; "
             f"{chosen.models} replicas × "
             f"{chosen.classifiers} classifiers, seed {chosen.seed}, hall of fame "
             f"{chosen.hall_of_fame}, soft weight {chosen.soft_weight:g}, virulence "

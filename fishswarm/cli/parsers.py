@@ -497,7 +497,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="classifier inputs, comma-separated, from speed, angular-speed, nearest "
         "(distance to the nearest schoolmate), counts (schoolmates within 15, 30 and 60 "
         "units), neighbors (count within one learned radius), neighbors2 (two) (default "
-        "speed,neighbors)",
+        "speed,counts; the study's: speed,neighbors)",
     )
     learn.add_argument(
         "--radii",
@@ -526,8 +526,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--virulence",
         type=float,
         help="in (0, 1]: classifiers are fittest at this score rather than at the highest, "
-        "so they leave replicas something to learn from (reduced virulence; default 1: the "
-        "study's method)",
+        "so they leave replicas something to learn from (reduced virulence; default 0.75; 1: "
+        "the study's method)",
     )
     learn.add_argument(
         "--trials",

@@ -23,6 +23,15 @@ from fishswarm.learning.coevolution import Coevolution, Fitness, LearningSetting
 
 FORMAT = "fishswarm-learning-checkpoint/1"
 
+# What a run was learned with before each of these settings existed: a checkpoint written
+# then lacks the field, and must resume as it ran, not with today's default.
+_BEFORE_THE_SETTING: dict[str, Any] = {
+    "hall_of_fame": 0,
+    "virulence": 1.0,
+    "trials": 1,
+    "radius_start": None,
+}
+
 
 class CheckpointError(ValueError):
     """A file is not a readable learning checkpoint; the message says why."""
@@ -109,7 +118,7 @@ def _settings_data(settings: LearningSettings) -> dict[str, Any]:
 
 
 def _settings_from(data: dict[str, Any]) -> LearningSettings:
-    values = dict(data)
+    values = {**_BEFORE_THE_SETTING, **data}
     values["inputs"] = tuple(values["inputs"])
     values["arena"] = arena_from(values["arena"])
     return LearningSettings(**values)

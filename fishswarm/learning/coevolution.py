@@ -61,7 +61,10 @@ class LearningSettings:
 
     Attributes:
         behavior: ``aggregation`` (start spread 100) or ``dispersion`` (spread 20).
-        inputs: classifier inputs, see :mod:`fishswarm.learning.features`.
+        inputs: classifier inputs, see :mod:`fishswarm.learning.features`. The default,
+            speed and the counts of schoolmates within three fixed radii, shows the
+            classifiers spacing from the first generation; the study's were speed and a
+            count within one learned radius, ``("speed", "neighbors")``.
         radii: ``bounded`` or ``unbounded``.
         models: replica population size.
         classifiers: classifier population size.
@@ -74,7 +77,8 @@ class LearningSettings:
             judge the tracks of this many past best models, against cycling and against
             disengagement (one side winning so completely that the other gets no signal).
         virulence: λ in (0, 1]: classifiers are fittest when their score (thresholded plus
-            soft, scaled to [0, 1]) is λ, not when it is highest (1: the study's method).
+            soft, scaled to [0, 1]) is λ, not when it is highest (1: the study's method;
+            0.75 by default, against the classifiers winning outright).
             Cartlidge and Bullock's reduced virulence (Evolutionary Computation 12(2),
             2004): a classifier that leaves replicas no way to score is less fit than one
             they can learn from.
@@ -89,7 +93,7 @@ class LearningSettings:
     """
 
     behavior: str = "aggregation"
-    inputs: tuple[str, ...] = ("speed", "neighbors")
+    inputs: tuple[str, ...] = ("speed", "counts")
     radii: str = "bounded"
     models: int = 100
     classifiers: int = 100
@@ -97,7 +101,7 @@ class LearningSettings:
     arena: Arena = field(default_factory=Arena)
     soft_weight: float = 1.0
     hall_of_fame: int = 10
-    virulence: float = 1.0
+    virulence: float = 0.75
     trials: int = 1
     radius_start: float | None = None
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
@@ -117,6 +118,22 @@ def test_hall_of_fame_keeps_champions_and_resumes_exactly(tmp_path: Path) -> Non
     resumed = _resumed(settings, tmp_path / "checkpoint.npz", before=2, after=2)
     assert resumed.history == straight.history
     assert not np.array_equal(straight.population, _run(SMALL, 4).population)
+
+
+def test_a_checkpoint_from_before_a_setting_existed_resumes_as_it_ran(tmp_path: Path) -> None:
+    path = tmp_path / "checkpoint.npz"
+    save_checkpoint(_run(SMALL, 1), path)
+    with np.load(path, allow_pickle=False) as data:
+        arrays = {name: data[name] for name in data.files}
+    meta = json.loads(str(arrays["meta"]))
+    for name in ("hall_of_fame", "virulence", "trials", "radius_start"):
+        del meta["settings"][name]
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez(path, **arrays)
+    settings = load_checkpoint(path).settings
+    # Today's defaults are a hall of fame of 10 and virulence 0.75; the run had neither.
+    assert (settings.hall_of_fame, settings.virulence, settings.trials) == (0, 1.0, 1)
+    assert settings.radius_start is None
 
 
 def test_a_checkpoint_is_plain_data_and_a_truncated_one_is_explained(tmp_path: Path) -> None:

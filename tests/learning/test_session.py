@@ -124,8 +124,9 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     )
     assert straight.returncode == 0, straight.stderr
     assert "generation 4/4" in straight.stderr
-    (radii,) = [line for line in straight.stderr.splitlines() if "learned radii" in line]
-    assert radii.startswith("  learned radii  r1 ") and radii.endswith(" units")
+    (radii,) = [line for line in straight.stderr.splitlines() if line.startswith("  learned radii")]
+    # The default inputs count within fixed radii: nothing learned to report.
+    assert radii == "  learned radii  none (the classifiers did not count neighbours)"
     # Four generations of six replicas do not learn to aggregate: the target is missed, and
     # the line says by how much, as summary.json does.
     target = json.loads((tmp_path / "a" / "summary.json").read_text())["target"]
@@ -150,10 +151,9 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     )
     assert first.returncode == 0 and second.returncode == 0, second.stderr
     header = (
-        "fishswarm learn: aggregation ideal fish; classifier inputs speed,neighbors, radii "
-        "bounded from 150 units; 6 replicas × 6 classifiers, seed 5, hall of fame 10, "
-        "soft weight 1, virulence 1, 1 start(s) a generation, study replicas; up to "
-        "generation 2"
+        "fishswarm learn: aggregation ideal fish; classifier inputs speed,counts, no learned "
+        "radii; 6 replicas × 6 classifiers, seed 5, hall of fame 10, soft weight 1, "
+        "virulence 0.75, 1 start(s) a generation, study replicas; up to generation 2"
     )
     assert header in first.stderr.splitlines()[0]
     assert "resumed from generation" not in first.stderr
@@ -182,6 +182,23 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     assert (tmp_path / "a" / "history.csv").read_text() == (
         tmp_path / "b" / "history.csv"
     ).read_text()
+
+
+def test_learn_names_where_learned_radii_start_and_where_they_ended(tmp_path: Path) -> None:
+    command = [sys.executable, "-m", "fishswarm", "learn", "--models", "4", "--classifiers"]
+    command += ["4", "--generations", "1", "--inputs", "speed,neighbors", "--radius-start"]
+    done = subprocess.run(
+        [*command, "30", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    lines = done.stderr.splitlines()
+    assert "classifier inputs speed,neighbors, radii bounded from 30 units; 4 replicas" in lines[0]
+    (radii,) = [line for line in lines if line.startswith("  learned radii")]
+    assert radii.startswith("  learned radii  r1 ") and radii.endswith(" units")
 
 
 def test_learned_radii_print_as_mean_and_spread_with_their_unit() -> None:
