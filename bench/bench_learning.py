@@ -23,6 +23,7 @@ import time
 
 import numpy as np
 
+from fishswarm.learning.arena import REPLICA_KINDS, Arena
 from fishswarm.learning.coevolution import Coevolution, LearningSettings
 
 
@@ -46,18 +47,28 @@ def main() -> None:
         default=1.0,
         help="weight of the soft judgement (0.001: the study's)",
     )
+    parser.add_argument(
+        "--replica",
+        nargs="+",
+        choices=REPLICA_KINDS,
+        default=["isotropic"],
+        help="replica kinds to time (default: learn's, isotropic)",
+    )
     args = parser.parse_args()
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
         f"{platform.python_version()}, numpy {np.__version__}\n"
     )
-    print("| classifier inputs | s/generation (mean) | min | 500 generations |")
-    print("|---|---:|---:|---:|")
-    for inputs in args.inputs:
+    print("| classifier inputs | replica | s/generation (mean) | min | 500 generations |")
+    print("|---|---|---:|---:|---:|")
+    for inputs, replica in [
+        (inputs, replica) for inputs in args.inputs for replica in args.replica
+    ]:
         settings = LearningSettings(
             inputs=tuple(inputs.split(",")),
             hall_of_fame=args.hall_of_fame,
             soft_weight=args.soft_weight,
+            arena=Arena(replica=replica),
         )
         run = Coevolution(settings)
         for _ in range(args.warm_up):
@@ -69,7 +80,8 @@ def main() -> None:
             times.append(time.perf_counter() - started)
         mean = float(np.mean(times))
         print(
-            f"| {inputs} | {mean:.2f} | {min(times):.2f} | {500 * mean / 60:.1f} min |", flush=True
+            f"| {inputs} | {replica} | {mean:.2f} | {min(times):.2f} | {500 * mean / 60:.1f} min |",
+            flush=True,
         )
 
 

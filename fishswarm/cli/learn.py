@@ -35,7 +35,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
     given = {name: value for name, value in named.items() if value is not None}
     values = dict(given)
     if "replica" in values:
-        values["arena"] = Arena(replica_reciprocal=values.pop("replica") == "reciprocal")
+        values["arena"] = Arena(replica=values.pop("replica"))
     try:
         settings = LearningSettings(**values)
     except ValueError as error:

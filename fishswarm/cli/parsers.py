@@ -545,10 +545,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     learn.add_argument(
         "--replica",
-        choices=("reciprocal", "study"),
-        help="how a replica's network makes a neighbour's contribution: study (default): the "
-        "network's answer as it is (its replicas can drift as one school); reciprocal: its "
-        "odd part, so that neighbours on opposite sides push opposite ways",
+        choices=("isotropic", "reciprocal", "study"),
+        help="how a replica's network makes a neighbour's contribution: isotropic (default): "
+        "the network sees the neighbour straight ahead at its distance and its answer is "
+        "turned by the neighbour's bearing, the same law in every direction; study: the "
+        "network sees the neighbour's position in the arena's axes and its answer is the "
+        "push (its replicas can drift as one school); reciprocal: the odd part of the "
+        "study's, so that neighbours on opposite sides push opposite ways",
     )
     learn.add_argument(
         "--out", type=Path, default=Path("runs/learn"), help="output folder (default runs/learn)"

@@ -20,6 +20,9 @@ from fishswarm.learning.networks import replica_outputs
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
+REPLICA_KINDS = ("study", "reciprocal", "isotropic")
+"""How a replica's network can make a neighbour's contribution (see :class:`Arena`)."""
+
 SPREADS = {"dispersion": 20.0, "aggregation": 100.0}
 """Side of the square the fish start in: 20 makes the school disperse, 100 aggregate."""
 
@@ -43,15 +46,20 @@ class Arena:
             replica's weights must grow 2.5 times as large for the same turn, and CMA-ES
             found no replica that disperses even when fitted to the ideal fish's spacing
             directly (57 % off, against 9 % at 40; docs/learning.md).
-        replica_reciprocal: a neighbour's contribution is the odd part of the replica
-            network's answer, ½(f(r) − f(−r)) for a neighbour at r, so that neighbours on
-            opposite sides push opposite ways; False: the network's answer as it is (the
-            study's replica). The study's replica can give every neighbour the same push
-            (its output biases alone do), and a school of 25 then drifts as one at full
-            speed: the dispersion replicas learned that way swam as fast as the ideal fish
-            while their spacing grew a tenth as fast (docs/learning.md). An option: over
-            three seeds it met the dispersion target once (the first run to) but missed
-            the others by more than the study's replica does.
+        replica: how a replica's network makes a neighbour's contribution (one of
+            :data:`REPLICA_KINDS`). ``study``: the network sees the neighbour's relative
+            position in the arena's axes and its answer is the push, as in the study.
+            ``reciprocal``: the odd part of that, ½(f(r) − f(−r)), so that neighbours on
+            opposite sides push opposite ways. ``isotropic``: the network sees the
+            neighbour straight ahead at its distance, (|r|, 0), and its answer is turned
+            back by the neighbour's bearing, so that the law is the same in every direction
+            (as the ideal fish's is) and opposite neighbours push opposite ways. The study's
+            replica can give every neighbour the same push (its output biases alone do), and
+            a school of 25 then drifts as one at full speed: dispersion replicas learned
+            that way swam as fast as the ideal fish while their spacing grew a tenth as fast
+            (docs/learning.md). Learning runs use ``isotropic`` by default
+            (:class:`~fishswarm.learning.coevolution.LearningSettings`); an Arena is the
+            study's unless told.
     """
 
     side: float = 300.0
@@ -63,7 +71,13 @@ class Arena:
     spacing: float = 40.0
     communication_range: float = 100.0
     replica_input_scale: float = 40.0
-    replica_reciprocal: bool = False
+    replica: str = "study"
+
+    def __post_init__(self) -> None:
+        if self.replica not in REPLICA_KINDS:
+            raise ValueError(
+                f"replica must be one of {', '.join(REPLICA_KINDS)}, got {self.replica!r}"
+            )
 
 
 EARLIER_REPLICA_INPUT_SCALE = 100.0
@@ -73,10 +87,12 @@ EARLIER_REPLICA_INPUT_SCALE = 100.0
 def arena_from(data: Mapping[str, Any]) -> Arena:
     """The arena a checkpoint or replica file names (its ``arena`` settings); a file from
     before ``replica_input_scale`` existed had replicas see positions over 100, one from
-    before ``replica_reciprocal`` existed had the study's replica (the default)."""
+    before ``replica`` existed had the study's replica or, if it says
+    ``replica_reciprocal``, the reciprocal one."""
     values = dict(data)
     values.setdefault("replica_input_scale", EARLIER_REPLICA_INPUT_SCALE)
-    values.setdefault("replica_reciprocal", False)
+    reciprocal = values.pop("replica_reciprocal", False)
+    values.setdefault("replica", "reciprocal" if reciprocal else "study")
     return Arena(**values)
 
 
@@ -130,9 +146,10 @@ def replica_velocity(positions: FloatArray, weights: FloatArray, *, arena: Arena
     """Replica fish: each neighbour's contribution comes from the model's network.
 
     The network sees the neighbour's relative position divided by the arena's
-    ``replica_input_scale`` and returns a direction (x, y in (−1, 1)) and a speed (in
-    (0, 1) × speed cap); a neighbour contributes speed × direction (its odd part with
-    ``arena.replica_reciprocal``). Contributions are summed and the sum is capped.
+    ``replica_input_scale`` (in the neighbour's own frame with ``arena.replica``
+    ``isotropic``) and returns a direction (x, y in (−1, 1)) and a speed (in (0, 1) × speed
+    cap); a neighbour contributes speed × direction (see :func:`replica_contributions`).
+    Contributions are summed and the sum is capped.
 
     Args:
         positions: (M, N, 2), one row of fish per model.
@@ -159,17 +176,38 @@ def replica_contributions(
         arena: the arena (input scale and speed cap).
 
     Returns:
-        (M, ..., 2) speed × direction of each neighbour (the odd part of it, ½(f(r) − f(−r)),
-        when ``arena.replica_reciprocal``), zero where not ``within``.
+        (M, ..., 2) speed × direction of each neighbour, zero where not ``within``: the
+        network's answer f(r) for ``arena.replica`` ``study``; its odd part,
+        ½(f(r) − f(−r)), for ``reciprocal``; for ``isotropic``, its answer for the
+        neighbour seen straight ahead, f((|r|, 0)), turned by the neighbour's bearing.
     """
-    scaled = relative / arena.replica_input_scale
-    contribution = _network_push(replica_outputs(weights, scaled), arena)
-    if arena.replica_reciprocal:
-        contribution = 0.5 * (
-            contribution - _network_push(replica_outputs(weights, -scaled), arena)
-        )
+    if arena.replica == "isotropic":
+        contribution = _turned_to_each_neighbour(weights, relative, arena)
+    else:
+        scaled = relative / arena.replica_input_scale
+        contribution = _network_push(replica_outputs(weights, scaled), arena)
+        if arena.replica == "reciprocal":
+            contribution = 0.5 * (
+                contribution - _network_push(replica_outputs(weights, -scaled), arena)
+            )
     result: FloatArray = contribution * within[..., None]
     return result
+
+
+def _turned_to_each_neighbour(
+    weights: FloatArray, relative: FloatArray, arena: Arena
+) -> FloatArray:
+    """Pushes (M, ..., 2) of an isotropic replica: the network sees each neighbour on its
+    x axis at the neighbour's distance, and its answer (along, across) is turned back so
+    that "along" points at the neighbour and "across" a quarter turn anticlockwise of it.
+    A neighbour at the fish's own position (distance 0) has no bearing and pushes not."""
+    distance = np.sqrt(np.einsum("...d,...d->...", relative, relative))
+    seen = np.stack([distance / arena.replica_input_scale, np.zeros_like(distance)], -1)
+    push = _network_push(replica_outputs(weights, seen), arena)
+    unit = relative / np.where(distance > 0, distance, np.inf)[..., None]
+    across = np.stack([-unit[..., 1], unit[..., 0]], -1)
+    turned: FloatArray = push[..., :1] * unit + push[..., 1:] * across
+    return turned
 
 
 def _network_push(outputs: FloatArray, arena: Arena) -> FloatArray:

@@ -69,7 +69,8 @@ class LearningSettings:
         models: replica population size.
         classifiers: classifier population size.
         seed: master seed.
-        arena: the 2-D world.
+        arena: the 2-D world, with isotropic replicas by default (``Arena()`` is the
+            study's world with the study's replica).
         soft_weight: share of the soft output added to the thresholded fitness (1: as much
             as the thresholded one; 0.001: it only breaks ties, the study's method).
         hall_of_fame: past champions drawn into each generation (0: the study's method).
@@ -98,7 +99,7 @@ class LearningSettings:
     models: int = 100
     classifiers: int = 100
     seed: int = 0
-    arena: Arena = field(default_factory=Arena)
+    arena: Arena = field(default_factory=lambda: Arena(replica="isotropic"))
     soft_weight: float = 1.0
     hall_of_fame: int = 10
     virulence: float = 0.75
@@ -138,9 +139,9 @@ class LearningSettings:
 
     @property
     def replica(self) -> str:
-        """How a replica's network makes a neighbour's contribution: ``reciprocal`` (its odd
-        part) or ``study`` (as it is); see :class:`~fishswarm.learning.arena.Arena`."""
-        return "reciprocal" if self.arena.replica_reciprocal else "study"
+        """How a replica's network makes a neighbour's contribution: ``isotropic``,
+        ``reciprocal`` or ``study``; see :class:`~fishswarm.learning.arena.Arena`."""
+        return self.arena.replica
 
     @property
     def network_size(self) -> int:

@@ -212,7 +212,7 @@ def test_replica_motion_by_hand() -> None:
     np.testing.assert_array_equal(far, [[0.0, 0.0]])
     # A reciprocal replica pushes the other way for a neighbour on the other side: a push
     # every neighbour gives alike cancels, and the fish stays.
-    still = replica_motion(neighbors, mask, weights=weights, arena=Arena(replica_reciprocal=True))
+    still = replica_motion(neighbors, mask, weights=weights, arena=Arena(replica="reciprocal"))
     np.testing.assert_array_equal(still, [[0.0, 0.0]])
 
 

@@ -92,11 +92,16 @@ def test_files_from_before_the_input_scale_keep_the_old_one() -> None:
     assert arena_from(saved).replica_input_scale == 100.0
 
 
-def test_files_from_before_reciprocal_replicas_keep_the_studys() -> None:
-    saved = dataclasses.asdict(dataclasses.replace(ARENA, replica_reciprocal=True))
-    assert arena_from(saved).replica_reciprocal
-    del saved["replica_reciprocal"]
-    assert not arena_from(saved).replica_reciprocal
+def test_files_from_before_the_replica_kind_keep_the_replica_they_were_learned_with() -> None:
+    saved = dataclasses.asdict(dataclasses.replace(ARENA, replica="isotropic"))
+    assert arena_from(saved).replica == "isotropic"
+    del saved["replica"]
+    assert arena_from(saved).replica == "study"  # before reciprocal replicas
+    # Between 2026-11-25 and the isotropic replica, files said replica_reciprocal.
+    assert arena_from({**saved, "replica_reciprocal": True}).replica == "reciprocal"
+    assert arena_from({**saved, "replica_reciprocal": False}).replica == "study"
+    with pytest.raises(ValueError, match="replica must be one of study, reciprocal, isotropic"):
+        Arena(replica="mirror")
 
 
 @given(
@@ -110,7 +115,7 @@ def test_a_reciprocal_replica_pushes_the_other_way_for_a_neighbour_on_the_other_
     weights = np.random.default_rng(seed).normal(0, 3, (1, 21))
     relative = np.array([[[x, y], [-x, -y]]])
     within = np.ones((1, 2), dtype=np.bool_)
-    reciprocal = dataclasses.replace(ARENA, replica_reciprocal=True)
+    reciprocal = dataclasses.replace(ARENA, replica="reciprocal")
     push = replica_contributions(weights, relative, within, arena=reciprocal)
     np.testing.assert_array_equal(push[0, 0], -push[0, 1])
     # The study's replica is half of it: its own push minus the mirrored one, halved.
@@ -126,7 +131,57 @@ def test_a_reciprocal_replica_in_a_ring_of_neighbours_stays_where_it_is() -> Non
     positions = np.concatenate([[[150.0, 150.0]], ring])[None]
     weights = np.random.default_rng(5).normal(0, 3, (1, 21))
     weights[0, 18:21] += 4.0
-    reciprocal = dataclasses.replace(ARENA, replica_reciprocal=True)
+    reciprocal = dataclasses.replace(ARENA, replica="reciprocal")
     centre = replica_velocity(positions, weights, arena=reciprocal)[0, 0]
     np.testing.assert_allclose(centre, [0.0, 0.0], atol=1e-12)
     assert np.linalg.norm(replica_velocity(positions, weights, arena=ARENA)[0, 0]) > 1.0
+
+
+ISOTROPIC = dataclasses.replace(ARENA, replica="isotropic")
+
+
+def test_an_isotropic_replica_turns_its_answer_to_each_neighbours_bearing() -> None:
+    # Drawn on paper: the network answers (along, across) for a neighbour straight ahead
+    # at 20 units; a neighbour at 20 units on +y gets that answer turned a quarter turn
+    # anticlockwise, (−across, along), and one at the fish's own place none.
+    weights = np.random.default_rng(11).normal(0, 2, (1, 21))
+    ahead = replica_contributions(
+        weights, np.array([[[20.0, 0.0]]]), np.ones((1, 1), np.bool_), arena=ISOTROPIC
+    )[0, 0]
+    study = replica_contributions(
+        weights, np.array([[[20.0, 0.0]]]), np.ones((1, 1), np.bool_), arena=ARENA
+    )[0, 0]
+    np.testing.assert_allclose(ahead, study, rtol=0, atol=1e-12)  # on the x axis, as the study's
+    relative = np.array([[[0.0, 20.0], [0.0, 0.0]]])
+    push = replica_contributions(weights, relative, np.ones((1, 2), np.bool_), arena=ISOTROPIC)
+    np.testing.assert_allclose(push[0, 0], [-ahead[1], ahead[0]], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(push[0, 1], [0.0, 0.0])
+
+
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    x=st.floats(-150, 150),
+    y=st.floats(-150, 150),
+    angle=st.floats(-np.pi, np.pi),
+)
+def test_an_isotropic_replica_obeys_the_same_law_in_every_direction(
+    seed: int, x: float, y: float, angle: float
+) -> None:
+    weights = np.random.default_rng(seed).normal(0, 3, (1, 21))
+    turn = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    relative = np.array([[[x, y], turn @ [x, y], [-x, -y]]])
+    push = replica_contributions(weights, relative, np.ones((1, 3), np.bool_), arena=ISOTROPIC)
+    # A neighbour turned about the fish turns its push with it; one on the other side
+    # pushes exactly the other way (no drift of the school as one).
+    np.testing.assert_allclose(push[0, 1], turn @ push[0, 0], rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(push[0, 2], -push[0, 0])
+
+
+def test_an_isotropic_replica_in_a_ring_of_neighbours_stays_where_it_is() -> None:
+    angles = np.arange(6) * np.pi / 3
+    ring = 150.0 + 25.0 * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+    positions = np.concatenate([[[150.0, 150.0]], ring])[None]
+    weights = np.random.default_rng(5).normal(0, 3, (1, 21))
+    weights[0, 18:21] += 4.0  # output biases: the study's replica drifts (test above)
+    centre = replica_velocity(positions, weights, arena=ISOTROPIC)[0, 0]
+    np.testing.assert_allclose(centre, [0.0, 0.0], atol=1e-12)

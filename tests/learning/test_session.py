@@ -76,7 +76,7 @@ def test_resuming_with_other_settings_is_refused_and_with_the_same_allowed(
 
 
 def test_a_reciprocal_replica_run_resumes_as_one(tmp_path: Path) -> None:
-    arena = dataclasses.replace(Arena(), replica_reciprocal=True)
+    arena = dataclasses.replace(Arena(), replica="reciprocal")
     settings = LearningSettings(models=4, classifiers=4, seed=1, inputs=("speed",), arena=arena)
     learn(settings, generations=1, out=tmp_path)
     with pytest.raises(LearningError, match="drop --replica to go on with that run"):
@@ -90,7 +90,7 @@ def test_a_reciprocal_replica_run_resumes_as_one(tmp_path: Path) -> None:
         resume=True,
         given={"replica": "reciprocal"},
     )
-    assert summary["settings"]["arena"]["replica_reciprocal"] is True
+    assert summary["settings"]["arena"]["replica"] == "reciprocal"
 
 
 def test_resume_needs_a_checkpoint(tmp_path: Path) -> None:
@@ -153,7 +153,7 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     header = (
         "fishswarm learn: aggregation ideal fish; classifier inputs speed,counts, no learned "
         "radii; 6 replicas × 6 classifiers, seed 5, hall of fame 10, soft weight 1, "
-        "virulence 0.75, 1 start(s) a generation, study replicas; up to generation 2"
+        "virulence 0.75, 1 start(s) a generation, isotropic replicas; up to generation 2"
     )
     assert header in first.stderr.splitlines()[0]
     assert "resumed from generation" not in first.stderr
