@@ -10,6 +10,7 @@ from typing import Any
 from fishswarm import __version__
 from fishswarm.behaviors.registry import BEHAVIORS
 from fishswarm.cli.study import add_parsers as add_study_parsers
+from fishswarm.learning.arena import REPLICA_KINDS
 from fishswarm.protocols.messages import FORMATION_SHAPES
 from fishswarm.sim.scenario import (
     PROFILES,
@@ -545,7 +546,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     learn.add_argument(
         "--replica",
-        choices=("isotropic", "reciprocal", "study"),
+        choices=REPLICA_KINDS,
         help="how a replica's network makes a neighbour's contribution: isotropic (default): "
         "the network sees the neighbour straight ahead at its distance and its answer is "
         "turned by the neighbour's bearing, the same law in every direction; study: the "
