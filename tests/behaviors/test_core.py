@@ -214,6 +214,14 @@ def test_replica_motion_by_hand() -> None:
     # every neighbour gives alike cancels, and the fish stays.
     still = replica_motion(neighbors, mask, weights=weights, arena=Arena(replica="reciprocal"))
     np.testing.assert_array_equal(still, [[0.0, 0.0]])
+    # An isotropic replica turns the same answer to each neighbour's bearing: 9 towards each
+    # of the two, (0.3, 0.1)/0.316 and (−0.2, 0.2)/0.283, summing to 9 × (0.242, 1.023),
+    # longer than 9, so capped: 9 units/s towards (0.230, 0.973), between the two.
+    toward = replica_motion(neighbors, mask, weights=weights, arena=Arena(replica="isotropic"))
+    total = np.array([0.3, 0.1]) / np.hypot(0.3, 0.1) + np.array([-0.2, 0.2]) / np.hypot(0.2, 0.2)
+    expected = 9 * STUDY_SCALE * total / np.linalg.norm(total)
+    np.testing.assert_allclose(toward, [expected], rtol=1e-12)
+    np.testing.assert_allclose(expected / (9 * STUDY_SCALE), [0.2298, 0.9733], atol=1e-4)
 
 
 def test_a_replica_runs_with_the_input_scale_it_was_learned_with(tmp_path: Path) -> None:
