@@ -17,6 +17,7 @@ Results and conditions are kept in docs/benchmarks.md.
 from __future__ import annotations
 
 import argparse
+import itertools
 import os
 import platform
 import time
@@ -61,9 +62,7 @@ def main() -> None:
     )
     print("| classifier inputs | replica | s/generation (mean) | min | 500 generations |")
     print("|---|---|---:|---:|---:|")
-    for inputs, replica in [
-        (inputs, replica) for inputs in args.inputs for replica in args.replica
-    ]:
+    for inputs, replica in itertools.product(args.inputs, args.replica):
         settings = LearningSettings(
             inputs=tuple(inputs.split(",")),
             hall_of_fame=args.hall_of_fame,

@@ -35,7 +35,10 @@ by speed alone; fixed ones see spacing from the first generation (docs/learning.
 
 
 def check_inputs(inputs: tuple[str, ...]) -> tuple[str, ...]:
-    """Validate a choice of classifier inputs (order kept, no repeats, not both counts)."""
+    """Validate a choice of classifier inputs.
+
+    The order is kept; no name may repeat, nor may ``neighbors`` and ``neighbors2`` go
+    together."""
     unknown = [name for name in inputs if name not in INPUTS]
     if unknown or not inputs or len(set(inputs)) != len(inputs):
         raise ValueError(
