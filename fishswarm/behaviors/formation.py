@@ -44,6 +44,7 @@ from fishswarm.behaviors.core import (
 from fishswarm.bluebot.control import PidGains
 from fishswarm.bluebot.dynamics import rotate_to_tank
 from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.formations.lattice import star_map
 from fishswarm.formations.local import LOCAL_SHAPES, local_spots
 from fishswarm.formations.maps import target_map
 from fishswarm.formations.rules import (
@@ -73,6 +74,11 @@ FORMATION_KIND = BROADCAST_KINDS.index("formation")
 NO_HOPS = 10_000
 """The hop count of a fish that has heard of no leader."""
 SLOT_RULES = ("share", "study")
+LOCAL_RULES = ("lattice", "neighbors")
+"""How fish make a local shape: places on the shape's lattice anchored at the leader (for
+shapes that have one, :data:`LATTICES`), or spots next to their nearest neighbours."""
+LATTICES = {"trigonal-planar": star_map}
+"""The local shapes with a map of places where every fish completes one."""
 DEFAULT_EFFORT_MARGIN = 40.0
 """Default margin of effort sharing, gain-weighted fin beats (set from measurements, see
 docs/formations.md)."""
@@ -114,6 +120,10 @@ class FormationParams:
             exceeds that of the most rested fish it hears by ``effort_margin`` asks it to
             swap places; the asked fish agrees by flag and both move (:func:`share_effort`).
         effort_margin: gain-weighted fin beats.
+        local_rule: how fish make a local shape: ``lattice`` — a map of places where every
+            fish completes the shape, anchored at the leader like a global map (shapes in
+            :data:`LATTICES`; the others are made with neighbours whatever this says) —
+            or ``neighbors``: spots that complete it with the fish's nearest neighbours.
     """
 
     shape: str
@@ -127,10 +137,15 @@ class FormationParams:
     station: float | None = None
     rotate_effort: bool = False
     effort_margin: float = DEFAULT_EFFORT_MARGIN
+    local_rule: str = "lattice"
 
     def __post_init__(self) -> None:
         if self.rule not in SLOT_RULES:
             raise ValueError(f"slot rule must be one of {', '.join(SLOT_RULES)}, got {self.rule!r}")
+        if self.local_rule not in LOCAL_RULES:
+            raise ValueError(
+                f"local rule must be one of {', '.join(LOCAL_RULES)}, got {self.local_rule!r}"
+            )
         if self.shape not in FORMATION_SHAPES:
             raise ValueError(
                 f"formation must be one of {', '.join(FORMATION_SHAPES)}, got {self.shape!r}"
@@ -142,8 +157,27 @@ class FormationParams:
 
     @property
     def is_local(self) -> bool:
-        """Whether the shape is local (made with the nearest neighbours)."""
+        """Whether the shape is local (judged with the nearest neighbours)."""
         return self.shape in LOCAL_SHAPES
+
+    @property
+    def uses_map(self) -> bool:
+        """Whether fish take places on a map anchored at the leader: a global map's, or a
+        local shape's lattice."""
+        return not self.is_local or (self.local_rule == "lattice" and self.shape in LATTICES)
+
+    def slots(self) -> FloatArray:
+        """(count, 3) the map's places in the formation frame, m (global maps and lattices).
+
+        Raises:
+            ValueError: a shape made with neighbours, which has no map.
+        """
+        if not self.uses_map:
+            raise ValueError(f"{self.shape} is made with neighbours: it has no map")
+        make = LATTICES.get(self.shape)
+        if make is not None:
+            return make(self.count, spacing=self.spacing)
+        return target_map(self.shape, self.count, spacing=self.spacing)
 
 
 @dataclass(frozen=True)
@@ -181,7 +215,8 @@ def fresh_formation_memory(count: int) -> FormationMemory:
 def formation_params(settings: Mapping[str, Any]) -> FormationParams:
     """The behaviour's parameters from a scenario's settings (``formation``, ``spacing``,
     ``tolerance``, ``formation_heading_deg``, ``flags``, ``fish``, ``slot_rule``,
-    ``formation_lead``, ``station_distance``, ``rotate_effort``, ``effort_margin``)."""
+    ``formation_lead``, ``station_distance``, ``rotate_effort``, ``effort_margin``,
+    ``local_rule``)."""
     spacing = settings.get("spacing")
     spacing = DEFAULT_SPACING if spacing is None else float(spacing)
     tolerance = settings.get("tolerance")
@@ -198,6 +233,7 @@ def formation_params(settings: Mapping[str, Any]) -> FormationParams:
         station=None if station is None else float(station),
         rotate_effort=bool(settings.get("rotate_effort", False)),
         effort_margin=float(settings.get("effort_margin", DEFAULT_EFFORT_MARGIN)),
+        local_rule=str(settings.get("local_rule") or "lattice"),
     )
 
 
@@ -267,18 +303,32 @@ def _with_senders(
 
 
 def _agreed_leader(
-    leader: FloatArray, rank: IntArray, inbox: Inbox, leaders: BoolArray, axis: FloatArray
+    leader: FloatArray,
+    rank: IntArray,
+    inbox: Inbox,
+    leaders: BoolArray,
+    axis: FloatArray,
+    *,
+    led: BoolArray,
+    margin: float,
 ) -> tuple[FloatArray, IntArray]:
     """The leader the flags agree on: a fish that hears a leader's flag anchors its map where
-    that leader appears — the one furthest along the orientation if it hears several, and
-    only if it is ahead of the fish (a fish ahead of every flagged leader leads itself)."""
+    that leader appears — the one furthest along the orientation if it hears several — if
+    the leader is ahead of the fish; a fish that did not lead at its last decision (``led``
+    false) follows a flagged leader up to ``margin`` m behind it too. A fish ahead of every
+    flagged leader leads itself.
+
+    The margin keeps the lead where it is while fish pass the leader on their way to their
+    places: without it a fish that swims past the leader takes the lead, every fish's map
+    jumps with it, and the old leader, no longer leading, swims off — and a BlueBot glides
+    for tens of seconds after a stroke."""
     along = np.einsum("bmd,bd->bm", inbox.sender, axis)
     along = np.where(leaders, along, -np.inf)
     if along.shape[1] == 0:
         return leader, rank
     best = np.argmax(along, axis=1)
     rows = np.arange(leader.shape[0])
-    follows = along[rows, best] > 0.0
+    follows = along[rows, best] > np.where(led, 0.0, -margin)
     agreed = np.where(follows[:, None], inbox.sender[rows, best], leader)
     return agreed, np.where(follows & (rank == 0), 1, rank)
 
@@ -430,7 +480,7 @@ def steer_formation(
     orientation = _orientation(perception, params)
     heard = _heard_flags(inbox, params)
     rank = np.zeros(count, dtype=np.int64)
-    if params.is_local:
+    if not params.uses_map:
         places, valid, preference = local_spots(
             params.shape, neighbors, mask, spacing=params.spacing
         )
@@ -444,14 +494,27 @@ def steer_formation(
             preference=preference,
         )  # fmt: skip
     else:
-        slots = target_map(params.shape, params.count, spacing=params.spacing)
+        slots = params.slots()
         known, real, holding = _with_senders(neighbors, mask, inbox, heard, params)
         leader, rank = leader_and_rank(known, real, orientation)
-        leader, rank = _agreed_leader(leader, rank, inbox, heard.leader, orientation)
+        if params.flags:
+            # A leader keeps the lead against fish that pass it by less than a spacing (they
+            # follow its flag): see _agreed_leader.
+            keeps = (memory.place == 0) & (
+                np.einsum("bd,bd->b", leader, orientation) <= params.spacing
+            )
+            leader = np.where(keeps[:, None], 0.0, leader)
+            rank = np.where(keeps, 0, rank)
+        leader, rank = _agreed_leader(
+            leader, rank, inbox, heard.leader, orientation,
+            led=memory.place == 0, margin=params.spacing,
+        )  # fmt: skip
+        leads = rank == 0
         if params.station is not None and perception.landmarks.shape[1]:
             # A fish that sees the landmark knows where the station is: slot 0 goes there.
             station = perception.landmarks[:, 0] - params.station * orientation
             leader = np.where(perception.landmark_mask[:, :1], station, leader)
+            leads &= ~perception.landmark_mask[:, 0]
         places = place_map(leader, orientation, slots)
         valid = np.ones(places.shape[:2], dtype=np.bool_)
         claimed = np.zeros(places.shape[:2], dtype=np.bool_)
@@ -468,6 +531,10 @@ def steer_formation(
             # its rank; sharing ignores the order.
             first=np.where(memory.place >= 0, memory.place, np.minimum(rank, params.count - 1)),
         )  # fmt: skip
+        # The map is anchored at the leader: its place is slot 0, whoever else stands near
+        # it or flags it (fish that start side by side, or one hidden behind another, may
+        # each take themselves for the leader until the flags settle it).
+        chosen = np.where(leads, 0, chosen)
     effort = np.zeros(count) if perception.effort is None else perception.effort
     swaps = _Swaps.none(memory)
     if params.rotate_effort and params.flags and not params.is_local:
@@ -486,7 +553,7 @@ def steer_formation(
         lead=params.lead,
     )
     hops = np.where(rank == 0, 0, np.minimum(heard.fewest_hops + 1, NO_HOPS))
-    if not params.is_local:
+    if params.uses_map:
         hops = np.where(has_place & (chosen == 0), 0, hops)
     # Every fish flags at every decision (joined or seeking): a flag shows where its sender
     # is even when nearer fish hide it, and what it holds or seeks.

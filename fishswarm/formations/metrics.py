@@ -199,16 +199,30 @@ def local_shape_errors(
     )
 
 
-def shape_edges(fit: Completion, tolerance: float) -> NDArray[np.intp]:
-    """(E, 2) the pairs of fish that make a completed local shape together (each pair once,
-    the lower index first): the edges a picture draws."""
+def shape_edges(
+    fit: Completion, tolerance: float, *, position: FloatArray, spacing: float
+) -> NDArray[np.intp]:
+    """(E, 2) the bonds of completed local shapes (each pair once, the lower index first):
+    the edges a picture draws. A bond joins two fish of a completed shape that stand about a
+    spacing apart — every pair of a triangle or a tetrahedron, the centre and each arm of a
+    star, not two arms (√3 spacings apart): pairs nearer than halfway between the two,
+    (1 + √3)/2 spacings.
+
+    Args:
+        fit: how each fish completes its shape (:func:`local_shape_errors`).
+        tolerance: m.
+        position: (N, 3) the fish, m.
+        spacing: the shape's edge, m.
+    """
     joined = np.flatnonzero(fit.joined(tolerance))
     if joined.size == 0 or fit.members.shape[1] == 0:
         return np.zeros((0, 2), dtype=np.intp)
     groups = np.concatenate([joined[:, None], fit.members[joined]], axis=1)
     pairs = np.array(list(itertools.combinations(range(groups.shape[1]), 2)), dtype=np.intp)
     edges = np.sort(groups[:, pairs].reshape(-1, 2), axis=1)
-    unique: NDArray[np.intp] = np.unique(edges, axis=0)
+    length = np.linalg.norm(position[edges[:, 0]] - position[edges[:, 1]], axis=1)
+    bonds = edges[length < spacing * (1 + math.sqrt(3)) / 2]
+    unique: NDArray[np.intp] = np.unique(bonds, axis=0).reshape(-1, 2)
     return unique
 
 

@@ -130,6 +130,10 @@ class Scenario:
         flags: whether formation fish broadcast and heed formation flags.
         slot_rule: how formation fish pick slots of a global map: ``share`` (default) or
             ``study`` (the study's rank rule).
+        local_rule: how formation fish make a local shape: ``lattice`` (default: places on
+            a map where every fish completes the shape, anchored at the leader, for shapes
+            that have one — trigonal planar) or ``neighbors`` (spots next to their nearest
+            neighbours).
         switch_formation: a shape formation fish switch to during the run (as an operator
             would with ``fishswarm formation``), at ``switch_at`` s.
         switch_at: when the switch happens, s of simulated time.
@@ -182,6 +186,7 @@ class Scenario:
     formation_lead: float = DEFAULT_LEAD
     flags: bool = True
     slot_rule: str = "share"
+    local_rule: str = "lattice"
     switch_formation: str | None = None
     switch_at: float = 0.0
     flow: tuple[float, float, float] = (0.0, 0.0, 0.0)

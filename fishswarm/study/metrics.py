@@ -361,7 +361,7 @@ class FormationTarget:
                 local.joined(self.tolerance),
                 np.zeros(count, dtype=np.bool_),
                 None,
-                shape_edges(local, self.tolerance),
+                shape_edges(local, self.tolerance, position=position, spacing=self.spacing),
             )
         assert self.slots is not None
         if self.slots.shape[0] < count or count == 0:

@@ -279,7 +279,7 @@ def test_broadcasts_cross_processes_and_are_counted_in_the_summary(
     np.testing.assert_array_equal(arrays["pos"], run_batch(scenario).position)
 
 
-@pytest.mark.parametrize("shape", ["tetrahedral-pyramid", "triangle"])
+@pytest.mark.parametrize("shape", ["tetrahedral-pyramid", "triangle", "trigonal-planar"])
 def test_a_formation_with_flags_flowing_is_the_same_across_processes_and_engines(
     endpoint: str, tmp_path: Path, shape: str
 ) -> None:

@@ -95,6 +95,105 @@ def test_a_flagged_slot_is_left_to_its_holder() -> None:
     np.testing.assert_allclose(steering.target, [[0.4, 0.0, 0.0]], atol=1e-12)
 
 
+def _led(place: int) -> FormationMemory:
+    """The formation memory of one fish whose last place was ``place``."""
+    return dataclasses.replace(fresh_formation_memory(1), place=np.array([place]))
+
+
+def test_a_leader_keeps_the_lead_against_a_fish_that_passes_it_by_less_than_a_spacing() -> None:
+    params = FormationParams("column", count=3, spacing=0.3)
+    # A follower (its flag: slot 2, one hop from the leader) swims past the leader, 0.1 m
+    # ahead of it: the leader stays on slot 0.
+    passing = [(FLAG, FormationFlag(2, 2, False, 1, 0, 7).values(), np.array([0.1, 0.05, 0.0]))]
+    memory, steering = steer_formation(
+        _led(0), _perception((0.1, 0.05, 0.0)), inbox_of([passing]), params=params
+    )
+    assert memory.place.tolist() == [0]
+    np.testing.assert_array_equal(steering.target, [[0.0, 0.0, 0.0]])
+    # 0.4 m ahead, more than a spacing: the passer leads now; the fish takes a slot behind
+    # it (the nearest free one, slot 1, 0.3 m behind the passer).
+    memory, steering = steer_formation(
+        _led(0), _perception((0.4, 0.0, 0.0)), Inbox.empty(1), params=params
+    )
+    assert memory.place.tolist() == [1]
+    np.testing.assert_allclose(steering.target, [[0.1, 0.0, 0.0]], atol=1e-12)
+    # A fish that did not lead sees the fish ahead as its leader, as the study's rule says.
+    memory, _ = steer_formation(
+        _led(2), _perception((0.1, 0.05, 0.0)), Inbox.empty(1), params=params
+    )
+    assert memory.place.tolist() != [0]
+
+
+def test_a_fish_that_passed_the_flagged_leader_by_less_than_a_spacing_follows_it() -> None:
+    params = FormationParams("column", count=3, spacing=0.3)
+    leader = [(FLAG, FormationFlag(2, 0, True, 0, 0, 9).values(), np.array([-0.1, 0.0, 0.0]))]
+    perception = _perception((-0.1, 0.0, 0.0))
+    # It sought slot 1 at its last decision: the leader 0.1 m behind it is still its leader.
+    memory, steering = steer_formation(_led(1), perception, inbox_of([leader]), params=params)
+    assert memory.place.tolist() == [1]
+    np.testing.assert_allclose(steering.target, [[-0.4, 0.0, 0.0]], atol=1e-12)
+    flag = FormationFlag.from_values(steering.outbox.values[0])
+    assert flag.hops == 1
+    # A fish that led at its last decision yields only to a flagged leader ahead of it: two
+    # fish that each took themselves for the leader settle it, the one ahead keeps it.
+    memory, _ = steer_formation(_led(0), perception, inbox_of([leader]), params=params)
+    assert memory.place.tolist() == [0]
+    # Beyond a spacing behind, the flagged leader is no one's leader but its own.
+    far = [(FLAG, FormationFlag(2, 0, True, 0, 0, 9).values(), np.array([-0.5, 0.0, 0.0]))]
+    memory, _ = steer_formation(
+        _led(1), _perception((-0.5, 0.0, 0.0)), inbox_of([far]), params=params
+    )
+    assert memory.place.tolist() == [0]
+
+
+def test_a_leader_holds_slot_0_even_with_a_fish_right_behind_it() -> None:
+    # Two fish started 3 cm apart, the other within the tolerance of slot 0: the one ahead
+    # leads, and slot 0 is where it stands (the map is anchored at it), not a place to share
+    # out; nor does the other's flag for slot 0 (it took itself for the leader) take it.
+    params = FormationParams("column", count=3, spacing=0.3)
+    twin = [(FLAG, FormationFlag(2, 0, True, 0, 0, 1).values(), np.array([-0.03, 0.0, 0.0]))]
+    for memory, inbox in ((fresh_formation_memory(1), Inbox.empty(1)), (_led(0), inbox_of([twin]))):
+        memory, steering = steer_formation(
+            memory, _perception((-0.03, 0.0, 0.0)), inbox, params=params
+        )
+        assert memory.place.tolist() == [0] and memory.joined.tolist() == [True]
+        np.testing.assert_array_equal(steering.target, [[0.0, 0.0, 0.0]])
+
+
+def test_stars_take_places_on_the_star_map_behind_the_leader() -> None:
+    from fishswarm.formations.lattice import star_map
+
+    params = FormationParams("trigonal-planar", count=15, spacing=0.25)
+    assert params.uses_map and params.is_local
+    # The flagged leader 1 m ahead; the fish is alone with it: it takes the free place
+    # nearest to it, by the star map laid behind the leader.
+    leader = [(FLAG, FormationFlag(7, 0, True, 0, 0, 3).values(), np.array([1.0, 0.0, 0.0]))]
+    memory, steering = steer_formation(
+        fresh_formation_memory(1), _perception((1.0, 0.0, 0.0)), inbox_of([leader]),
+        params=params,
+    )  # fmt: skip
+    places = np.array([1.0, 0.0, 0.0]) + star_map(15, spacing=0.25)
+    nearest = int(np.argmin(np.linalg.norm(places, axis=1)))
+    assert memory.place.tolist() == [nearest]
+    np.testing.assert_allclose(steering.target[0], places[nearest], atol=1e-12)
+    # With the neighbours' rule it has no map, and one neighbour makes no star: it stays.
+    chasing = dataclasses.replace(params, local_rule="neighbors")
+    assert not chasing.uses_map
+    with pytest.raises(ValueError, match="no map"):
+        chasing.slots()
+    memory, steering = steer_formation(
+        fresh_formation_memory(1), _perception((1.0, 0.0, 0.0)), inbox_of([leader]),
+        params=chasing,
+    )  # fmt: skip
+    assert memory.place.tolist() == [-1]
+    np.testing.assert_array_equal(steering.target, [[0.0, 0.0, 0.0]])
+
+
+def test_an_unknown_local_rule_is_refused() -> None:
+    with pytest.raises(ValueError, match="local rule must be one of lattice, neighbors"):
+        FormationParams("trigonal-planar", count=4, local_rule="nearest")
+
+
 def test_two_fish_form_a_column_in_the_batch_engine() -> None:
     # From 1.4 m apart: within 30 s the follower holds its slot 0.3 m behind the leader
     # (within the tolerance, 0.075 m, give or take the 1 Hz controller's overshoot).
@@ -109,7 +208,7 @@ def test_two_fish_form_a_column_in_the_batch_engine() -> None:
     assert np.abs(late - 0.3).max() < 0.075
 
 
-@pytest.mark.parametrize("shape", ["pyramid", "triangle", "tetrahedron"])
+@pytest.mark.parametrize("shape", ["pyramid", "triangle", "trigonal-planar", "tetrahedron"])
 def test_formation_fish_decide_alone_as_in_a_school(shape: str) -> None:
     params = fish_params(
         {"behavior": "formation", "formation": shape, "fish": 6, "tank": (1.78, 1.78, 1.17)}
@@ -189,7 +288,7 @@ def test_a_fish_closing_on_its_place_aims_short_of_it_by_its_drift() -> None:
     np.testing.assert_array_equal(still, target[:1])
 
 
-@pytest.mark.parametrize("shape", ["pyramid", "diamond"])
+@pytest.mark.parametrize("shape", ["pyramid", "diamond", "trigonal-planar"])
 def test_fifteen_fish_hold_their_places(shape: str) -> None:
     from fishswarm.study.metrics import formation_target_of
 
@@ -201,8 +300,9 @@ def test_fifteen_fish_hold_their_places(shape: str) -> None:
     target = formation_target_of(scenario)
     assert target is not None
     final = target.metrics(trajectory.position[-1])
-    # Measured: 100 % joined, 0.023 m (pyramid) and 0.024 m (diamond); without the lead
-    # the pyramid ends at 67 % and 0.067 m.
+    # Measured: 100 % joined, 0.023 m (pyramid), 0.024 m (diamond) and 0.012 m (stars,
+    # each fish's group against the ideal star); without the lead the pyramid ends at 67 %
+    # and 0.067 m.
     assert final["joined_fraction"] >= 0.9 and final["shape_error"] <= 0.25 * 0.25
     np.testing.assert_array_less(np.linalg.norm(trajectory.velocity[-1], axis=1), 0.05)
 

@@ -155,5 +155,20 @@ def test_the_edges_of_completed_shapes_are_the_sides_of_their_triangles() -> Non
     fit = local_shape_errors(school, "triangle", spacing=L, tolerance=TOLERANCE)
     assert fit.joined(TOLERANCE).tolist() == [True, True, True, True, False]
     assert sorted(fit.members[0].tolist()) == [1, 2] and sorted(fit.members[3].tolist()) == [1, 2]
-    edges = shape_edges(fit, TOLERANCE)
+    edges = shape_edges(fit, TOLERANCE, position=school, spacing=L)
     assert edges.tolist() == [[0, 1], [0, 2], [1, 2], [1, 3], [2, 3]]
+
+
+def test_the_edges_of_a_completed_star_join_its_centre_to_its_arms() -> None:
+    from fishswarm.formations.metrics import shape_edges
+
+    # A centre (0) with arms at 0°, 120° and 240° (1–3), 1 cm off; the arms are √3·L apart
+    # and are not joined to each other.
+    arms = [
+        [L * math.cos(a), L * math.sin(a), 0.0] for a in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)
+    ]
+    school = np.array([[0.0, 0.01, 0.0], *arms])
+    fit = local_shape_errors(school, "trigonal-planar", spacing=L, tolerance=TOLERANCE)
+    assert fit.joined(TOLERANCE).all()
+    edges = shape_edges(fit, TOLERANCE, position=school, spacing=L)
+    assert edges.tolist() == [[0, 1], [0, 2], [0, 3]]

@@ -1,0 +1,178 @@
+"""Star maps: places on a triangular lattice where every fish completes a trigonal-planar star.
+
+A school in which each fish makes a star with its nearest neighbours (SPEC §5: trigonal
+planar, k = 3) is not something fish reach by chasing spots next to neighbours that chase
+spots of their own (docs/formations.md measures it: 0–20 % joined). It is a lattice the
+school must agree on — and the formation flags let it agree on one leader and orientation,
+as for a global map. This module makes that lattice's map.
+
+On a triangular lattice of side ``spacing`` a fish completes a star with its nearest
+neighbours (judged as :func:`fishswarm.formations.groups.completion` does, with a tolerance
+below a quarter of the spacing) in exactly two ways:
+
+- as a *centre*: three of its six lattice neighbours are taken, 120° apart;
+- as an *arm*: it has one taken neighbour, which is the centre of a star of which the fish
+  is an arm (the arm's two siblings are then its next nearest, √3 spacings away, and no
+  other fish is nearer).
+
+A fish with two taken neighbours or more and no three of them 120° apart completes none.
+:func:`star_sites` grows a school on the lattice one place at a time, each time taking the
+place that completes the most stars, nearest the middle; for 15 fish every one completes a
+star (a hexagon about a centre fish, an arm out of each corner, one arm grown into a star).
+:func:`star_map` turns the places into a map like the global ones: the leader is the fish
+that can lead with the least way to the others, and the map is turned so that it stands
+furthest ahead of the rest. Numpy only: it runs on the robot.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+Site = tuple[int, int]
+"""A lattice place: steps along the lattice's two axes, 60° apart."""
+
+_DIRECTIONS: tuple[Site, ...] = ((1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1))
+"""The six neighbours of a place, in angular order, 60° apart, from 0°."""
+_STARS = (frozenset({0, 2, 4}), frozenset({1, 3, 5}))
+"""Three directions 120° apart: the arms of a star."""
+_TURNS = 3600
+_WEIGHED = 48
+"""How many free places, nearest the middle, growth weighs at each step."""
+"""Directions tried when turning the map (every 0.1°)."""
+
+
+def _step(site: Site, direction: int) -> Site:
+    da, db = _DIRECTIONS[direction]
+    return site[0] + da, site[1] + db
+
+
+def _position(site: Site) -> tuple[float, float]:
+    """Where a place is, in spacings."""
+    return site[0] + site[1] / 2, site[1] * math.sqrt(3) / 2
+
+
+def _taken_directions(site: Site, taken: set[Site]) -> frozenset[int]:
+    return frozenset(d for d in range(6) if _step(site, d) in taken)
+
+
+def completes_star(site: Site, taken: set[Site]) -> bool:
+    """Whether a fish at ``site`` completes a star with the fish at the ``taken`` places
+    (``site`` among them): as a centre, or as an arm of its one neighbour's star."""
+    around = _taken_directions(site, taken)
+    if any(star <= around for star in _STARS):
+        return True
+    if len(around) != 1:
+        return False
+    (toward,) = around
+    centre = _step(site, toward)
+    back = (toward + 3) % 6  # the fish itself, seen from the centre
+    arms = _taken_directions(centre, taken)
+    return any(back in star and star <= arms for star in _STARS)
+
+
+def _near(site: Site) -> list[Site]:
+    """The places within two steps of ``site``, itself included: those whose stars a fish
+    at ``site`` can make or spoil."""
+    return [
+        (site[0] + a, site[1] + b) for a in range(-2, 3) for b in range(-2, 3) if abs(a + b) <= 2
+    ]
+
+
+def _worth(site: Site, taken: set[Site]) -> float:
+    """What a fish at ``site`` adds to the school: 1 if it completes a star; a tenth if it
+    does not yet but its taken neighbours are part of a star's arms (it may still become a
+    centre) — without that foresight growth one place at a time never starts a star, whose
+    first three places complete nothing."""
+    if completes_star(site, taken):
+        return 1.0
+    around = _taken_directions(site, taken)
+    return 0.1 if any(around <= star for star in _STARS) else 0.0
+
+
+def star_sites(count: int) -> list[Site]:
+    """``count`` lattice places, grown one at a time from (0, 0): each time the free place
+    next to the school that adds the most worth (:func:`_worth`: completed stars, and stars
+    that may still be completed), the one nearest (0, 0) on a tie (then the lowest
+    coordinates)."""
+    taken: set[Site] = {(0, 0)}
+    order: list[Site] = [(0, 0)]
+    worth: dict[Site, float] = {(0, 0): _worth((0, 0), taken)}
+    distance: dict[Site, float] = {}
+    for site in (_step((0, 0), d) for d in range(6)):
+        distance[site] = math.hypot(*_position(site))
+    while len(order) < count:
+        # Only the free places nearest the middle are weighed: it keeps the school round
+        # and the growth of thousands of places quick.
+        weighed = sorted((away, site) for site, away in distance.items())[:_WEIGHED]
+        best: tuple[float, float, Site] | None = None
+        for away, site in weighed:
+            after = taken | {site}
+            gain = sum(
+                _worth(other, after) - worth.get(other, 0.0)
+                for other in _near(site)
+                if other in after
+            )
+            key = (-round(gain, 9), round(away, 9), site)
+            if best is None or key < best:
+                best = key
+        assert best is not None
+        chosen = best[2]
+        taken.add(chosen)
+        order.append(chosen)
+        del distance[chosen]
+        for site in (_step(chosen, d) for d in range(6)):
+            if site not in taken and site not in distance:
+                distance[site] = math.hypot(*_position(site))
+        for other in _near(chosen):
+            if other in taken:
+                worth[other] = _worth(other, taken)
+    return order
+
+
+def _lead_and_turn(points: FloatArray) -> tuple[int, float]:
+    """Which of the points (N, 2) leads and the angle (rad) to turn them by so that it is
+    furthest ahead (+x) of the others: of the points that can be ahead of all others, the
+    one nearest the others on average, turned to stand ahead by the widest margin."""
+    if points.shape[0] == 1:
+        return 0, 0.0
+    angles = np.linspace(0.0, 2 * math.pi, _TURNS, endpoint=False)
+    forward = np.stack([np.cos(angles), np.sin(angles)], axis=1)  # (A, 2)
+    along = points @ forward.T  # (N, A)
+    ahead_of_rest = along - np.sort(along, axis=0)[-2]  # (N, A) > 0 only for the front one
+    can_lead = np.flatnonzero((ahead_of_rest > 1e-9).any(axis=1))
+    spread = np.linalg.norm(points[can_lead, None, :] - points[None, :, :], axis=2).mean(axis=1)
+    leader = int(can_lead[np.argmin(spread)])
+    return leader, float(-angles[int(np.argmax(ahead_of_rest[leader]))])
+
+
+@functools.lru_cache(maxsize=16)
+def star_map(count: int, *, spacing: float) -> FloatArray:
+    """The star map for ``count`` fish, ``spacing`` m between lattice neighbours: (count, 3)
+    places in the formation frame (x forward, y right, z down; m), the leader's at the origin
+    and first, the others row by row backwards (as the global maps, so that the same rules
+    apply). Read-only, made once per count and spacing.
+
+    Raises:
+        ValueError: a count below 1 or a spacing not positive.
+    """
+    if count < 1:
+        raise ValueError(f"a star map is for 1 fish or more, got {count}")
+    if not spacing > 0 or not math.isfinite(spacing):
+        raise ValueError(f"spacing must be a positive length, got {spacing}")
+    points = np.array([_position(site) for site in star_sites(count)], dtype=np.float64)
+    leader, angle = _lead_and_turn(points)
+    turn = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
+    placed = (points - points[leader]) @ turn.T * spacing
+    placed = np.round(placed, 12) + 0.0  # no −0.0, no rounding dust in the order
+    rest = np.delete(np.arange(count), leader)
+    rest = rest[np.lexsort((placed[rest, 1], np.abs(placed[rest, 1]), -placed[rest, 0]))]
+    slots = np.zeros((count, 3))
+    slots[:, :2] = placed[np.concatenate([[leader], rest])]
+    slots.setflags(write=False)
+    return slots
