@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,7 +44,7 @@ from fishswarm.behaviors.core import (
 from fishswarm.bluebot.control import PidGains
 from fishswarm.bluebot.dynamics import rotate_to_tank
 from fishswarm.bluebot.parameters import BODY_LENGTH
-from fishswarm.formations.lattice import star_map
+from fishswarm.formations.lattice import close_packing, star_map
 from fishswarm.formations.local import LOCAL_SHAPES, local_spots
 from fishswarm.formations.maps import target_map
 from fishswarm.formations.rules import (
@@ -77,7 +77,12 @@ SLOT_RULES = ("share", "study")
 LOCAL_RULES = ("lattice", "neighbors")
 """How fish make a local shape: places on the shape's lattice anchored at the leader (for
 shapes that have one, :data:`LATTICES`), or spots next to their nearest neighbours."""
-LATTICES = {"trigonal-planar": star_map}
+
+
+LATTICES: dict[str, Callable[..., FloatArray]] = {
+    "trigonal-planar": star_map,
+    "tetrahedron": close_packing,
+}
 """The local shapes with a map of places where every fish completes one."""
 DEFAULT_EFFORT_MARGIN = 40.0
 """Default margin of effort sharing, gain-weighted fin beats (set from measurements, see
@@ -121,9 +126,10 @@ class FormationParams:
             swap places; the asked fish agrees by flag and both move (:func:`share_effort`).
         effort_margin: gain-weighted fin beats.
         local_rule: how fish make a local shape: ``lattice`` — a map of places where every
-            fish completes the shape, anchored at the leader like a global map (shapes in
-            :data:`LATTICES`; the others are made with neighbours whatever this says) —
-            or ``neighbors``: spots that complete it with the fish's nearest neighbours.
+            fish completes the shape, anchored at the leader like a global map (stars and
+            tetrahedra, :data:`LATTICES`; triangles are made with neighbours whatever this
+            says) — or ``neighbors``: spots that complete it with the fish's nearest
+            neighbours.
     """
 
     shape: str

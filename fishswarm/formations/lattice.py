@@ -1,4 +1,4 @@
-"""Star maps: places on a triangular lattice where every fish completes a trigonal-planar star.
+"""Lattices of local shapes: places where every fish completes its shape with its neighbours.
 
 A school in which each fish makes a star with its nearest neighbours (SPEC §5: trigonal
 planar, k = 3) is not something fish reach by chasing spots next to neighbours that chase
@@ -21,7 +21,11 @@ place that completes the most stars, nearest the middle; for 15 fish every one c
 star (a hexagon about a centre fish, an arm out of each corner, one arm grown into a star).
 :func:`star_map` turns the places into a map like the global ones: the leader is the fish
 that can lead with the least way to the others, and the map is turned so that it stands
-furthest ahead of the rest. Numpy only: it runs on the robot.
+furthest ahead of the rest.
+
+Tetrahedra need no growing: in close packing every fish has three mutually adjacent
+neighbours, so the tetrahedral pyramid of the global maps (:func:`close_packing`) is their
+lattice. Numpy only: it runs on the robot.
 """
 
 from __future__ import annotations
@@ -31,6 +35,8 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
+
+from fishswarm.formations.maps import target_map
 
 FloatArray = NDArray[np.float64]
 
@@ -176,3 +182,14 @@ def star_map(count: int, *, spacing: float) -> FloatArray:
     slots[:, :2] = placed[np.concatenate([[leader], rest])]
     slots.setflags(write=False)
     return slots
+
+
+def close_packing(count: int, *, spacing: float) -> FloatArray:
+    """The tetrahedra's map for ``count`` fish: the tetrahedral pyramid (layers of 1, 3, 6,
+    10, … in close packing, :func:`fishswarm.formations.maps.tetrahedron`), on which every
+    fish completes a regular tetrahedron with three of its nearest neighbours.
+
+    Raises:
+        ValueError: a count out of range or a spacing not positive.
+    """
+    return target_map("tetrahedral-pyramid", count, spacing=spacing)

@@ -132,8 +132,8 @@ class Scenario:
             ``study`` (the study's rank rule).
         local_rule: how formation fish make a local shape: ``lattice`` (default: places on
             a map where every fish completes the shape, anchored at the leader, for shapes
-            that have one — trigonal planar) or ``neighbors`` (spots next to their nearest
-            neighbours).
+            that have one — trigonal planar and tetrahedron) or ``neighbors`` (spots next
+            to their nearest neighbours; triangles are always made so).
         switch_formation: a shape formation fish switch to during the run (as an operator
             would with ``fishswarm formation``), at ``switch_at`` s.
         switch_at: when the switch happens, s of simulated time.

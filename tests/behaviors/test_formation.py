@@ -208,11 +208,24 @@ def test_two_fish_form_a_column_in_the_batch_engine() -> None:
     assert np.abs(late - 0.3).max() < 0.075
 
 
-@pytest.mark.parametrize("shape", ["pyramid", "triangle", "trigonal-planar", "tetrahedron"])
-def test_formation_fish_decide_alone_as_in_a_school(shape: str) -> None:
+@pytest.mark.parametrize(
+    ("shape", "rule"),
+    [
+        ("pyramid", "lattice"),
+        ("triangle", "lattice"),
+        ("trigonal-planar", "lattice"),
+        ("trigonal-planar", "neighbors"),
+        ("tetrahedron", "lattice"),
+        ("tetrahedron", "neighbors"),
+    ],
+)
+def test_formation_fish_decide_alone_as_in_a_school(shape: str, rule: str) -> None:
     params = fish_params(
-        {"behavior": "formation", "formation": shape, "fish": 6, "tank": (1.78, 1.78, 1.17)}
-    )
+        {
+            "behavior": "formation", "formation": shape, "fish": 6, "local_rule": rule,
+            "tank": (1.78, 1.78, 1.17),
+        }
+    )  # fmt: skip
     rng = np.random.default_rng(3)
     neighbors = rng.normal(0, 0.5, (4, 5, 3))
     mask = np.ones((4, 5), dtype=np.bool_)

@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial.distance import pdist
 
 from fishswarm.formations.groups import completion
-from fishswarm.formations.lattice import completes_star, star_map, star_sites
+from fishswarm.formations.lattice import close_packing, completes_star, star_map, star_sites
 
 # Lattice places are steps along two axes 60° apart: (1, 0) at 0°, (0, 1) at 60°,
 # (-1, 1) at 120°, (-1, 0) at 180°, (0, -1) at 240°, (1, -1) at 300°.
@@ -19,13 +19,13 @@ FAN = {(0, 0), (1, 0), (0, 1), (-1, 1)}  # arms at 0°, 60°, 120°: no star
 HEXAGON = {(0, 0), (1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, -1)}  # a centre and its ring
 
 
-def _observed(places: np.ndarray, spacing: float) -> np.ndarray:
-    """Which fish at ``places`` (N, 3) complete a star by the observer's measure."""
+def _observed(places: np.ndarray, spacing: float, shape: str = "trigonal-planar") -> np.ndarray:
+    """Which fish at ``places`` (N, 3) complete their shape by the observer's measure."""
     count = places.shape[0]
     others = np.array([np.delete(places, i, axis=0) for i in range(count)])
     fit = completion(
         places[:, None, :], others, np.ones(others.shape[:2], dtype=np.bool_),
-        "trigonal-planar", spacing=spacing, tolerance=spacing / 4,
+        shape, spacing=spacing, tolerance=spacing / 4,
     )  # fmt: skip
     joined: np.ndarray = fit.joined(spacing / 4)[:, 0]
     return joined
@@ -89,3 +89,12 @@ def test_a_map_is_the_same_for_any_spacing_scaled() -> None:
 def test_bad_maps_are_refused(count: int, spacing: float) -> None:
     with pytest.raises(ValueError, match=r"star map|spacing"):
         star_map(count, spacing=spacing)
+
+
+@pytest.mark.parametrize("count", [4, 10, 15, 20])
+def test_every_fish_in_close_packing_completes_a_tetrahedron(count: int) -> None:
+    assert _observed(close_packing(count, spacing=0.25), 0.25, "tetrahedron").all()
+    # Each lattice is its own shape's: close packing gives few stars (none of 4 or 10 fish,
+    # 4 of 15), the flat star map no tetrahedron.
+    assert not _observed(close_packing(count, spacing=0.25), 0.25).all()
+    assert not _observed(star_map(count, spacing=0.25), 0.25, "tetrahedron").any()
