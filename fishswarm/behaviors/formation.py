@@ -503,17 +503,18 @@ def steer_formation(
         slots = params.slots()
         known, real, holding = _with_senders(neighbors, mask, inbox, heard, params)
         leader, rank = leader_and_rank(known, real, orientation)
+        # With a station, slot 0 is a place behind the post, not the leader's: holding it
+        # says nothing of leading, and the leader's rules below stay off.
+        led = (memory.place == 0) & np.bool_(params.station is None)
         if params.flags:
             # A leader keeps the lead against fish that pass it by less than a spacing (they
             # follow its flag): see _agreed_leader.
-            keeps = (memory.place == 0) & (
-                np.einsum("bd,bd->b", leader, orientation) <= params.spacing
-            )
+            keeps = led & (np.einsum("bd,bd->b", leader, orientation) <= params.spacing)
             leader = np.where(keeps[:, None], 0.0, leader)
             rank = np.where(keeps, 0, rank)
         leader, rank = _agreed_leader(
             leader, rank, inbox, heard.leader, orientation,
-            led=memory.place == 0, margin=params.spacing,
+            led=led, margin=params.spacing if params.station is None else 0.0,
         )  # fmt: skip
         leads = rank == 0
         if params.station is not None and perception.landmarks.shape[1]:

@@ -36,7 +36,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from fishswarm.formations.maps import target_map
+from fishswarm.formations.maps import MAX_FISH, target_map
 
 FloatArray = NDArray[np.float64]
 
@@ -48,9 +48,13 @@ _DIRECTIONS: tuple[Site, ...] = ((1, 0), (0, 1), (-1, 1), (-1, 0), (0, -1), (1, 
 _STARS = (frozenset({0, 2, 4}), frozenset({1, 3, 5}))
 """Three directions 120° apart: the arms of a star."""
 _TURNS = 3600
+"""Directions tried when turning the map (every 0.1°)."""
 _WEIGHED = 48
 """How many free places, nearest the middle, growth weighs at each step."""
-"""Directions tried when turning the map (every 0.1°)."""
+_DIGITS = 9
+"""Lengths are compared rounded to this many decimals: ties of a symmetric school are
+broken by order, not by the last bits of a sum, which may differ between machines (each
+robot makes its own map and must make the same one)."""
 
 
 def _step(site: Site, direction: int) -> Site:
@@ -105,7 +109,7 @@ def star_sites(count: int) -> list[Site]:
     """``count`` lattice places, grown one at a time from (0, 0): each time the free place
     next to the school that adds the most worth (:func:`_worth`: completed stars, and stars
     that may still be completed), the one nearest (0, 0) on a tie (then the lowest
-    coordinates)."""
+    coordinates). Only the :data:`_WEIGHED` free places nearest (0, 0) are weighed."""
     taken: set[Site] = {(0, 0)}
     order: list[Site] = [(0, 0)]
     worth: dict[Site, float] = {(0, 0): _worth((0, 0), taken)}
@@ -124,7 +128,7 @@ def star_sites(count: int) -> list[Site]:
                 for other in _near(site)
                 if other in after
             )
-            key = (-round(gain, 9), round(away, 9), site)
+            key = (-round(gain, _DIGITS), round(away, _DIGITS), site)
             if best is None or key < best:
                 best = key
         assert best is not None
@@ -141,34 +145,57 @@ def star_sites(count: int) -> list[Site]:
     return order
 
 
+def _hull(points: FloatArray) -> NDArray[np.intp]:
+    """The corners of the convex hull of points (N, 2), ascending (points on an edge
+    between two corners left out): the points that can stand ahead of all others."""
+    order = sorted(range(points.shape[0]), key=lambda i: (points[i, 0], points[i, 1]))
+    rounded = np.round(points, _DIGITS)
+
+    def turns_left(a: int, b: int, c: int) -> bool:
+        ab, ac = rounded[b] - rounded[a], rounded[c] - rounded[a]
+        return bool(ab[0] * ac[1] - ab[1] * ac[0] > 10.0**-_DIGITS)
+
+    corners: list[int] = []
+    for chain in (order, order[::-1]):  # the lower hull, then the upper
+        start = len(corners)
+        for index in chain:
+            while len(corners) - start >= 2 and not turns_left(corners[-2], corners[-1], index):
+                corners.pop()
+            corners.append(index)
+        corners.pop()  # each chain's last point starts the other
+    return np.array(sorted(set(corners)), dtype=np.intp)
+
+
 def _lead_and_turn(points: FloatArray) -> tuple[int, float]:
     """Which of the points (N, 2) leads and the angle (rad) to turn them by so that it is
-    furthest ahead (+x) of the others: of the points that can be ahead of all others, the
-    one nearest the others on average, turned to stand ahead by the widest margin."""
-    if points.shape[0] == 1:
-        return 0, 0.0
+    furthest ahead (+x) of the others: of the points that can be ahead of all others (the
+    hull's corners), the one nearest the others on average (the first on a tie), turned to
+    stand ahead by the widest margin (the first such direction from 0)."""
+    if points.shape[0] < 3:
+        return 0, 0.0 if points.shape[0] == 1 else math.atan2(*(points[0] - points[1])[::-1])
+    can_lead = _hull(points)
+    spread = np.linalg.norm(points[can_lead, None, :] - points[None, :, :], axis=2).mean(axis=1)
+    leader = int(can_lead[np.argmin(np.round(spread, _DIGITS))])
     angles = np.linspace(0.0, 2 * math.pi, _TURNS, endpoint=False)
     forward = np.stack([np.cos(angles), np.sin(angles)], axis=1)  # (A, 2)
-    along = points @ forward.T  # (N, A)
-    ahead_of_rest = along - np.sort(along, axis=0)[-2]  # (N, A) > 0 only for the front one
-    can_lead = np.flatnonzero((ahead_of_rest > 1e-9).any(axis=1))
-    spread = np.linalg.norm(points[can_lead, None, :] - points[None, :, :], axis=2).mean(axis=1)
-    leader = int(can_lead[np.argmin(spread)])
-    return leader, float(-angles[int(np.argmax(ahead_of_rest[leader]))])
+    others = np.delete(points - points[leader], leader, axis=0)
+    margin = -(others @ forward.T).max(axis=0)  # (A,) how far ahead of the rest it stands
+    return leader, float(-angles[int(np.argmax(np.round(margin, _DIGITS)))])
 
 
 @functools.lru_cache(maxsize=16)
 def star_map(count: int, *, spacing: float) -> FloatArray:
     """The star map for ``count`` fish, ``spacing`` m between lattice neighbours: (count, 3)
     places in the formation frame (x forward, y right, z down; m), the leader's at the origin
-    and first, the others row by row backwards (as the global maps, so that the same rules
-    apply). Read-only, made once per count and spacing.
+    and first, the others from the front backwards (decreasing x; then from the middle
+    out, left first), like the global maps. Read-only, made once per count and spacing
+    (about 1.5 s for 1 000 fish).
 
     Raises:
-        ValueError: a count below 1 or a spacing not positive.
+        ValueError: a count out of [1, MAX_FISH] or a spacing not positive.
     """
-    if count < 1:
-        raise ValueError(f"a star map is for 1 fish or more, got {count}")
+    if not 1 <= count <= MAX_FISH:
+        raise ValueError(f"a star map is for 1 to {MAX_FISH} fish, got {count}")
     if not spacing > 0 or not math.isfinite(spacing):
         raise ValueError(f"spacing must be a positive length, got {spacing}")
     points = np.array([_position(site) for site in star_sites(count)], dtype=np.float64)

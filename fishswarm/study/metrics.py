@@ -386,8 +386,9 @@ class FormationRoles:
             shape).
         slots: (N, 3) the map's slots laid onto the school by the best rigid motion, m (None
             for a local shape).
-        edges: (E, 2) pairs of fish (indices) that make a completed local shape together;
-            none for a global map.
+        edges: (E, 2) bonds of completed local shapes: pairs of fish (indices) about a
+            spacing apart in a shape they complete together (a star's centre and an arm,
+            not two arms); none for a global map.
     """
 
     joined: NDArray[np.bool_]

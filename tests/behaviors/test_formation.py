@@ -117,11 +117,13 @@ def test_a_leader_keeps_the_lead_against_a_fish_that_passes_it_by_less_than_a_sp
     )
     assert memory.place.tolist() == [1]
     np.testing.assert_allclose(steering.target, [[0.1, 0.0, 0.0]], atol=1e-12)
-    # A fish that did not lead sees the fish ahead as its leader, as the study's rule says.
-    memory, _ = steer_formation(
+    # A fish that did not lead sees the fish ahead as its leader, as the study's rule says,
+    # and takes the free slot nearest to it: slot 1, 0.3 m behind the fish ahead.
+    memory, steering = steer_formation(
         _led(2), _perception((0.1, 0.05, 0.0)), Inbox.empty(1), params=params
     )
-    assert memory.place.tolist() != [0]
+    assert memory.place.tolist() == [1]
+    np.testing.assert_allclose(steering.target, [[-0.2, 0.05, 0.0]], atol=1e-12)
 
 
 def test_a_fish_that_passed_the_flagged_leader_by_less_than_a_spacing_follows_it() -> None:
@@ -427,6 +429,22 @@ def test_a_fish_that_sees_the_post_anchors_the_map_at_the_station_behind_it() ->
         fresh_formation_memory(1), _perception((-0.5, 0.0, 0.0)), Inbox.empty(1), params=params
     )
     np.testing.assert_allclose(blind.target, [[0.0, 0.0, 0.0]], atol=1e-12)
+
+
+def test_with_a_station_holding_slot_0_is_no_claim_to_lead() -> None:
+    # A fish that sought the station (slot 0) at its last decision and no longer sees the
+    # post: a fish 0.2 m ahead of it leads, and it takes slot 1 behind that fish — it does
+    # not keep a lead it never had.
+    params = FormationParams("column", count=2, spacing=0.3, station=0.5)
+    memory, steering = steer_formation(
+        _led(0), _perception((0.2, 0.0, 0.0)), Inbox.empty(1), params=params
+    )
+    assert memory.place.tolist() == [1] and memory.joined.tolist() == [False]
+    np.testing.assert_allclose(steering.target, [[-0.1, 0.0, 0.0]], atol=1e-12)
+    # Without a station the same fish keeps the lead (less than a spacing behind it).
+    plain = dataclasses.replace(params, station=None)
+    memory, _ = steer_formation(_led(0), _perception((0.2, 0.0, 0.0)), Inbox.empty(1), params=plain)
+    assert memory.place.tolist() == [0]
 
 
 def test_effort_sharing_fish_decide_alone_as_in_a_school() -> None:
