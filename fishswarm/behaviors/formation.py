@@ -77,8 +77,6 @@ SLOT_RULES = ("share", "study")
 LOCAL_RULES = ("lattice", "neighbors")
 """How fish make a local shape: places on the shape's lattice anchored at the leader (for
 shapes that have one, :data:`LATTICES`), or spots next to their nearest neighbours."""
-
-
 LATTICES: dict[str, Callable[..., FloatArray]] = {
     "trigonal-planar": star_map,
     "tetrahedron": close_packing,
