@@ -225,8 +225,17 @@ def formation_params(settings: Mapping[str, Any]) -> FormationParams:
     spacing = DEFAULT_SPACING if spacing is None else float(spacing)
     tolerance = settings.get("tolerance")
     station = settings.get("station_distance")
+    shape = str(settings.get("formation") or "pyramid")
+    rotate_effort = bool(settings.get("rotate_effort", False))
+    if rotate_effort and shape in LOCAL_SHAPES:
+        # Refused here, where a user asks for it; a live switch to a local shape only pauses
+        # the sharing (it swaps the places of a global map).
+        raise ValueError(
+            f"effort sharing swaps the places of a global map; {shape} is a local shape: "
+            "choose a global map or drop --rotate-effort (rotate_effort)"
+        )
     return FormationParams(
-        shape=str(settings.get("formation") or "pyramid"),
+        shape=shape,
         count=int(settings.get("fish", 15)),
         spacing=spacing,
         tolerance=0.25 * spacing if tolerance is None else float(tolerance),
@@ -235,7 +244,7 @@ def formation_params(settings: Mapping[str, Any]) -> FormationParams:
         rule=str(settings.get("slot_rule") or "share"),
         lead=float(settings.get("formation_lead", DEFAULT_LEAD)),
         station=None if station is None else float(station),
-        rotate_effort=bool(settings.get("rotate_effort", False)),
+        rotate_effort=rotate_effort,
         effort_margin=float(settings.get("effort_margin", DEFAULT_EFFORT_MARGIN)),
         local_rule=str(settings.get("local_rule") or "lattice"),
     )
@@ -612,7 +621,8 @@ FORMATION = Behavior(
 
 def with_formation(params: FishParams, shape: str) -> FishParams:
     """The fish's parameters with another formation shape: an operator's live switch.
-    Parameters of other behaviours come back unchanged.
+    Parameters of other behaviours come back unchanged. Effort sharing (global maps only)
+    pauses while the shape is local.
 
     Raises:
         ValueError: an unknown shape.

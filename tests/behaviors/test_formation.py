@@ -196,6 +196,20 @@ def test_an_unknown_local_rule_is_refused() -> None:
         FormationParams("trigonal-planar", count=4, local_rule="nearest")
 
 
+def test_effort_sharing_on_a_local_shape_is_refused_not_ignored() -> None:
+    from fishswarm.behaviors.formation import formation_params, with_formation
+
+    asked = {"formation": "trigonal-planar", "fish": 4, "rotate_effort": True}
+    with pytest.raises(ValueError, match="trigonal-planar is a local shape"):
+        formation_params(asked)
+    assert formation_params({**asked, "formation": "column"}).rotate_effort
+    # A live switch to a local shape pauses the sharing instead: the fish go on.
+    params = fish_params({"behavior": "formation", **asked, "formation": "column"})
+    switched = with_formation(params, "triangle")
+    assert isinstance(switched.steering, FormationParams)
+    assert switched.steering.shape == "triangle" and switched.steering.rotate_effort
+
+
 def test_two_fish_form_a_column_in_the_batch_engine() -> None:
     # From 1.4 m apart: within 30 s the follower holds its slot 0.3 m behind the leader
     # (within the tolerance, 0.075 m, give or take the 1 Hz controller's overshoot).
