@@ -36,6 +36,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.bluebot.dynamics import rotate_to_tank
 from fishswarm.formations.maps import MAX_FISH, target_map
 
 FloatArray = NDArray[np.float64]
@@ -200,13 +201,13 @@ def star_map(count: int, *, spacing: float) -> FloatArray:
         raise ValueError(f"spacing must be a positive length, got {spacing}")
     points = np.array([_position(site) for site in star_sites(count)], dtype=np.float64)
     leader, angle = _lead_and_turn(points)
-    turn = np.array([[math.cos(angle), -math.sin(angle)], [math.sin(angle), math.cos(angle)]])
-    placed = (points - points[leader]) @ turn.T * spacing
+    flat = np.zeros((count, 3))
+    flat[:, :2] = points - points[leader]
+    placed = rotate_to_tank(flat, np.full(count, angle)) * spacing
     placed = np.round(placed, 12) + 0.0  # no −0.0, no rounding dust in the order
     rest = np.delete(np.arange(count), leader)
     rest = rest[np.lexsort((placed[rest, 1], np.abs(placed[rest, 1]), -placed[rest, 0]))]
-    slots = np.zeros((count, 3))
-    slots[:, :2] = placed[np.concatenate([[leader], rest])]
+    slots: FloatArray = placed[np.concatenate([[leader], rest])]
     slots.setflags(write=False)
     return slots
 

@@ -16,7 +16,6 @@ from scipy.spatial.distance import pdist
 from fishswarm.behaviors.formation import FormationParams
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.formations.groups import Completion
-from fishswarm.formations.maps import target_map
 from fishswarm.formations.metrics import (
     Alignment,
     align,
@@ -406,8 +405,9 @@ def formation_target_of(scenario: Scenario) -> FormationTarget | None:
         return None
     if params.is_local:
         return FormationTarget(None, params.spacing, params.tolerance, params.shape)
-    slots = target_map(params.shape, scenario.fish, spacing=params.spacing)
-    return FormationTarget(slots, params.spacing, params.tolerance, orientation=params.orientation)
+    return FormationTarget(
+        params.slots(), params.spacing, params.tolerance, orientation=params.orientation
+    )
 
 
 def formation_summary(times: list[float], series: list[dict[str, float]]) -> dict[str, Any]:
