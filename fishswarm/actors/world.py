@@ -37,7 +37,7 @@ from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.actors.perceptions import perception_messages
 from fishswarm.actors.roster import LostFish, Roster
-from fishswarm.actors.tick_commands import TickCommands, values_at
+from fishswarm.actors.tick_commands import TickCommands, among, values_at
 from fishswarm.behaviors.registry import rules_of
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import fish_id_of
@@ -414,7 +414,7 @@ class World:
             due, rows = self.sim.due()
             due_ids = np.array(due, dtype=np.int64)
             if self._leaving:
-                staying = ~np.isin(due_ids, self._leaving_ids())
+                staying = ~among(self._leaving_ids(), due_ids)
                 due_ids, rows = due_ids[staying], rows[staying]
             self._current = TickCommands.of(event.number, due_ids)
             for key, message in perception_messages(
@@ -458,9 +458,9 @@ class World:
     def _hold(self) -> None:
         """Hand the fins of the fish that answered (and are still here) to the simulation."""
         current = self._current
-        held = current.answered & np.isin(current.ids, self.sim.ids)
+        held = current.answered & among(self.sim.ids, current.ids)
         if self._leaving:
-            held &= ~np.isin(current.ids, self._leaving_ids())
+            held &= ~among(self._leaving_ids(), current.ids)
         answered = current.ids[held]
         self.sim.hold(answered.tolist(), current.fins[held])
         if self.scenario.time_mode == "jitter":

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given
+from hypothesis import strategies as st
 
-from fishswarm.actors.tick_commands import TickCommands, values_at
+from fishswarm.actors.tick_commands import TickCommands, among, values_at
 
 
 def test_a_tick_takes_each_awaited_fish_once_and_knows_who_is_left() -> None:
@@ -33,3 +35,27 @@ def test_values_are_found_by_id_and_zero_for_fish_not_listed() -> None:
     assert values_at(ids, values, np.array([1, 3, 5, 8, 9])).tolist() == [0, 30, 0, 80, 0]
     assert values_at(ids[:0], values[:0], np.array([1, 2])).tolist() == [0, 0]
     assert values_at(ids, values, np.zeros(0, dtype=np.int64)).tolist() == []
+
+
+def test_membership_among_sorted_ids_drawn_on_paper() -> None:
+    ids = np.array([3, 4, 8])
+    assert among(ids, np.array([1, 3, 5, 8, 9, 4])).tolist() == [
+        False,
+        True,
+        False,
+        True,
+        False,
+        True,
+    ]
+    assert among(ids[:0], np.array([1, 2])).tolist() == [False, False]
+    assert among(ids, np.zeros(0, dtype=np.int64)).tolist() == []
+
+
+@given(
+    st.sets(st.integers(0, 60), max_size=30),
+    st.lists(st.integers(-5, 70), max_size=30),
+)
+def test_membership_among_sorted_ids_is_numpys_isin(ids: set[int], wanted: list[int]) -> None:
+    haystack = np.array(sorted(ids), dtype=np.int64)
+    needles = np.array(wanted, dtype=np.int64)
+    assert among(haystack, needles).tolist() == np.isin(needles, haystack).tolist()
