@@ -64,6 +64,12 @@ the neighbour axis (same order, same bits) instead of numpy's running sum along 
 whole decision, measured: 5 000 fish with 50 neighbour rows 9.8 → 8.2 ms, 200 fish with 30
 0.42 → 0.28 ms; at 100 fish the running sum is still quicker (0.10 against 0.13 ms)."""
 
+BLOCK_FISH = 1024
+"""Fish decided at a time in a larger batch: a block's (fish × neighbours) arrays stay in a
+core's cache where the whole batch's would not (the same bits; measured, Lennard-Jones
+alone, 46 neighbour rows: 10 000 fish 14.7 → 10.2 ms, 5 000 fish 6.3 → 4.9 ms; blocks of
+512 or 2 048 fish do less well)."""
+
 STUDY_MIN_DISTANCE = 1e-6
 """The study code clipped distances below 0.001 mm, in metres."""
 
@@ -113,8 +119,36 @@ def lennard_jones(
     """
     if target_distance <= 0:
         raise ValueError(f"target_distance must be positive, got {target_distance}")
-    if neighbors.shape[1] == 0:
-        return np.zeros((neighbors.shape[0], 3))
+    fish = neighbors.shape[0]
+    if fish == 0 or neighbors.shape[1] == 0:
+        return np.zeros((fish, 3))
+    blocks = [slice(start, start + BLOCK_FISH) for start in range(0, fish, BLOCK_FISH)]
+    results = [
+        _lennard_jones_block(
+            neighbors[block],
+            mask[block],
+            target_distance=target_distance,
+            epsilon=epsilon,
+            cap=cap,
+            study_form=study_form,
+            loop=fish >= RUNNING_SUM_LOOP_MIN,  # the whole batch's choice, in every block
+        )
+        for block in blocks
+    ]
+    return results[0] if len(results) == 1 else np.concatenate(results)
+
+
+def _lennard_jones_block(
+    neighbors: FloatArray,
+    mask: BoolArray,
+    *,
+    target_distance: float,
+    epsilon: float,
+    cap: float,
+    study_form: bool,
+    loop: bool,
+) -> FloatArray:
+    """:func:`lennard_jones` of a block of fish (``loop``: sum neighbour by neighbour)."""
     # The squares added column by column, in the order a reduction over the last axis adds
     # them (the same bits), but 6× faster at thousands of fish: numpy reduces an axis of
     # three slowly. Ufuncs called directly: at the batch of one a fish actor decides with,
@@ -137,7 +171,7 @@ def lennard_jones(
     # result: a fish alone (batch of one) and the same fish in a padded batch agree exactly.
     # + 0.0 turns the −0.0 of a fish that sees nobody in a padded batch into +0.0, the
     # zero a fish deciding alone gets: atan2(−0, −0) is −180°, and the fish would turn.
-    if neighbors.shape[0] < RUNNING_SUM_LOOP_MIN:
+    if not loop:
         total = np.add.accumulate(neighbors * scale[..., None], axis=1)[:, -1] + 0.0
     else:
         # The same sum, neighbour by neighbour: for thousands of fish a loop over the

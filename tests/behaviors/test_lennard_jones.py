@@ -137,3 +137,30 @@ def test_a_large_batch_sums_neighbours_as_each_fish_alone_does() -> None:
         )  # fmt: skip
         np.testing.assert_array_equal(together[fish], alone[0])
     assert not np.signbit(together[seen == 0]).any()  # +0.0, not −0.0, for the lonely
+
+
+@pytest.mark.parametrize("study_form", [False, True])
+def test_a_batch_of_several_blocks_decides_as_each_fish_alone(study_form: bool) -> None:
+    from fishswarm.behaviors.lennard_jones import BLOCK_FISH
+
+    # Two whole blocks and a part: the blocks' rows come back in order, bit for bit as each
+    # fish deciding alone (a block smaller than the running-sum threshold included).
+    rng = np.random.default_rng(9)
+    count, rows = 2 * BLOCK_FISH + 37, 12
+    seen = rng.integers(0, rows + 1, count)
+    mask = np.arange(rows)[None, :] < seen[:, None]
+    neighbors = np.where(mask[..., None], rng.normal(0.0, 0.4, (count, rows, 3)), 0.0)
+    together = lennard_jones(neighbors, mask, target_distance=0.26, study_form=study_form)
+    assert together.shape == (count, 3)
+    for fish in range(count):
+        alone = lennard_jones(
+            neighbors[fish : fish + 1, : seen[fish]], mask[fish : fish + 1, : seen[fish]],
+            target_distance=0.26, study_form=study_form,
+        )  # fmt: skip
+        np.testing.assert_array_equal(together[fish], alone[0])
+
+
+def test_no_fish_at_all_get_no_motion() -> None:
+    assert lennard_jones(
+        np.zeros((0, 4, 3)), np.zeros((0, 4), bool), target_distance=0.26
+    ).shape == (0, 3)
