@@ -411,8 +411,7 @@ class World:
                 tick_start = trio.current_time()  # after a pause: pace from now on
             inbox_counts = await self._inbox_counts(event)
             # Fish lost while the world waited for the channel decide no more.
-            due, rows = self.sim.due()
-            due_ids = np.array(due, dtype=np.int64)
+            due_ids, rows = self.sim.due()
             if self._leaving:
                 staying = ~among(self._leaving_ids(), due_ids)
                 due_ids, rows = due_ids[staying], rows[staying]
@@ -430,7 +429,7 @@ class World:
                 run=self.run_id,
                 heading=self.sim.state.yaw,  # the simulated fish's compass
                 formation=self._formation or self.params.formation_at(event.time),
-                rows=rows.tolist(),
+                rows=rows,
             ):
                 self._put(bus, key, encode(message))
             if deferred is not None:
@@ -462,7 +461,7 @@ class World:
         if self._leaving:
             held &= ~among(self._leaving_ids(), current.ids)
         answered = current.ids[held]
-        self.sim.hold(answered.tolist(), current.fins[held])
+        self.sim.hold(answered, current.fins[held])
         if self.scenario.time_mode == "jitter":
             return  # broadcasts are not delivered in jitter mode: nothing to announce
         self._broadcasters, self._broadcasts = answered, current.broadcasts[held]

@@ -16,12 +16,16 @@ once for every time mode:
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fishswarm.sim.streams import Stream, stream
+
+IntArray = NDArray[np.int64]
 
 
 @dataclass(frozen=True)
@@ -62,11 +66,11 @@ class Clock(Protocol):
         """A fish leaves."""
         ...
 
-    def due(self, now: float) -> list[int]:
-        """The fish that decide at ``now``, in id order."""
+    def due(self, now: float) -> IntArray:
+        """The fish that decide at ``now``, ascending (read-only)."""
         ...
 
-    def decided(self, fish_ids: list[int]) -> None:
+    def decided(self, fish_ids: IntArray) -> None:
         """These fish have decided."""
         ...
 
@@ -84,6 +88,9 @@ class LockstepClock:
         self.ticks = ticks
         self._tick = 0
         self._fish: set[int] = set()
+        self._due: IntArray | None = None
+        """Every fish, ascending, until one joins or leaves (sorting 10 000 ids every tick
+        cost the world half a millisecond)."""
 
     def next_event(self) -> Event:
         tick = self._tick
@@ -99,14 +106,18 @@ class LockstepClock:
 
     def add(self, fish_id: int, at: float) -> None:
         self._fish.add(fish_id)
+        self._due = None
 
     def remove(self, fish_id: int) -> None:
         self._fish.discard(fish_id)
+        self._due = None
 
-    def due(self, now: float) -> list[int]:
-        return sorted(self._fish)
+    def due(self, now: float) -> IntArray:
+        if self._due is None:
+            self._due = _ascending(self._fish)
+        return self._due
 
-    def decided(self, fish_ids: list[int]) -> None:
+    def decided(self, fish_ids: IntArray) -> None:
         return None
 
 
@@ -173,12 +184,19 @@ class JitterClock:
     def remove(self, fish_id: int) -> None:
         self.next_time.pop(fish_id, None)
 
-    def due(self, now: float) -> list[int]:
-        return sorted(fish_id for fish_id, at in self.next_time.items() if at <= now)
+    def due(self, now: float) -> IntArray:
+        return _ascending(fish_id for fish_id, at in self.next_time.items() if at <= now)
 
-    def decided(self, fish_ids: list[int]) -> None:
-        for fish_id in fish_ids:
+    def decided(self, fish_ids: IntArray) -> None:
+        for fish_id in fish_ids.tolist():
             self.next_time[fish_id] += draw_period(self.period, self.jitter, self._rngs[fish_id])
+
+
+def _ascending(fish_ids: Iterable[int]) -> IntArray:
+    """Fish ids as a read-only ascending array."""
+    ids = np.array(sorted(fish_ids), dtype=np.int64)
+    ids.setflags(write=False)
+    return ids
 
 
 def clock_for(*, time_mode: str, period: float, jitter: float, seed: int, ticks: int) -> Clock:

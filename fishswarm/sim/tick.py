@@ -154,14 +154,14 @@ class WorldSim:
         """Which landmarks every fish sees now."""
         return observe_landmarks(self.params, self.state)
 
-    def due(self) -> tuple[list[int], Rows]:
-        """The fish that decide now: their ids and rows."""
+    def due(self) -> tuple[IntArray, Rows]:
+        """The fish that decide now: their ids (ascending, read-only) and rows."""
         due = self.clock.due(self.now)
-        rows: Rows = np.searchsorted(self.ids, np.array(due, dtype=np.int64)).astype(np.intp)
+        rows: Rows = np.searchsorted(self.ids, due).astype(np.intp)
         return due, rows
 
-    def hold(self, fish_ids: list[int], fins: FloatArray) -> None:
+    def hold(self, fish_ids: IntArray, fins: FloatArray) -> None:
         """The fish ``fish_ids`` (in the world, ascending) decided ``fins`` (rows alike)."""
-        rows = np.searchsorted(self.ids, np.array(fish_ids, dtype=np.int64))
+        rows = np.searchsorted(self.ids, fish_ids)
         self.fins[rows] = fins
         self.clock.decided(fish_ids)

@@ -24,7 +24,7 @@ def _times(scenario: Scenario, fish_id: int, others: list[int], decisions: int) 
     times = []
     for _ in range(decisions):
         times.append(schedule.next_time[fish_id])
-        schedule.decided([fish_id])
+        schedule.decided(np.array([fish_id]))
     return times
 
 
@@ -53,9 +53,9 @@ def test_snapshots_win_ties_and_decisions_go_in_id_order() -> None:
     assert schedule.next_event() == Event(0.0, 0.0, 0, last=False, deciding=False, number=0)
     assert schedule.next_event() == Event(1.0, 1.0, 1, last=False, deciding=False, number=0)
     assert schedule.next_event() == Event(1.0, 0.0, None, last=False, deciding=True, number=1)
-    assert schedule.due(1.0) == [2, 5, 7]
+    assert schedule.due(1.0).tolist() == [2, 5, 7]
     schedule.remove(5)
-    assert schedule.due(1.0) == [2, 7]
+    assert schedule.due(1.0).tolist() == [2, 7]
 
 
 def test_lockstep_snapshots_and_decides_every_period_and_ends_with_a_snapshot() -> None:
@@ -68,7 +68,15 @@ def test_lockstep_snapshots_and_decides_every_period_and_ends_with_a_snapshot() 
         Event(0.5, 0.5, 1, last=False, deciding=True, number=1),
         Event(1.0, 0.5, 2, last=True, deciding=False, number=2),
     ]
-    assert clock.due(0.5) == [1, 4]
+    assert clock.due(0.5).tolist() == [1, 4]
+    # The fish who decide are remembered between ticks, and change as fish come and go.
+    clock.add(9, 0.5)
+    clock.add(3, 0.5)
+    assert clock.due(1.0).tolist() == [1, 3, 4, 9]
+    clock.remove(4)
+    assert clock.due(1.0).tolist() == [1, 3, 9]
+    with pytest.raises(ValueError, match="read-only"):
+        clock.due(1.0)[0] = 7
 
 
 def test_jitter_runs_are_deterministic_and_differ_from_lockstep() -> None:

@@ -26,7 +26,7 @@ def test_effort_counts_fin_beats_and_follows_a_fish_that_leaves_and_returns() ->
     world = WorldSim(WorldParams.of(Scenario(fish=3, duration=10.0)))
     world.join([0, 1, 2])
     world.next_event()  # tick 0: nothing has moved yet
-    world.hold([0, 1, 2], np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 0, 0]]))
+    world.hold(np.array([0, 1, 2]), np.array([[1.0, 0, 0, 0], [0, 1.0, 0, 0], [0, 0, 0, 0]]))
     world.next_event()  # one control period (1 s) with those fins
     np.testing.assert_allclose(world.effort, [3.0, 6.0, 0.0])
     world.leave([1])
