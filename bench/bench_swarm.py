@@ -219,6 +219,15 @@ def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None
         ylabel="time per tick (ms)",
         title="One control period of a whole swarm, 2 cores",
     )
+    # Plain numbers on both axes, not powers of ten: 25, 1,000, 10,000 fish; 1, 2, 5, 10 ms.
+    times = [batch[n] * 1e3 for n in sizes] + [row[3] * 1e3 for row in measured]
+    marks = [m * 10**e for e in range(-2, 5) for m in (1, 2, 5)]
+    axis.set_xticks(sizes)
+    axis.set_yticks([m for m in marks if min(times) / 2 <= m <= max(times) * 2])
+    plain = matplotlib.ticker.FuncFormatter(lambda value, _: f"{value:,g}")
+    axis.xaxis.set_major_formatter(plain)
+    axis.yaxis.set_major_formatter(plain)
+    axis.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     axis.grid(True, which="both", alpha=0.3)
     axis.legend()
     figure.savefig(path, dpi=120)
