@@ -44,6 +44,18 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
         "Lennard-Jones target distance in m (default 0.26 for aggregation, "
         "the tank diagonal for dispersion)",
     ),
+    "spawn_region": (
+        "--spawn",
+        str,
+        "where the fish start: ball (default: within --spawn-radius of the tank centre, "
+        "clipped to the tank) or tank (anywhere in the tank; for hundreds of fish or more)",
+    ),
+    "spawn_radius": (
+        "--spawn-radius",
+        float,
+        "with --spawn ball: radius of the start ball, m (default 0.26 for dispersion, 1.3 for "
+        "the other behaviours)",
+    ),
     "blind_width": ("--blind-width", float, "blind-spot width in m (default 0.05)"),
     "sphere_radius": ("--sphere-radius", float, "blocking-sphere radius in m (default 0.065)"),
     "vision_model": (
@@ -183,8 +195,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--procs",
         type=int,
         default=1,
-        help="fish worker processes (default 1; on two cores a second one pays off only from "
-        "thousands of fish: 10 000 fish 13 %% faster, 25 fish 30 %% slower, docs/benchmarks.md)",
+        help="fish worker processes (default 1; on two cores a second one pays off only at "
+        "thousands of fish, and not always: 10 000 fish 6-7 %% faster in two runs of three, "
+        "1 000 fish 6-14 %% and 25 fish 12-27 %% slower; docs/benchmarks.md)",
     )
     run.add_argument(
         "--record",

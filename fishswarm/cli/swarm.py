@@ -38,9 +38,11 @@ from fishswarm.actors.security import (
 from fishswarm.actors.session import ConnectError, SessionSettings, check_endpoint, open_session
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus, query
+from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import ControlReply, ControlRequest
+from fishswarm.sim.physics import WorldParams, spawn_spacing
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.live_view import open_live_view
 from fishswarm.study.progress import ProgressLine, bar
@@ -182,6 +184,27 @@ def _check_file_path(flag: str, path: Path | None) -> None:
         )
 
 
+CROWDED_SPACING = BODY_LENGTH / 4
+"""Fish starting closer than this to their nearest neighbour (the median fish) are warned
+of, m: a quarter of a BlueBot's length, about half the spacing of the study's own start."""
+
+
+def crowding_warning(scenario: Scenario) -> str | None:
+    """What to say when the fish start piled on one another — hundreds of fish in the
+    study's start ball — and how to spread them; None when they do not."""
+    spacing = spawn_spacing(WorldParams.of(scenario), scenario.fish)
+    if spacing >= CROWDED_SPACING:
+        return None
+    study = Scenario()
+    usual = spawn_spacing(WorldParams.of(study), study.fish)
+    return (
+        f"the {scenario.fish} fish start a median {spacing * 100:.1f} cm from their nearest "
+        f"neighbour (a BlueBot is {BODY_LENGTH * 100:.0f} cm long; the study's "
+        f"{study.fish} fish start {usual * 100:.0f} cm apart): spread them with --spawn tank, "
+        "a larger --spawn-radius, or a larger tank (tank = [x, y, z] in a --config file)"
+    )
+
+
 def run(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm run``."""
     if args.procs < 1:
@@ -217,6 +240,9 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         f"process(es), listening on {settings.listen}",
         file=sys.stderr,
     )
+    crowded = crowding_warning(scenario)
+    if crowded is not None:
+        print(f"fishswarm run: warning: {crowded}", file=sys.stderr)
     show = None if args.quiet else progress_printer(scenario.ticks)
     with contextlib.ExitStack() as serving:
         view = None
@@ -378,6 +404,9 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
 
 def world(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm world``: the world alone."""
+    crowded = crowding_warning(scenario)
+    if crowded is not None:
+        print(f"fishswarm world: warning: {crowded}", file=sys.stderr)
     actor = World(
         WorldSettings(
             scenario,

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from fishswarm.bluebot.dynamics import State, rest_state, step
 from fishswarm.bluebot.parameters import BlueBot, Tank
@@ -142,6 +143,16 @@ def place(params: WorldParams, ids: IntArray) -> State:
     position = np.array([p for p, _ in poses]).reshape(-1, 3)
     yaw = np.array([y for _, y in poses])
     return rest_state(position, yaw)
+
+
+def spawn_spacing(params: WorldParams, fish: int) -> float:
+    """How far apart fish ``0 … fish − 1`` start: the median distance from a fish to its
+    nearest other at the spawn poses, m (infinite for fewer than two fish)."""
+    if fish < 2:
+        return float("inf")
+    position = place(params, np.arange(fish, dtype=np.int64)).position
+    distance, _ = cKDTree(position).query(position, k=2)
+    return float(np.median(distance[:, 1]))
 
 
 def observe(

@@ -135,6 +135,8 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["run", "--fish", "many"], "invalid int value"),
         (["export", "nowhere.mcap"], "say what to write"),
         (["run", "--vision", "sonar"], "vision_model must be one of geometric, camera"),
+        (["run", "--spawn", "pool"], "spawn_region must be one of ball, tank, got 'pool'"),
+        (["run", "--spawn-radius", "0"], "spawn_radius must be positive metres"),
         (["run", "--profile", "code"], "profile must be one of paper, study-code, got 'code'"),
         (["fish", "--id", "1", "--study-code", "drag,wobble"], "unknown switch(es) 'wobble'"),
         (["experiment", "blindspot", "--profile", "code"], "invalid choice: 'code'"),
@@ -150,6 +152,32 @@ def test_bad_arguments_exit_nonzero_with_a_reason(args: list[str], message: str)
     result = _run(*args, timeout=30)
     assert result.returncode == 2
     assert message in result.stderr
+
+
+def test_fish_piled_on_one_another_at_the_start_are_warned_of_with_the_way_out() -> None:
+    from fishswarm.cli.swarm import crowding_warning
+
+    assert crowding_warning(Scenario()) is None  # the study's 25 fish, 6 cm apart
+    assert crowding_warning(Scenario(fish=1000, spawn_region="tank")) is None  # 8.5 cm
+    warning = crowding_warning(Scenario(fish=1000))  # the study's ball: 2.3 cm
+    assert warning is not None
+    assert warning.startswith("the 1000 fish start a median 2.3 cm from their nearest")
+    assert "the study's 25 fish start 6 cm apart" in warning
+    assert "--spawn tank" in warning and "--spawn-radius" in warning
+
+
+def test_a_crowded_run_says_so_before_it_starts_and_runs_anyway(tmp_path: Path) -> None:
+    summary = tmp_path / "s.json"
+    crowded = ["--fish", "40", "--spawn-radius", "0.05", "--duration", "1", "--quiet"]
+    result = _run("run", *crowded, *_outputs(tmp_path, summary))
+    assert result.returncode == 0, result.stderr
+    assert "fishswarm run: warning: the 40 fish start a median" in result.stderr
+    assert json.loads(summary.read_text())["scenario"]["spawn_radius"] == pytest.approx(0.05)
+    spread = _run("run", "--fish", "4", "--spawn", "tank", "--duration", "1", "--quiet",
+                  *_outputs(tmp_path, summary))  # fmt: skip
+    assert spread.returncode == 0, spread.stderr
+    assert "warning" not in spread.stderr
+    assert json.loads(summary.read_text())["scenario"]["spawn_region"] == "tank"
 
 
 def test_a_run_in_which_the_watchdog_stopped_fish_says_so_and_exits_4(tmp_path: Path) -> None:
