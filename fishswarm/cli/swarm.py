@@ -195,14 +195,26 @@ def crowding_warning(scenario: Scenario) -> str | None:
     spacing = spawn_spacing(WorldParams.of(scenario), scenario.fish)
     if spacing >= CROWDED_SPACING:
         return None
-    study = Scenario()
+    study = Scenario()  # the study's dispersion start, the tightest of its set-ups
     usual = spawn_spacing(WorldParams.of(study), study.fish)
+    if scenario.spawn_region == "tank":
+        way_out = "a larger tank (tank = [x, y, z] in a --config file)"
+    else:
+        way_out = (
+            "--spawn tank (anywhere in the tank; with a larger tank = [x, y, z] in a "
+            "--config file for more room) or a larger --spawn-radius"
+        )
     return (
         f"the {scenario.fish} fish start a median {spacing * 100:.1f} cm from their nearest "
-        f"neighbour (a BlueBot is {BODY_LENGTH * 100:.0f} cm long; the study's "
-        f"{study.fish} fish start {usual * 100:.0f} cm apart): spread them with --spawn tank, "
-        "a larger --spawn-radius, or a larger tank (tank = [x, y, z] in a --config file)"
+        f"neighbour (a BlueBot is {BODY_LENGTH * 100:.0f} cm long; the study's dispersion "
+        f"start puts {study.fish} fish {usual * 100:.0f} cm apart): spread them with {way_out}"
     )
+
+
+def _warn_if_crowded(command: str, scenario: Scenario) -> None:
+    crowded = crowding_warning(scenario)
+    if crowded is not None:
+        print(f"fishswarm {command}: warning: {crowded}", file=sys.stderr)
 
 
 def run(args: argparse.Namespace, scenario: Scenario) -> int:
@@ -240,9 +252,7 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         f"process(es), listening on {settings.listen}",
         file=sys.stderr,
     )
-    crowded = crowding_warning(scenario)
-    if crowded is not None:
-        print(f"fishswarm run: warning: {crowded}", file=sys.stderr)
+    _warn_if_crowded("run", scenario)
     show = None if args.quiet else progress_printer(scenario.ticks)
     with contextlib.ExitStack() as serving:
         view = None
@@ -404,9 +414,7 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
 
 def world(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm world``: the world alone."""
-    crowded = crowding_warning(scenario)
-    if crowded is not None:
-        print(f"fishswarm world: warning: {crowded}", file=sys.stderr)
+    _warn_if_crowded("world", scenario)
     actor = World(
         WorldSettings(
             scenario,

@@ -162,8 +162,13 @@ def test_fish_piled_on_one_another_at_the_start_are_warned_of_with_the_way_out()
     warning = crowding_warning(Scenario(fish=1000))  # the study's ball: 2.3 cm
     assert warning is not None
     assert warning.startswith("the 1000 fish start a median 2.3 cm from their nearest")
-    assert "the study's 25 fish start 6 cm apart" in warning
+    assert "the study's dispersion start puts 25 fish 6 cm apart" in warning
     assert "--spawn tank" in warning and "--spawn-radius" in warning
+    # Already spread over the whole tank: only a larger tank helps.
+    packed = crowding_warning(Scenario(fish=20_000, spawn_region="tank"))
+    assert packed is not None and packed.endswith(
+        "a larger tank (tank = [x, y, z] in a --config file)"
+    )
 
 
 def test_a_crowded_run_says_so_before_it_starts_and_runs_anyway(tmp_path: Path) -> None:

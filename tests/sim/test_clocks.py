@@ -70,6 +70,7 @@ def test_lockstep_snapshots_and_decides_every_period_and_ends_with_a_snapshot() 
     ]
     assert clock.due(0.5).tolist() == [1, 4]
     # The fish who decide are remembered between ticks, and change as fish come and go.
+    assert clock.due(1.0) is clock.due(1.5)
     clock.add(9, 0.5)
     clock.add(3, 0.5)
     assert clock.due(1.0).tolist() == [1, 3, 4, 9]
