@@ -69,6 +69,12 @@ class CompiledVision:
 SIFT_CHUNK = 64
 """Fish sifted one after another by one thread, sharing its scratch arrays."""
 
+INSERTION_MAX = 64
+"""The range search keeps a fish's others in order as it finds them up to this many in
+range; a fish with more (a school in a tank too small for it: 2 000 fish in the study's
+tank have all the others in range) has them sorted once found, instead of moving each
+past the nearer ones found after it (0.6 s a tick at 2 000 fish)."""
+
 COMPILED_MIN_FISH = 200
 """From this many fish on, a scenario's world integrates and sees with the compiled kernels,
 and the swarm metrics take the compiled pairwise distance (below, loading the kernels takes
@@ -387,6 +393,9 @@ def _scan_in_range() -> Callable[..., None]:
     ) -> None:
         width = index.shape[1]
         for fish in numba.prange(points.shape[0]):
+            # The first pass counted each fish's others: a crowded fish's are sorted once
+            # they are all in (insertion would move each past the nearer ones found later).
+            crowded = width > 0 and found[fish] > INSERTION_MAX
             total = 0
             for row in range(max(cell[fish, 1] - 1, 0), min(cell[fish, 1] + 2, rows)):
                 for column in range(max(cell[fish, 0] - 1, 0), min(cell[fish, 0] + 2, columns)):
@@ -401,7 +410,10 @@ def _scan_in_range() -> Callable[..., None]:
                         gap = math.sqrt(dx * dx + dy * dy + dz * dz)
                         if gap > reach:
                             continue
-                        if width:
+                        if crowded:
+                            index[fish, total] = other
+                            distance[fish, total] = gap
+                        elif width:
                             # Insertion into the row kept nearest first, ties by index: the
                             # order of a stable sort by distance of the others in index order,
                             # without a buffer or a sort per fish.
@@ -420,6 +432,22 @@ def _scan_in_range() -> Callable[..., None]:
                             distance[fish, place] = gap
                         total += 1
             found[fish] = total
+            if crowded:
+                # Nearest first, then equal distances by index (an insertion pass over the
+                # sorted row moves only ties): the order the insertion above gives.
+                order_ = np.argsort(distance[fish, :total])
+                gaps = distance[fish, :total][order_]
+                others = index[fish, :total][order_]
+                for k in range(1, total):
+                    gap, other = gaps[k], others[k]
+                    place = k
+                    while place > 0 and gaps[place - 1] == gap and others[place - 1] > other:
+                        gaps[place] = gaps[place - 1]
+                        others[place] = others[place - 1]
+                        place -= 1
+                    gaps[place], others[place] = gap, other
+                distance[fish, :total] = gaps
+                index[fish, :total] = others
 
     return scan_all
 

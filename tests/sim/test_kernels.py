@@ -62,13 +62,17 @@ def _swarm(rng: np.random.Generator, count: int, side: float) -> tuple[np.ndarra
     return position, yaw
 
 
-@pytest.mark.parametrize(("count", "side"), [(40, 2.0), (600, 12.0)])
+@pytest.mark.parametrize(("count", "side"), [(40, 2.0), (600, 12.0), (300, 1.0)])
 def test_the_range_search_kernel_equals_the_reference(count: int, side: float) -> None:
     # 40 fish: the reference's all-pairs branch; 600: its KD-tree branch. Ties (fish 3 has
-    # fish 2 and 4 both 0.5 m away; 0 and 1 coincide) go by index in all three.
+    # fish 2 and 4 both 0.5 m away; 0 and 1 coincide) go by index in all three. 40 fish
+    # have fewer others in range than the kernel keeps in order as found; 300 in a metre's
+    # square all the others, sorted once found (600 fish: some of each).
     position, _ = _swarm(np.random.default_rng(count), count, side)
     index, distance = _in_range(position, 3.0)
     found, gaps = kernels.in_range(position, 3.0)
+    in_range = (found >= 0).sum(axis=1)
+    assert (in_range.max() > kernels.INSERTION_MAX) == (count > 40)
     np.testing.assert_array_equal(found, index)
     # The all-pairs branch sums the squares with einsum: the last bit may differ.
     np.testing.assert_allclose(gaps, distance, rtol=1e-15, atol=0)
