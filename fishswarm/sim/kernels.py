@@ -435,9 +435,9 @@ def _scan_in_range() -> Callable[..., None]:
             if crowded:
                 # Nearest first, then equal distances by index (an insertion pass over the
                 # sorted row moves only ties): the order the insertion above gives.
-                order_ = np.argsort(distance[fish, :total])
-                gaps = distance[fish, :total][order_]
-                others = index[fish, :total][order_]
+                by_distance = np.argsort(distance[fish, :total])
+                gaps = distance[fish, :total][by_distance]
+                others = index[fish, :total][by_distance]
                 for k in range(1, total):
                     gap, other = gaps[k], others[k]
                     place = k
