@@ -433,21 +433,14 @@ def _scan_in_range() -> Callable[..., None]:
                         total += 1
             found[fish] = total
             if crowded:
-                # Nearest first, then equal distances by index (an insertion pass over the
-                # sorted row moves only ties): the order the insertion above gives.
-                by_distance = np.argsort(distance[fish, :total])
-                gaps = distance[fish, :total][by_distance]
-                others = index[fish, :total][by_distance]
-                for k in range(1, total):
-                    gap, other = gaps[k], others[k]
-                    place = k
-                    while place > 0 and gaps[place - 1] == gap and others[place - 1] > other:
-                        gaps[place] = gaps[place - 1]
-                        others[place] = others[place - 1]
-                        place -= 1
-                    gaps[place], others[place] = gap, other
-                distance[fish, :total] = gaps
-                index[fish, :total] = others
+                # By index, then stably by distance: nearest first, equal distances by
+                # index, the order the insertion above gives (however many fish tie).
+                by_index = np.argsort(index[fish, :total])
+                others = index[fish, :total][by_index]
+                gaps = distance[fish, :total][by_index]
+                by_distance = np.argsort(gaps, kind="mergesort")
+                distance[fish, :total] = gaps[by_distance]
+                index[fish, :total] = others[by_distance]
 
     return scan_all
 
