@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.bluebot.dynamics import rotate_to_tank
-from fishswarm.formations.maps import MAX_FISH, target_map
+from fishswarm.formations.maps import check_size, target_map
 
 FloatArray = NDArray[np.float64]
 
@@ -193,12 +193,10 @@ def star_map(count: int, *, spacing: float) -> FloatArray:
     (about 1.5 s for 1 000 fish).
 
     Raises:
-        ValueError: a count out of [1, MAX_FISH] or a spacing not positive.
+        ValueError: a count out of [1, :data:`~fishswarm.formations.maps.MAX_FISH`] or a
+            spacing not positive.
     """
-    if not 1 <= count <= MAX_FISH:
-        raise ValueError(f"a star map is for 1 to {MAX_FISH} fish, got {count}")
-    if not spacing > 0 or not math.isfinite(spacing):
-        raise ValueError(f"spacing must be a positive length, got {spacing}")
+    check_size(count, spacing, what="a star map")
     points = np.array([_position(site) for site in star_sites(count)], dtype=np.float64)
     leader, angle = _lead_and_turn(points)
     flat = np.zeros((count, 3))

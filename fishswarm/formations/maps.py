@@ -149,6 +149,19 @@ THREE_D = ("tetrahedral-pyramid", "diamond", "phalanx")
 """The maps that use depth."""
 
 
+def check_size(count: int, spacing: float, *, what: str = "a map") -> None:
+    """Refuse a map for a count out of [1, MAX_FISH] or a spacing that is not a positive
+    length (``what``: the map, as the message names it).
+
+    Raises:
+        ValueError: with what is wrong.
+    """
+    if not 1 <= count <= MAX_FISH:
+        raise ValueError(f"{what} is for 1 to {MAX_FISH} fish, got {count}")
+    if not spacing > 0 or not math.isfinite(spacing):
+        raise ValueError(f"spacing must be a positive length, got {spacing}")
+
+
 @functools.lru_cache(maxsize=64)
 def target_map(name: str, count: int, *, spacing: float) -> FloatArray:
     """The map ``name`` for ``count`` fish, ``spacing`` m between nearest slots (read-only,
@@ -160,10 +173,7 @@ def target_map(name: str, count: int, *, spacing: float) -> FloatArray:
     make = MAPS.get(name)
     if make is None:
         raise ValueError(f"formation map must be one of {', '.join(MAPS)}, got {name!r}")
-    if not 1 <= count <= MAX_FISH:
-        raise ValueError(f"a map is for 1 to {MAX_FISH} fish, got {count}")
-    if not spacing > 0 or not math.isfinite(spacing):
-        raise ValueError(f"spacing must be a positive length, got {spacing}")
+    check_size(count, spacing)
     made: FloatArray = make(count, spacing=spacing)
     slots: FloatArray = made - made[0]  # the leader's slot at the origin
     slots.setflags(write=False)
