@@ -10,8 +10,9 @@ their order, so velocities agree bit for bit; angles go through the C library's 
 cosine, which may differ from numpy's in the last bit (tested equal within 1e-12, and the
 same fish seen on random swarms).
 
-The kernels release the GIL: the world's steps, computed in a worker thread, and the
-observer's metrics run beside the actors' own work. numba is optional
+The kernels release the GIL: the world's steps, computed in a worker thread, run beside the
+actors' own work. (The observer's distance kernels are in
+:mod:`fishswarm.study.distance_kernels`, on one core each.) numba is optional
 (``pip install 'fishswarm[fast]'``) and imported only when a kernel is
 first asked for: the robot's import path never reaches this module, and a simulator without
 numba runs the numpy reference.
@@ -77,12 +78,13 @@ past the nearer ones found after it (0.6 s a tick at 2 000 fish)."""
 
 COMPILED_MIN_FISH = 200
 """From this many fish on, a scenario's world integrates and sees with the compiled kernels,
-and the swarm metrics take the compiled pairwise distance (below, loading the kernels takes
-longer than they save; small swarms stay on the numpy references)."""
+and the swarm metrics their compiled distances (below, loading the kernels takes longer than
+they save; small swarms stay on the numpy and scipy references)."""
 
 _LOCK = threading.Lock()
-"""One kernel at a time per process: the world's thread and the observer's may both call
-one, and numba's simplest threading layer must not start two parallel regions at once."""
+"""One kernel at a time per process: two threads may each call one (the world's event loop
+and its worker thread, or two worlds), and numba's simplest threading layer must not start
+two parallel regions at once."""
 
 
 def available() -> bool:
@@ -211,17 +213,6 @@ def in_range(position: FloatArray, visual_range: float) -> tuple[NDArray[np.intp
     distance = np.full((count, width), np.inf)
     _call(_scan_in_range(), *grid, found, index, distance)
     return index, distance
-
-
-def mean_pairwise_distance(position: FloatArray) -> float:
-    """The mean distance over all pairs of ``position`` (N, 3), m: scipy's
-    ``pdist(position).mean()`` within rounding, summed fish by fish in parallel."""
-    count = position.shape[0]
-    if count < 2:
-        return 0.0
-    sums = np.zeros(count)
-    _call(_pairwise_sums(), np.ascontiguousarray(position, dtype=np.float64), sums)
-    return float(sums.sum() / (count * (count - 1) / 2))
 
 
 def sift(
@@ -443,23 +434,3 @@ def _scan_in_range() -> Callable[..., None]:
                 index[fish, :total] = others[by_distance]
 
     return scan_all
-
-
-@functools.cache
-def _pairwise_sums() -> Callable[..., None]:
-    """Each fish's summed distance to the fish after it (compiled on first use, cached)."""
-    import numba
-
-    @numba.njit(parallel=True, cache=True, nogil=True)
-    def sums_all(points: Any, sums: Any) -> None:
-        count = points.shape[0]
-        for fish in numba.prange(count):
-            total = 0.0
-            for other in range(fish + 1, count):
-                dx = points[other, 0] - points[fish, 0]
-                dy = points[other, 1] - points[fish, 1]
-                dz = points[other, 2] - points[fish, 2]
-                total += math.sqrt(dx * dx + dy * dy + dz * dz)
-            sums[fish] = total
-
-    return sums_all

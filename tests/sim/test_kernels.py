@@ -148,23 +148,3 @@ def test_large_scenarios_integrate_and_see_with_the_kernels_and_match_the_refere
     reference = run_batch(scenario)
     np.testing.assert_allclose(compiled.position, reference.position, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(compiled.neighbors_seen, reference.neighbors_seen)
-
-
-def test_the_mean_pairwise_distance_kernel_equals_scipys() -> None:
-    from scipy.spatial.distance import pdist
-
-    from fishswarm.study.metrics import pairwise_distance
-
-    rng = np.random.default_rng(11)
-    for count in (2, 3, 257):
-        position = rng.uniform(0.0, 5.0, (count, 3))
-        assert kernels.mean_pairwise_distance(position) == pytest.approx(
-            float(pdist(position).mean()), rel=1e-13
-        )
-    # A unit square: 4 pairs at 1 m and 2 at √2 m.
-    square = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
-    assert kernels.mean_pairwise_distance(square) == pytest.approx((4 + 2 * np.sqrt(2)) / 6)
-    assert kernels.mean_pairwise_distance(square[:1]) == 0.0
-    # The swarm metric takes the kernel from 200 fish on, with the same value.
-    many = rng.uniform(0.0, 5.0, (400, 3))
-    assert pairwise_distance(many) == pytest.approx(float(pdist(many).mean()), rel=1e-13)
