@@ -23,6 +23,7 @@ import platform
 from bench_swarm import batch_tick
 
 from fishswarm.sim import kernels
+from fishswarm.sim.allocator import tune_allocator
 
 
 def tick_seconds(fish: int, compiled: bool) -> tuple[float, float]:
@@ -42,9 +43,10 @@ def main() -> None:
     args = parser.parse_args()
     if not kernels.available():
         raise SystemExit("numba is not installed: pip install -e '.[fast]'")
+    tuned = tune_allocator()  # as a fishswarm process runs
     print(
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-        f"Python {platform.python_version()}"
+        f"Python {platform.python_version()}, allocator set: {'yes' if tuned else 'no'}"
     )
     print("| fish | numpy ms/tick | compiled ms/tick | speed-up | compiled steps/s | start-up s |")
     print("|---:|---:|---:|---:|---:|---:|")

@@ -47,6 +47,7 @@ from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.messages import Perception
 from fishswarm.sim import kernels
+from fishswarm.sim.allocator import tune_allocator
 from fishswarm.sim.engine import run_batch
 from fishswarm.sim.scenario import Scenario
 
@@ -241,11 +242,14 @@ def main() -> None:
     parser.add_argument("--round-trips", type=int, default=2000)
     parser.add_argument("--plot", help="also draw tick time against fish count to this file")
     args = parser.parse_args()
+    # As the fishswarm command and its workers do: the batch engine and the launcher run here.
+    tuned = tune_allocator()
     measured: list[tuple[int, int, float, float]] = []
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
         f"{platform.python_version()}, compiled kernels: "
-        f"{'yes' if kernels.available() else 'no (numba not installed)'}\n"
+        f"{'yes' if kernels.available() else 'no (numba not installed)'}, allocator set: "
+        f"{'yes' if tuned else 'no (not glibc)'}\n"
     )
     echo = float(np.median(echo_round_trips("zenoh", 1000))) / 1e3
     print(f"Zenoh echo floor: {echo * 1e3:.3f} ms (median of 1000)\n")

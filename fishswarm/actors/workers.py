@@ -22,6 +22,7 @@ from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.behaviors.core import FishParams
 from fishswarm.protocols.keys import KeySpace
+from fishswarm.sim.allocator import tune_allocator
 
 
 @dataclass(frozen=True)
@@ -84,6 +85,7 @@ def split_fish(ids: list[int], procs: int) -> list[tuple[int, ...]]:
 def worker_main(spec: WorkerSpec, connection: Connection) -> None:
     """Entry point of a worker process."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    tune_allocator()
     logging.basicConfig(level=spec.log_level, format="%(levelname)s %(name)s: %(message)s")
     statistics = trio.run(_serve, spec, connection)
     with contextlib.suppress(BrokenPipeError, OSError):

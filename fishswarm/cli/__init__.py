@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from fishswarm.cli.parsers import build_parser, scenario_from
+from fishswarm.sim.allocator import tune_allocator
 from fishswarm.sim.scenario import ConfigError
 
 
@@ -18,6 +19,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level, format="%(levelname)s %(name)s: %(message)s")
     from fishswarm.cli import learn, robot, study, swarm, view
+
+    if args.command != "robot":  # a robot's small process keeps glibc's own settings
+        tune_allocator()
 
     handlers: dict[str, Any] = {
         "run": swarm.run,

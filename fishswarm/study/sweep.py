@@ -22,6 +22,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.sim.allocator import tune_allocator
 from fishswarm.sim.engine import run_batch
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import Experiment, RunKey, RunOutcome
@@ -67,9 +68,11 @@ class SweepInterrupted(KeyboardInterrupt):
         self.total = total
 
 
-def _ignore_interrupts() -> None:
-    """A worker leaves Ctrl-C to the sweep, which stops it."""
+def _start_process() -> None:
+    """Set up a sweep's process: it leaves Ctrl-C to the sweep, which stops it, and keeps
+    its freed arrays for the next run's."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    tune_allocator()
 
 
 def run_experiment(
@@ -129,7 +132,7 @@ def _run_in_processes(
     """
     context = multiprocessing.get_context("spawn")
     pool = concurrent.futures.ProcessPoolExecutor(
-        jobs, mp_context=context, initializer=_ignore_interrupts
+        jobs, mp_context=context, initializer=_start_process
     )
     futures = [pool.submit(run_one, experiment, key, engine) for key in pairs]
     handed: set[concurrent.futures.Future[RunOutcome]] = set()
