@@ -51,13 +51,13 @@ from fishswarm.sim.allocator import tune_allocator
 from fishswarm.sim.engine import run_batch
 from fishswarm.sim.scenario import Scenario
 
-DURATION = {25: 120.0, 100: 60.0, 1000: 60.0, 10_000: 24.0}
+DURATION = {25: 600.0, 100: 120.0, 1000: 300.0, 10_000: 40.0}
 WARM_UP_TICKS = 4
 """The tick is timed from the snapshot of this tick to the last, as the batch engine's is
 timed without its start-up and first tick: the first ticks of a run load the compiled
 kernels and warm the workers up (at 1 000 fish, 15 ticks averaged 54 ms where 150 averaged
 14.5)."""
-BATCH_DURATION = {25: 300.0, 1000: 60.0, 10_000: 20.0}
+BATCH_DURATION = {25: 600.0, 1000: 300.0, 10_000: 40.0}
 
 
 def swarm_row(fish: int, procs: int) -> dict[str, float]:
