@@ -127,3 +127,49 @@ def test_the_nearest_neighbour_metric_is_the_same_compiled() -> None:
     school = np.c_[rng.uniform(0, 20, (500, 2)), rng.uniform(0, 1.2, 500)]
     assert kernels.COMPILED_MIN_FISH <= 500
     assert nearest_neighbor_distance(school) == float(_kd_nearest(school).mean())
+
+
+def test_pairs_must_be_integer_lists_of_one_length() -> None:
+    position = np.zeros((3, 3))
+    two, one = np.array([0, 1], dtype=np.intp), np.array([2], dtype=np.intp)
+    with pytest.raises(ValueError, match="one length"):
+        distance_kernels.pair_distances(position, two, one)
+    with pytest.raises(ValueError, match="integer"):
+        distance_kernels.pair_distances(position, np.array([0.0, 1.0]), two)
+
+
+def test_a_position_that_is_not_finite_is_refused() -> None:
+    position = np.zeros((4, 3))
+    position[2, 2] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        distance_kernels.nearest_distances(position)
+
+
+def test_a_school_the_columns_cannot_split_goes_to_the_k_d_tree(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    asked: list[int] = []
+    tree = cKDTree
+
+    def spy(points: np.ndarray) -> object:
+        asked.append(points.shape[0])
+        return tree(points)
+
+    monkeypatch.setattr(distance_kernels, "cKDTree", spy)
+    rng = np.random.default_rng(4)
+    spread = np.c_[rng.uniform(0, 30, (1000, 2)), rng.uniform(0, 1.2, 1000)]
+    distance_kernels.nearest_distances(spread)
+    assert asked == []
+    # A school 1 m across and one straggler 100 m off: the columns (sized from the whole
+    # footprint, 4.5 m) hold the school in a few, more than CROWDED_COLUMN each.
+    straggling = np.r_[rng.normal(0.0, 0.3, (1000, 3)), [[100.0, 100.0, 0.5]]]
+    np.testing.assert_array_equal(
+        distance_kernels.nearest_distances(straggling), _kd_nearest(straggling)
+    )
+    assert asked == [1001]
+    # Fish stacked over one another with a nanometre of sideways jitter: columns of about two
+    # fish each, a nanometre wide, with the nearest fish a millimetre above: the search
+    # spends its COLUMNS_PER_FISH and hands over.
+    stacked = np.c_[rng.uniform(0, 1e-9, (1000, 2)), np.linspace(0.0, 1.0, 1000)]
+    np.testing.assert_array_equal(distance_kernels.nearest_distances(stacked), _kd_nearest(stacked))
+    assert asked == [1001, 1000]
