@@ -196,8 +196,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=1,
         help="fish worker processes (default 1; on two cores a second one pays off only at "
-        "thousands of fish, and not always: 10 000 fish 6-7 %% faster in two runs of three, "
-        "1 000 fish 6-14 %% and 25 fish 12-27 %% slower; docs/benchmarks.md)",
+        "thousands of fish: in three runs 10 000 fish 3-7 %% faster, 1 000 fish 3 %% "
+        "faster to 17 %% slower, 25 fish 13-20 %% slower; docs/benchmarks.md)",
     )
     run.add_argument(
         "--record",
