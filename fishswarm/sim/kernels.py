@@ -78,8 +78,8 @@ past the nearer ones found after it (0.6 s a tick at 2 000 fish)."""
 
 COMPILED_MIN_FISH = 200
 """From this many fish on, a scenario's world integrates and sees with the compiled kernels,
-and the swarm metrics their compiled distances (below, loading the kernels takes longer than
-they save; small swarms stay on the numpy and scipy references)."""
+and the swarm metrics take their compiled distances (below, loading the kernels takes longer
+than they save; small swarms stay on the numpy and scipy references)."""
 
 _LOCK = threading.Lock()
 """One kernel at a time per process: two threads may each call one (the world's event loop
