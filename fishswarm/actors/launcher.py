@@ -340,6 +340,11 @@ def _summary(
         "wall_time": wall_time,
         "loop_time": world.wall_time,
         "compiled_kernels": world.params.compiled,
+        "world_time": {
+            "physics": world_stats.physics_time_median,
+            "vision": world_stats.vision_time_median,
+            "perceptions": world_stats.perceptions_time_median,
+        },
         "answer_time": {
             "median": world_stats.answer_time_median,
             "p90": world_stats.answer_time_p90,

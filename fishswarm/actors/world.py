@@ -79,6 +79,11 @@ it. A shorter step stays in the event loop: handing it over would cost more than
 observer's decoding and the step's numpy then contend for the GIL and the two cores)."""
 
 
+STEP_PHASES = {"next_event": "physics", "sense": "vision"}
+"""The simulation's steps whose times :meth:`World.statistics` reports, by the part of a
+tick they are."""
+
+
 class StartTimeout(RuntimeError):
     """The fish the world waits for did not all come up in time."""
 
@@ -137,6 +142,10 @@ class WorldStatistics:
             90th percentile over the ticks every fish answered, s (0 before any tick; a tick
             in which a fish timed out is left out, its fish counted as lost); the network's
             latency shows here.
+        physics_time_median, vision_time_median, perceptions_time_median: how long this
+            process took, median over its steps, to move the fish to the next tick or event
+            (physics), to see for them (vision), and to build and send their perceptions, s
+            of wall time (0 before any) — with the answer time, where a tick goes.
     """
 
     ticks: int
@@ -150,6 +159,9 @@ class WorldStatistics:
     mismatched_fish: int = 0
     answer_time_median: float = 0.0
     answer_time_p90: float = 0.0
+    physics_time_median: float = 0.0
+    vision_time_median: float = 0.0
+    perceptions_time_median: float = 0.0
 
     @property
     def rejected_total(self) -> int:
@@ -204,6 +216,12 @@ class World:
         """The rules this world's scenario says its fish decide by (FishAbout.rules)."""
         self._warned: set[str] = set()
         self._step_times: dict[str, float] = {}
+        self._phase_times: dict[str, list[float]] = {
+            "physics": [],
+            "vision": [],
+            "perceptions": [],
+        }
+        """Wall time of every physics and vision step and every sending of perceptions, s."""
         """How long each step of the simulation took the last time, s: a long one runs in a
         worker thread, so that the world keeps pulsing meanwhile."""
 
@@ -236,6 +254,9 @@ class World:
             mismatched_fish=len(self.mismatched),
             answer_time_median=_quantile(self._answer_times, 0.5),
             answer_time_p90=_quantile(self._answer_times, 0.9),
+            physics_time_median=_quantile(self._phase_times["physics"], 0.5),
+            vision_time_median=_quantile(self._phase_times["vision"], 0.5),
+            perceptions_time_median=_quantile(self._phase_times["perceptions"], 0.5),
         )
 
     async def run(
@@ -292,7 +313,9 @@ class World:
         offload = many if last is None else last > (OFFLOAD_LONG if many else OFFLOAD_AFTER)
         started = time.perf_counter()
         result = await trio.to_thread.run_sync(step) if offload else step()
-        self._step_times[name] = time.perf_counter() - started
+        self._step_times[name] = took = time.perf_counter() - started
+        if name in STEP_PHASES:
+            self._phase_times[STEP_PHASES[name]].append(took)
         return result
 
     def _subscribe_commands(self, key: str, kind: str) -> Declared:
@@ -401,6 +424,7 @@ class World:
             if realtime and trio.current_time() - tick_start > period:
                 tick_start = trio.current_time()  # after a pause: pace from now on
             inbox_counts = await self._inbox_counts(event)
+            sending = time.perf_counter()
             # Fish lost while the world waited for the channel decide no more.
             due_ids, rows = self.sim.due()
             if self._leaving:
@@ -423,6 +447,7 @@ class World:
                 rows=rows,
             ):
                 self._put(bus, key, encode(message))
+            self._phase_times["perceptions"].append(time.perf_counter() - sending)
             if deferred is not None:
                 snapshot = self._snapshot(event.time, perceived.counts, deferred)
                 self._put(bus, self.keys.snapshot, encode(snapshot))

@@ -373,6 +373,13 @@ def _summary_text(summary: dict[str, Any]) -> str:
         f"deliveries {counts['deliveries']}, wall {summary['wall_time']:.2f} s"
         + (f", {rtf:.{2 if rtf < 1 else 0}f}× real time" if rtf else "")
     )
+    world_time = summary.get("world_time") or {}
+    if world_time.get("physics"):
+        lines.append(
+            "  a tick in the world (medians): physics "
+            f"{world_time['physics'] * 1e3:.1f} ms, vision {world_time['vision'] * 1e3:.1f} ms, "
+            f"perceptions out {world_time['perceptions'] * 1e3:.1f} ms"
+        )
     answer = summary.get("answer_time") or {}
     if answer.get("median"):
         lines.append(

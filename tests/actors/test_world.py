@@ -4,6 +4,8 @@ and the same trajectories as the batch engine."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 import trio
@@ -636,3 +638,35 @@ def test_a_step_runs_in_a_worker_thread_only_while_its_last_run_took_long(
     # Runs 1 and 2 in the event loop (no run before; a quick one before), run 2 slow: run 3
     # goes to a worker thread; it was quick, so run 4 is back in the loop.
     assert threads == [True, True, False, True]
+
+
+def test_the_worlds_statistics_say_where_its_ticks_went(monkeypatch: pytest.MonkeyPatch) -> None:
+    import time
+
+    from fishswarm.sim.tick import WorldSim
+
+    # Physics made to take at least 6 ms of wall time a step, vision at least 2 ms; the
+    # perceptions are left as they are.
+    def slowed(step: Any, seconds: float) -> Any:
+        def run(self: WorldSim) -> Any:
+            until = time.perf_counter() + seconds
+            result = step(self)
+            while time.perf_counter() < until:
+                pass
+            return result
+
+        run.__name__ = step.__name__
+        return run
+
+    monkeypatch.setattr(WorldSim, "next_event", slowed(WorldSim.next_event, 0.006))
+    monkeypatch.setattr(WorldSim, "sense", slowed(WorldSim.sense, 0.002))
+    scenario = Scenario(fish=4, duration=4.0, seed=2)
+    world, _ = run_mock(lambda: _swarm(scenario, schools=2))
+    statistics = world.statistics()
+    assert statistics.physics_time_median >= 0.006
+    assert 0.002 <= statistics.vision_time_median < statistics.physics_time_median
+    assert 0 < statistics.perceptions_time_median < 0.002
+    # One physics and one vision step a tick (and one for the first look), perceptions at
+    # every tick but the last.
+    assert len(world._phase_times["physics"]) == len(world._phase_times["vision"]) == 5
+    assert len(world._phase_times["perceptions"]) == 4

@@ -61,6 +61,13 @@ def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -
     assert data["scenario"]["fish"] == 6 and data["scenario"]["seed"] == 7
     assert data["counts"]["ticks"] == 4
     assert data["real_time_factor"] > 1
+    # Where a tick went: each part of the world's a share of the loop, the fish's answer too.
+    parts = data["world_time"]
+    assert set(parts) == {"physics", "vision", "perceptions"}
+    per_tick = data["loop_time"] / data["counts"]["ticks"]
+    assert all(0 < seconds < per_tick for seconds in parts.values())
+    assert 0 < data["answer_time"]["median"] < per_tick
+    assert "a tick in the world (medians): physics " in result.stderr
     for name in (
         "centroid_distance",
         "pairwise_distance",
