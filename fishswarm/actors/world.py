@@ -142,10 +142,11 @@ class WorldStatistics:
             90th percentile over the ticks every fish answered, s (0 before any tick; a tick
             in which a fish timed out is left out, its fish counted as lost); the network's
             latency shows here.
-        physics_time_median, vision_time_median, perceptions_time_median: how long this
-            process took, median over its steps, to move the fish to the next tick or event
-            (physics), to see for them (vision), and to build and send their perceptions, s
-            of wall time (0 before any) — with the answer time, where a tick goes.
+        physics_time_median, vision_time_median, perceptions_time_median: where the world's
+            time goes: the median wall time of its steps — moving the fish to the next tick
+            (lockstep; to the next event in jitter mode: physics), seeing for them (vision),
+            and building and sending their perceptions (landmarks seen included) — s, 0
+            before any; a step handed to a worker thread counts the hand-off too.
     """
 
     ticks: int
@@ -206,24 +207,24 @@ class World:
         self._messages_out = 0
         self._current = TickCommands()
         self.mismatched: set[int] = set()
+        """Fish that said they run another behaviour, version or rules than this world's."""
         self.vouched: set[tuple[int, str | None]] = set()
         """(fish id, school or None) pairs vouched for on their own about keys."""
         self._unvouched: dict[tuple[int, str | None], str] = {}
         """With ``vouched_only``: live fish tokens not (yet) vouched for, held back from the
         roster until they are (a fish's token may come before its vouching)."""
-        """Fish that said they run another behaviour, version or rules than this world's."""
         self._fish_rules = rules_of(settings.scenario.fish_params())
         """The rules this world's scenario says its fish decide by (FishAbout.rules)."""
         self._warned: set[str] = set()
         self._step_times: dict[str, float] = {}
+        """How long each step of the simulation took the last time, s: a long one runs in a
+        worker thread, so that the world keeps pulsing meanwhile."""
         self._phase_times: dict[str, list[float]] = {
             "physics": [],
             "vision": [],
             "perceptions": [],
         }
         """Wall time of every physics and vision step and every sending of perceptions, s."""
-        """How long each step of the simulation took the last time, s: a long one runs in a
-        worker thread, so that the world keeps pulsing meanwhile."""
 
     @property
     def lost(self) -> list[LostFish]:

@@ -376,7 +376,7 @@ def _summary_text(summary: dict[str, Any]) -> str:
     world_time = summary.get("world_time") or {}
     if world_time.get("physics"):
         lines.append(
-            "  a tick in the world (medians): physics "
+            "  the world's steps (medians): physics "
             f"{world_time['physics'] * 1e3:.1f} ms, vision {world_time['vision'] * 1e3:.1f} ms, "
             f"perceptions out {world_time['perceptions'] * 1e3:.1f} ms"
         )

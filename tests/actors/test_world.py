@@ -643,14 +643,17 @@ def test_a_step_runs_in_a_worker_thread_only_while_its_last_run_took_long(
 def test_the_worlds_statistics_say_where_its_ticks_went(monkeypatch: pytest.MonkeyPatch) -> None:
     import time
 
+    from fishswarm.actors import world as world_module
+    from fishswarm.actors.perceptions import perception_messages
     from fishswarm.sim.tick import WorldSim
 
-    # Physics made to take at least 6 ms of wall time a step, vision at least 2 ms; the
-    # perceptions are left as they are.
+    # Each part made to take at least a known wall time, one apart from the other: physics
+    # 6 ms a step, vision 2 ms, building the perceptions 3 ms. (Only lower bounds: a loaded
+    # machine makes any step longer, never shorter.)
     def slowed(step: Any, seconds: float) -> Any:
-        def run(self: WorldSim) -> Any:
+        def run(*args: Any, **kwargs: Any) -> Any:
             until = time.perf_counter() + seconds
-            result = step(self)
+            result = step(*args, **kwargs)
             while time.perf_counter() < until:
                 pass
             return result
@@ -660,12 +663,13 @@ def test_the_worlds_statistics_say_where_its_ticks_went(monkeypatch: pytest.Monk
 
     monkeypatch.setattr(WorldSim, "next_event", slowed(WorldSim.next_event, 0.006))
     monkeypatch.setattr(WorldSim, "sense", slowed(WorldSim.sense, 0.002))
+    monkeypatch.setattr(world_module, "perception_messages", slowed(perception_messages, 0.003))
     scenario = Scenario(fish=4, duration=4.0, seed=2)
     world, _ = run_mock(lambda: _swarm(scenario, schools=2))
     statistics = world.statistics()
     assert statistics.physics_time_median >= 0.006
-    assert 0.002 <= statistics.vision_time_median < statistics.physics_time_median
-    assert 0 < statistics.perceptions_time_median < 0.002
+    assert statistics.vision_time_median >= 0.002
+    assert statistics.perceptions_time_median >= 0.003
     # One physics and one vision step a tick (and one for the first look), perceptions at
     # every tick but the last.
     assert len(world._phase_times["physics"]) == len(world._phase_times["vision"]) == 5

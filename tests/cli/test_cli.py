@@ -67,7 +67,7 @@ def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -
     per_tick = data["loop_time"] / data["counts"]["ticks"]
     assert all(0 < seconds < per_tick for seconds in parts.values())
     assert 0 < data["answer_time"]["median"] < per_tick
-    assert "a tick in the world (medians): physics " in result.stderr
+    assert "the world's steps (medians): physics " in result.stderr
     for name in (
         "centroid_distance",
         "pairwise_distance",
