@@ -220,9 +220,7 @@ class World:
         """How long each step of the simulation took the last time, s: a long one runs in a
         worker thread, so that the world keeps pulsing meanwhile."""
         self._phase_times: dict[str, list[float]] = {
-            "physics": [],
-            "vision": [],
-            "perceptions": [],
+            phase: [] for phase in (*STEP_PHASES.values(), "perceptions")
         }
         """Wall time of every physics and vision step and every sending of perceptions, s."""
 
