@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -74,6 +74,24 @@ STUDY_MIN_DISTANCE = 1e-6
 """The study code clipped distances below 0.001 mm, in metres."""
 
 
+class TargetVectors(Protocol):
+    """The target vectors of :func:`lennard_jones` computed another way — bit for bit the
+    same — e.g. the simulator's compiled loop for large schools
+    (:func:`fishswarm.sim.decision_kernels.lennard_jones_target_vectors`)."""
+
+    def __call__(
+        self,
+        neighbors: FloatArray,
+        mask: BoolArray,
+        *,
+        target_distance: float,
+        epsilon: float,
+        cap: float,
+        floor: float,
+        study_form: bool,
+    ) -> FloatArray: ...
+
+
 def lennard_jones_force(
     distance: FloatArray, *, target_distance: float, epsilon: float
 ) -> FloatArray:
@@ -101,6 +119,7 @@ def lennard_jones(
     epsilon: float = DEFAULT_EPSILON,
     cap: float = BODY_LENGTH,
     study_form: bool = False,
+    compiled: TargetVectors | None = None,
 ) -> FloatArray:
     """Desired motion of B fish from the neighbours they see.
 
@@ -113,6 +132,8 @@ def lennard_jones(
         study_form: the study code's form: each force times the neighbour's relative
             position instead of its direction, with ε replaced by :data:`STUDY_GAIN` (m) and
             distances clipped below at :data:`STUDY_MIN_DISTANCE`.
+        compiled: computes the same vectors (with ε already the study's gain in its form,
+            and the floor of the distances); None: numpy.
 
     Returns:
         (B, 3) target vector in the body frame, m; zero for a fish that sees nobody.
@@ -122,6 +143,18 @@ def lennard_jones(
     fish = neighbors.shape[0]
     if fish == 0 or neighbors.shape[1] == 0:
         return np.zeros((fish, 3))
+    epsilon = STUDY_GAIN if study_form else epsilon
+    floor = STUDY_MIN_DISTANCE if study_form else MIN_DISTANCE
+    if compiled is not None:
+        return compiled(
+            neighbors,
+            mask,
+            target_distance=target_distance,
+            epsilon=epsilon,
+            cap=cap,
+            floor=floor,
+            study_form=study_form,
+        )
     blocks = [slice(start, start + BLOCK_FISH) for start in range(0, fish, BLOCK_FISH)]
     results = [
         _lennard_jones_block(
@@ -130,6 +163,7 @@ def lennard_jones(
             target_distance=target_distance,
             epsilon=epsilon,
             cap=cap,
+            floor=floor,
             study_form=study_form,
             loop=fish >= RUNNING_SUM_LOOP_MIN,  # the whole batch's choice, in every block
         )
@@ -145,21 +179,20 @@ def _lennard_jones_block(
     target_distance: float,
     epsilon: float,
     cap: float,
+    floor: float,
     study_form: bool,
     loop: bool,
 ) -> FloatArray:
-    """:func:`lennard_jones` of a block of fish (``loop``: sum neighbour by neighbour)."""
+    """:func:`lennard_jones` of a block of fish (``loop``: sum neighbour by neighbour), with
+    ε already the study's gain in its form."""
     # The squares added column by column, in the order a reduction over the last axis adds
     # them (the same bits), but 6× faster at thousands of fish: numpy reduces an axis of
     # three slowly. Ufuncs called directly: at the batch of one a fish actor decides with,
     # numpy's Python wrappers cost as much as the arithmetic.
     square = neighbors * neighbors
     distance = np.sqrt(square[..., 0] + square[..., 1] + square[..., 2])
-    floor = STUDY_MIN_DISTANCE if study_form else MIN_DISTANCE
     capped = np.minimum(np.maximum(distance, floor), target_distance + cap)
-    magnitude = lennard_jones_force(
-        capped, target_distance=target_distance, epsilon=STUDY_GAIN if study_form else epsilon
-    )
+    magnitude = lennard_jones_force(capped, target_distance=target_distance, epsilon=epsilon)
     # Repulsion (positive) points away from the neighbour: −magnitude along its unit vector
     # (the study's form: along the relative position itself). A coincident neighbour
     # (distance 0) has no direction and contributes nothing.
@@ -193,11 +226,14 @@ class LennardJonesParams:
         target_distance: r_t, m.
         epsilon: ε, m².
         study_form: the study code's force form (:func:`lennard_jones`).
+        compiled: the same vectors computed another way (:func:`lennard_jones`), e.g. a
+            simulator's for a large school; None: numpy (a robot's fish).
     """
 
     target_distance: float
     epsilon: float = DEFAULT_EPSILON
     study_form: bool = False
+    compiled: TargetVectors | None = None
 
     def __post_init__(self) -> None:
         if not self.target_distance > 0:
@@ -214,6 +250,7 @@ def steer_lennard_jones(
         target_distance=params.target_distance,
         epsilon=params.epsilon,
         study_form=params.study_form,
+        compiled=params.compiled,
     )
     return memory, steady(target)
 
