@@ -333,6 +333,14 @@ def perceive_landmarks(
         vision: the vision parameters.
     """
     count = position.shape[0]
+    if landmarks.shape[0] == 0:
+        # Most scenarios have none: no sines and cosines of every fish's yaw for nothing
+        # (0.4 ms a tick at 10 000 fish).
+        return Perceived(
+            np.zeros((count, 0, 3)),
+            np.zeros((count, 0), dtype=np.bool_),
+            np.zeros((count, 0), dtype=np.intp),
+        )
     relative = (
         np.broadcast_to(landmarks[None, :, :], (count, *landmarks.shape)) - position[:, None, :]
     )

@@ -128,6 +128,16 @@ def test_landmark_in_blind_spot_is_hidden() -> None:
     np.testing.assert_allclose(result.of(1), [[0.5, 0.0, 0.0]])
 
 
+def test_no_landmarks_are_seen_by_every_fish_as_nothing() -> None:
+    result = perceive_landmarks(
+        np.array([[1.0, 1.0, 0.5], [0.0, 1.0, 0.5]]), np.zeros(2), np.zeros((0, 3)), vision=Vision()
+    )
+    assert result.neighbors.shape == (2, 0, 3) and result.neighbors.dtype == np.float64
+    assert result.mask.shape == (2, 0) and result.mask.dtype == np.bool_
+    assert result.index.shape == (2, 0) and result.index.dtype == np.intp
+    assert result.counts.tolist() == [0, 0] and result.of(1).shape == (0, 3)
+
+
 @settings(max_examples=50, deadline=None)
 @given(
     positions=hnp.arrays(
