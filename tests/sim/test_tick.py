@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from fishswarm.bluebot.parameters import effort_rate, fin_frequencies
 from fishswarm.sim.physics import WorldParams
@@ -20,6 +23,18 @@ def test_effort_weighs_each_fins_beats_by_its_gain() -> None:
     fins = np.array([[1.0, 0.0, 0.5, 0.0], [0.5, 1.0, 1.0, 0.1], [1.5, -1.0, 0.0, 0.0]])
     # 1·3 + 0.5·5.5 = 5.75; 0.5·2 + 1·6 + 1·10 + 0.1·1.9 = 17.19; gains clipped: 1·3.
     np.testing.assert_allclose(effort_rate(fins), [5.75, 17.19, 3.0])
+
+
+@settings(max_examples=80, deadline=None)
+@given(
+    fins=arrays(
+        np.float64, st.tuples(st.integers(0, 50), st.just(4)), elements=st.floats(-0.5, 1.5)
+    )
+)
+def test_effort_rate_adds_the_fins_as_a_sum_over_each_row_does(fins: np.ndarray) -> None:
+    # Added column by column for speed: bit for bit numpy's sum over the row.
+    expected = (np.clip(fins, 0.0, 1.0) * fin_frequencies(fins)).sum(axis=1)
+    assert effort_rate(fins).tobytes() == expected.tobytes()
 
 
 def test_effort_counts_fin_beats_and_follows_a_fish_that_leaves_and_returns() -> None:
