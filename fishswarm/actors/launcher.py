@@ -39,6 +39,7 @@ from fishswarm.actors.workers import (
 )
 from fishswarm.actors.world import World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus
+from fishswarm.sim.decision_kernels import with_compiled_decisions
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import ORBIT_SUMMARIES
 from fishswarm.study.metrics import METRIC_NAMES, formation_summary
@@ -151,7 +152,7 @@ async def run_swarm(
                 await nursery.start(observer.run, bus)
                 await nursery.start(channel.run, bus)
                 await nursery.start(serve_control, session, world)
-                params = scenario.fish_params()
+                params = with_compiled_decisions(scenario.fish_params(), scenario.fish)
                 for index, ids in enumerate(schools):
                     spec = WorkerSpec(
                         index,

@@ -23,6 +23,7 @@ from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.behaviors.core import FishParams
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.allocator import tune_allocator
+from fishswarm.sim.decision_kernels import prepare
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,7 @@ def worker_main(spec: WorkerSpec, connection: Connection) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     tune_allocator()
     logging.basicConfig(level=spec.log_level, format="%(levelname)s %(name)s: %(message)s")
+    prepare(spec.params)
     statistics = trio.run(_serve, spec, connection)
     with contextlib.suppress(BrokenPipeError, OSError):
         connection.send(("statistics", statistics))

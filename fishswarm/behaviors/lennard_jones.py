@@ -227,7 +227,7 @@ class LennardJonesParams:
         epsilon: ε, m².
         study_form: the study code's force form (:func:`lennard_jones`).
         compiled: the same vectors computed another way (:func:`lennard_jones`), e.g. a
-            simulator's for a large school; None: numpy (a robot's fish).
+            simulator's for a large school; None: numpy.
     """
 
     target_distance: float

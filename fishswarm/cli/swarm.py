@@ -42,6 +42,7 @@ from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import ControlReply, ControlRequest
+from fishswarm.sim.decision_kernels import prepare, with_compiled_decisions
 from fishswarm.sim.physics import WorldParams, spawn_spacing
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.live_view import open_live_view
@@ -393,7 +394,8 @@ def _summary_text(summary: dict[str, Any]) -> str:
 
 def fish(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm fish``: fish actors alone, connected to a router."""
-    params = scenario.fish_params()
+    # Compiled decisions as the launcher's workers have them (the same bits either way).
+    params = with_compiled_decisions(scenario.fish_params(), scenario.fish)
     keys = scenario.keys
 
     try:
@@ -406,6 +408,7 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
         )
     except ValueError as error:
         raise ConfigError(str(error)) from None
+    prepare(params)
 
     async def main() -> None:
         async with (

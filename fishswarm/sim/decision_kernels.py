@@ -9,15 +9,16 @@ operations are the numpy path's, in its order and without contraction into fused
 multiply-adds (numba's default), so the results agree bit for bit: which path a batch takes
 never shows in a trajectory, and a fish deciding alone equals the same fish in a school.
 
-A scenario of :data:`~fishswarm.sim.kernels.COMPILED_MIN_FISH` fish or more hands this loop
-to its fish's parameters (:meth:`fishswarm.sim.scenario.Scenario.fish_params`), so that the
-batch engine and the fish workers both take it. numba is optional (``pip install
-'fishswarm[fast]'``) and imported only when the loop is first asked for; the robot's
-import path never reaches this module.
+The simulator hands this loop to the fish of a swarm of
+:data:`~fishswarm.sim.kernels.COMPILED_MIN_FISH` fish or more (:func:`with_compiled_decisions`:
+the batch engine, the launcher's fish workers, ``fishswarm fish``); a robot's fish keeps the
+numpy path. numba is optional (``pip install 'fishswarm[fast]'``) and imported only when
+the loop is first asked for; the robot's import path never reaches this module.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Callable
 from typing import Any
@@ -25,8 +26,45 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.behaviors.core import FishParams
+from fishswarm.behaviors.lennard_jones import LennardJonesParams
+from fishswarm.sim import kernels
+
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+
+
+def with_compiled_decisions(params: FishParams, fish: int) -> FishParams:
+    """The fish's parameters for a simulated swarm of ``fish``: Lennard-Jones steering with
+    the compiled loop from :data:`~fishswarm.sim.kernels.COMPILED_MIN_FISH` fish on when numba
+    is installed (below, loading numba costs a process more than the loop saves); anything
+    else as it is."""
+    steering = params.steering
+    if (
+        not isinstance(steering, LennardJonesParams)
+        or fish < kernels.COMPILED_MIN_FISH
+        or not kernels.available()
+    ):
+        return params
+    compiled = dataclasses.replace(steering, compiled=lennard_jones_target_vectors)
+    return dataclasses.replace(params, steering=compiled)
+
+
+def prepare(params: FishParams) -> None:
+    """Load the compiled loop now if ``params`` use it (from numba's cache, or compiled):
+    a fish worker does so before it reports ready, so that its first decision does not
+    stall its event loop for the half second numba takes to load."""
+    steering = params.steering
+    if isinstance(steering, LennardJonesParams) and steering.compiled is not None:
+        steering.compiled(
+            np.zeros((1, 1, 3)),
+            np.zeros((1, 1), dtype=np.bool_),
+            target_distance=steering.target_distance,
+            epsilon=steering.epsilon,
+            cap=1.0,
+            floor=1.0,
+            study_form=steering.study_form,
+        )
 
 
 def lennard_jones_target_vectors(
@@ -61,9 +99,11 @@ def lennard_jones_target_vectors(
             f"neighbors must be (B, K, 3) and mask (B, K), got {neighbors.shape} and {mask.shape}"
         )
     result = np.empty((neighbors.shape[0], 3))
+    # Writeable C arrays of one dtype each: one compiled signature for every caller (a fish
+    # deciding alone hands in a read-only view, which numba would compile anew for).
     _loop()(
-        np.ascontiguousarray(neighbors, dtype=np.float64),
-        np.ascontiguousarray(mask, dtype=np.bool_),
+        np.require(neighbors, np.float64, ("C", "W")),
+        np.require(mask, np.bool_, ("C", "W")),
         float(target_distance),
         float(epsilon),
         float(cap),
@@ -81,8 +121,9 @@ def _loop() -> Callable[..., None]:
     import numba
 
     # One core, the GIL released: a fish worker's Zenoh callbacks run beside it, and the
-    # world's parallel kernels keep the other core.
-    @numba.njit(cache=True, nogil=True)
+    # world's parallel kernels keep the other core. numpy's error model: a division by zero
+    # gives inf or nan as numpy's does, rather than raising.
+    @numba.njit(cache=True, nogil=True, error_model="numpy")
     def loop(
         neighbors: Any,
         mask: Any,
@@ -113,16 +154,11 @@ def _loop() -> Callable[..., None]:
                 real = mask[i, j] and distance > 0
                 length = 1.0 if study_form or not real else distance
                 scale = -magnitude / length * (1.0 if real else 0.0)
-                # The numpy path starts its sum from the first contribution, not from zero:
-                # 0.0 + (−0.0) would turn a first −0.0 into +0.0 and change a sign.
-                if j == 0:
-                    total_x = x * scale
-                    total_y = y * scale
-                    total_z = z * scale
-                else:
-                    total_x += x * scale
-                    total_y += y * scale
-                    total_z += z * scale
+                # The numpy path starts from the first contribution rather than from 0.0:
+                # the two differ at most in the sign of a zero, which + 0.0 below settles.
+                total_x += x * scale
+                total_y += y * scale
+                total_z += z * scale
                 count += mask[i, j]
             seen = max(count, 1)
             result[i, 0] = (total_x + 0.0) / seen

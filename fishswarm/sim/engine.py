@@ -24,6 +24,7 @@ from fishswarm.behaviors.core import (
 )
 from fishswarm.behaviors.formation import apply_directive
 from fishswarm.bluebot.vision import Perceived
+from fishswarm.sim.decision_kernels import with_compiled_decisions
 from fishswarm.sim.medium import deliver
 from fishswarm.sim.physics import WorldParams
 from fishswarm.sim.scenario import Scenario
@@ -99,7 +100,7 @@ def run_batch(scenario: Scenario) -> Trajectory:
     Tick 0 is the initial state. Returns the fish at every snapshot (whole control periods).
     """
     params = WorldParams.of(scenario)
-    fish = scenario.fish_params()
+    fish = with_compiled_decisions(scenario.fish_params(), scenario.fish)
     ids = np.arange(scenario.fish, dtype=np.int64)
     world = WorldSim(params)
     world.join(ids.tolist())

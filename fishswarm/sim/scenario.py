@@ -36,8 +36,6 @@ from fishswarm.bluebot.parameters import BlueBot, Tank
 from fishswarm.bluebot.vision import Vision
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import FORMATION_SHAPES
-from fishswarm.sim import kernels
-from fishswarm.sim.decision_kernels import lennard_jones_target_vectors
 
 SPAWN_REGIONS = ("ball", "tank")
 TIME_MODES = ("lockstep", "jitter", "realtime")
@@ -435,20 +433,9 @@ class Scenario:
         settings = dataclasses.asdict(self)
         settings["study_code"] = self.study_switches
         try:
-            params = fish_params(settings)
+            return fish_params(settings)
         except ValueError as error:
             raise ConfigError(str(error)) from None
-        steering = params.steering
-        if (
-            isinstance(steering, LennardJonesParams)
-            and self.fish >= kernels.COMPILED_MIN_FISH
-            and kernels.available()
-        ):
-            # The same bits, a third of the time (decision_kernels): the batch engine and
-            # every fish worker of a large swarm take it; a robot's fish never does.
-            compiled = dataclasses.replace(steering, compiled=lennard_jones_target_vectors)
-            params = dataclasses.replace(params, steering=compiled)
-        return params
 
     def resolved_target_distance(self) -> float | None:
         """Lennard-Jones r_t after defaults: 0.26 m for aggregation, the tank diagonal for

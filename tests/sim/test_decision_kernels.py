@@ -2,22 +2,30 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fishswarm.behaviors.core import FishParams
 from fishswarm.behaviors.lennard_jones import (
     MIN_DISTANCE,
-    LennardJonesParams,
+    STUDY_GAIN,
     lennard_jones,
 )
 from fishswarm.bluebot.parameters import BODY_LENGTH
-from fishswarm.sim import kernels
-from fishswarm.sim.decision_kernels import lennard_jones_target_vectors
+from fishswarm.sim import decision_kernels, kernels
+from fishswarm.sim.decision_kernels import (
+    lennard_jones_target_vectors,
+    prepare,
+    with_compiled_decisions,
+)
+from fishswarm.sim.engine import run_batch
 from fishswarm.sim.scenario import Scenario
 
-pytest.importorskip("numba")
+needs_numba = pytest.mark.skipif(not kernels.available(), reason="numba is not installed")
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
@@ -37,13 +45,15 @@ def _school(seed: int, fish: int, rows: int, coincident: bool) -> tuple[np.ndarr
     return neighbors, mask
 
 
-@settings(max_examples=60, deadline=None)
+@needs_numba
+@settings(max_examples=80, deadline=None)
 @given(
     seed=st.integers(0, 2**32 - 1),
     fish=st.integers(1, 40),
     rows=st.integers(1, 30),
     target_distance=st.sampled_from([0.26, 1.0, 2.517]),
     epsilon=st.sampled_from([1.0, 0.26**2 / 72]),
+    cap=st.sampled_from([BODY_LENGTH, 0.02, 1.5]),
     study_form=st.booleans(),
     coincident=st.booleans(),
 )
@@ -53,6 +63,7 @@ def test_the_compiled_loop_equals_the_numpy_path_bit_for_bit(
     rows: int,
     target_distance: float,
     epsilon: float,
+    cap: float,
     study_form: bool,
     coincident: bool,
 ) -> None:
@@ -63,6 +74,7 @@ def test_the_compiled_loop_equals_the_numpy_path_bit_for_bit(
             mask,
             target_distance=target_distance,
             epsilon=epsilon,
+            cap=cap,
             study_form=study_form,
             compiled=compiled,
         )
@@ -71,6 +83,7 @@ def test_the_compiled_loop_equals_the_numpy_path_bit_for_bit(
     assert _same_bits(got, expected)
 
 
+@needs_numba
 @pytest.mark.parametrize("study_form", [False, True])
 def test_a_large_school_decides_as_the_numpy_path_and_as_each_fish_alone(
     study_form: bool,
@@ -97,6 +110,7 @@ def test_a_large_school_decides_as_the_numpy_path_and_as_each_fish_alone(
     assert lonely.any() and not np.signbit(together[lonely]).any()  # +0.0, as the numpy path
 
 
+@needs_numba
 def test_one_neighbour_by_hand() -> None:
     # A neighbour 0.13 m ahead, r_t 0.26, ε 1: ratio 2, −dV/dr = 12/0.13·(2¹² − 2⁶) ≈ 372 185
     # pushes the fish back along x (the one neighbour's direction, averaged over one); a
@@ -116,6 +130,25 @@ def test_one_neighbour_by_hand() -> None:
     np.testing.assert_array_equal(result[:, 1:], 0.0)
 
 
+@needs_numba
+@pytest.mark.parametrize("compiled", [None, lennard_jones_target_vectors])
+def test_the_study_form_floors_distances_at_a_micrometre(compiled: object) -> None:
+    # A neighbour 0.5 mm ahead, within the paper's 1 mm floor but above the study's 1 µm:
+    # the study's force at the distance itself, times the relative position (SPEC §8).
+    distance, target = 5e-4, 0.26
+    ratio = target / distance
+    force = 12.0 * STUDY_GAIN / distance * (ratio**12 - ratio**6)
+    result = lennard_jones(
+        np.array([[[distance, 0.0, 0.0]]]),
+        np.ones((1, 1), dtype=bool),
+        target_distance=target,
+        study_form=True,
+        compiled=compiled,  # type: ignore[arg-type]
+    )
+    np.testing.assert_allclose(result[0], [-force * distance, 0.0, 0.0], rtol=1e-12)
+
+
+@needs_numba
 def test_mismatched_shapes_are_refused() -> None:
     with pytest.raises(ValueError, match="neighbors must be"):
         lennard_jones_target_vectors(
@@ -129,23 +162,71 @@ def test_mismatched_shapes_are_refused() -> None:
         )
 
 
-def test_a_large_scenarios_fish_take_the_compiled_loop_and_a_small_ones_do_not() -> None:
-    def compiled_of(fish: int, behavior: str) -> object:
-        steering = Scenario(fish=fish, behavior=behavior).fish_params().steering
-        return getattr(steering, "compiled", "no such field")
+def _steering(params: FishParams) -> object:
+    return getattr(params.steering, "compiled", "no such field")
 
+
+def test_a_simulated_swarm_of_200_fish_or_more_decides_with_the_loop(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr(kernels, "available", lambda: True)
     large = kernels.COMPILED_MIN_FISH
-    assert compiled_of(large, "dispersion") is lennard_jones_target_vectors
-    assert compiled_of(large, "aggregation") is lennard_jones_target_vectors
-    assert compiled_of(large - 1, "dispersion") is None
-    assert compiled_of(large, "orbit") == "no such field"  # not a Lennard-Jones behaviour
+    for behavior in ("dispersion", "aggregation"):
+        params = Scenario(fish=large, behavior=behavior).fish_params()
+        assert _steering(with_compiled_decisions(params, large)) is lennard_jones_target_vectors
+        assert _steering(with_compiled_decisions(params, large - 1)) is None
+        # What a robot's fish is given (fishswarm robot) never has it, whatever the swarm.
+        assert _steering(params) is None
+    orbit = Scenario(fish=large, behavior="orbit").fish_params()
+    assert with_compiled_decisions(orbit, large) is orbit  # not a Lennard-Jones behaviour
 
 
-def test_the_parameters_with_the_loop_travel_to_a_worker_process() -> None:
+def test_without_numba_a_large_swarm_decides_with_numpy(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(kernels, "available", lambda: False)
+    large = kernels.COMPILED_MIN_FISH
+    params = with_compiled_decisions(Scenario(fish=large).fish_params(), large)
+    assert _steering(params) is None
+
+
+def test_the_parameters_with_the_loop_travel_to_a_worker_process(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     # A fish worker gets its parameters pickled (spawn): the loop goes by name.
     import pickle
 
-    params = Scenario(fish=kernels.COMPILED_MIN_FISH).fish_params()
+    monkeypatch.setattr(kernels, "available", lambda: True)
+    large = kernels.COMPILED_MIN_FISH
+    params = with_compiled_decisions(Scenario(fish=large).fish_params(), large)
     again = pickle.loads(pickle.dumps(params))
-    assert isinstance(again.steering, LennardJonesParams)
-    assert again.steering.compiled is lennard_jones_target_vectors
+    assert _steering(again) is lennard_jones_target_vectors
+
+
+def test_prepare_runs_the_loop_once_and_leaves_numpy_fish_alone() -> None:
+    calls: list[tuple[int, ...]] = []
+
+    def loop(neighbors: np.ndarray, mask: np.ndarray, **options: object) -> np.ndarray:
+        calls.append(neighbors.shape)
+        return np.zeros((neighbors.shape[0], 3))
+
+    params = Scenario(fish=3).fish_params()
+    prepare(params)
+    assert calls == []
+    steering = dataclasses.replace(params.steering, compiled=loop)
+    prepare(dataclasses.replace(params, steering=steering))
+    assert calls == [(1, 1, 3)]
+
+
+@needs_numba
+def test_the_batch_engine_of_a_large_swarm_decides_with_the_loop(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    calls: list[int] = []
+    original = decision_kernels.lennard_jones_target_vectors
+
+    def spy(neighbors: np.ndarray, mask: np.ndarray, **options: object) -> np.ndarray:
+        calls.append(neighbors.shape[0])
+        return original(neighbors, mask, **options)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(decision_kernels, "lennard_jones_target_vectors", spy)
+    run_batch(Scenario.crowded(kernels.COMPILED_MIN_FISH, duration=2.0, seed=1))
+    assert calls and set(calls) == {kernels.COMPILED_MIN_FISH}
