@@ -82,6 +82,23 @@ def test_camera_vision_runs_the_same_over_zenoh_as_in_the_batch_engine(
     assert 0.5 < sight["recall"] <= 1.0
 
 
+def test_a_large_swarm_runs_over_zenoh_as_in_the_batch_engine(
+    endpoint: str, tmp_path: Path
+) -> None:
+    # 250 fish: compiled physics and vision in the world (and the batch engine) and, with
+    # numba, the compiled Lennard-Jones loop in both workers — the same trajectory, bit for bit.
+    scenario = Scenario.crowded(250, duration=4.0, seed=4)
+    reference = run_batch(scenario)
+    path = tmp_path / "large.mcap"
+    result = _launch(scenario, endpoint, path, procs=2)
+    assert result.exit_code == 0 and result.summary["counts"]["lost_fish"] == 0
+    arrays = read_recording(path).arrays()
+    np.testing.assert_array_equal(arrays["pos"], reference.position)
+    np.testing.assert_array_equal(arrays["yaw"], reference.yaw)
+    moved = np.linalg.norm(reference.position[-1] - reference.position[0], axis=1)
+    assert (moved > 0.01).mean() > 0.9  # the school swam: equal trajectories, not still ones
+
+
 @pytest.mark.parametrize("time_mode", ["lockstep", "jitter"])
 def test_same_seed_same_trajectory_across_processes_and_batch_engine(
     endpoint: str, tmp_path: Path, time_mode: str
