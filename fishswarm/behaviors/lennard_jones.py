@@ -143,14 +143,15 @@ def lennard_jones(
     fish = neighbors.shape[0]
     if fish == 0 or neighbors.shape[1] == 0:
         return np.zeros((fish, 3))
-    epsilon = STUDY_GAIN if study_form else epsilon
+    # The form's constants, once for either path.
+    gain = STUDY_GAIN if study_form else epsilon
     floor = STUDY_MIN_DISTANCE if study_form else MIN_DISTANCE
     if compiled is not None:
         return compiled(
             neighbors,
             mask,
             target_distance=target_distance,
-            epsilon=epsilon,
+            epsilon=gain,
             cap=cap,
             floor=floor,
             study_form=study_form,
@@ -161,7 +162,7 @@ def lennard_jones(
             neighbors[block],
             mask[block],
             target_distance=target_distance,
-            epsilon=epsilon,
+            epsilon=gain,
             cap=cap,
             floor=floor,
             study_form=study_form,
