@@ -28,12 +28,23 @@ subscription = open_subscription
 """Subscribe for the block; (key, payload) pairs arrive in the inbox it yields."""
 
 
+_HANDED_OUT: set[int] = set()
+"""Ports :func:`free_port` gave this test session already."""
+
+
 def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        port: int = probe.getsockname()[1]
-        return port
+    """A TCP port on 127.0.0.1 that nothing listens on right now, and that this session was
+    not given before: the system may hand the same free port to two probes in a row (a test
+    once got one port for a page and its data stream), so a test asking for several gets
+    different ones."""
+    for _ in range(100):
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+            probe.bind(("127.0.0.1", 0))
+            port: int = probe.getsockname()[1]
+        if port not in _HANDED_OUT:
+            _HANDED_OUT.add(port)
+            return port
+    raise RuntimeError("no free port on 127.0.0.1 that this test session has not used")
 
 
 def wait_for_port(port: int, *, timeout: float = 20.0) -> None:
