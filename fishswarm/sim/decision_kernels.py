@@ -40,11 +40,7 @@ def with_compiled_decisions(params: FishParams, fish: int) -> FishParams:
     is installed (below, loading numba costs a process more than the loop saves); anything
     else as it is."""
     steering = params.steering
-    if (
-        not isinstance(steering, LennardJonesParams)
-        or fish < kernels.COMPILED_MIN_FISH
-        or not kernels.available()
-    ):
+    if not isinstance(steering, LennardJonesParams) or not kernels.compiles(fish):
         return params
     compiled = dataclasses.replace(steering, compiled=lennard_jones_target_vectors)
     return dataclasses.replace(params, steering=compiled)

@@ -92,6 +92,12 @@ def available() -> bool:
     return importlib.util.find_spec("numba") is not None
 
 
+def compiles(fish: int) -> bool:
+    """Whether a swarm of ``fish`` runs on compiled kernels — its world's, its fish's
+    decisions, its metrics: from :data:`COMPILED_MIN_FISH` on, when numba is installed."""
+    return fish >= COMPILED_MIN_FISH and available()
+
+
 def step(state: State, fins: FloatArray, *, duration: float, robot: BlueBot, tank: Tank) -> State:
     """:func:`fishswarm.bluebot.dynamics.step`, compiled: the same arguments and result.
 

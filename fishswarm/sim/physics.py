@@ -103,8 +103,7 @@ class WorldParams:
             robot=scenario.robot(),
             still_until=scenario.still_until,
             # The compiled integrator knows neither flow nor wakes.
-            compiled=scenario.fish >= kernels.COMPILED_MIN_FISH
-            and kernels.available()
+            compiled=kernels.compiles(scenario.fish)
             and not any(scenario.flow)
             and scenario.wake_saving == 0,
             flow=scenario.flow,

@@ -95,7 +95,7 @@ def pairwise_distance(position: FloatArray) -> float:
     count = position.shape[0]
     if count < 2:
         return 0.0
-    compiled = _compiled(count)
+    compiled = kernels.compiles(count)
     if count * (count - 1) // 2 > EXACT_PAIRS_MAX:
         first, second = _sampled_pairs(count)
         if compiled:
@@ -110,11 +110,6 @@ def pairwise_distance(position: FloatArray) -> float:
     if compiled:
         return distance_kernels.mean_pairwise_distance(position)
     return float(pdist(position).mean())
-
-
-def _compiled(count: int) -> bool:
-    """Whether the distances of ``count`` fish are measured by the compiled kernels."""
-    return count >= kernels.COMPILED_MIN_FISH and kernels.available()
 
 
 @functools.lru_cache(maxsize=4)
@@ -134,7 +129,7 @@ def nearest_neighbor_distance(position: FloatArray) -> float:
     count = position.shape[0]
     if count < 2:
         return 0.0
-    if _compiled(count):
+    if kernels.compiles(count):
         return float(distance_kernels.nearest_distances(position).mean())
     distance, _ = cKDTree(position).query(position, k=2)
     return float(distance[:, 1].mean())
