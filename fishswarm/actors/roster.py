@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.actors.bus import Declared
+from fishswarm.actors.perceptions import Schools
 from fishswarm.actors.tick_commands import among
 from fishswarm.protocols.keys import KeySpace, fish_id_of
 
@@ -62,6 +63,8 @@ class Roster:
         self._subscriptions: dict[str, tuple[Declared, float]] = {}
         self._senders: dict[str, NDArray[np.int64]] = {}
         """Per command key, the fish whose commands come on it, ascending (built on demand)."""
+        self._schools: tuple[NDArray[np.int64], Schools] | None = None
+        """The last numbering of schools and the ids it numbers (until a school changes)."""
 
     def on_alive(self, key: str, alive: bool, now: float) -> int | None:
         """A liveliness token came or went; the fish that left, if one did."""
@@ -87,13 +90,24 @@ class Roster:
             log.warning("ignored the liveliness token %s: not a valid school name", key)
             return None
         self.alive.add(fish_id)
-        self.school_of[fish_id] = member.school
+        if self.school_of.get(fish_id, ()) != member.school:
+            self.school_of[fish_id] = member.school
+            self._schools = None
         if self.command_key.get(fish_id) != command_key:
             self.command_key[fish_id] = command_key
             self._senders.clear()
         if command_key not in self._subscriptions:
             self._subscriptions[command_key] = (self._subscribe(command_key, kind), now)
         return None
+
+    def schools(self, ids: NDArray[np.int64]) -> Schools:
+        """The schools of the fish ``ids`` (the world's, as it is now), numbered once for as
+        long as neither the fish nor their schools change."""
+        cached = self._schools
+        if cached is None or cached[0] is not ids:
+            # The world replaces its ids array when fish join or leave, never edits it.
+            cached = self._schools = (ids, Schools.of(ids, self.school_of))
+        return cached[1]
 
     def all_on(self, command_key: str, fish_ids: NDArray[np.int64]) -> bool:
         """Whether each of ``fish_ids`` sends its commands on ``command_key``."""

@@ -433,7 +433,7 @@ class World:
             for key, message in perception_messages(
                 self.keys,
                 ids=self.sim.ids,
-                school_of=self.roster.school_of,
+                schools=self.roster.schools(self.sim.ids),
                 depth=self.sim.state.position[:, 2],
                 perceived=perceived,
                 landmarks=self.sim.sense_landmarks(),

@@ -5,10 +5,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fishswarm.actors.perceptions import perception_messages
+from fishswarm.actors.perceptions import Schools, perception_messages
 from fishswarm.bluebot.vision import Perceived
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import Perception, PerceptionBatch
@@ -32,7 +33,7 @@ def test_schools_get_one_batch_and_others_their_own_perception() -> None:
     messages = perception_messages(
         keys,
         ids=ids,
-        school_of={1: "s", 4: None, 7: "s"},
+        schools=Schools.of(ids, {1: "s", 4: None, 7: "s"}),
         depth=np.array([0.1, 0.4, 0.7]),
         perceived=perceived,
         landmarks=landmarks,
@@ -56,7 +57,7 @@ def test_schools_get_one_batch_and_others_their_own_perception() -> None:
     only_seven = perception_messages(
         keys,
         ids=ids,
-        school_of={1: "s", 4: None, 7: "s"},
+        schools=Schools.of(ids, {1: "s", 4: None, 7: "s"}),
         depth=np.array([0.1, 0.4, 0.7]),
         perceived=perceived,
         landmarks=landmarks,
@@ -70,6 +71,70 @@ def test_schools_get_one_batch_and_others_their_own_perception() -> None:
     assert only_seven[0][1].ids.tolist() == [7]
 
 
+def test_schools_are_numbered_in_name_order_and_fish_without_one_are_minus_one() -> None:
+    ids = np.array([1, 4, 7, 9, 12])
+    schools = Schools.of(ids, {1: "b", 4: None, 7: "a", 12: "b"})  # 9: not known, own keys
+    assert schools.names == ("a", "b")
+    assert schools.number.tolist() == [1, -1, 0, -1, 1]
+    assert not schools.number.flags.writeable
+
+
+def test_numbering_of_other_fish_is_refused() -> None:
+    perceived = _perceived([[], []], width=1)
+    with pytest.raises(ValueError, match="numbered for 3 fish, not 2"):
+        perception_messages(
+            KeySpace(),
+            ids=np.array([0, 1]),
+            schools=Schools.of(np.array([0, 1, 2]), {}),
+            depth=np.zeros(2),
+            perceived=perceived,
+            landmarks=perceived,
+            inbox_counts=np.zeros(2, dtype=np.int64),
+            tick=1,
+            time=1.0,
+        )
+
+
+def test_parts_of_several_schools_take_turns() -> None:
+    # Schools a (fish 0-4) and b (fish 5-6), one row each, at most 2 rows a batch: a gets
+    # parts [0, 1], [2, 3], [4] and b gets [5, 6]; they go a, b, a, a (b has run out), so
+    # that b's worker need not wait for all of a's parts.
+    keys = KeySpace()
+    ids = np.arange(7)
+    school_of = {i: "a" if i < 5 else "b" for i in range(7)}
+    perceived = _perceived([[[float(i), 0.0, 0.0]] for i in range(7)], width=1)
+    messages = perception_messages(
+        keys,
+        ids=ids,
+        schools=Schools.of(ids, school_of),
+        depth=np.zeros(7),
+        perceived=perceived,
+        landmarks=_perceived([[] for _ in range(7)], width=1),
+        inbox_counts=np.zeros(7, dtype=np.int64),
+        tick=2,
+        time=2.0,
+        row_limit=2,
+    )
+    a, b = keys.school_perceptions("a"), keys.school_perceptions("b")
+    assert [key for key, _ in messages] == [a, b, a, a]
+    batches = [m for _, m in messages if isinstance(m, PerceptionBatch)]
+    assert [m.ids.tolist() for m in batches] == [[0, 1], [5, 6], [2, 3], [4]]
+    # Only fish 5 due (jitter mode): one batch, for b alone; none, empty, for a.
+    due = perception_messages(
+        keys,
+        ids=ids,
+        schools=Schools.of(ids, school_of),
+        depth=np.zeros(7),
+        perceived=perceived,
+        landmarks=_perceived([[] for _ in range(7)], width=1),
+        inbox_counts=np.zeros(7, dtype=np.int64),
+        tick=3,
+        time=2.5,
+        rows=[5],
+    )
+    assert [key for key, _ in due] == [b]
+
+
 def test_a_school_too_large_for_one_batch_gets_consecutive_parts_within_the_limit() -> None:
     # Six fish of one school seeing 3, 1, 4, 1, 5, 2 neighbours, a limit of 5 rows: parts
     # [3, 1] (4 rows), [4, 1] (5), [5] (5), [2]; together exactly the one batch's rows.
@@ -80,7 +145,7 @@ def test_a_school_too_large_for_one_batch_gets_consecutive_parts_within_the_limi
     landmarks = _perceived([[] for _ in seen], width=1)
     common: dict[str, Any] = {
         "ids": np.arange(10, 16),
-        "school_of": dict.fromkeys(range(10, 16), "s"),
+        "schools": Schools.of(np.arange(10, 16), dict.fromkeys(range(10, 16), "s")),
         "depth": np.linspace(0.1, 0.6, 6),
         "perceived": perceived,
         "landmarks": landmarks,
@@ -127,7 +192,7 @@ def test_every_batch_carries_exactly_its_fishs_rows(
     messages = perception_messages(
         KeySpace(),
         ids=np.arange(count),
-        school_of=school_of,
+        schools=Schools.of(np.arange(count), school_of),
         depth=np.arange(count) / 10,
         perceived=perceived,
         landmarks=landmarks,
