@@ -13,7 +13,13 @@ import numpy as np
 import pytest
 import trio
 
-from fishswarm.actors.launcher import EXIT_WORKER_DIED, LaunchSettings, RunResult, run_swarm
+from fishswarm.actors.launcher import (
+    EXIT_WORKER_DIED,
+    LaunchSettings,
+    RunResult,
+    run_swarm,
+    shared_memory_pool,
+)
 from fishswarm.actors.observer import Progress
 from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.zenoh_bus import ZenohBus, query
@@ -30,6 +36,14 @@ def _launch(scenario: Scenario, endpoint: str, path: Path, procs: int = 1) -> Ru
         scenario, procs=procs, listen=endpoint, record=path, summary=path.with_suffix(".json")
     )
     return run_trio(lambda: run_swarm(settings), timeout=120)
+
+
+def test_the_shared_memory_pool_grows_with_the_swarm_beyond_zenohs_default() -> None:
+    mebibyte = 2**20
+    assert shared_memory_pool(25) == shared_memory_pool(2048) == 16 * mebibyte
+    assert shared_memory_pool(2049) == 2049 * 8 * 1024
+    # 10 000 fish in a crowded tank put about 6.5 MB a tick: the pool holds a dozen ticks.
+    assert shared_memory_pool(10_000) == 80_000 * 1024
 
 
 @pytest.mark.parametrize(("behavior", "sign"), [("dispersion", 1), ("aggregation", -1)])

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
+import queue
 import threading
 
 import pytest
 import trio
+import zenoh
 
 from fishswarm.actors.bus import open_alive_events, open_token
 from fishswarm.actors.inbox import Inbox
@@ -137,3 +140,40 @@ def test_port_in_use_fails_clearly(endpoint: str) -> None:
 def test_bad_endpoints_are_explained(bad: str) -> None:
     with pytest.raises(ValueError, match="PROTOCOL/HOST:PORT"):
         check_endpoint(bad)
+
+
+@pytest.mark.parametrize(("pool", "shared"), [(4 * 2**20, True), (256 * 2**10, False)])
+def test_large_messages_go_through_shared_memory_when_the_pool_holds_them(
+    endpoint: str, pool: int, shared: bool
+) -> None:
+    # 1 MiB messages from the router to a client on this machine: copied into the
+    # router's shared-memory pool when the pool can hold them, through the socket when not;
+    # the same bytes arrive either way. (Zenoh makes the pool at the first large message,
+    # which goes through the socket meanwhile: the messages after it are the ones checked.)
+    message = bytes(range(256)) * 4096
+    router = SessionSettings(mode="router", listen=[endpoint], shared_memory_pool=pool)
+    client = SessionSettings(mode="client", connect=[endpoint])
+    arrived: queue.Queue[tuple[bytes, bool]] = queue.Queue()
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        arrived.put((sample.payload.to_bytes(), sample.payload.as_shm() is not None))
+
+    with zenoh.open(router.to_config()) as sender, zenoh.open(client.to_config()) as receiver:
+        subscriber = receiver.declare_subscriber("test/large", on_sample)
+        try:
+            for _ in range(50):  # until the subscription has reached the router
+                sender.put("test/large", message)
+                with contextlib.suppress(queue.Empty):
+                    arrived.get(timeout=0.1)
+                    break
+            for _ in range(3):
+                sender.put("test/large", message)
+            later = [arrived.get(timeout=5) for _ in range(3)]
+        finally:
+            subscriber.undeclare()
+    assert later == [(message, shared)] * 3
+
+
+def test_a_shared_memory_pool_must_have_room() -> None:
+    with pytest.raises(ValueError, match="positive number of bytes, got 0"):
+        SessionSettings(mode="router", shared_memory_pool=0)
