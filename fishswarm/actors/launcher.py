@@ -13,6 +13,7 @@ import contextlib
 import dataclasses
 import json
 import logging
+import os
 import signal
 import tempfile
 import time
@@ -212,16 +213,35 @@ async def run_swarm(
     return RunResult(exit_code, summary, observer.history)
 
 
-def shared_memory_pool(fish: int) -> int:
+def shared_memory_pool(fish: int, *, free: int | None = None) -> int | None:
     """Bytes of shared memory for the launcher's Zenoh session to copy its large messages
-    into for the workers on this machine: Zenoh's default 16 MiB up to 2 048 fish, 8 KiB a
-    fish beyond.
+    into for the workers on this machine: 8 KiB a fish beyond Zenoh's default of 16 MiB
+    (None: the default, up to 2 048 fish), at most half of what ``/dev/shm`` has free.
 
     A crowded tank's tick puts about 0.7 KiB a fish (perceptions and snapshot), and the
     pool must hold several ticks' worth while the workers let go of them; a message that
     finds it full goes through the socket instead (10 000 fish: 2.4 MB parts, 0.3 ms to put
-    into shared memory against 1.8 ms through the socket)."""
-    return max(16 * 2**20, fish * 8 * 2**10)
+    into shared memory against 1.8 ms through the socket). A pool larger than the free
+    space would not fit: Zenoh then sends everything through the socket and leaves the
+    failed pool's file behind, filling ``/dev/shm`` for every session after it (Docker
+    gives a container 64 MB unless told otherwise with ``--shm-size``).
+
+    Args:
+        fish: how many fish the run has.
+        free: bytes free for shared memory (None: ask ``/dev/shm``; unknown: the default).
+    """
+    wanted = fish * 8 * 2**10
+    default = 16 * 2**20
+    if wanted <= default:
+        return None
+    if free is None:
+        try:
+            stats = os.statvfs("/dev/shm")
+        except OSError:
+            return None
+        free = stats.f_bavail * stats.f_frsize
+    pool = min(wanted, free // 2)
+    return pool if pool > default else None
 
 
 def _contains(error: BaseException, kind: type[BaseException]) -> bool:

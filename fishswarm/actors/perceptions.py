@@ -15,7 +15,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from itertools import chain, zip_longest
-from typing import TypeVar
+from typing import TypeVar, cast
 
 import numpy as np
 from numpy.typing import NDArray
@@ -106,8 +106,8 @@ def perception_messages(
     messages: list[tuple[str, Message]] = []
     chosen = np.arange(ids.size, dtype=np.intp) if rows is None else np.asarray(rows, np.intp)
     school_numbers = schools.number[chosen]
-    for row in chosen[school_numbers < 0].tolist():
-        fish_id = int(ids[row])
+    alone = chosen[school_numbers < 0]
+    for row, fish_id in zip(alone.tolist(), ids[alone].tolist(), strict=True):
         perception = Perception(
             fish_id,
             tick,
@@ -199,7 +199,9 @@ def _taken(values: NDArray[Item], members: Rows) -> NDArray[Item]:
 def _in_turns(lists: list[list[Part]]) -> list[Part]:
     """The first item of every list, then every second item, and so on (a shorter list
     drops out when it runs out)."""
-    return [item for item in chain.from_iterable(zip_longest(*lists)) if item is not None]
+    gap = object()
+    turns = chain.from_iterable(zip_longest(*lists, fillvalue=gap))
+    return [cast(Part, item) for item in turns if item is not gap]
 
 
 def _parts(

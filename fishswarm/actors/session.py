@@ -20,7 +20,7 @@ import zenoh
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 SHARED_MEMORY_POOL = "transport/shared_memory/transport_optimization/pool_size"
 """Where Zenoh's configuration sizes the pool it copies messages over 3 KiB into, for
-sessions on the same machine (on by default since Zenoh 1.1)."""
+sessions on the same machine (on by default in Zenoh 1.10, which fishswarm uses)."""
 
 
 class ConnectError(RuntimeError):
