@@ -23,6 +23,7 @@ from fishswarm.actors.launcher import (
     RunResult,
     WorkerFailed,
     run_swarm,
+    shared_memory_pool,
 )
 from fishswarm.actors.observer import WORLD_END_SETTLE, Observer, Progress
 from fishswarm.actors.robot import HardwareError
@@ -446,7 +447,12 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                 scenario, recorder=recorder, on_progress=show, observer_id="world-cli"
             )
             async with (
-                open_session(_client(args, "world")) as session,
+                open_session(
+                    dataclasses.replace(
+                        _client(args, "world"),
+                        shared_memory_pool=shared_memory_pool(scenario.fish),
+                    )
+                ) as session,
                 trio.open_nursery() as nursery,
             ):
                 bus = ZenohBus(session)
