@@ -6,6 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 from scipy.spatial.distance import pdist
 
 from fishswarm.sim.engine import run_batch
@@ -30,6 +33,23 @@ SQUARE = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
 def test_pairwise_and_nearest_on_a_square() -> None:
     assert pairwise_distance(SQUARE) == pytest.approx((4 + 2 * math.sqrt(2)) / 6)
     assert nearest_neighbor_distance(SQUARE) == pytest.approx(1.0)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    arrays(
+        np.float64,
+        st.tuples(st.integers(2, 40), st.just(3)),
+        elements=st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False),
+    )
+)
+def test_centroid_distance_is_numpys_norm_to_the_bit(position: np.ndarray) -> None:
+    count = position.shape[0]
+    others = (position.sum(axis=0)[None, :] - position) / (count - 1)
+    by_norm = float(np.linalg.norm(position - others, axis=1).mean())
+    before = position.copy()
+    assert centroid_distance(position) == by_norm
+    np.testing.assert_array_equal(position, before)  # the positions are left alone
 
 
 def test_centroid_of_the_others_on_a_square() -> None:
