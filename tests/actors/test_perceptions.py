@@ -101,37 +101,24 @@ def test_parts_of_several_schools_take_turns() -> None:
     # that b's worker need not wait for all of a's parts.
     keys = KeySpace()
     ids = np.arange(7)
-    school_of = {i: "a" if i < 5 else "b" for i in range(7)}
-    perceived = _perceived([[[float(i), 0.0, 0.0]] for i in range(7)], width=1)
-    messages = perception_messages(
-        keys,
-        ids=ids,
-        schools=Schools.of(ids, school_of),
-        depth=np.zeros(7),
-        perceived=perceived,
-        landmarks=_perceived([[] for _ in range(7)], width=1),
-        inbox_counts=np.zeros(7, dtype=np.int64),
-        tick=2,
-        time=2.0,
-        row_limit=2,
-    )
+    common: dict[str, Any] = {
+        "ids": ids,
+        "schools": Schools.of(ids, {i: "a" if i < 5 else "b" for i in range(7)}),
+        "depth": np.zeros(7),
+        "perceived": _perceived([[[float(i), 0.0, 0.0]] for i in range(7)], width=1),
+        "landmarks": _perceived([[] for _ in range(7)], width=1),
+        "inbox_counts": np.zeros(7, dtype=np.int64),
+        "tick": 2,
+        "time": 2.0,
+        "row_limit": 2,
+    }
+    messages = perception_messages(keys, **common)
     a, b = keys.school_perceptions("a"), keys.school_perceptions("b")
     assert [key for key, _ in messages] == [a, b, a, a]
     batches = [m for _, m in messages if isinstance(m, PerceptionBatch)]
     assert [m.ids.tolist() for m in batches] == [[0, 1], [5, 6], [2, 3], [4]]
     # Only fish 5 due (jitter mode): one batch, for b alone; none, empty, for a.
-    due = perception_messages(
-        keys,
-        ids=ids,
-        schools=Schools.of(ids, school_of),
-        depth=np.zeros(7),
-        perceived=perceived,
-        landmarks=_perceived([[] for _ in range(7)], width=1),
-        inbox_counts=np.zeros(7, dtype=np.int64),
-        tick=3,
-        time=2.5,
-        rows=[5],
-    )
+    due = perception_messages(keys, rows=[5], **common)
     assert [key for key, _ in due] == [b]
 
 
