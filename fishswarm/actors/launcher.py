@@ -214,9 +214,10 @@ async def run_swarm(
 
 
 def shared_memory_pool(fish: int, *, free: int | None = None) -> int | None:
-    """Bytes of shared memory for the launcher's Zenoh session to copy its large messages
-    into for the workers on this machine: 8 KiB a fish beyond Zenoh's default of 16 MiB
-    (None: the default, up to 2 048 fish), at most half of what ``/dev/shm`` has free.
+    """Bytes of shared memory for the world's Zenoh session (the launcher's, or that of
+    ``fishswarm world``) to copy its large messages into for the fish on this machine:
+    8 KiB a fish beyond Zenoh's default of 16 MiB (None: the default, up to 2 048 fish), at
+    most half of what ``/dev/shm`` has free.
 
     A crowded tank's tick puts about 0.7 KiB a fish (perceptions and snapshot), and the
     pool must hold several ticks' worth while the workers let go of them; a message that

@@ -35,7 +35,8 @@ METRIC_NAMES = ("centroid_distance", "pairwise_distance", "nearest_neighbor_dist
 
 
 def centroid_distance(position: FloatArray) -> float:
-    """Distance of each fish to the centroid of the others, averaged over fish, m.
+    """Distance of each fish to the centroid of the others, averaged over fish, m, from
+    (N, 3) positions.
 
     What the research code printed as "mean inter-robot distance".
     """
