@@ -139,8 +139,9 @@ def access_control(
     :func:`rights_of`, and each school (name → its fish ids) its :func:`school_rights`.
 
     A subscriber only receives what its subject may also ``put`` on egress (measured, SPEC
-    §7), so subscribing grants both; liveliness is allowed on the swarm's ``alive`` keys (the
-    access control does not filter it anyway).
+    §7), so subscribing grants that too, on egress only: from the subject to the router a put
+    needs the right to publish. Liveliness is allowed on the swarm's ``alive`` keys (the access
+    control does not filter it anyway).
     """
     rules: list[dict[str, Any]] = []
     subject_entries: list[dict[str, Any]] = []
@@ -162,13 +163,13 @@ def access_control(
         mine: list[str] = []
         kinds = (
             ("publish", ["put", "delete"], ["ingress"], rights.publishes),
-            ("subscribe", ["declare_subscriber", "put", "delete"], ["ingress", "egress"],
-             rights.subscribes),
+            ("subscribe", ["declare_subscriber"], ["ingress", "egress"], rights.subscribes),
             ("query", ["query", "reply"], ["ingress", "egress"], rights.queries),
             ("serve", ["declare_queryable", "query", "reply"], ["ingress", "egress"],
              rights.serves),
             ("declare", ["declare_subscriber"], ["ingress"], rights.declares),
-            ("receive", ["put", "delete"], ["egress"], rights.receives),
+            ("receive", ["put", "delete"], ["egress"],
+             tuple(dict.fromkeys((*rights.subscribes, *rights.receives)))),
         )  # fmt: skip
         for name, messages, flows, exprs in kinds:
             if not exprs:

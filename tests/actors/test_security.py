@@ -3,6 +3,7 @@ certificate's common name."""
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import json
 import shutil
@@ -62,10 +63,13 @@ def test_secure_init_writes_an_authority_a_certificate_per_subject_and_the_acces
     rules = {rule["id"]: rule for rule in access["rules"]}
     assert rules["robot-1-publish"]["key_exprs"][0] == "fishswarm/default/fish/1/command"
     assert not any("fish/2" in key for key in rules["robot-1-publish"]["key_exprs"])
-    # An observer publishes nothing; what it subscribes to it may also receive (egress put).
+    # An observer publishes nothing; what it subscribes to it may also receive: a put on
+    # egress only (from the router to it), never on ingress (from it to the router).
     assert "observer-publish" not in rules
-    assert set(rules["observer-subscribe"]["messages"]) >= {"declare_subscriber", "put"}
-    assert "egress" in rules["observer-subscribe"]["flows"]
+    assert rules["observer-subscribe"]["messages"] == ["declare_subscriber"]
+    assert rules["observer-receive"]["messages"] == ["put", "delete"]
+    assert rules["observer-receive"]["flows"] == ["egress"]
+    assert rules["observer-receive"]["key_exprs"] == rules["observer-subscribe"]["key_exprs"]
 
 
 def test_certificates_that_cannot_be_used_get_a_clear_message(
@@ -181,6 +185,60 @@ def test_only_certified_clients_connect_and_each_may_put_only_its_own_keys(
         "observer": ["snapshot"],
         "robot-2": ["world to fish 2"],
     }
+
+
+def test_a_subject_may_not_put_on_the_keys_it_only_subscribes_to(secure_dir: Path) -> None:
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    # Each forger subscribes to the key it forges (a robot to the pulse and the robots'
+    # order, an observer to the snapshots); only the world and the admin may put there.
+    forged = [
+        ("robot-1", KEYS.world_pulse),
+        ("robot-1", KEYS.robot_order),
+        ("observer-lab", KEYS.snapshot),
+        ("robot-1", KEYS.snapshot),
+    ]
+    genuine = [("world", KEYS.world_pulse), ("admin", KEYS.robot_order), ("world", KEYS.snapshot)]
+
+    async def main() -> list[tuple[str, str]]:
+        subjects = ["world", "admin", "observer-lab", "robot-1", "robot-2"]
+        async with contextlib.AsyncExitStack() as stack:
+            await stack.enter_async_context(
+                open_session(_settings(secure_dir, "router", endpoint, router=True))
+            )
+            buses = {
+                subject: ZenohBus(
+                    await stack.enter_async_context(
+                        open_session(_settings(secure_dir, subject, endpoint))
+                    )
+                )
+                for subject in subjects
+            }
+            inboxes = {
+                key: await stack.enter_async_context(subscription(buses["robot-2"], key))
+                for key in (KEYS.world_pulse, KEYS.robot_order, KEYS.snapshot)
+            }
+            # Wait until the routes are up: each genuine put reaches robot 2.
+            for subject, key in genuine:
+                with trio.fail_after(10):
+                    while True:
+                        buses[subject].put(key, b"probe")
+                        with trio.move_on_after(0.1):
+                            await inboxes[key].receive()
+                            break
+            await trio.sleep(0.3)
+            for inbox in inboxes.values():
+                inbox.drain()
+            for subject, key in forged + genuine:
+                buses[subject].put(key, subject.encode())
+            await trio.sleep(1.0)  # whatever was let through has come by now
+            return sorted(
+                (key, payload.decode())
+                for key, inbox in inboxes.items()
+                for _, payload in inbox.drain()
+            )
+
+    heard = run_trio(main)
+    assert heard == sorted((key, subject) for subject, key in genuine)
 
 
 def test_the_access_control_names_every_subject_once() -> None:
