@@ -60,6 +60,14 @@ class SensorUnavailable(RuntimeError):
     """A camera frame or depth reading could not be had this period (the driver skips it)."""
 
 
+SENSOR_ERRORS = (OSError, RuntimeError)
+"""What a sensor's read may raise without ending the robot's run: a bus error (smbus2 raises
+OSError, e.g. errno 121 when a device does not answer on I²C), a failed reading
+(:class:`~fishswarm.bluebot.pressure.SensorError`), a bad or late camera frame, or
+:class:`SensorUnavailable`. The driver skips the period; the fish's watchdog stops its fins
+if no perception comes for long. Anything else is a defect and ends the run."""
+
+
 @dataclass
 class Hardware:
     """A robot's ports, whatever drives them (gpiozero and picamera2, or mocks).
@@ -187,6 +195,10 @@ class Driver:
         self.link = True
         self._run_id = secrets.randbits(62)
         self._intake = Intake(f"driver {settings.robot_id}")
+        self._failing: int | None = None
+        """Periods without a reading since the last one (None: the last period had one)."""
+        self._failure: str | None = None
+        """The last sensor error logged, until a reading comes."""
         self._counts = dict.fromkeys(
             (
                 "perceptions",
@@ -278,15 +290,37 @@ class Driver:
             if self.state not in ("stopped", "stranded"):
                 try:
                     depth, neighbors = await self._run_blocking(self._look)
-                except SensorUnavailable as error:
-                    self._counts["frames_missed"] += 1
-                    log.debug("robot %d: %s", self.settings.robot_id, error)
+                except SENSOR_ERRORS as error:
+                    self._missed(error)
                 else:
+                    if self._failure is not None:
+                        log.warning(
+                            "robot %d: sensing again after %d periods without (%s)",
+                            self.settings.robot_id, self._failing, self._failure,
+                        )  # fmt: skip
+                    self._failing = self._failure = None
                     self._depth = depth
                     self._perceive(local, depth, neighbors)
             # A slow frame does not pile up periods: the next starts from now.
             deadline = max(deadline, trio.current_time())
             await trio.sleep_until(deadline)
+
+    def _missed(self, error: Exception) -> None:
+        """A period without a usable reading: counted; a sensor's error logged when it
+        starts and when it changes, not every period."""
+        self._counts["frames_missed"] += 1
+        self._failing = (self._failing or 0) + 1
+        if isinstance(error, SensorUnavailable):
+            log.debug("robot %d: %s", self.settings.robot_id, error)
+            return
+        failure = f"{type(error).__name__}: {error}"
+        if failure != self._failure:
+            self._failure = failure
+            log.warning(
+                "robot %d: a sensor failed (%s); this period is skipped, and the fish's "
+                "fins stop if no reading comes for its perception timeout",
+                self.settings.robot_id, failure,
+            )  # fmt: skip
 
     def _look(self) -> Look:
         """Depth and neighbours from the sensors (runs in a worker thread)."""

@@ -311,6 +311,79 @@ def test_a_missing_frame_skips_the_period_and_malformed_commands_are_counted(
     assert statistics.rejected == 1 and statistics.commands == 0
 
 
+class FlakyDepth:
+    """A pressure sensor on an I²C bus that fails as real ones do, on the reads listed."""
+
+    def __init__(self, failures: dict[int, Exception]) -> None:
+        self.failures = failures
+        self.reads = 0
+
+    def read_depth(self) -> float:
+        self.reads += 1
+        failure = self.failures.get(self.reads)
+        if failure is not None:
+            raise failure
+        return 0.5
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_failing_sensor_skips_its_periods_and_the_robot_senses_on(
+    factory: object, caplog: pytest.LogCaptureFixture
+) -> None:
+    # Reads 2 and 3: the device does not answer on the bus (what smbus2 raises); read 5: a
+    # reading the sensor's own checks refuse.
+    from fishswarm.bluebot.pressure import SensorError
+
+    nack = OSError(121, "Remote I/O error")
+    depth = FlakyDepth({2: nack, 3: nack, 5: SensorError("pressure out of range")})
+    hardware = Hardware(
+        GpioFins(pin_factory=factory), GpioLeds(pin_factory=factory), SceneCamera(), depth
+    )
+
+    async def main() -> Driver:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True])
+        async with trio.open_nursery() as nursery:
+            await nursery.start(driver.run, local, remote)
+            await trio.sleep(3.2)  # periods at 0, 0.5, …, 3.0 s: seven reads
+            nursery.cancel_scope.cancel()
+        return driver
+
+    with caplog.at_level("WARNING", logger="fishswarm.actors.driver"):
+        statistics = run_mock(main).statistics()
+    hardware.close()
+    assert depth.reads == 7
+    assert statistics.frames_missed == 3 and statistics.perceptions == 4
+    # Logged when a failure starts or changes, and when sensing comes back: not every period.
+    messages = [record.getMessage() for record in caplog.records]
+    assert len(messages) == 4
+    assert "Remote I/O error" in messages[0] and "SensorError" not in messages[0]
+    assert "sensing again after 2 periods" in messages[1]
+    assert "SensorError: pressure out of range" in messages[2]
+    assert "sensing again after 1 periods" in messages[3]
+
+
+def test_a_defect_in_a_sensor_port_still_ends_the_run(factory: object) -> None:
+    # Not a sensor's failure but a programming error: it must not be skipped in silence.
+    depth = FlakyDepth({2: TypeError("read_depth() got an unexpected argument")})
+    hardware = Hardware(
+        GpioFins(pin_factory=factory), GpioLeds(pin_factory=factory), SceneCamera(), depth
+    )
+
+    async def main() -> None:
+        driver = make_driver(hardware, [True])
+        async with trio.open_nursery() as nursery:
+            await nursery.start(driver.run, MemoryBus(), MemoryBus())
+            await trio.sleep(3.0)
+
+    with pytest.RaisesGroup(TypeError, flatten_subgroups=True):
+        run_mock(main)
+    hardware.close()
+    assert depth.reads == 2
+
+
 def test_settings_that_would_stop_the_fins_between_commands_are_refused() -> None:
     with pytest.raises(ValueError, match="command_timeout"):
         DriverSettings(1, "dispersion", control_period=1.0, command_timeout=0.5)
