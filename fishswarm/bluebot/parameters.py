@@ -170,6 +170,15 @@ class Wiring:
 
 CAMERA_RESOLUTION = (256, 192)
 """Width and height of the images the robot's camera captures, pixels (SPEC §6)."""
+CAMERA_FRAME_RATE = 60.0
+"""Frames per second the camera streams at, Hz (SPEC §6)."""
+CAMERA_COLOUR_GAINS = (1.0, 1.0)
+"""Red and blue gains with automatic white balance off (SPEC §6): the LED pipeline's blue
+threshold and its brightness-for-range check assume colours that do not drift."""
+CAMERA_SWITCH_FRAMES = 2
+"""Frames dropped after the multiplexer switches cameras: the frames already in flight were
+exposed, at least in part, through the other camera (SPEC §6: expect dropped frames after a
+switch). At 60 fps this costs 33 ms."""
 LED_SPACING = 0.086
 """Distance between a BlueBot's two rear LEDs (one above the other) and from the upper one to
 the front LED along the heading, m (SPEC §6)."""

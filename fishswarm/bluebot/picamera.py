@@ -5,9 +5,11 @@ line is the SoC's GPIO 40 (the line the Pi's camera LED used; blueswarm's ``lib_
 sets it before each capture). gpiozero only addresses header pins and refuses GPIO 40, so
 the line is driven through lgpio, the library gpiozero itself uses on Raspberry Pi OS.
 Frames come from picamera2 (Raspberry Pi OS's ``python3-picamera2``, reached through the
-venv's system site packages) at the robot's 256 × 192: its ``RGB888`` format lays pixels out
-as blue, green, red, so each frame is flipped to the RGB the LED pipeline expects.
-Both libraries are imported only when the cameras are opened.
+venv's system site packages) streaming video at the robot's 256 × 192 and 60 fps, automatic
+white balance off with gains (1, 1), as SPEC §6 has it: its ``RGB888`` format lays pixels out
+as blue, green, red, so each frame is flipped to the RGB the LED pipeline expects. After the
+multiplexer switches cameras the frames already in flight are dropped. Both libraries are
+imported only when the cameras are opened.
 """
 
 from __future__ import annotations
@@ -18,7 +20,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fishswarm.bluebot.parameters import CAMERA_RESOLUTION, Wiring
+from fishswarm.bluebot.parameters import (
+    CAMERA_COLOUR_GAINS,
+    CAMERA_FRAME_RATE,
+    CAMERA_RESOLUTION,
+    CAMERA_SWITCH_FRAMES,
+    Wiring,
+)
 from fishswarm.bluebot.ports import CameraSide
 
 Select = Callable[[bool], None]
@@ -51,8 +59,13 @@ class PiCameras:
         try:
             if camera is None:
                 camera = _open_picamera2()
-            config = camera.create_still_configuration(
-                main={"size": tuple(resolution), "format": "RGB888"}
+            config = camera.create_video_configuration(
+                main={"size": tuple(resolution), "format": "RGB888"},
+                controls={
+                    "FrameRate": CAMERA_FRAME_RATE,
+                    "AwbEnable": False,
+                    "ColourGains": CAMERA_COLOUR_GAINS,
+                },
             )
             camera.configure(config)
             camera.start()
@@ -61,11 +74,17 @@ class PiCameras:
             raise
         self._camera = camera
         self._resolution = resolution
+        self._level: bool | None = None
+        """The select line's level now (None: not driven yet)."""
 
     def capture(self, side: CameraSide) -> NDArray[np.uint8]:
         """One frame of the camera on ``side``: (height, width, 3) RGB."""
-        right = side == "right"
-        self._select(right == self._wiring.camera_right_level)
+        level = (side == "right") == self._wiring.camera_right_level
+        if level != self._level:
+            self._select(level)
+            self._level = level
+            for _ in range(CAMERA_SWITCH_FRAMES):
+                self._camera.capture_array("main")
         frame = np.asarray(self._camera.capture_array("main"))
         width, height = self._resolution
         if frame.shape[:2] != (height, width) or frame.shape[2] < 3:

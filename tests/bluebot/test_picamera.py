@@ -10,7 +10,7 @@ import pytest
 
 from fishswarm.bluebot.fisheye import Fisheye
 from fishswarm.bluebot.leds import LedVision, perceive_leds
-from fishswarm.bluebot.parameters import BlueBot, Wiring
+from fishswarm.bluebot.parameters import CAMERA_SWITCH_FRAMES, BlueBot, Wiring
 from fishswarm.bluebot.picamera import PiCameras
 from fishswarm.bluebot.ports import CameraSide
 from fishswarm.sim.camera import Optics, render_views
@@ -29,18 +29,27 @@ IMAGES = render_views(
 
 
 class MuxedCamera:
-    """Picamera2's calls as the driver makes them, behind a two-way multiplexer."""
+    """Picamera2's calls as the driver makes them, behind a two-way multiplexer whose
+    switch the stream shows ``in_flight`` frames late (frames already exposed)."""
 
-    def __init__(self) -> None:
+    def __init__(self, in_flight: int = CAMERA_SWITCH_FRAMES) -> None:
         self.line = False
+        self.showing: CameraSide = "left"
+        self.late = 0
+        self.in_flight = in_flight
+        self.frames = 0
         self.calls: list[Any] = []
 
     def select(self, level: bool) -> None:
+        if level != self.line:
+            self.late = self.in_flight
         self.line = level
         self.calls.append(("select", level))
 
-    def create_still_configuration(self, main: dict[str, Any]) -> dict[str, Any]:
-        return {"main": main}
+    def create_video_configuration(
+        self, main: dict[str, Any], controls: dict[str, Any]
+    ) -> dict[str, Any]:
+        return {"main": main, "controls": controls}
 
     def configure(self, config: dict[str, Any]) -> None:
         self.calls.append(("configure", config))
@@ -49,8 +58,12 @@ class MuxedCamera:
         self.calls.append("start")
 
     def capture_array(self, stream: str) -> np.ndarray:
-        side: CameraSide = "right" if self.line else "left"
-        return IMAGES[side][:, :, ::-1].copy()  # RGB888 is laid out B, G, R
+        self.frames += 1
+        if self.late:
+            self.late -= 1
+        else:
+            self.showing = "right" if self.line else "left"
+        return IMAGES[self.showing][:, :, ::-1].copy()  # RGB888 is laid out B, G, R
 
     def stop(self) -> None:
         self.calls.append("stop")
@@ -62,12 +75,16 @@ class MuxedCamera:
 def test_each_side_selects_its_camera_and_frames_come_back_rgb() -> None:
     device = MuxedCamera()
     cameras = PiCameras(camera=device, select=device.select)
+    # Video at 60 fps, white balance fixed (SPEC §6).
+    controls = {"FrameRate": 60.0, "AwbEnable": False, "ColourGains": (1.0, 1.0)}
     assert device.calls[:2] == [
-        ("configure", {"main": {"size": (256, 192), "format": "RGB888"}}),
+        ("configure", {"main": {"size": (256, 192), "format": "RGB888"}, "controls": controls}),
         "start",
     ]
     right, left = cameras.capture("right"), cameras.capture("left")
     assert device.calls[2:] == [("select", True), ("select", False)]
+    # Each switch dropped the frames in flight, which still showed the other camera.
+    assert device.frames == 2 * (CAMERA_SWITCH_FRAMES + 1)
     np.testing.assert_array_equal(right, IMAGES["right"])
     np.testing.assert_array_equal(left, IMAGES["left"])
     # The pipeline finds the neighbour in what the port returns.
@@ -96,3 +113,20 @@ def test_a_frame_of_the_wrong_size_is_an_error() -> None:
     cameras = PiCameras(camera=device, select=device.select, resolution=(320, 240))
     with pytest.raises(RuntimeError, match=r"expected \(240, 320, 3\)"):
         cameras.capture("left")
+
+
+def test_frames_of_one_camera_come_without_drops_until_it_switches() -> None:
+    device = MuxedCamera()
+    cameras = PiCameras(camera=device, select=device.select)
+    for _ in range(3):
+        np.testing.assert_array_equal(cameras.capture("right"), IMAGES["right"])
+    assert device.frames == CAMERA_SWITCH_FRAMES + 3
+    assert [call for call in device.calls if call[0] == "select"] == [("select", True)]
+
+
+def test_without_the_drops_a_switch_would_return_the_other_cameras_frame() -> None:
+    # The stand-in's lag is what the drops are for: a device with one more frame in flight
+    # than the driver drops hands back the camera it switched away from.
+    device = MuxedCamera(in_flight=CAMERA_SWITCH_FRAMES + 1)
+    cameras = PiCameras(camera=device, select=device.select)
+    np.testing.assert_array_equal(cameras.capture("right"), IMAGES["left"])
