@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -154,6 +155,23 @@ def test_the_service_starts_the_robot_with_arguments_the_cli_accepts(tmp_path: P
     assert (args.command, args.robot_id, args.hardware) == ("robot", 7, "mock")
     assert args.connect == "tcp/192.168.1.10:7447" and args.connect_timeout == -1
     assert "Restart=on-failure" in unit
+    # lgpio makes its pipes in the working directory: one the robot's user may write.
+    assert "RuntimeDirectory=fishswarm-%i" in unit.splitlines()
+    assert "WorkingDirectory=/run/fishswarm-%i" in unit.splitlines()
+    verify = shutil.which("systemd-analyze")
+    if verify is not None:
+        (tmp_path / "fishswarm-fish@.service").write_text(unit)
+        checked = subprocess.run(
+            [verify, "verify", str(tmp_path / "fishswarm-fish@7.service")],
+            capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+        # Only the robot's venv is missing on this machine; every setting must be known.
+        problems = [
+            line
+            for line in (checked.stdout + checked.stderr).splitlines()
+            if line and "/opt/fishswarm/venv/bin/fishswarm is not executable" not in line
+        ]
+        assert problems == []
     client = render("zenoh-client.json5.j2", tmp_path, fishswarm_router="tcp/10.1.2.3:7447")
     config = zenoh.Config.from_file(str(tmp_path / "zenoh-client.json5"))
     assert config.get_json("connect/endpoints") == '["tcp/10.1.2.3:7447"]'

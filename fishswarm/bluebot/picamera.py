@@ -122,8 +122,17 @@ def _lgpio_line(pin: int) -> tuple[Select, Callable[[], None]]:
         raise ImportError(
             "the camera switch needs lgpio: on Raspberry Pi OS, apt install python3-lgpio"
         ) from error
-    chip = lgpio.gpiochip_open(0)
-    lgpio.gpio_claim_output(chip, pin, 0)
+    # lgpio raises its own error type (not an OSError): said as a RuntimeError, which the
+    # robot reports as hardware it could not open, with the chip closed again.
+    try:
+        chip = lgpio.gpiochip_open(0)
+    except lgpio.error as error:
+        raise RuntimeError(f"cannot open GPIO chip 0 for the camera switch: {error}") from error
+    try:
+        lgpio.gpio_claim_output(chip, pin, 0)
+    except lgpio.error as error:
+        lgpio.gpiochip_close(chip)
+        raise RuntimeError(f"cannot claim GPIO {pin} for the camera switch: {error}") from error
 
     def select(level: bool) -> None:
         lgpio.gpio_write(chip, pin, int(level))

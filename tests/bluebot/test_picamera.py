@@ -130,3 +130,34 @@ def test_without_the_drops_a_switch_would_return_the_other_cameras_frame() -> No
     device = MuxedCamera(in_flight=CAMERA_SWITCH_FRAMES + 1)
     cameras = PiCameras(camera=device, select=device.select)
     np.testing.assert_array_equal(cameras.capture("right"), IMAGES["left"])
+
+
+class FakeLgpio:
+    """lgpio's calls the camera switch makes, with a line another process holds."""
+
+    class error(Exception):  # noqa: N801 (lgpio's own name)
+        pass
+
+    def __init__(self) -> None:
+        self.closed: list[int] = []
+
+    def gpiochip_open(self, chip: int) -> int:
+        return 7
+
+    def gpio_claim_output(self, handle: int, pin: int, level: int) -> None:
+        raise self.error("GPIO busy")
+
+    def gpiochip_close(self, handle: int) -> None:
+        self.closed.append(handle)
+
+
+def test_a_camera_switch_line_that_cannot_be_claimed_is_a_clear_error(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import sys
+
+    lgpio = FakeLgpio()
+    monkeypatch.setitem(sys.modules, "lgpio", lgpio)
+    with pytest.raises(RuntimeError, match="cannot claim GPIO 40 for the camera switch: GPIO busy"):
+        PiCameras(camera=MuxedCamera())
+    assert lgpio.closed == [7]  # the chip is not left open
