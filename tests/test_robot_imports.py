@@ -8,6 +8,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+from tests.conftest import free_port
 from tests.test_architecture import _imports, _modules
 
 ROBOT_MODULES = (
@@ -136,3 +137,42 @@ def test_the_driver_and_the_fish_actor_run_with_the_base_station_packages_blocke
     assert result.returncode == 0, result.stderr
     perceptions, commands, scipy_loaded = result.stdout.split()
     assert int(perceptions) >= 4 and int(commands) >= 4 and scipy_loaded == "False"
+
+
+COMMANDS = """
+import sys
+for name in BLOCKED:
+    sys.modules[name] = None
+from fishswarm.cli import main
+codes = []
+for argv in ARGVS:
+    try:
+        codes.append(main(argv))
+    except SystemExit as exit:
+        codes.append(exit.code)
+print(*codes)
+"""
+
+
+def test_the_robots_commands_run_with_the_base_station_packages_blocked() -> None:
+    # What a robot's service runs, on a machine that is not a BlueBot (so its hardware cannot
+    # be opened) and with no router listening: each must end in a message, not in an
+    # ImportError of a base-station package.
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    argvs = [
+        ["robot", "--help"],
+        ["robot", "--id", "3", "--hardware", "bluebot", "--connect", endpoint],
+        ["robot", "--id", "3", "--hardware", "mock", "--connect", endpoint,
+         "--connect-timeout", "0.5"],
+        ["robots", "--connect", endpoint, "--connect-timeout", "0.5"],
+    ]  # fmt: skip
+    program = f"BLOCKED = {BLOCKED!r}\nARGVS = {argvs!r}\n" + COMMANDS
+    result = subprocess.run(
+        [sys.executable, "-W", "ignore", "-c", program],
+        capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split()[-4:] == ["0", "1", "1", "1"]
+    assert "cannot open the BlueBot's hardware" in result.stderr
+    assert result.stderr.count("cannot open a client session") == 2
+    assert "Traceback" not in result.stderr

@@ -3,14 +3,37 @@
 
 from __future__ import annotations
 
+import importlib
 import logging
 import sys
 from collections.abc import Sequence
-from typing import Any
 
+from fishswarm.cli.common import UserError
 from fishswarm.cli.parsers import build_parser, scenario_from
 from fishswarm.sim.allocator import tune_allocator
 from fishswarm.sim.scenario import ConfigError
+
+HANDLERS = {
+    "run": ("swarm", "run"),
+    "fish": ("swarm", "fish"),
+    "robot": ("robot", "robot"),
+    "robots": ("robot", "robots"),
+    "world": ("swarm", "world"),
+    "channel": ("swarm", "channel"),
+    "observe": ("swarm", "observe"),
+    "view": ("view", "view"),
+    "router": ("swarm", "router"),
+    "secure": ("swarm", "secure"),
+    "formation": ("swarm", "formation"),
+    "export": ("swarm", "export"),
+    "learn": ("learn", "learn_command"),
+    "experiment": ("study", "experiment"),
+    "plot": ("study", "plot"),
+    "animate": ("study", "animate"),
+}
+"""Each command's handler: (module of :mod:`fishswarm.cli`, function). Only the command's
+own module is imported: ``fishswarm robot`` on a BlueBot's Pi must not import the base
+station's (scipy, mcap)."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -18,35 +41,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=args.log_level, format="%(levelname)s %(name)s: %(message)s")
-    from fishswarm.cli import learn, robot, study, swarm, view
-
     if args.command != "robot":  # a robot's small process keeps glibc's own settings
         tune_allocator()
-
-    handlers: dict[str, Any] = {
-        "run": swarm.run,
-        "fish": swarm.fish,
-        "robot": robot.robot,
-        "robots": robot.robots,
-        "world": swarm.world,
-        "channel": swarm.channel,
-        "observe": swarm.observe,
-        "view": view.view,
-        "router": swarm.router,
-        "secure": swarm.secure,
-        "formation": swarm.formation,
-        "export": swarm.export,
-        "learn": learn.learn_command,
-        "experiment": study.experiment,
-        "plot": study.plot,
-        "animate": study.animate,
-    }
+    module, function = HANDLERS[args.command]
+    handler = getattr(importlib.import_module(f"fishswarm.cli.{module}"), function)
     try:
         scenario = scenario_from(args) if hasattr(args, "config") else None
-        code = int(handlers[args.command](args, scenario))
+        code = int(handler(args, scenario))
     except ConfigError as error:
         parser.exit(2, f"fishswarm {args.command}: error: {error}\n")
-    except swarm.UserError as error:
+    except UserError as error:
         print(f"fishswarm {args.command}: error: {error}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

@@ -19,7 +19,7 @@ from fishswarm.actors.robot import (
 from fishswarm.actors.security import SecurityError, robot_subject
 from fishswarm.actors.session import open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
-from fishswarm.cli.swarm import UserError, _client, _endpoint, _run_trio, secure_extra
+from fishswarm.cli.common import UserError, client_settings, endpoint_of, run_trio, secure_extra
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.scenario import ConfigError, Scenario
 
@@ -41,7 +41,7 @@ def robot(args: argparse.Namespace, scenario: Scenario) -> int:
                 link_timeout=args.link_timeout,
             ),
             scenario.fish_params(),
-            _endpoint(args.connect, "--connect"),
+            endpoint_of(args.connect, "--connect"),
             hardware=args.hardware,
             connect_timeout=args.connect_timeout,
             perception_timeout=args.perception_timeout,
@@ -63,7 +63,7 @@ def robot(args: argparse.Namespace, scenario: Scenario) -> int:
                 file=sys.stderr,
             )
 
-    _run_trio(main)
+    run_trio(main)
     return 0
 
 
@@ -75,7 +75,7 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
         order = ("resume", args.resume)
 
     async def main() -> list[FleetEntry]:
-        async with open_session(_client(args, "admin")) as session:
+        async with open_session(client_settings(args, "admin")) as session:
             bus = ZenohBus(session)
             if order is not None:
                 sent = order_fleet(bus, keys, order[0], order[1])
@@ -83,7 +83,7 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
                 print(f"sent {order[0]} to {whom}", file=sys.stderr)
             return await survey_fleet(bus, keys, listen=args.listen)
 
-    fleet: list[FleetEntry] = _run_trio(main)
+    fleet: list[FleetEntry] = run_trio(main)
     if args.json:
         print(json.dumps([_as_dict(entry) for entry in fleet], indent=2))
     else:

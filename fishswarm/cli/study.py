@@ -26,7 +26,7 @@ if TYPE_CHECKING:
 
 def add_parsers(commands: Any) -> None:
     """Add the ``experiment`` and ``plot`` commands to the ``fishswarm`` parser."""
-    from fishswarm.study.experiment import ENGINES, available
+    from fishswarm.study.catalog import ENGINES, available
 
     names = ", ".join(available()) or "see experiments/"
     experiment = commands.add_parser(
@@ -320,7 +320,7 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
 def _read(path: Path, *, at_least: int, purpose: str) -> Recording:
     """A recording with at least ``at_least`` snapshots, or a usage error saying why not."""
-    from fishswarm.cli.swarm import UserError
+    from fishswarm.cli.common import UserError
     from fishswarm.study.recording import RecordingError, read_recording
 
     try:

@@ -26,20 +26,25 @@ from fishswarm.actors.launcher import (
     shared_memory_pool,
 )
 from fishswarm.actors.observer import WORLD_END_SETTLE, Observer, Progress
-from fishswarm.actors.robot import HardwareError
 from fishswarm.actors.security import (
     ACCESS_FILE,
     AUTHORITY,
-    SecurityError,
     init_secure,
     observer_subject,
     robot_subject,
-    session_security,
 )
-from fishswarm.actors.session import ConnectError, SessionSettings, check_endpoint, open_session
+from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus, query
 from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.cli.common import USER_ERRORS as COMMON_ERRORS
+from fishswarm.cli.common import (
+    UserError,
+    client_settings,
+    endpoint_of,
+    run_trio,
+    secure_extra,
+)
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import ControlReply, ControlRequest
@@ -59,28 +64,6 @@ from fishswarm.study.scene import stage_of
 from fishswarm.study.view_settings import ViewError, ViewSettings
 
 
-class UserError(RuntimeError):
-    """Something the user can fix: the message says what."""
-
-
-def _endpoint(value: str, flag: str) -> str:
-    try:
-        return check_endpoint(value)
-    except ValueError as error:
-        raise ConfigError(f"{flag}: {error}") from None
-
-
-def _client(args: argparse.Namespace, subject: str) -> SessionSettings:
-    """A client session to ``--connect``; with ``--secure DIR``, over mutual TLS with the
-    certificate of ``subject``."""
-    return SessionSettings(
-        mode="client",
-        connect=[_endpoint(args.connect, "--connect")],
-        connect_timeout=args.connect_timeout,
-        extra=secure_extra(args, subject, endpoint=args.connect),
-    )
-
-
 def _fish_subject(args: argparse.Namespace) -> str:
     """The certificate a ``fishswarm fish`` process uses: its robot's (one fish per process
     in a secured swarm)."""
@@ -92,61 +75,13 @@ def _fish_subject(args: argparse.Namespace) -> str:
     return robot_subject(args.ids[0])
 
 
-def secure_extra(
-    args: argparse.Namespace, subject: str, *, endpoint: str, router: bool = False
-) -> dict[str, Any]:
-    """The session settings of ``--secure DIR`` for ``subject`` (none without it).
-
-    Raises:
-        ConfigError: ``--secure`` with an endpoint that is not ``tls/``.
-        SecurityError: the subject's certificate cannot be used (which file, and why).
-    """
-    folder = getattr(args, "secure", None)
-    if folder is None:
-        return {}
-    if not endpoint.startswith("tls/"):
-        flag = "--listen" if router else "--connect"
-        raise ConfigError(
-            f"{flag} {endpoint}: a secured swarm talks TLS only: give a tls/ endpoint, e.g. "
-            f"tls/{endpoint.partition('/')[2] or '127.0.0.1:7447'}"
-        )
-    return session_security(folder, subject, router=router)
-
-
-USER_ERRORS = (
-    ConnectError,
-    SecurityError,
-    StartTimeout,
-    RecordingError,
-    WorkerFailed,
-    ConfigError,
-    HardwareError,
-    ViewError,
-)
+USER_ERRORS = (*COMMON_ERRORS, StartTimeout, RecordingError, WorkerFailed, ViewError)
+"""Errors the swarm's commands report as a message, not a traceback."""
 
 
 def _run_trio(main: Callable[[], Any]) -> Any:
     """Run ``main`` under trio; errors a user can fix come out as one :class:`UserError`."""
-    try:
-        return trio.run(main)
-    except KeyboardInterrupt:
-        raise
-    except BaseExceptionGroup as group:
-        interrupted, _ = group.split(KeyboardInterrupt)
-        if interrupted is not None:
-            raise KeyboardInterrupt from None
-        matched, rest = group.split(USER_ERRORS)
-        if matched is not None and rest is None:
-            raise UserError(_first_message(matched)) from None
-        raise
-    except USER_ERRORS as error:
-        raise UserError(str(error)) from None
-
-
-def _first_message(error: BaseException) -> str:
-    while isinstance(error, BaseExceptionGroup):
-        error = error.exceptions[0]
-    return str(error)
+    return run_trio(main, errors=USER_ERRORS)
 
 
 def progress_printer(ticks: int, stream: Any = sys.stderr) -> Callable[[Progress], None]:
@@ -234,7 +169,7 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
     settings = LaunchSettings(
         scenario=scenario,
         procs=args.procs,
-        listen=_endpoint(args.listen, "--listen"),
+        listen=endpoint_of(args.listen, "--listen"),
         record=args.record,
         summary=args.summary,
         start_timeout=args.start_timeout,
@@ -413,7 +348,7 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
 
     async def main() -> None:
         async with (
-            open_session(_client(args, _fish_subject(args))) as session,
+            open_session(client_settings(args, _fish_subject(args))) as session,
             trio.open_nursery() as nursery,
         ):
             await nursery.start(Fish(settings).run, ZenohBus(session))
@@ -449,7 +384,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
             async with (
                 open_session(
                     dataclasses.replace(
-                        _client(args, "world"),
+                        client_settings(args, "world"),
                         shared_memory_pool=shared_memory_pool(scenario.fish),
                     )
                 ) as session,
@@ -476,7 +411,7 @@ def channel(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm channel``: the channel alone."""
 
     async def main() -> None:
-        async with open_session(_client(args, "channel")) as session:
+        async with open_session(client_settings(args, "channel")) as session:
             await Channel(scenario).run(ZenohBus(session))
 
     _run_trio(main)
@@ -495,7 +430,7 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
         try:
             observer = Observer(keys, recorder=recorder, on_progress=show, observer_id="cli")
             async with (
-                open_session(_client(args, observer_subject(args.name))) as session,
+                open_session(client_settings(args, observer_subject(args.name))) as session,
                 trio.open_nursery() as nursery,
             ):
                 await nursery.start(observer.run, ZenohBus(session))
@@ -534,7 +469,7 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
     request = encode(ControlRequest("formation", formation=args.shape))
 
     async def main() -> list[bytes]:
-        async with open_session(_client(args, "admin")) as session:
+        async with open_session(client_settings(args, "admin")) as session:
             return await query(session, keys.control, request, timeout=5.0)
 
     replies = _run_trio(main)
@@ -553,7 +488,7 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
 def router(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm router``: a Zenoh router for robots and observers."""
-    listen = _endpoint(args.listen, "--listen")
+    listen = endpoint_of(args.listen, "--listen")
     secured = f", secured by {args.secure}" if args.secure else ""
 
     async def main() -> None:

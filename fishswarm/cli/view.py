@@ -17,7 +17,8 @@ from fishswarm.actors.security import observer_subject
 from fishswarm.actors.session import open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.bluebot.parameters import Tank
-from fishswarm.cli.swarm import UserError, _client, _run_trio, view_settings, wait_for_ctrl_c
+from fishswarm.cli.common import UserError, client_settings
+from fishswarm.cli.swarm import _run_trio, view_settings, wait_for_ctrl_c
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.live_view import LiveView, open_live_view
@@ -90,7 +91,7 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
             # be gone before it can: the view shows what it sees meanwhile).
             view.show_stage(Stage(Tank().size))
             async with (
-                open_session(_client(args, observer_subject(args.name))) as session,
+                open_session(client_settings(args, observer_subject(args.name))) as session,
                 trio.open_nursery() as nursery,
             ):
                 observer = Observer(keys, on_scene=view.show, observer_id="view")

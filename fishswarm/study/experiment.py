@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +23,7 @@ from numpy.typing import NDArray
 
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.sim.scenario import ConfigError, Scenario, read_toml
+from fishswarm.study.catalog import EXPERIMENTS_FOLDER, available
 from fishswarm.study.metrics import (
     FORMATION_METRIC_NAMES,
     ORBIT_BEHAVIORS,
@@ -44,8 +44,6 @@ METRICS = ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance"
 """Columns of a swarm run's metric series: the three mean distances (m) of SPEC §3 and
 neighbours seen."""
 
-ENGINES = ("actors", "batch")
-"""How an experiment's runs go: through the actor system, or the in-process batch engine."""
 
 METRIC_LABELS = {
     "centroid_distance": "distance to centroid of others (m)",
@@ -195,7 +193,6 @@ SWEEPABLE = (
     "channel_loss",
     "effort_margin",
 )
-EXPERIMENTS_FOLDER = Path(__file__).resolve().parent / "experiments"
 
 RunKey = tuple[str, float, int]
 """One run of an experiment: (group, value, seed)."""
@@ -452,17 +449,6 @@ class Experiment:
             dict(study_settings),
             tuple((str(group), dict(settings)) for group, settings in groups.items()),
         )
-
-
-def available() -> list[str]:
-    """Names of the experiments shipped with fishswarm (``fishswarm/study/experiments/``)."""
-    if not EXPERIMENTS_FOLDER.is_dir():
-        return []
-    return sorted(
-        path.stem
-        for path in EXPERIMENTS_FOLDER.glob("*.toml")
-        if "experiment" in tomllib.loads(path.read_text(encoding="utf-8"))
-    )
 
 
 def find(name_or_path: str) -> Experiment:

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from fishswarm.sim.scenario import ConfigError, Scenario
-from fishswarm.study.experiment import EXPERIMENTS_FOLDER
+from fishswarm.study.catalog import EXPERIMENTS_FOLDER
 
 
 def test_defaults_follow_the_study() -> None:

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from fishswarm.sim.scenario import ConfigError
+from fishswarm.study.catalog import available
 from fishswarm.study.experiment import (
     METRICS,
     Experiment,
     RunOutcome,
-    available,
     change_from_third_percent,
     change_percent,
     find,

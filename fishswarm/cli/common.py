@@ -1,0 +1,104 @@
+"""What every ``fishswarm`` command shares: errors a user can fix, checked endpoints, client
+sessions (secured or not), and running a command's actors under trio.
+
+It imports only what a robot has (DESIGN §7): ``fishswarm robot`` runs on a BlueBot's Pi,
+where scipy and mcap are not installed, and gets its helpers from here rather than from the
+base station's commands in :mod:`fishswarm.cli.swarm`.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from typing import Any
+
+import trio
+
+from fishswarm.actors.robot import HardwareError
+from fishswarm.actors.security import SecurityError, session_security
+from fishswarm.actors.session import ConnectError, SessionSettings, check_endpoint
+from fishswarm.sim.scenario import ConfigError
+
+
+class UserError(RuntimeError):
+    """Something the user can fix: the message says what."""
+
+
+USER_ERRORS: tuple[type[BaseException], ...] = (
+    ConnectError,
+    SecurityError,
+    ConfigError,
+    HardwareError,
+)
+"""Errors every command reports as a message, not a traceback (a command adds its own)."""
+
+
+def endpoint_of(value: str, flag: str) -> str:
+    """``value`` of ``flag`` if it is an endpoint Zenoh accepts.
+
+    Raises:
+        ConfigError: it is not, with why.
+    """
+    try:
+        return check_endpoint(value)
+    except ValueError as error:
+        raise ConfigError(f"{flag}: {error}") from None
+
+
+def client_settings(args: argparse.Namespace, subject: str) -> SessionSettings:
+    """A client session to ``--connect``; with ``--secure DIR``, over mutual TLS with the
+    certificate of ``subject``."""
+    return SessionSettings(
+        mode="client",
+        connect=[endpoint_of(args.connect, "--connect")],
+        connect_timeout=args.connect_timeout,
+        extra=secure_extra(args, subject, endpoint=args.connect),
+    )
+
+
+def secure_extra(
+    args: argparse.Namespace, subject: str, *, endpoint: str, router: bool = False
+) -> dict[str, Any]:
+    """The session settings of ``--secure DIR`` for ``subject`` (none without it).
+
+    Raises:
+        ConfigError: ``--secure`` with an endpoint that is not ``tls/``.
+        SecurityError: the subject's certificate cannot be used (which file, and why).
+    """
+    folder = getattr(args, "secure", None)
+    if folder is None:
+        return {}
+    if not endpoint.startswith("tls/"):
+        flag = "--listen" if router else "--connect"
+        raise ConfigError(
+            f"{flag} {endpoint}: a secured swarm talks TLS only: give a tls/ endpoint, e.g. "
+            f"tls/{endpoint.partition('/')[2] or '127.0.0.1:7447'}"
+        )
+    return session_security(folder, subject, router=router)
+
+
+def run_trio(
+    main: Callable[[], Any], *, errors: tuple[type[BaseException], ...] = USER_ERRORS
+) -> Any:
+    """Run ``main`` under trio; ``errors`` (a user can fix them) come out as one
+    :class:`UserError` with the first one's message."""
+    try:
+        return trio.run(main)
+    except KeyboardInterrupt:
+        raise
+    except BaseExceptionGroup as group:
+        interrupted, _ = group.split(KeyboardInterrupt)
+        if interrupted is not None:
+            raise KeyboardInterrupt from None
+        matched, rest = group.split(errors)
+        if matched is not None and rest is None:
+            raise UserError(_first_message(matched)) from None
+        raise
+    except errors as error:
+        raise UserError(str(error)) from None
+
+
+def _first_message(error: BaseException) -> str:
+    while isinstance(error, BaseExceptionGroup):
+        error = error.exceptions[0]
+    return str(error)
