@@ -177,3 +177,57 @@ def test_the_service_starts_the_robot_with_arguments_the_cli_accepts(tmp_path: P
     assert config.get_json("connect/endpoints") == '["tcp/10.1.2.3:7447"]'
     assert config.get_json("scouting/multicast/enabled") == "false"
     assert "client" in client
+
+
+BOOKWORM = ("numpy==1.24.2", "msgpack==1.0.3", "trio==0.22.0", "gpiozero==2.0", "smbus2==0.4.2")
+"""The versions of the robot's Python packages in Raspberry Pi OS bookworm, which the role
+installs with apt."""
+OFFLINE = ("NewConnectionError", "Temporary failure in name resolution", "Network is unreachable")
+
+
+def test_the_robot_runs_on_the_packages_the_role_installs(tmp_path: Path, wheel: Path) -> None:
+    # The venv the role makes on a robot, with pip's copies of bookworm's packages standing
+    # in for apt's, what the role asks pip for, and the wheel without its dependencies.
+    import yaml
+
+    from tests.test_robot_imports import BLOCKED, COMMANDS, DRIVE
+
+    defaults = yaml.safe_load((ROLE / "defaults" / "main.yml").read_text())
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True, timeout=120)
+    python = str(venv / "bin" / "python")
+
+    def pip(*args: str) -> None:
+        result = subprocess.run(
+            [python, "-m", "pip", "install", "-q", "--disable-pip-version-check", *args],
+            capture_output=True, text=True, timeout=600, check=False,
+        )  # fmt: skip
+        if result.returncode and any(sign in result.stderr for sign in OFFLINE):
+            pytest.skip(f"pip cannot reach its package index here: {result.stderr[-300:]}")
+        assert result.returncode == 0, result.stderr
+
+    pip(*BOOKWORM, *defaults["fishswarm_pip_packages"])
+    pip("--no-deps", str(wheel))
+    # The driver and the fish actor on mock pins, and the robot's commands, with none of
+    # the base station's packages importable.
+    driven = subprocess.run(
+        [python, "-c", f"BLOCKED = {BLOCKED!r}\n" + DRIVE],
+        capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
+    )  # fmt: skip
+    assert driven.returncode == 0, driven.stderr
+    perceptions, commands, scipy_loaded = driven.stdout.split()
+    assert int(perceptions) >= 4 and int(commands) >= 4 and scipy_loaded == "False"
+    argvs = [["robot", "--help"], ["robot", "--id", "3", "--hardware", "bluebot"]]
+    program = f"BLOCKED = {BLOCKED!r}\nARGVS = {argvs!r}\n" + COMMANDS
+    ran = subprocess.run(
+        [python, "-W", "ignore", "-c", program],
+        capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
+    )  # fmt: skip
+    assert ran.returncode == 0, ran.stderr
+    assert ran.stdout.split()[-2:] == ["0", "1"]
+    assert "cannot open the BlueBot's hardware" in ran.stderr
+    versions = subprocess.run(
+        [python, "-c", "import numpy, msgpack, trio; print(numpy.__version__, trio.__version__)"],
+        capture_output=True, text=True, timeout=60, check=True,
+    )  # fmt: skip
+    assert versions.stdout.split() == ["1.24.2", "0.22.0"]
