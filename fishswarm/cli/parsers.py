@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,40 @@ from fishswarm.sim.scenario import (
 from fishswarm.study.view_settings import GRPC_PORT, WEB_PORT
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+def seconds(text: str) -> float:
+    """A duration, s: a finite number, not negative (an argparse type)."""
+    value = _number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is negative: give seconds, 0 or more")
+    return value
+
+
+def wait_seconds(text: str) -> float:
+    """A longest wait, s: a finite number; a negative one waits forever (an argparse type)."""
+    return _number(text)
+
+
+def fish_id(text: str) -> int:
+    """A fish's (or robot's) id: an integer, 0 or more (an argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is negative: fish ids are 0 or more")
+    return value
+
+
+def _number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number of seconds")
+    return value
 
 
 SWITCH_ON = object()
@@ -227,13 +262,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--start-timeout",
-        type=float,
+        type=seconds,
         default=60.0,
         help="longest wait for all fish to come up, s (default 60)",
     )
     run.add_argument(
         "--perception-timeout",
-        type=float,
+        type=seconds,
         default=5.0,
         help="each fish's safety watchdog: fins off after this long without a perception or "
         "a pulse of the world, s (default 5); a run in which it fired ends 'degraded', exit 4",
@@ -256,7 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
     fish.add_argument(
         "--id",
         dest="ids",
-        type=int,
+        type=fish_id,
         action="append",
         required=True,
         help="fish id; repeat for several fish in one process",
@@ -268,7 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fish.add_argument(
         "--perception-timeout",
-        type=float,
+        type=seconds,
         default=5.0,
         help="fins off after this long without a perception or a pulse of the world, s (default 5)",
     )
@@ -292,7 +327,9 @@ def build_parser() -> argparse.ArgumentParser:
         "running on the same router ('fishswarm run --time realtime'), its camera images "
         "rendered from that world.",
     )
-    robot.add_argument("--id", dest="robot_id", type=int, required=True, help="the robot's fish id")
+    robot.add_argument(
+        "--id", dest="robot_id", type=fish_id, required=True, help="the robot's fish id"
+    )
     robot.add_argument(
         "--hardware",
         choices=["bluebot", "mock"],
@@ -306,13 +343,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     robot.add_argument(
         "--command-timeout",
-        type=float,
+        type=seconds,
         help="fins off when no command arrives for this long, s (more than --period; "
         "default 2.5 periods, at least 1 s)",
     )
     robot.add_argument(
         "--link-timeout",
-        type=float,
+        type=seconds,
         default=10.0,
         help="with the link to the router lost, swim on the robot's own perception for this "
         "long, then stop the fins until it returns, s (default 10)",
@@ -326,7 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     robot.add_argument(
         "--perception-timeout",
-        type=float,
+        type=seconds,
         default=3.0,
         help="the fish actor's own watchdog: fins off after this long without a perception, "
         "s (default 3)",
@@ -343,14 +380,14 @@ def build_parser() -> argparse.ArgumentParser:
     _add_connect(robots)
     robots.add_argument("--swarm", default="default", help="swarm name (default default)")
     robots.add_argument(
-        "--listen", type=float, default=1.5, help="how long to listen, s (default 1.5)"
+        "--listen", type=seconds, default=1.5, help="how long to listen, s (default 1.5)"
     )
     order = robots.add_mutually_exclusive_group()
     order.add_argument(
-        "--stop", type=int, nargs="*", metavar="ID", help="stop these robots (none given: all)"
+        "--stop", type=fish_id, nargs="*", metavar="ID", help="stop these robots (none given: all)"
     )
     order.add_argument(
-        "--resume", type=int, nargs="*", metavar="ID", help="resume these robots (none: all)"
+        "--resume", type=fish_id, nargs="*", metavar="ID", help="resume these robots (none: all)"
     )
     robots.add_argument("--json", action="store_true", help="print the fleet as JSON")
 
@@ -364,7 +401,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scenario_flags(world, list(_SCENARIO_FLAGS))
     world.add_argument(
         "--start-timeout",
-        type=float,
+        type=seconds,
         default=60.0,
         help="longest wait for the fish, s (default 60)",
     )
@@ -476,7 +513,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(robot-ID: the robot's fish and driver), and access_control.json for the router.",
     )
     init.add_argument("folder", type=Path, metavar="DIR", help="folder to write into")
-    init.add_argument("--robots", type=int, nargs="*", default=[], metavar="ID",
+    init.add_argument("--robots", type=fish_id, nargs="*", default=[], metavar="ID",
                       help="robot ids to make certificates for")  # fmt: skip
     init.add_argument(
         "--observers",
@@ -633,7 +670,7 @@ def _add_connect(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--secure", type=Path, metavar="DIR", help=SECURE_HELP)
     parser.add_argument(
         "--connect-timeout",
-        type=float,
+        type=wait_seconds,
         default=10.0,
         help="longest wait for the router, s; negative waits forever (default 10)",
     )

@@ -153,6 +153,13 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         ),
         (["robot", "--id", "1", "--hardware", "lego"], "invalid choice: 'lego'"),
         (["robots", "--stop", "1", "--resume", "2"], "not allowed with argument"),
+        (["run", "--start-timeout", "-1"], "'-1' is negative: give seconds, 0 or more"),
+        (["world", "--start-timeout", "nan"], "'nan' is not a finite number of seconds"),
+        (["observe", "--connect-timeout", "nan"], "'nan' is not a finite number of seconds"),
+        (["fish", "--id", "-5"], "'-5' is negative: fish ids are 0 or more"),
+        (["robot", "--id", "-1"], "'-1' is negative: fish ids are 0 or more"),
+        (["robot", "--id", "1", "--link-timeout", "inf"], "'inf' is not a finite number"),
+        (["robots", "--stop", "2", "x"], "'x' is not a whole number"),
     ],
 )
 def test_bad_arguments_exit_nonzero_with_a_reason(args: list[str], message: str) -> None:
