@@ -118,6 +118,14 @@ class DriverSettings:
     fisheye: Fisheye = field(default_factory=Fisheye)
 
     def __post_init__(self) -> None:
+        if (
+            isinstance(self.robot_id, bool)
+            or not isinstance(self.robot_id, int)
+            or self.robot_id < 0
+        ):
+            raise ValueError(
+                f"robot_id must be a fish id, a whole number 0 or more, got {self.robot_id!r}"
+            )
         for name in ("control_period", "command_timeout", "link_timeout", "status_period"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):

@@ -387,3 +387,5 @@ def test_a_defect_in_a_sensor_port_still_ends_the_run(factory: object) -> None:
 def test_settings_that_would_stop_the_fins_between_commands_are_refused() -> None:
     with pytest.raises(ValueError, match="command_timeout"):
         DriverSettings(1, "dispersion", control_period=1.0, command_timeout=0.5)
+    with pytest.raises(ValueError, match="robot_id must be a fish id"):
+        DriverSettings(-1, "dispersion")
