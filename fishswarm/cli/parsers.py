@@ -110,7 +110,8 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
         "--time",
         str,
         "lockstep (default: as fast as possible, deterministic), jitter (each fish on its own "
-        "clock, periods drawn from N(period, --jitter); deterministic) or realtime (one tick "
+        "clock, periods drawn from N(period, --jitter); deterministic; no broadcasts, so a "
+        "formation needs --no-flags) or realtime (one tick "
         "per control period of wall-clock time; late fish keep their last command)",
     ),
     "jitter": (

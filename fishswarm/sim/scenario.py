@@ -331,6 +331,11 @@ class Scenario:
             self.time_mode in TIME_MODES,
             f"time_mode must be one of {', '.join(TIME_MODES)}, got {self.time_mode!r}",
         )
+        need(
+            not (self.behavior == "formation" and self.flags and self.time_mode == "jitter"),
+            "formation flags are not delivered in jitter mode (each fish decides on its own "
+            "clock; docs/architecture.md): use --time lockstep or realtime, or --no-flags",
+        )
         if self.landmark is not None:
             size = self.tank
             need(

@@ -76,10 +76,19 @@ async def _swarm(scenario: Scenario, *, schools: int) -> tuple[World, list[Snaps
             "spacing": 0.25,
         },
         {
-            # Flags flowing in jitter mode, a fifth of them lost, efforts in them.
+            # A formation in jitter mode (without flags: not delivered in this mode).
             "behavior": "formation",
             "formation": "column",
             "time_mode": "jitter",
+            "flags": False,
+            "controller": "pid",
+            "spawn_radius": 0.3,
+            "spacing": 0.25,
+        },
+        {
+            # Flags flowing, a fifth of them lost, efforts in them.
+            "behavior": "formation",
+            "formation": "column",
             "channel_loss": 0.2,
             "controller": "pid",
             "spawn_radius": 0.3,

@@ -100,6 +100,11 @@ def test_settings_are_checked_together_and_name_what_the_user_set() -> None:
     ):
         Scenario(behavior="orbit", orbit_radius=5.0)
     assert Scenario(behavior="waltz", orbit_radius=1.0).orbit_radius == 1.0  # a partner distance
+    # Formation flags are not delivered in jitter mode: refused unless turned off.
+    with pytest.raises(ConfigError, match="formation flags are not delivered in jitter mode"):
+        Scenario(behavior="formation", time_mode="jitter")
+    assert not Scenario(behavior="formation", time_mode="jitter", flags=False).flags
+    assert Scenario(behavior="dispersion", time_mode="jitter").flags  # flags only matter there
 
 
 @pytest.mark.parametrize(
