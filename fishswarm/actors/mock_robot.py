@@ -38,7 +38,17 @@ from fishswarm.sim.camera import Optics, render_views
 FloatArray = NDArray[np.float64]
 
 STALE_AFTER = 0.6
-"""A snapshot older than this (wall-clock s) gives no camera frame or depth reading."""
+"""A snapshot older than this (wall-clock s) gives no camera frame or depth reading, or than
+:data:`STALE_PERIODS` control periods when that is longer."""
+STALE_PERIODS = 1.5
+"""A realtime world sends one snapshot a control period, and the driver reads at its own
+phase in the period: a snapshot must stay fresh for more than a period, or a driver whose
+phase falls late would never see one."""
+
+
+def stale_after(control_period: float) -> float:
+    """How old a snapshot may get before the mock robot's sensors give nothing, s."""
+    return max(STALE_AFTER, STALE_PERIODS * control_period)
 
 
 class WorldFeed:
@@ -216,13 +226,20 @@ class MockBody:
 
 
 def open_mock_hardware(
-    robot_id: int, keys: KeySpace, *, seed: int = 0, pin_factory: Any = None
+    robot_id: int,
+    keys: KeySpace,
+    *,
+    control_period: float = 1.0,
+    seed: int = 0,
+    pin_factory: Any = None,
 ) -> tuple[Hardware, MockBody]:
     """A mock robot's ports and its body in the simulated world.
 
     Args:
         robot_id: the robot's fish id.
         keys: the swarm's key space.
+        control_period: the robot's control period, s (the world's, which sends a snapshot
+            each period): how long a snapshot stays fresh follows from it.
         seed: the seed of its cameras' sensor noise.
         pin_factory: gpiozero's pin factory (None: a fresh ``MockFactory``).
     """
@@ -234,7 +251,7 @@ def open_mock_hardware(
                 "a mock robot runs on gpiozero's mock pins: pip install 'fishswarm[robot]'"
             ) from error
         pin_factory = MockFactory()
-    feed = WorldFeed(robot_id)
+    feed = WorldFeed(robot_id, stale_after=stale_after(control_period))
     fins = BodyFins(GpioFins(pin_factory=pin_factory))
     try:
         leds = GpioLeds(pin_factory=pin_factory)

@@ -126,7 +126,9 @@ async def run_robot(
     )
     body = None
     if settings.hardware == "mock":
-        hardware, body = open_mock_hardware(robot_id, keys, seed=settings.seed)
+        hardware, body = open_mock_hardware(
+            robot_id, keys, control_period=settings.driver.control_period, seed=settings.seed
+        )
     else:
         hardware = open_bluebot_hardware()
     try:

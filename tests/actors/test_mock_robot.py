@@ -1,0 +1,73 @@
+"""A mock robot's sensors, fed by the world's snapshots: fresh for longer than the period at
+which a realtime world sends them, stale once the link has been quiet for longer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fishswarm.actors.driver import SensorUnavailable
+from fishswarm.actors.mock_robot import STALE_AFTER, SnapshotDepth, WorldFeed, stale_after
+from fishswarm.protocols.messages import Snapshot
+
+
+class Clock:
+    """Wall-clock time the test sets, s."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def snapshot(tick: int) -> Snapshot:
+    one = np.zeros(1)
+    return Snapshot(
+        tick, float(tick), np.array([3]), np.array([[0.9, 0.9, 0.5]]), np.zeros((1, 3)), one,
+        np.zeros(1, dtype=np.int64), np.zeros(1, dtype=np.int64), one,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("period", [0.2, 1.0, 2.0])
+@pytest.mark.parametrize("phase", [0.1, 0.5, 0.95])
+def test_a_driver_reading_at_any_phase_of_the_period_gets_every_snapshot(
+    period: float, phase: float
+) -> None:
+    # The world sends a snapshot at every k·period; the driver reads at k·period + phase.
+    clock = Clock()
+    feed = WorldFeed(3, stale_after=stale_after(period), clock=clock)
+    depth = SnapshotDepth(feed)
+    readings = 0
+    for tick in range(10):
+        clock.now = tick * period
+        feed.take(snapshot(tick))
+        clock.now = (tick + phase) * period
+        assert depth.read_depth() == pytest.approx(0.5)
+        readings += 1
+    assert readings == 10
+
+
+def test_a_snapshot_goes_stale_when_the_link_is_quiet_for_longer() -> None:
+    assert stale_after(0.2) == STALE_AFTER  # short periods keep the floor
+    assert stale_after(1.0) == pytest.approx(1.5)
+    clock = Clock()
+    feed = WorldFeed(3, stale_after=stale_after(1.0), clock=clock)
+    feed.take(snapshot(0))
+    clock.now = 1.4
+    assert SnapshotDepth(feed).read_depth() == pytest.approx(0.5)
+    clock.now = 1.6  # the next snapshot, due at 1 s, never came
+    with pytest.raises(SensorUnavailable, match=r"1\.6 s old"):
+        SnapshotDepth(feed).read_depth()
+
+
+def test_the_mock_robots_sensors_keep_snapshots_for_its_period() -> None:
+    from fishswarm.actors.mock_robot import open_mock_hardware
+    from fishswarm.protocols.keys import KeySpace
+
+    hardware, _ = open_mock_hardware(3, KeySpace(), control_period=1.0)
+    try:
+        assert isinstance(hardware.depth, SnapshotDepth)
+        assert hardware.depth.feed.stale_after == pytest.approx(1.5)
+    finally:
+        hardware.close()
