@@ -22,9 +22,9 @@ from fishswarm.protocols.messages import Snapshot
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.metrics import (
     FormationTarget,
+    FormationTargets,
     OrbitTarget,
     OrbitTracker,
-    formation_target_of,
     orbit_target_of,
     swarm_metrics,
 )
@@ -76,7 +76,8 @@ class Observer:
         recorder: where to record snapshots, metrics and events (optional).
         on_progress: called after every snapshot.
         observer_id: id of this observer's liveliness token.
-        formation: a target shape to measure formation metrics against (formation runs).
+        formations: the targets to measure formation metrics against (formation runs): the
+            one of the shape each snapshot says the fish are told to take.
         orbit: a post and radius to measure orbit metrics against (orbit, milling, waltz).
         stage: the tank and landmark, drawn in the recorded scenes (optional).
         on_scene: called after every snapshot with what the swarm looks like and the
@@ -90,7 +91,7 @@ class Observer:
         recorder: Recorder | None = None,
         on_progress: Callable[[Progress], None] | None = None,
         observer_id: str = "0",
-        formation: FormationTarget | None = None,
+        formations: FormationTargets | None = None,
         orbit: OrbitTarget | None = None,
         stage: Stage | None = None,
         on_scene: Callable[[Scene, dict[str, float]], None] | None = None,
@@ -101,7 +102,7 @@ class Observer:
         self.recorder = recorder
         self.on_progress = on_progress
         self.observer_id = observer_id
-        self.formation = formation
+        self.formations = formations
         self.orbit = orbit
         self._orbit_tracker = None if orbit is None else OrbitTracker(orbit)
         self.history: list[Progress] = []
@@ -130,16 +131,21 @@ class Observer:
             recorder=recorder,
             on_progress=on_progress,
             observer_id=observer_id,
-            formation=formation_target_of(scenario),
+            formations=FormationTargets.of(scenario),
             orbit=orbit_target_of(scenario),
             stage=stage_of(scenario),
             on_scene=on_scene,
         )
 
+    @property
+    def formation(self) -> FormationTarget | None:
+        """The target of the run's configured shape (None: not a formation run)."""
+        return None if self.formations is None else self.formations.at(None)
+
     def measure_as(self, scenario: Scenario) -> None:
         """From the next snapshot on, measure and draw the run of ``scenario`` (for an
         observer that attached before it knew what runs)."""
-        self.formation = formation_target_of(scenario)
+        self.formations = FormationTargets.of(scenario)
         self.orbit = orbit_target_of(scenario)
         self._orbit_tracker = None if self.orbit is None else OrbitTracker(self.orbit)
         self.stage = stage_of(scenario)
@@ -223,9 +229,10 @@ class Observer:
             metrics = await trio.to_thread.run_sync(swarm_metrics, *measure)
         else:
             metrics = swarm_metrics(*measure)
-        if self.formation is not None:
+        target = None if self.formations is None else self.formations.at(snapshot.formation)
+        if target is not None:
             try:
-                metrics.update(self.formation.metrics(snapshot.position))
+                metrics.update(target.metrics(snapshot.position))
             except ValueError as error:  # e.g. positions no assignment can handle
                 log.warning("no formation metrics at tick %d: %s", snapshot.tick, error)
         if self._orbit_tracker is not None:
@@ -243,7 +250,7 @@ class Observer:
             )
         recording_scene = self.recorder is not None and progress.fish <= RECORDED_SCENE_FISH
         if recording_scene or self.on_scene is not None:
-            scene = scene_of(snapshot, self.formation)
+            scene = scene_of(snapshot, target)
             if recording_scene:
                 assert self.recorder is not None
                 self.recorder.scene(snapshot.time, scene_message(scene, self.stage))

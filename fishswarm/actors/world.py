@@ -460,6 +460,7 @@ class World:
     def _snapshot(self, time: float, seen: IntArray, broadcasts: IntArray) -> Snapshot:
         """The swarm as it is now: this tick's snapshot."""
         state = self.sim.state
+        forming = self.scenario.behavior == "formation"
         return Snapshot(
             self.tick,
             time,
@@ -470,6 +471,7 @@ class World:
             seen,
             broadcasts,
             self.sim.effort,
+            (self._formation or self.params.formation_at(time)) if forming else None,
         )
 
     def _defers(self, event: Event) -> bool:

@@ -209,15 +209,23 @@ def _orbit_of(settings: dict[str, Any]) -> OrbitTarget | None:
         return None
 
 
-def _formation_of(settings: dict[str, Any]) -> FormationTarget | None:
-    """The target of a recorded formation run (None for other runs, and for recordings
-    that do not say what ran)."""
-    from fishswarm.study.metrics import formation_target_of
+def _formations_of(recording: Recording) -> list[FormationTarget] | None:
+    """The target of each snapshot of a recorded formation run: the shape the snapshot says
+    the fish were told to take, or (recorded before snapshots said) the scenario's own
+    switch. None for other runs, and for recordings that do not say what ran."""
+    from fishswarm.study.metrics import FormationTargets, scheduled_shape
 
     try:
-        return formation_target_of(Scenario.from_mapping(settings, source="the recording"))
+        ran = Scenario.from_mapping(recording.scenario, source="the recording")
     except ConfigError:
         return None
+    targets = FormationTargets.of(ran)
+    if targets is None:
+        return None
+    return [
+        targets.at(snapshot.formation or scheduled_shape(ran, snapshot.time))
+        for snapshot in recording.snapshots
+    ]
 
 
 def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
@@ -241,9 +249,13 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     }
     settings = recording.scenario
     orbit = _orbit_of(settings)
-    formation = _formation_of(settings)
-    if formation is not None:
-        series = [formation.metrics(s.position) for s in recording.snapshots]
+    formations = _formations_of(recording)
+    formation = None if formations is None else formations[-1]
+    if formations is not None:
+        series = [
+            target.metrics(s.position)
+            for target, s in zip(formations, recording.snapshots, strict=True)
+        ]
         metrics |= {name: np.array([m[name] for m in series]) for name in FORMATION_METRIC_NAMES}
     if orbit is not None:
         # From the positions, so that recordings made before the observer measured orbits
@@ -310,12 +322,27 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
             fps=args.fps,
             title=f"{settings.get('fish', '?')} fish, {settings.get('behavior', '?')}",
             on_frame=show,
-            formation=_formation_of(settings),
+            **_animated_formation(recording),
         )
     except AnimationError as error:
         raise ConfigError(str(error)) from None
     print(f"wrote {args.out} ({frames.t.size} frames)", file=sys.stderr)
     return 0
+
+
+def _animated_formation(recording: Recording) -> dict[str, Any]:
+    """The animation's formation arguments: the first snapshot's target, and each later
+    target from the time the fish were told to take it."""
+    formations = _formations_of(recording)
+    if formations is None:
+        return {}
+    times = [snapshot.time for snapshot in recording.snapshots]
+    switches = [
+        (time, target)
+        for time, target, before in zip(times[1:], formations[1:], formations[:-1], strict=True)
+        if target is not before
+    ]
+    return {"formation": formations[0], "switches": switches}
 
 
 def _read(path: Path, *, at_least: int, purpose: str) -> Recording:

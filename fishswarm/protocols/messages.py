@@ -401,6 +401,8 @@ class Snapshot(Message):
         broadcasts: (N,) how many broadcasts each fish sent at the previous tick.
         effort: (N,) each fish's effort so far, gain-weighted fin beats (None: not
             measured).
+        formation: the shape formation fish are told to take at this tick, after a switch
+            (None: as configured, or not a formation run).
     """
 
     type_name: ClassVar[str] = "snapshot"
@@ -413,8 +415,10 @@ class Snapshot(Message):
     neighbors_seen: IntArray
     broadcasts: IntArray
     effort: FloatArray | None = None
+    formation: str | None = None
 
     def __post_init__(self) -> None:
+        _check_formation(self.formation)
         check_int("tick", self.tick)
         check_float("time", self.time, low=0.0)
         check_array(self, "ids", np.int64, None)

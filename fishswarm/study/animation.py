@@ -132,6 +132,7 @@ def animate(
     title: str = "",
     on_frame: Callable[[int, int], None] | None = None,
     formation: FormationTarget | None = None,
+    switches: Sequence[tuple[float, FormationTarget]] = (),
 ) -> Path:
     """Write an animation of the run to ``out`` (.gif or .mp4).
 
@@ -146,6 +147,8 @@ def animate(
         on_frame: called with (frame number, frames in all) as frames are drawn.
         formation: the target of a formation run: fish coloured by role and joined state,
             the target laid onto them in the flat views.
+        switches: (time, target) of each switch to another shape: from ``time``, s, the
+            fish are coloured by, and laid onto, that target.
 
     Raises:
         AnimationError: unknown format, the viewer is not in the run, or a tool is missing.
@@ -158,8 +161,9 @@ def animate(
     plt, animation = _matplotlib()
     writer = _writer(animation, out, fps)
     figure, draw = animation_figure(
-        frames, tank=tank, vision=vision, viewer=viewer, title=title, formation=formation
-    )
+        frames, tank=tank, vision=vision, viewer=viewer, title=title, formation=formation,
+        switches=switches,
+    )  # fmt: skip
     count = frames.t.size
     with writer.saving(figure, str(out), dpi=figure.dpi):
         for frame in range(count):
@@ -179,8 +183,10 @@ def animation_figure(
     viewer: int,
     title: str = "",
     formation: FormationTarget | None = None,
+    switches: Sequence[tuple[float, FormationTarget]] = (),
 ) -> tuple[Any, Callable[[int], None]]:
-    """The animation's figure and a function that draws frame k into it.
+    """The animation's figure and a function that draws frame k into it (``formation`` and
+    ``switches`` as in :func:`animate`).
 
     Four views: from above and from the side (flat, so that their axes read like a plan and
     an elevation), a camera circling the tank (3-D), and through the eyes of fish ``viewer``
@@ -226,8 +232,12 @@ def animation_figure(
         mine = int(present[:column].sum()) if present[column] else None
         here, heading = position[present], yaw[present]
         colours: list[Any] = _colours(here.shape[0])
-        if formation is not None:
-            roles = formation.roles(here)
+        target = formation
+        for since, switched in switches:
+            if frames.t[frame] >= since:
+                target = switched
+        if target is not None:
+            roles = target.roles(here)
             colours = role_colours(roles.joined, roles.leader)
             if roles.slots is not None:
                 drawn.append(_hollow(above, roles.slots[:, 0], roles.slots[:, 1]))

@@ -28,11 +28,12 @@ from fishswarm.study.metrics import (
     FORMATION_METRIC_NAMES,
     ORBIT_BEHAVIORS,
     ORBIT_METRIC_NAMES,
+    FormationTargets,
     effort_spread,
-    formation_target_of,
     linked_centroid_distance,
     orbit_metrics,
     orbit_target_of,
+    scheduled_shape,
     swarm_metrics,
 )
 
@@ -299,20 +300,23 @@ class Experiment:
         position: FloatArray,
         seen: NDArray[np.int64],
         effort: FloatArray | None = None,
+        times: FloatArray | None = None,
     ) -> FloatArray:
         """(T, M) the metric series of one run from its positions (T, N, 3), the
-        neighbours each fish saw (T, N) and each fish's effort so far (T, N; formations)."""
+        neighbours each fish saw (T, N), each fish's effort so far (T, N; formations) and
+        the snapshots' times (T,), s (default: one a control period from 0; a formation
+        is measured against the shape its scenario has switched to by then)."""
         if self.forming:
-            target = formation_target_of(scenario)
-            assert target is not None  # a formation scenario always has one
+            targets = FormationTargets.of(scenario)
+            assert targets is not None  # a formation scenario always has them
             spent = np.zeros(position.shape[:2]) if effort is None else effort
-            return np.array(
-                [
-                    [*(target.metrics(p)[name] for name in FORMATION_METRIC_NAMES),
-                     effort_spread(e)]
-                    for p, e in zip(position, spent, strict=True)
-                ]
-            )  # fmt: skip
+            at = np.arange(position.shape[0]) * scenario.control_period if times is None else times
+            rows = []
+            for p, e, t in zip(position, spent, at, strict=True):
+                target = targets.at(scheduled_shape(scenario, float(t)))
+                metrics = target.metrics(p)
+                rows.append([*(metrics[name] for name in FORMATION_METRIC_NAMES), effort_spread(e)])
+            return np.array(rows)
         if self.orbiting:
             orbit = orbit_target_of(scenario)
             assert orbit is not None  # an orbiting scenario always has one

@@ -3,6 +3,7 @@ orbit metrics, and a formation's metrics against its target shape."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
@@ -413,17 +414,55 @@ class FormationRoles:
 
 
 def formation_target_of(scenario: Scenario) -> FormationTarget | None:
-    """The target of a formation run (None for other runs)."""
-    if scenario.behavior != "formation":
-        return None
-    params = scenario.fish_params().steering
-    if not isinstance(params, FormationParams):
-        return None
+    """The target of a formation run as configured, before any switch (None for other
+    runs)."""
+    targets = FormationTargets.of(scenario)
+    return None if targets is None else targets.at(None)
+
+
+def formation_target(params: FormationParams) -> FormationTarget:
+    """The target formation fish with ``params`` make."""
     if params.is_local:
         return FormationTarget(None, params.spacing, params.tolerance, params.shape)
     return FormationTarget(
         params.slots(), params.spacing, params.tolerance, orientation=params.orientation
     )
+
+
+class FormationTargets:
+    """The targets of a formation run: its configured shape's and, made when first asked
+    for, those of the shapes its fish are switched to (by the scenario, or by an operator's
+    ``fishswarm formation``) — the same spacing, tolerance and heading, another shape."""
+
+    def __init__(self, params: FormationParams) -> None:
+        self._params = params
+        self._targets: dict[str, FormationTarget] = {}
+
+    @classmethod
+    def of(cls, scenario: Scenario) -> FormationTargets | None:
+        """The targets of a formation scenario (None for other runs)."""
+        if scenario.behavior != "formation":
+            return None
+        params = scenario.fish_params().steering
+        return cls(params) if isinstance(params, FormationParams) else None
+
+    def at(self, shape: str | None) -> FormationTarget:
+        """The target of ``shape`` (None: the configured one)."""
+        name = self._params.shape if shape is None else shape
+        target = self._targets.get(name)
+        if target is None:
+            target = formation_target(dataclasses.replace(self._params, shape=name))
+            self._targets[name] = target
+        return target
+
+
+def scheduled_shape(scenario: Scenario, time: float) -> str | None:
+    """The shape the scenario's own switch tells its fish to take at ``time``, s (None:
+    as configured). What a snapshot that does not say (recorded before snapshots did) is
+    measured against."""
+    if scenario.switch_formation is not None and time >= scenario.switch_at:
+        return scenario.switch_formation
+    return None
 
 
 def formation_summary(times: list[float], series: list[dict[str, float]]) -> dict[str, Any]:

@@ -50,7 +50,7 @@ def run_one(experiment: Experiment, key: RunKey, engine: Engine) -> RunOutcome:
     scenario = experiment.scenario_for(value, seed, group)
     started = time.perf_counter()
     t, position, seen, effort = engine(scenario)
-    metrics = experiment.metrics_of(scenario, position, seen, effort)
+    metrics = experiment.metrics_of(scenario, position, seen, effort, times=t)
     elapsed = time.perf_counter() - started
     return RunOutcome(value, seed, t, metrics, position, elapsed, group)
 

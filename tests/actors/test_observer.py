@@ -129,3 +129,43 @@ def test_an_observer_hands_each_scene_to_a_view_and_records_it(tmp_path: Path) -
     fish, tank = scenes[-1]["entities"]
     assert [a["pose"]["position"]["x"] for a in fish["arrows"]] == [0.5, 1.5]
     assert max(p["x"] for p in tank["lines"][0]["points"]) == 2.0
+
+
+def test_a_formation_is_measured_against_the_shape_each_snapshot_names() -> None:
+    # Six fish in the slots of a column: perfect against a column, not against the pyramid
+    # the scenario starts with. The snapshots after the switch name the column.
+    from fishswarm.sim.scenario import Scenario
+    from fishswarm.study.metrics import FormationTargets
+
+    scenario = Scenario(fish=6, behavior="formation", formation="pyramid", spacing=0.25)
+    targets = FormationTargets.of(scenario)
+    assert targets is not None
+    column = targets.at("column")
+    assert column.slots is not None
+    position = column.slots[:6] + np.array([0.9, 0.9, 0.5])
+
+    def snapshot(tick: int, formation: str | None) -> bytes:
+        zeros, counts = np.zeros((6, 3)), np.zeros(6, dtype=np.int64)
+        return encode(
+            Snapshot(
+                tick, float(tick), np.arange(6), position, zeros, np.zeros(6), counts, counts,
+                formation=formation,
+            )
+        )  # fmt: skip
+
+    async def main() -> Observer:
+        bus = MemoryBus()
+        observer = Observer.of(scenario)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            for tick, formation in enumerate([None, "column", "column"]):
+                bus.put(KEYS.snapshot, snapshot(tick, formation))
+                await observer.wait_for_tick(tick)
+            nursery.cancel_scope.cancel()
+        return observer
+
+    history = run_mock(main).history
+    before, *after = (progress.metrics for progress in history)
+    assert before["shape_error"] > 0.05 and before["joined_fraction"] < 1.0
+    for metrics in after:
+        assert metrics["shape_error"] < 1e-9 and metrics["joined_fraction"] == 1.0

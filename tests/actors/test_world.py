@@ -105,6 +105,14 @@ def test_the_actors_give_the_batch_engines_trajectory(changes: dict[str, object]
     reference = run_batch(scenario)
     np.testing.assert_array_equal(np.array([s.position for s in snapshots]), reference.position)
     np.testing.assert_array_equal(np.array([s.yaw for s in snapshots]), reference.yaw)
+    # Each snapshot names the shape the fish are told to take once the scenario switches.
+    switched = scenario.switch_formation
+    assert [s.formation for s in snapshots] == [
+        switched if switched is not None and s.time >= scenario.switch_at else None
+        for s in snapshots
+    ]
+    if switched is not None:
+        assert snapshots[-1].formation == switched
 
 
 def test_schools_whose_perceptions_come_in_parts_decide_as_with_one_batch(

@@ -498,10 +498,33 @@ def test_an_operator_switches_a_running_schools_formation(tmp_path: Path) -> Non
         assert "formation diamond from tick" in switch.stderr and "6 fish" in switch.stderr
         bad = _run("formation", "circle", "--connect", endpoint, timeout=30)
         assert bad.returncode == 2 and "invalid choice: 'circle'" in bad.stderr
+        # Let a few snapshots come after the switch.
+        time.sleep(2.0)
     finally:
         run.send_signal(signal.SIGINT)
         _, errors = run.communicate(timeout=20)
     assert run.returncode == 130, errors
+    # The snapshots say when the fish were told to take the diamond, and the recording's
+    # pictures measure them against it from then on.
+    from fishswarm.cli.study import _animated_formation, _formations_of
+    from fishswarm.study.recording import read_recording
+
+    recording = read_recording(tmp_path / "r.mcap")
+    shapes = [snapshot.formation for snapshot in recording.snapshots]
+    first = shapes.index("diamond")
+    assert 0 < first < len(shapes) - 2
+    assert set(shapes[:first]) == {None} and set(shapes[first:]) == {"diamond"}
+    targets = _formations_of(recording)
+    assert targets is not None
+    assert targets[0].slots is not None and targets[-1].slots is not None
+    assert targets[0].slots.shape != targets[-1].slots.shape or not np.allclose(
+        targets[0].slots, targets[-1].slots
+    )
+    animated = _animated_formation(recording)
+    np.testing.assert_array_equal(animated["formation"].slots, targets[0].slots)
+    ((since, switched),) = animated["switches"]
+    assert since == recording.snapshots[first].time
+    np.testing.assert_array_equal(switched.slots, targets[-1].slots)
 
 
 def test_version_descriptions_and_quiet_world() -> None:

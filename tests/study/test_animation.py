@@ -112,6 +112,36 @@ def test_formation_frames_show_roles_and_the_target() -> None:
     assert [t.get_text() for t in above.get_legend().get_texts()] == list(ROLE_COLOURS)
 
 
+def test_after_a_switch_the_frames_show_the_new_target() -> None:
+    # The fish hold a column all along; the run starts as a pyramid and switches at 1 s.
+    pytest.importorskip("matplotlib")
+    from fishswarm.formations.maps import target_map
+    from fishswarm.study.metrics import FormationTarget
+
+    column = target_map("column", 3, spacing=0.3)
+    placed = column + np.array([1.0, 1.0, 0.5])
+    frames = resample(
+        np.array([0.0, 2.0]), np.stack([placed, placed]), np.zeros((2, 3)),
+        np.array([1, 2, 3]), step=1.0,
+    )  # fmt: skip
+    pyramid = FormationTarget(target_map("pyramid", 3, spacing=0.3), 0.3, 0.05)
+    figure, draw = animation_figure(
+        frames, tank=(1.78, 1.78, 1.17), vision=Vision(), viewer=3,
+        formation=pyramid, switches=[(1.0, FormationTarget(column, 0.3, 0.05))],
+    )  # fmt: skip
+    above = figure.axes[0]
+
+    def target_shown(frame: int) -> np.ndarray:
+        draw(frame)
+        hollow = above.collections[0]
+        return np.sort(np.asarray(hollow.get_offsets()), axis=0)
+
+    on_the_fish = np.sort(placed[:, :2], axis=0)
+    assert not np.allclose(target_shown(0), on_the_fish, atol=1e-6)  # still the pyramid
+    np.testing.assert_allclose(target_shown(1), on_the_fish, atol=1e-9)  # the column, at 1 s
+    np.testing.assert_allclose(target_shown(2), on_the_fish, atol=1e-9)
+
+
 def matplotlib_colors() -> Any:
     import matplotlib.colors
 

@@ -249,3 +249,30 @@ def test_bad_groups_are_named(tmp_path: Path, groups: str, message: str) -> None
     )
     with pytest.raises(ConfigError, match=message):
         find(str(path))
+
+
+def test_a_formation_experiment_measures_each_snapshot_against_the_scheduled_shape() -> None:
+    # Six fish held in the slots of a column for three snapshots; the scenario starts as a
+    # pyramid and switches to the column at 1 s: only the first snapshot is off its target.
+    from fishswarm.sim.scenario import Scenario
+    from fishswarm.study.metrics import FormationTargets
+
+    scenario = Scenario(
+        fish=6, behavior="formation", formation="pyramid", switch_formation="column",
+        switch_at=1.0, spacing=0.25, duration=2.0,
+    )  # fmt: skip
+    targets = FormationTargets.of(scenario)
+    assert targets is not None
+    slots = targets.at("column").slots
+    assert slots is not None
+    position = np.repeat((slots[:6] + np.array([0.9, 0.9, 0.5]))[None], 3, axis=0)
+    experiment = Experiment(
+        name="switch-test", title="Switch", parameter="fish", label="fish", values=(6.0,),
+        seeds=1, scenario=scenario,
+    )  # fmt: skip
+    series = experiment.metrics_of(
+        scenario, position, np.zeros((3, 6), dtype=np.int64), times=np.array([0.0, 1.0, 2.0])
+    )
+    shape_error = series[:, experiment.metric_names.index("shape_error")]
+    assert shape_error[0] > 0.05
+    np.testing.assert_allclose(shape_error[1:], 0.0, atol=1e-9)
