@@ -325,9 +325,16 @@ class World:
         return self._bus.subscribe(key, lambda k, payload: events.push((kind, k, payload)))
 
     def control(self, request: ControlRequest) -> ControlReply:
-        """Answer a control request: status, pause, resume or stop (a run that has ended
-        only reports its status)."""
-        action = "status" if self.state_name in ("finished", "stopped") else request.action
+        """Answer a control request: status, pause, resume, stop or a formation switch (a
+        run that has ended only reports its status; a switch it cannot make says why)."""
+        ended = self.state_name in ("finished", "stopped")
+        action = "status" if ended else request.action
+        refused = None
+        if request.action == "formation" and ended:
+            refused = f"the run has {self.state_name}"
+        elif request.action == "formation" and self.scenario.behavior != "formation":
+            refused = f"the fish run {self.scenario.behavior}, not a formation"
+            action = "status"
         if action == "pause":
             if self._resume.is_set():  # pausing twice is pausing once
                 self._resume = trio.Event()
@@ -341,7 +348,7 @@ class World:
             self._stop_requested = True
             self._resume.set()
             self.state_name = "stopping"
-        return ControlReply(self.state_name, self.tick, self.time, len(self.roster.alive))
+        return ControlReply(self.state_name, self.tick, self.time, len(self.roster.alive), refused)
 
     def control_payload(self, key: str, payload: bytes) -> bytes | None:
         """Answer an encoded control request; None (counted and logged) if it is not one."""

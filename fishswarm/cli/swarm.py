@@ -45,7 +45,7 @@ from fishswarm.cli.common import (
     run_trio,
     secure_extra,
 )
-from fishswarm.protocols.codec import decode, encode
+from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import ControlReply, ControlRequest
 from fishswarm.sim.decision_kernels import prepare, with_compiled_decisions
@@ -477,7 +477,12 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
         raise UserError(
             f"no world of swarm {args.swarm!r} answered on {args.connect}: is a run going?"
         )
-    reply = decode(replies[0], ControlReply)
+    try:
+        reply = decode(replies[0], ControlReply)
+    except MessageError as error:
+        raise UserError(f"the world's answer is not a control reply: {error}") from None
+    if reply.refused is not None:
+        raise UserError(f"the world did not switch to {args.shape}: {reply.refused}")
     print(
         f"formation {args.shape} from tick {reply.tick + 1} (world {reply.state}, "
         f"{reply.live_fish} fish)",

@@ -492,6 +492,7 @@ class ControlReply(Message):
         tick: the current tick.
         time: the current simulated time, s.
         live_fish: how many fish are live.
+        refused: why the request was not carried out (None: it was, or it only asked).
     """
 
     type_name: ClassVar[str] = "control_reply"
@@ -499,12 +500,17 @@ class ControlReply(Message):
     tick: int
     time: float
     live_fish: int
+    refused: str | None = None
 
     def __post_init__(self) -> None:
         check_text("state", self.state)
         check_int("tick", self.tick)
         check_float("time", self.time, low=0.0)
         check_int("live_fish", self.live_fish, high=MAX_ROWS)
+        if self.refused is not None and not (
+            isinstance(self.refused, str) and 0 < len(self.refused) <= 200
+        ):
+            raise ValueError("refused must be a reason of 1 to 200 characters")
 
 
 @dataclass(frozen=True, eq=False)

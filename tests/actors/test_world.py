@@ -421,6 +421,19 @@ def test_control_pauses_resumes_and_stops_the_world() -> None:
     ]
 
 
+def test_a_formation_switch_the_world_cannot_make_is_refused_with_why() -> None:
+    world = World(WorldSettings(Scenario(fish=2, behavior="aggregation"), expected_fish=(0, 1)))
+    reply = world.control(ControlRequest("formation", formation="diamond"))
+    assert reply.refused == "the fish run aggregation, not a formation"
+    forming = World(WorldSettings(Scenario(fish=2, behavior="formation"), expected_fish=(0, 1)))
+    assert forming.control(ControlRequest("formation", formation="diamond")).refused is None
+    forming.state_name = "finished"
+    reply = forming.control(ControlRequest("formation", formation="column"))
+    assert reply.refused == "the run has finished"
+    # Other requests to an ended run only report its state, as before.
+    assert forming.control(ControlRequest("stop")).refused is None
+
+
 def test_realtime_keeps_wall_clock_pace_and_a_silent_fish_keeps_its_last_command() -> None:
     # One fish answered by hand: full caudal for ticks 0 and 1, then silence. In realtime
     # mode the world goes on at one tick per 0.1 s, the silent fish keeps swimming on its

@@ -527,6 +527,33 @@ def test_an_operator_switches_a_running_schools_formation(tmp_path: Path) -> Non
     np.testing.assert_array_equal(switched.slots, targets[-1].slots)
 
 
+def test_a_switch_a_running_world_cannot_make_fails_with_why(tmp_path: Path) -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    run = subprocess.Popen(
+        [*FISHSWARM, "run", "--fish", "3", "--duration", "100000", "--period", "0.5",
+         "--time", "realtime", "--listen", endpoint, "--quiet",
+         "--record", str(tmp_path / "r.mcap"), "--summary", str(tmp_path / "s.json")],
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        wait_for_port(port)
+        deadline = time.monotonic() + 30
+        while True:  # until the world answers
+            switch = _run("formation", "diamond", "--connect", endpoint, timeout=30)
+            if "no world" not in switch.stderr or time.monotonic() > deadline:
+                break
+            time.sleep(0.2)
+        assert switch.returncode == 1, switch.stderr
+        assert (
+            "the world did not switch to diamond: the fish run dispersion, not a formation"
+            in switch.stderr
+        )
+    finally:
+        run.send_signal(signal.SIGINT)
+        run.communicate(timeout=20)
+
+
 def test_version_descriptions_and_quiet_world() -> None:
     version = _run("--version")
     assert version.returncode == 0 and version.stdout.strip() == "fishswarm 0.1.0"
