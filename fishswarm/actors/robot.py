@@ -214,3 +214,24 @@ def order_fleet(bus: Bus, keys: KeySpace, action: str, robot_ids: list[int]) -> 
     order = RobotOrder(action, np.array(sorted(set(robot_ids)), dtype=np.int64))
     bus.put(keys.robot_order, encode(order))
     return order
+
+
+def unconfirmed(fleet: list[FleetEntry], order: RobotOrder) -> dict[int, str]:
+    """The robots an order was for that do not report obeying it, each with why: a stop is
+    obeyed by a robot that says it is ``stopped``, a resume by one that no longer does.
+
+    An order is one message: a robot whose link was down when it went out never hears it,
+    and a robot that restarts comes back unstopped, so the operator must know.
+    """
+    heard = {entry.robot_id: entry for entry in fleet}
+    wanted = order.robot_ids.tolist() or sorted(heard)
+    missing: dict[int, str] = {}
+    for robot_id in wanted:
+        entry = heard.get(robot_id)
+        if entry is None or entry.status is None:
+            missing[robot_id] = "not heard from"
+            continue
+        stopped = entry.status.state == "stopped"
+        if stopped != (order.action == "stop"):
+            missing[robot_id] = f"still {entry.status.state}"
+    return missing

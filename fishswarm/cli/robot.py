@@ -15,12 +15,14 @@ from fishswarm.actors.robot import (
     order_fleet,
     run_robot,
     survey_fleet,
+    unconfirmed,
 )
 from fishswarm.actors.security import SecurityError, robot_subject
 from fishswarm.actors.session import open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.cli.common import UserError, client_settings, endpoint_of, run_trio, secure_extra
 from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.messages import RobotOrder
 from fishswarm.sim.scenario import ConfigError, Scenario
 
 
@@ -74,12 +76,14 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
     if args.resume is not None:
         order = ("resume", args.resume)
 
+    sent: list[RobotOrder] = []
+
     async def main() -> list[FleetEntry]:
         async with open_session(client_settings(args, "admin")) as session:
             bus = ZenohBus(session)
             if order is not None:
-                sent = order_fleet(bus, keys, order[0], order[1])
-                whom = ", ".join(map(str, sent.robot_ids.tolist())) or "every robot"
+                sent.append(order_fleet(bus, keys, order[0], order[1]))
+                whom = ", ".join(map(str, sent[0].robot_ids.tolist())) or "every robot"
                 print(f"sent {order[0]} to {whom}", file=sys.stderr)
             return await survey_fleet(bus, keys, listen=args.listen)
 
@@ -88,7 +92,17 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
         print(json.dumps([_as_dict(entry) for entry in fleet], indent=2))
     else:
         print(fleet_table(fleet))
-    return 0
+    if not sent:
+        return 0
+    missing = unconfirmed(fleet, sent[0])
+    for robot_id, why in missing.items():
+        print(
+            f"robot {robot_id} did not confirm the {sent[0].action} ({why}): a robot whose "
+            f"link is down never hears it, and one that restarts comes back unstopped; "
+            "send it again",
+            file=sys.stderr,
+        )
+    return 1 if missing else 0
 
 
 def _as_dict(entry: FleetEntry) -> dict[str, object]:

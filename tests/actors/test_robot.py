@@ -149,6 +149,23 @@ def test_mock_robots_join_obey_a_stop_and_survive_losing_the_router(
                 order_fleet(base, KEYS, "resume", [10, 11])
                 await until(lambda: all(r.state == "swimming" for r in robots), timeout=5)
 
+                # From the command line: the operator learns which robots did not confirm.
+                async def robots_command(*words: str) -> tuple[int, str]:
+                    done = await trio.run_process(
+                        [sys.executable, "-m", "fishswarm", "robots", "--connect", endpoint,
+                         "--listen", "1.5", *words],
+                        capture_stdout=True, capture_stderr=True, check=False,
+                    )  # fmt: skip
+                    return done.returncode, done.stderr.decode()
+
+                code, said = await robots_command("--stop", "10", "99")
+                assert code == 1, said
+                assert "robot 99 did not confirm the stop (not heard from)" in said
+                assert "robot 10 did not" not in said and robots[0].state == "stopped"
+                code, said = await robots_command("--resume", "10")
+                assert code == 0 and "did not confirm" not in said, said
+                await until(lambda: all(r.state == "swimming" for r in robots), timeout=5)
+
             # The router (and the world) die: no more frames, no more commands, fins off.
             await until(lambda: all(beating(r) for r in robots), timeout=5)
             start = trio.current_time()
