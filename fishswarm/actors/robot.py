@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -81,12 +83,19 @@ def open_bluebot_hardware() -> Hardware:
     """The BlueBot's own ports: fins and LEDs on gpiozero, both cameras through picamera2,
     the MS5803 depth sensor over I²C (each released again if a later one fails to open).
 
+    Under systemd (``StateDirectory=``, as the deployment's unit has it) the depth sensor
+    keeps its surface pressure in the robot's state folder, so that a restart in mid-dive
+    does not take that depth for the surface.
+
     Raises:
         HardwareError: a library is missing or a device does not answer, with which.
     """
     from fishswarm.bluebot.gpio import GpioFins, GpioLeds
     from fishswarm.bluebot.picamera import PiCameras
-    from fishswarm.bluebot.pressure import SensorError, open_depth_sensor
+    from fishswarm.bluebot.pressure import SURFACE_FILE, SensorError, open_depth_sensor
+
+    state = os.environ.get("STATE_DIRECTORY")
+    surface_file = Path(state.split(":")[0]) / SURFACE_FILE if state else None
 
     try:
         with contextlib.ExitStack() as opened:
@@ -96,7 +105,7 @@ def open_bluebot_hardware() -> Hardware:
             opened.callback(leds.close)
             camera = PiCameras()
             opened.callback(camera.close)
-            depth = open_depth_sensor()
+            depth = open_depth_sensor(surface_file=surface_file)
             opened.pop_all()
     except (ImportError, OSError, SensorError, RuntimeError) as error:
         raise HardwareError(

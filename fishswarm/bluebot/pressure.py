@@ -11,12 +11,18 @@ scalings: the 1-bar ``01BA`` and the 2-bar ``02BA`` (the robot code had a file f
 
 from __future__ import annotations
 
+import json
+import logging
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Protocol
 
 from fishswarm.bluebot.parameters import GRAVITY, BlueBot, Wiring
+
+log = logging.getLogger(__name__)
 
 RESET = 0x1E
 PROM_READ = 0xA2
@@ -206,14 +212,31 @@ class PressureReader(Protocol):
     def close(self) -> None: ...
 
 
+SURFACE_FILE = "surface-pressure.json"
+"""Where a robot keeps the surface pressure it measured, in its state folder."""
+SURFACE_KEPT = 6 * 3600.0
+"""How long a kept surface pressure is trusted, s: the weather moves the air's pressure by
+up to about 1 hPa an hour, which reads as 1 cm of depth."""
+SURFACE_TOLERANCE = 200.0
+"""A start reading this much (Pa, 2 cm of water) above the kept surface pressure means the
+robot started under water."""
+
+
 class PressureDepth:
-    """Depth from a pressure sensor: the surface pressure is taken at start (the robot at
-    the surface), as the mean of a few readings. Implements the ``DepthSensor`` port.
+    """Depth from a pressure sensor: against the surface pressure, the mean of a few
+    readings at start (the robot at the surface). Implements the ``DepthSensor`` port.
+
+    A robot whose process restarts in mid-dive would take its depth then for the surface.
+    Given a ``surface_file``, the surface pressure measured at a start at the surface is
+    kept there, and a later start that reads more than :data:`SURFACE_TOLERANCE` above it,
+    within :data:`SURFACE_KEPT`, goes on from the kept one instead.
 
     Args:
         sensor: the pressure sensor.
         density: the water's density, kg/m³.
         surface_samples: readings averaged for the surface pressure.
+        surface_file: where to keep the surface pressure across restarts (None: nowhere).
+        clock: wall-clock time, s (for the kept value's age).
     """
 
     def __init__(
@@ -222,13 +245,30 @@ class PressureDepth:
         *,
         density: float = BlueBot().water_density,
         surface_samples: int = 5,
+        surface_file: Path | None = None,
+        clock: Callable[[], float] = time.time,
     ) -> None:
         if surface_samples < 1:
             raise ValueError("surface_samples must be at least 1")
         self._sensor = sensor
         self._density = density
         readings = [sensor.read().pressure for _ in range(surface_samples)]
-        self.surface_pressure = sum(readings) / len(readings)
+        here = sum(readings) / len(readings)
+        kept = None if surface_file is None else _kept_surface(surface_file, clock())
+        self.resumed = kept is not None and here > kept + SURFACE_TOLERANCE
+        """Whether the robot started under water and goes on from the kept surface."""
+        if self.resumed:
+            assert kept is not None
+            self.surface_pressure = kept
+            log.warning(
+                "depth sensor: %.0f Pa at start, %.2f m below the surface kept in %s: "
+                "started under water, depth measured from the kept surface",
+                here, depth_of(here, kept, density=density), surface_file,
+            )  # fmt: skip
+        else:
+            self.surface_pressure = here
+            if surface_file is not None:
+                _keep_surface(surface_file, here, clock())
 
     def read_depth(self) -> float:
         """Depth below the surface, m (positive down)."""
@@ -240,10 +280,37 @@ class PressureDepth:
         self._sensor.close()
 
 
+def _kept_surface(path: Path, now: float) -> float | None:
+    """The surface pressure kept in ``path`` if it is recent enough, Pa (None: none)."""
+    try:
+        kept = json.loads(path.read_text())
+        pressure, taken = float(kept["pressure"]), float(kept["time"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    fresh = 0.0 <= now - taken <= SURFACE_KEPT and math.isfinite(pressure) and pressure > 0
+    return pressure if fresh else None
+
+
+def _keep_surface(path: Path, pressure: float, now: float) -> None:
+    """Keep the surface pressure in ``path`` (written whole, then moved into place, so that
+    a robot switched off meanwhile leaves the old value or the new one, never half)."""
+    partial = path.with_suffix(".partial")
+    try:
+        partial.write_text(json.dumps({"pressure": pressure, "time": now}))
+        partial.replace(path)
+    except OSError as error:
+        log.warning("depth sensor: cannot keep the surface pressure in %s: %s", path, error)
+
+
 def open_depth_sensor(
-    *, wiring: Wiring = Wiring(), model: str = "02BA", density: float = BlueBot().water_density
+    *,
+    wiring: Wiring = Wiring(),
+    model: str = "02BA",
+    density: float = BlueBot().water_density,
+    surface_file: Path | None = None,
 ) -> PressureDepth:
-    """The robot's depth sensor over I²C (needs ``smbus2``, from the ``robot`` extra).
+    """The robot's depth sensor over I²C (needs ``smbus2``, from the ``robot`` extra),
+    keeping its surface pressure in ``surface_file`` (see :class:`PressureDepth`).
 
     Raises:
         SensorError: no sensor answers.
@@ -258,7 +325,9 @@ def open_depth_sensor(
     bus = SMBus(wiring.depth_bus)
     try:
         return PressureDepth(
-            Ms5803(bus, address=wiring.depth_address, model=model), density=density
+            Ms5803(bus, address=wiring.depth_address, model=model),
+            density=density,
+            surface_file=surface_file,
         )
     except BaseException:
         bus.close()

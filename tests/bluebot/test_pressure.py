@@ -3,6 +3,9 @@ depth from pressure."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -136,3 +139,62 @@ def test_depth_is_measured_from_the_surface_pressure_taken_at_start() -> None:
     depth = PressureDepth(sensor, density=998.0)
     assert depth.surface_pressure == 100_000.0
     assert depth.read_depth() == pytest.approx(0.5)
+
+
+RHO_G = 998.0 * 9.81
+
+
+def surface_then(depth: float, surface: float = 100_000.0) -> StepPressure:
+    """Five readings at start with the robot ``depth`` m below a surface at ``surface``
+    Pa, then one at the same depth."""
+    here = surface + depth * RHO_G
+    return StepPressure([here] * 6)
+
+
+def test_a_restart_in_mid_dive_goes_on_from_the_kept_surface(tmp_path: Path) -> None:
+    kept = tmp_path / "surface-pressure.json"
+    clock = [1_000.0]
+    # The first start, at the surface: its pressure is kept.
+    first = PressureDepth(
+        surface_then(0.0), density=998.0, surface_file=kept, clock=lambda: clock[0]
+    )
+    assert not first.resumed and first.surface_pressure == 100_000.0
+    assert json.loads(kept.read_text()) == {"pressure": 100_000.0, "time": 1_000.0}
+    # Restarted an hour later 0.5 m down: depth from the kept surface, not 0.
+    clock[0] += 3_600.0
+    again = PressureDepth(
+        surface_then(0.5), density=998.0, surface_file=kept, clock=lambda: clock[0]
+    )
+    assert again.resumed and again.surface_pressure == 100_000.0
+    assert again.read_depth() == pytest.approx(0.5)
+    assert json.loads(kept.read_text())["time"] == 1_000.0  # a dive's reading is not kept
+
+
+@pytest.mark.parametrize(
+    ("age", "depth", "weather", "resumed"),
+    [
+        (3_600.0, 0.01, 0.0, False),  # within 2 cm of the kept surface: at the surface
+        (3_600.0, 0.0, -300.0, False),  # the air's pressure fell: the surface is lower
+        (7 * 3_600.0, 0.5, 0.0, False),  # kept too long ago: not trusted
+        (-60.0, 0.5, 0.0, False),  # kept "in the future" (a clock set back): not trusted
+    ],
+)
+def test_a_start_at_the_surface_or_an_old_surface_takes_it_anew(
+    tmp_path: Path, age: float, depth: float, weather: float, resumed: bool
+) -> None:
+    kept = tmp_path / "surface-pressure.json"
+    kept.write_text(json.dumps({"pressure": 100_000.0, "time": 0.0}))
+    sensor = surface_then(depth, surface=100_000.0 + weather)
+    started = PressureDepth(sensor, density=998.0, surface_file=kept, clock=lambda: age)
+    assert started.resumed is resumed
+    assert started.surface_pressure == pytest.approx(100_000.0 + weather + depth * RHO_G)
+    assert json.loads(kept.read_text())["time"] == age  # taken anew, and kept
+
+
+@pytest.mark.parametrize("content", ["", "{not json", '{"pressure": "high", "time": 0}', "[]"])
+def test_a_damaged_kept_surface_is_taken_anew(tmp_path: Path, content: str) -> None:
+    kept = tmp_path / "surface-pressure.json"
+    kept.write_text(content)
+    started = PressureDepth(surface_then(0.5), density=998.0, surface_file=kept, clock=lambda: 10.0)
+    assert not started.resumed
+    assert json.loads(kept.read_text()) == {"pressure": started.surface_pressure, "time": 10.0}
