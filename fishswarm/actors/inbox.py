@@ -63,9 +63,14 @@ class Inbox(Generic[T]):
 
     def drain(self) -> list[T]:
         """Every item waiting now, in order (none: an empty list)."""
-        items = list(self._items)
-        self._items.clear()
-        return items
+        # One item at a time: a push from another thread between copying the deque and
+        # clearing it would be lost; popleft and append are each atomic.
+        items: list[T] = []
+        try:
+            while True:
+                items.append(self._items.popleft())
+        except IndexError:
+            return items
 
     async def receive(self) -> T:
         """Wait for and return the next item."""

@@ -11,6 +11,11 @@ from fishswarm.protocols.messages import Message
 
 M = TypeVar("M", bound=Message)
 
+LOGGED_SENDERS = 64
+"""Most (sender key, kind) pairs an actor logs a rejection for: a sender choosing new keys
+(any fish id on a wildcard subscription) must not grow the memory or the log without end.
+Past it, rejections are counted only, and the log says so once per kind."""
+
 log = logging.getLogger(__name__)
 
 
@@ -26,6 +31,7 @@ class Intake:
         self.accepted = 0
         self.rejected: Counter[str] = Counter()
         self._logged: set[tuple[str, str]] = set()
+        self._silenced: set[str] = set()
 
     def decode(self, key: str, payload: bytes, expected: type[M]) -> M | None:
         """The message, or None (counted and logged) if the payload is not a valid one."""
@@ -52,11 +58,21 @@ class Intake:
         return message
 
     def reject(self, key: str, kind: str, reason: str) -> None:
-        """Count a rejected message; log the first of each (sender key, kind)."""
+        """Count a rejected message; log the first of each (sender key, kind), for up to
+        :data:`LOGGED_SENDERS` of them."""
         self.rejected[kind] += 1
-        if (key, kind) not in self._logged:
+        if (key, kind) in self._logged:
+            return
+        if len(self._logged) < LOGGED_SENDERS:
             self._logged.add((key, kind))
             log.warning("%s rejected a %s message on %s: %s", self.actor, kind, key, reason)
+        elif kind not in self._silenced:
+            self._silenced.add(kind)
+            log.warning(
+                "%s rejected a %s message on %s: %s; %s senders have been named, further %s "
+                "rejections are counted, not logged",
+                self.actor, kind, key, reason, LOGGED_SENDERS, kind,
+            )  # fmt: skip
 
     @property
     def rejected_total(self) -> int:

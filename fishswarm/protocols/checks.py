@@ -96,5 +96,9 @@ def check_ids(ids: IntArray) -> None:
 def check_counts(name: str, counts: IntArray, rows: int, what: str) -> None:
     if (counts < 0).any():
         raise ValueError(f"{name} must be non-negative")
+    # Each count bounded first, so that the sum cannot wrap around in int64 and come out
+    # right for counts no batch could hold.
+    if (counts > rows).any():
+        raise ValueError(f"{name} must each be at most the {rows} rows of {what}")
     if int(counts.sum()) != rows:
         raise ValueError(f"{name} add up to {int(counts.sum())}, but {what} has {rows} rows")

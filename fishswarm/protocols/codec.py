@@ -113,9 +113,11 @@ def decode(payload: bytes | bytearray | memoryview, expected: type[M] | None = N
         raise MessageError(f"not msgpack: {type(error).__name__}: {error}") from None
     if not isinstance(raw, dict) or set(raw) != {"v", "t", "f"}:
         raise MessageError("not a fishswarm message: expected a map with keys v, t, f")
-    if raw["v"] != SCHEMA_VERSION:
+    # Compared only once known to be a plain integer: an array would compare element-wise.
+    if type(raw["v"]) is not int or raw["v"] != SCHEMA_VERSION:
+        shown = raw["v"] if isinstance(raw["v"], int | str) else type(raw["v"]).__name__
         raise MessageError(
-            f"schema version {raw['v']!r} is not supported (this fishswarm speaks {SCHEMA_VERSION})"
+            f"schema version {shown!r} is not supported (this fishswarm speaks {SCHEMA_VERSION})"
         )
     cls = MESSAGE_TYPES.get(raw["t"]) if isinstance(raw["t"], str) else None
     if cls is None:
@@ -127,5 +129,5 @@ def decode(payload: bytes | bytearray | memoryview, expected: type[M] | None = N
         raise MessageError("message fields must be a map")
     try:
         return cls(**fields)  # type: ignore[return-value]
-    except (TypeError, ValueError) as error:
+    except Exception as error:  # whatever hostile fields make a check raise
         raise MessageError(f"invalid {cls.type_name}: {error}") from None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import inspect
 import math
 import struct
 
@@ -16,6 +17,8 @@ from hypothesis.extra import numpy as hnp
 from fishswarm.protocols import MessageError, decode, encode
 from fishswarm.protocols.checks import MAX_ROWS
 from fishswarm.protocols.messages import (
+    MESSAGE_TYPES,
+    SCHEMA_VERSION,
     Broadcast,
     ChannelReport,
     Command,
@@ -113,6 +116,73 @@ def test_perception_round_trip_property(neighbors: np.ndarray, tick: int, depth:
 def test_garbage_never_escapes_as_another_error(data: bytes) -> None:
     with contextlib.suppress(MessageError):
         decode(data)
+
+
+def _ext_array(values: list[float] | list[int]) -> msgpack.ExtType:
+    """The codec's array extension around ``values`` (int64 if all are ints, else float64)."""
+    ints = all(isinstance(v, int) for v in values)
+    array = np.asarray(values, dtype="<i8" if ints else "<f8")
+    header = struct.pack("<BBI", 1 if ints else 0, 1, array.size)
+    return msgpack.ExtType(1, header + array.tobytes())
+
+
+_ARRAYS = st.lists(st.floats(), max_size=3).map(_ext_array) | st.lists(
+    st.integers(-(2**63), 2**63 - 1), max_size=3
+).map(_ext_array)
+_LEAVES = (
+    st.none()
+    | st.booleans()
+    | st.integers(-(2**63), 2**64 - 1)
+    | st.floats()
+    | st.text(max_size=6)
+    | st.binary(max_size=8)
+    | _ARRAYS
+)
+_VALUES = st.recursive(
+    _LEAVES,
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=3)
+    ),
+    max_leaves=8,
+)
+
+
+@st.composite
+def _hostile(draw: st.DrawFn) -> bytes:
+    """A message's outline — the right keys, a real type name and its field names — with
+    anything at all in them."""
+    cls = draw(st.sampled_from(sorted(MESSAGE_TYPES.values(), key=lambda c: c.type_name)))
+    names = list(inspect.signature(cls).parameters)
+    fields = draw(st.dictionaries(st.sampled_from(names), _VALUES, max_size=len(names)))
+    version = draw(st.just(SCHEMA_VERSION) | _ARRAYS | _VALUES)
+    type_name = draw(st.just(cls.type_name) | _VALUES)
+    packed: bytes = msgpack.packb({"v": version, "t": type_name, "f": fields}, use_bin_type=True)
+    return packed
+
+
+@given(payload=_hostile())
+def test_hostile_fields_never_escape_as_another_error(payload: bytes) -> None:
+    # Whatever a sender puts in a message's fields — arrays for numbers, numbers past int64,
+    # an array for the schema version — decoding says MessageError and nothing else.
+    with contextlib.suppress(MessageError):
+        decode(payload)
+
+
+def test_a_schema_version_or_counts_meant_to_fool_the_checks_are_rejected() -> None:
+    pulse = {"run": 1, "tick": 1, "state": "running"}
+    for version in (_ext_array([1.0, 1.0]), _ext_array([]), [1], "1", True):
+        payload = msgpack.packb({"v": version, "t": "world_pulse", "f": pulse})
+        with pytest.raises(MessageError, match="schema version"):
+            decode(payload)
+    # Counts that wrap around int64 to the right total: 2^63-1 + 2^63-1 + 2 = 0 rows.
+    three = np.zeros(3, dtype=np.int64)
+    fields = _perception_batch_fields(
+        ids=np.arange(3), depth=np.full(3, 0.5), neighbors=np.zeros((0, 3)),
+        neighbor_counts=np.array([2**63 - 1, 2**63 - 1, 2]), landmark_counts=three,
+        inbox_counts=three,
+    )  # fmt: skip
+    with pytest.raises(MessageError, match="neighbor_counts must each be at most the 0 rows"):
+        decode(_raw("perception_batch", fields), PerceptionBatch)
 
 
 DTYPE_CODES = {"<f8": 0, "<i8": 1, "|b1": 2, "<f4": 7}
