@@ -10,7 +10,7 @@ deterministic, and nothing lost.
 from __future__ import annotations
 
 import logging
-from collections import defaultdict
+from collections import defaultdict, deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,7 +58,10 @@ class Channel:
         self.outbox_timeout = outbox_timeout
         self._intake = Intake("channel")
         self._events: Inbox[tuple[str, str, bytes]]
-        self._outbox: dict[int, list[Broadcast]] = defaultdict(list)
+        self._outbox: dict[int, dict[int, list[Broadcast]]] = defaultdict(dict)
+        """Broadcasts received, by tick and sender."""
+        self._early: deque[tuple[str, bytes]] = deque()
+        """Snapshots that came while the channel gathered an earlier one's broadcasts."""
         self._rngs: dict[int, np.random.Generator] = {}
         self._delivered = 0
         self._missing = 0
@@ -89,53 +92,84 @@ class Channel:
 
     async def _next_snapshot(self) -> Snapshot:
         while True:
-            kind, key, payload = await self._events.receive()
-            if kind == "snapshot":
-                snapshot = self._intake.decode(key, payload, Snapshot)
-                if snapshot is not None:
-                    self._last_tick = snapshot.tick
-                    return snapshot
+            if self._early:
+                key, payload = self._early.popleft()
             else:
-                self._take_outbox(key, payload)
+                kind, key, payload = await self._events.receive()
+                if kind != "snapshot":
+                    self._take_outbox(key, payload)
+                    continue
+            snapshot = self._intake.decode(key, payload, Snapshot)
+            if snapshot is not None:
+                self._last_tick = snapshot.tick
+                return snapshot
 
-    def _take_outbox(self, key: str, payload: bytes) -> None:
+    def _take_outbox(self, key: str, payload: bytes) -> Broadcast | None:
+        """Keep a broadcast for delivery; the broadcast kept, or None."""
         sender, _ = self.keys.member_of(key)
         owner = fish_id_of(sender)
         if owner is None:
             self._intake.reject(key, "misaddressed", f"{sender!r} is not a fish id")
-            return
+            return None
         broadcast = self._intake.decode_addressed(
             key, payload, Broadcast, field="sender_id", owner=owner
         )
         if broadcast is None:
-            return
+            return None
         # Only broadcasts of the ticks about to be delivered are kept: anything else is
         # stale or forged, and would pile up.
         if not self._last_tick - 1 <= broadcast.tick <= self._last_tick + 2:
             self._intake.reject(key, "stale", f"broadcast of tick {broadcast.tick}")
-            return
-        self._outbox[broadcast.tick].append(broadcast)
+            return None
+        self._outbox[broadcast.tick].setdefault(broadcast.sender_id, []).append(broadcast)
+        return broadcast
 
     async def _gather(self, snapshot: Snapshot) -> list[Broadcast]:
+        """The broadcasts the snapshot announces, by sender: each sender's first as many as
+        it announced. Waits for them (at most ``outbox_timeout``); any other broadcast of
+        the tick — from a fish that was not announced (lost, or late), or one too many — is
+        not delivered, and counted."""
         sent_tick = snapshot.tick - 1
-        wanted = int(snapshot.broadcasts.sum())
+        wanted = {
+            int(fish): int(count)
+            for fish, count in zip(snapshot.ids.tolist(), snapshot.broadcasts.tolist(), strict=True)
+            if count > 0
+        }
+        kept = self._outbox[sent_tick]
+        remaining = sum(max(0, n - len(kept.get(fish, []))) for fish, n in wanted.items())
         with trio.move_on_after(self.outbox_timeout):
-            while len(self._outbox[sent_tick]) < wanted:
+            while remaining > 0:
                 kind, key, payload = await self._events.receive()
-                if kind == "outbox":
-                    self._take_outbox(key, payload)
+                if kind == "snapshot":
+                    self._early.append((key, payload))
+                    continue
+                broadcast = self._take_outbox(key, payload)
+                if (
+                    broadcast is not None
+                    and broadcast.tick == sent_tick
+                    and len(kept[broadcast.sender_id]) <= wanted.get(broadcast.sender_id, 0)
+                ):
+                    remaining -= 1
         for old in [t for t in self._outbox if t < sent_tick]:
             del self._outbox[old]
-        got = self._outbox.pop(sent_tick, [])
-        if len(got) < wanted:
-            self._missing += wanted - len(got)
+        got = self._outbox.pop(sent_tick, {})
+        chosen = [b for fish in sorted(wanted) for b in got.get(fish, [])[: wanted[fish]]]
+        for fish, broadcasts in got.items():
+            for _ in range(len(broadcasts) - wanted.get(fish, 0)):
+                self._intake.reject(
+                    self.keys.outbox(fish), "unannounced",
+                    f"a broadcast of tick {sent_tick} that its snapshot does not announce",
+                )  # fmt: skip
+        wanted_total = sum(wanted.values())
+        if len(chosen) < wanted_total:
+            self._missing += wanted_total - len(chosen)
             log.warning(
                 "channel: %d of %d broadcasts of tick %d never arrived",
-                wanted - len(got),
-                wanted,
+                wanted_total - len(chosen),
+                wanted_total,
                 sent_tick,
             )
-        return sorted(got, key=lambda b: b.sender_id)
+        return chosen
 
     def _deliver(self, bus: Bus, snapshot: Snapshot, broadcasts: list[Broadcast]) -> None:
         index_of = {int(i): n for n, i in enumerate(snapshot.ids.tolist())}
