@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import trio
@@ -102,3 +103,20 @@ def _first_message(error: BaseException) -> str:
     while isinstance(error, BaseExceptionGroup):
         error = error.exceptions[0]
     return str(error)
+
+
+def prepare_folder(folder: Path, flag: str) -> None:
+    """Make the output folder now, before hours of work go into it.
+
+    Raises:
+        ConfigError: it is a file, or cannot be made or written to, with which.
+    """
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{flag} {folder} is a file: give a folder to write into")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / ".fishswarm-write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as error:
+        raise ConfigError(f"{flag} {folder}: cannot write there ({error.strerror})") from None

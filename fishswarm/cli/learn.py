@@ -6,6 +6,7 @@ import argparse
 import sys
 from typing import Any
 
+from fishswarm.cli.common import prepare_folder
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.progress import ProgressLine, bar
 
@@ -36,10 +37,16 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
     values = dict(given)
     if "replica" in values:
         values["arena"] = Arena(replica=values.pop("replica"))
-    try:
-        settings = LearningSettings(**values)
-    except ValueError as error:
-        raise ConfigError(str(error)) from None
+    # Resuming, the checkpoint's settings rule (what is given is only compared with them):
+    # a value checked against a fresh run's defaults could be refused wrongly (a radius
+    # start of an unbounded run against bounded radii).
+    settings = None
+    if not args.resume:
+        try:
+            settings = LearningSettings(**values)
+        except ValueError as error:
+            raise ConfigError(str(error)) from None
+    prepare_folder(args.out, "--out")
     every = max(1, args.generations // 50)
     output = ProgressLine()
 

@@ -119,7 +119,7 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
     from fishswarm.study.experiment import find
     from fishswarm.study.progress import ProgressLine, bar
     from fishswarm.study.report import write_report
-    from fishswarm.study.sweep import SweepInterrupted, run_experiment
+    from fishswarm.study.sweep import SweepFailed, SweepInterrupted, run_experiment
 
     chosen = find(args.name)
     if args.seeds is not None and args.seeds < 1:
@@ -133,6 +133,9 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
         profile=args.profile,
     )
     out = args.out or Path("runs/experiments") / chosen.name
+    from fishswarm.cli.common import prepare_folder
+
+    prepare_folder(out, "--out")
     total = len(chosen.runs())
     groups = f" for {' and '.join(chosen.group_names)}" if chosen.groups else ""
     print(
@@ -160,23 +163,25 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
         outcomes = run_experiment(
             chosen, engine=engine_named(args.engine), jobs=args.jobs, on_run=show
         )
-    except SweepInterrupted as stop:
+    except (SweepInterrupted, SweepFailed) as stop:
         output.close()
+        failed = isinstance(stop, SweepFailed)
+        how = f"a run failed ({stop})" if failed else "interrupted"
         if not stop.outcomes:
-            print("fishswarm: interrupted before the first run finished; nothing written",
+            print(f"fishswarm: {how} before the first run finished; nothing written",
                   file=sys.stderr)  # fmt: skip
-            return 130
+            return 1 if failed else 130
         values = tuple(v for v in chosen.values if any(o.value == v for o in stop.outcomes))
         write_report(
             chosen.with_changes(values=values), stop.outcomes, out, engine=args.engine,
             wall_time=time.perf_counter() - started, runs_total=stop.total,
         )  # fmt: skip
         print(
-            f"fishswarm: interrupted after {len(stop.outcomes)} of {stop.total} runs; wrote "
+            f"fishswarm: {how} after {len(stop.outcomes)} of {stop.total} runs; wrote "
             f"what finished to {out} (marked incomplete in table.md and summary.json)",
             file=sys.stderr,
         )
-        return 130
+        return 1 if failed else 130
     wall_time = time.perf_counter() - started
     paths = write_report(chosen, outcomes, out, engine=args.engine, wall_time=wall_time)
     print((out / "table.md").read_text(encoding="utf-8"))

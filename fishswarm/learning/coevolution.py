@@ -116,8 +116,10 @@ class LearningSettings:
             raise ValueError("models and classifiers need populations of at least 2")
         if self.seed < 0:
             raise ValueError(f"seed must be non-negative, got {self.seed}")
-        if not self.soft_weight >= 0:
-            raise ValueError(f"soft_weight must be 0 or more, got {self.soft_weight}")
+        if not (math.isfinite(self.soft_weight) and self.soft_weight >= 0):
+            raise ValueError(
+                f"soft_weight must be a finite number, 0 or more, got {self.soft_weight}"
+            )
         if not 0 < self.virulence <= 1:
             raise ValueError(f"virulence must be in (0, 1], got {self.virulence}")
         if self.hall_of_fame < 0:
@@ -125,7 +127,9 @@ class LearningSettings:
         if self.trials < 1:
             raise ValueError(f"trials must be 1 or more, got {self.trials}")
         low, high = RADII_MODES[self.radii]
-        if self.radius_start is not None and not low <= self.radius_start <= high:
+        if self.radius_start is not None and not (
+            math.isfinite(self.radius_start) and low <= self.radius_start <= high
+        ):
             raise ValueError(
                 f"radius_start must lie in [{low:g}, {high:g}] for {self.radii} radii, "
                 f"got {self.radius_start:g}"

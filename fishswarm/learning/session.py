@@ -119,7 +119,7 @@ def target_report(evaluation: Evaluation, arena: Arena) -> dict[str, Any]:
 
 
 def learn(
-    settings: LearningSettings,
+    settings: LearningSettings | None,
     *,
     generations: int,
     out: Path,
@@ -132,7 +132,7 @@ def learn(
     """Run (or resume) co-evolution up to ``generations`` and write the outputs to ``out``.
 
     Args:
-        settings: the run's settings (when resuming, the checkpoint's settings rule).
+        settings: the run's settings (None only when resuming: the checkpoint's rule).
         generations: total number of generations, counting those already done.
         out: output folder.
         checkpoint_every: write a checkpoint every this many generations (and at the end).
@@ -161,6 +161,8 @@ def learn(
         except CheckpointError as error:
             raise LearningError(str(error)) from None
         _check_same(run.settings, given or {}, checkpoint)
+    elif settings is None:
+        raise LearningError("a new run needs its settings (None is for resuming only)")
     else:
         run = Coevolution(settings)
     if on_start is not None:

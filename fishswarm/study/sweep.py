@@ -58,6 +58,17 @@ def run_one(experiment: Experiment, key: RunKey, engine: Engine) -> RunOutcome:
 Progress = Callable[[int, int, RunOutcome], None]
 
 
+class SweepFailed(RuntimeError):
+    """A run of a sweep failed; the sweep stopped its other runs. ``outcomes`` holds the runs
+    finished before, in the order of :meth:`Experiment.runs`, ``total`` the runs the sweep
+    had, and the message says which run failed and why."""
+
+    def __init__(self, outcomes: list[RunOutcome], total: int, failure: str) -> None:
+        super().__init__(failure)
+        self.outcomes = outcomes
+        self.total = total
+
+
 class SweepInterrupted(KeyboardInterrupt):
     """Ctrl-C stopped a sweep; ``outcomes`` holds the runs finished before it, in the order
     of :meth:`Experiment.runs`, and ``total`` the runs the sweep had."""
@@ -96,6 +107,7 @@ def run_experiment(
 
     Raises:
         SweepInterrupted: Ctrl-C; the runs still going are stopped, those done come with it.
+        SweepFailed: a run raised; the runs not started are not, those done come with it.
     """
     pairs = experiment.runs()
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(pairs)))
@@ -115,6 +127,9 @@ def run_experiment(
     except KeyboardInterrupt:
         finished = [outcomes[pair] for pair in pairs if pair in outcomes]
         raise SweepInterrupted(finished, len(pairs)) from None
+    except Exception as error:
+        finished = [outcomes[pair] for pair in pairs if pair in outcomes]
+        raise SweepFailed(finished, len(pairs), f"{type(error).__name__}: {error}") from error
     return [outcomes[pair] for pair in pairs]
 
 
@@ -127,8 +142,9 @@ def _run_in_processes(
 ) -> None:
     """Run the pairs in ``jobs`` spawned processes, handing each outcome to ``done``.
 
-    The processes ignore Ctrl-C; on Ctrl-C here, the runs in progress finish (each is
-    bounded), are handed over too, and the interrupt goes on up.
+    The processes ignore Ctrl-C; on Ctrl-C here, or when a run fails, the runs not started
+    are cancelled, those in progress finish (each is bounded) and are handed over too, and
+    the interrupt or the run's error goes on up.
     """
     context = multiprocessing.get_context("spawn")
     pool = concurrent.futures.ProcessPoolExecutor(
@@ -140,7 +156,7 @@ def _run_in_processes(
         for future in concurrent.futures.as_completed(futures):
             handed.add(future)
             done(future.result())
-    except KeyboardInterrupt:
+    except BaseException:
         pool.shutdown(wait=True, cancel_futures=True)
         for future in futures:
             if future in handed or future.cancelled() or future.exception() is not None:

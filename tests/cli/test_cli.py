@@ -160,6 +160,9 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["robot", "--id", "-1"], "'-1' is negative: fish ids are 0 or more"),
         (["robot", "--id", "1", "--link-timeout", "inf"], "'inf' is not a finite number"),
         (["robots", "--stop", "2", "x"], "'x' is not a whole number"),
+        (["learn", "--soft-weight", "inf"], "soft_weight must be a finite number"),
+        (["learn", "--out", __file__], "is a file: give a folder to write into"),
+        (["experiment", "blindspot", "--out", __file__], "is a file: give a folder"),
     ],
 )
 def test_bad_arguments_exit_nonzero_with_a_reason(args: list[str], message: str) -> None:

@@ -232,3 +232,21 @@ def test_the_target_judges_spacing_at_whole_seconds_5_to_15_and_the_final_speed(
     slow = target_report(Evaluation(np.stack([ideal, ideal]), speed, tracks), arena)
     assert slow["spacing_error"] == 0.0 and slow["speed_difference"] == pytest.approx(0.6)
     assert not slow["met"]
+
+
+def test_an_unbounded_run_resumes_with_the_radius_start_it_was_learned_with(
+    tmp_path: Path,
+) -> None:
+    command = [
+        sys.executable, "-m", "fishswarm", "learn", "--models", "4", "--classifiers", "4",
+        "--inputs", "speed,neighbors", "--radii", "unbounded", "--radius-start", "-20",
+        "--out", str(tmp_path), "--quiet",
+    ]  # fmt: skip
+    for generations, extra in (("2", []), ("3", ["--resume"])):
+        done = subprocess.run(
+            [*command, "--generations", generations, *extra],
+            capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+    assert "resumed from generation 2" in done.stderr
+    assert json.loads((tmp_path / "summary.json").read_text())["generations"] == 3

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fishswarm.sim.scenario import ConfigError
+from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.catalog import available
 from fishswarm.study.experiment import (
     METRICS,
@@ -162,7 +162,6 @@ def test_orbit_experiments_summarise_radius_revolutions_speed_and_collisions() -
 def test_ctrl_c_in_a_sweep_returns_the_runs_that_finished(tmp_path: Path) -> None:
     import json
 
-    from fishswarm.sim.scenario import Scenario
     from fishswarm.study.report import write_report
     from fishswarm.study.sweep import SweepInterrupted, run_experiment, run_on_batch_engine
 
@@ -187,6 +186,36 @@ def test_ctrl_c_in_a_sweep_returns_the_runs_that_finished(tmp_path: Path) -> Non
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert (summary["complete"], summary["runs_done"], summary["runs_total"]) == (False, 2, 8)
     assert [row["runs"] for row in summary["rows"]] == [2]
+
+
+def failing_first_seed(scenario: Scenario) -> tuple[np.ndarray, ...]:
+    """A sweep's engine (in a spawned process) whose runs of seed 0 fail at once, and whose
+    others take two seconds before they run."""
+    import time
+
+    from fishswarm.study.sweep import run_on_batch_engine
+
+    if scenario.seed == 0:
+        raise RuntimeError(f"run with seed 0 ended degraded (blind width {scenario.blind_width:g})")
+    time.sleep(2.0)
+    return run_on_batch_engine(scenario)
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_failed_run_stops_the_sweep_and_returns_the_runs_that_finished(jobs: int) -> None:
+    from fishswarm.study.sweep import SweepFailed, run_experiment
+
+    experiment = find("blindspot").with_changes(seeds=2, duration=2.0)
+    # Runs go value by value, seeds 0 and 1: the first run fails.
+    with pytest.raises(SweepFailed, match="RuntimeError: run with seed 0 ended degraded") as stop:
+        run_experiment(experiment, engine=failing_first_seed, jobs=jobs)  # type: ignore[arg-type]
+    assert stop.value.total == len(experiment.runs()) == 8
+    # Nothing ran after the failure in this process. In two processes, the runs already
+    # handed to them finish (the executor keeps one more queued than it has processes, and
+    # the process whose run failed takes the next): at most three; the others of the eight
+    # are cancelled, not run to the end.
+    assert len(stop.value.outcomes) <= (0 if jobs == 1 else 3)
+    assert all(outcome.seed == 1 for outcome in stop.value.outcomes)
 
 
 def test_groups_compare_the_sweep_under_named_settings(tmp_path: Path) -> None:
@@ -276,3 +305,31 @@ def test_a_formation_experiment_measures_each_snapshot_against_the_scheduled_sha
     shape_error = series[:, experiment.metric_names.index("shape_error")]
     assert shape_error[0] > 0.05
     np.testing.assert_allclose(shape_error[1:], 0.0, atol=1e-9)
+
+
+def test_the_experiment_command_writes_what_finished_when_a_run_fails(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    from fishswarm.cli import main
+    from fishswarm.cli import study as study_command
+
+    def fails_at_the_second_run(scenario: Scenario) -> tuple[np.ndarray, ...]:
+        from fishswarm.study.sweep import run_on_batch_engine
+
+        if scenario.seed == 1:
+            raise RuntimeError("run with seed 1 ended degraded")
+        return run_on_batch_engine(scenario)
+
+    monkeypatch.setattr(study_command, "engine_named", lambda name: fails_at_the_second_run)
+    out = tmp_path / "out"
+    code = main(
+        ["experiment", "blindspot", "--seeds", "2", "--duration", "2", "--jobs", "1",
+         "--out", str(out), "--quiet"]
+    )  # fmt: skip
+    assert code == 1
+    said = capsys.readouterr().err
+    assert "a run failed (RuntimeError: run with seed 1 ended degraded) after 1 of 8 runs" in said
+    summary = json.loads((out / "summary.json").read_text())
+    assert (summary["complete"], summary["runs_done"], summary["runs_total"]) == (False, 1, 8)
