@@ -15,7 +15,7 @@ import socket
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any
 
-from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.bluebot.parameters import BODY_LENGTH, Tank
 from fishswarm.study.experiment import METRIC_LABELS
 from fishswarm.study.scene import (
     LANDMARK_RGB,
@@ -25,6 +25,7 @@ from fishswarm.study.scene import (
     Scene,
     Stage,
     tank_edges,
+    upright,
 )
 from fishswarm.study.view_settings import ViewError, ViewSettings
 
@@ -99,10 +100,13 @@ class LiveView:
         self.settings = settings
         self.scenes = 0
         self._metrics: set[str] = set()
+        self._height = Tank().size[2]
+        """The tank's height, m: what is drawn is drawn upright in it (:func:`upright`)."""
 
     def show_stage(self, stage: Stage) -> None:
         """Draw the tank's walls and the landmark (they stay for the whole view)."""
         rr, log = self._rr, self._recording.log
+        self._height = stage.tank[2]
         log("tank", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         log(
             "tank/walls",
@@ -112,7 +116,9 @@ class LiveView:
         if stage.landmark is not None:
             log(
                 "tank/landmark",
-                rr.Points3D([stage.landmark], colors=LANDMARK_RGB, radii=0.02),
+                rr.Points3D(
+                    [upright(stage.landmark, self._height)], colors=LANDMARK_RGB, radii=0.02
+                ),
                 static=True,
             )
 
@@ -123,27 +129,36 @@ class LiveView:
         rr, log = self._rr, self._recording.log
         self._recording.set_time(TIMELINE, duration=scene.time)
         colours = scene.colours()
+        position = upright(scene.position, self._height)
         log(
             "tank/fish",
-            rr.Points3D(scene.position, colors=colours, radii=0.25 * BODY_LENGTH),
+            rr.Points3D(position, colors=colours, radii=0.25 * BODY_LENGTH),
         )
+        # Headings lie in the horizontal plane: turning depth into height leaves them as
+        # they are.
         log(
             "tank/heading",
             rr.Arrows3D(
-                origins=scene.position, vectors=scene.heading * BODY_LENGTH, colors=colours,
+                origins=position, vectors=scene.heading * BODY_LENGTH, colors=colours,
                 radii=0.06 * BODY_LENGTH,
             ),
         )  # fmt: skip
         if scene.slots is not None:
             log(
                 "tank/target",
-                rr.Points3D(scene.slots, colors=TARGET_RGB, radii=0.1 * BODY_LENGTH),
-            )
+                rr.Points3D(
+                    upright(scene.slots, self._height), colors=TARGET_RGB,
+                    radii=0.1 * BODY_LENGTH,
+                ),
+            )  # fmt: skip
         if scene.edges is not None:
             log(
                 "tank/shapes",
-                rr.LineStrips3D(list(scene.edges), colors=ROLE_RGB["joined"], radii=0.002),
-            )
+                rr.LineStrips3D(
+                    list(upright(scene.edges, self._height)), colors=ROLE_RGB["joined"],
+                    radii=0.002,
+                ),
+            )  # fmt: skip
         for name, value in metrics.items():
             if value is None or not math.isfinite(value):
                 continue

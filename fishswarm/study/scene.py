@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.bluebot.parameters import BODY_LENGTH, Tank
 from fishswarm.protocols.messages import Snapshot
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.metrics import FormationTarget
@@ -44,7 +44,8 @@ SCENE_SCHEMA = "foxglove.SceneUpdate"
 """The schema name under which Foxglove and Lichtblick recognise a scene."""
 
 FRAME = "tank"
-"""The frame every scene entity is drawn in: the tank's, x and y along its walls, z up."""
+"""The frame every scene entity is drawn in: x and y along the tank's walls as in the tank
+frame, z up from the floor (the tank frame's z is depth, down: see :func:`upright`)."""
 
 
 @dataclass(frozen=True)
@@ -120,6 +121,15 @@ def scene_of(snapshot: Snapshot, formation: FormationTarget | None = None) -> Sc
     return Scene(snapshot.time, snapshot.ids, snapshot.position, heading, roles, slots, edges)
 
 
+def upright(points: Any, height: float) -> FloatArray:
+    """(..., 3) points of the tank frame (z: depth below the surface, down) as drawn (z:
+    height above the floor, up): x and y the same, z = ``height`` − depth, so that fish near
+    the surface are drawn at the top, as in the side views of ``plot`` and ``animate``."""
+    drawn = np.array(points, dtype=np.float64)
+    drawn[..., 2] = height - drawn[..., 2]
+    return drawn
+
+
 def tank_edges(tank: tuple[float, float, float]) -> FloatArray:
     """(12, 2, 3) the tank's edges, each from one corner to another, m."""
     x, y, z = tank
@@ -173,7 +183,7 @@ def _entity(name: str, time: float, **primitives: list[dict[str, Any]]) -> dict[
     }
 
 
-def _fish_arrows(scene: Scene) -> str:
+def _fish_arrows(scene: Scene, height: float) -> str:
     """The JSON of one arrow per fish, written row by row from a template (a dict and
     ``json.dumps`` per fish took 20 ms a snapshot at 1 000 fish; this takes a tenth)."""
     dimensions = json.dumps(
@@ -189,7 +199,9 @@ def _fish_arrows(scene: Scene) -> str:
         role: json.dumps(_colour(rgb), separators=(",", ":")) for role, rgb in ROLE_RGB.items()
     }
     half_yaw = np.arctan2(scene.heading[:, 1], scene.heading[:, 0]) / 2
-    rows = np.column_stack([scene.position, np.sin(half_yaw), np.cos(half_yaw)]).round(DIGITS)
+    rows = np.column_stack(
+        [upright(scene.position, height), np.sin(half_yaw), np.cos(half_yaw)]
+    ).round(DIGITS)
     return ",".join(
         f'{{"pose":{{"position":{{"x":{x!r},"y":{y!r},"z":{z!r}}},"orientation":'
         f'{{"x":0.0,"y":0.0,"z":{qz!r},"w":{qw!r}}}}},{dimensions},"color":{colours[role]}}}'
@@ -203,13 +215,16 @@ def scene_message(scene: Scene, stage: Stage | None = None) -> bytes:
     slots as translucent spheres or the sides of completed local shapes as lines, and with
     ``stage`` the tank's edges and the landmark.
 
-    Each entity keeps its id from message to message, so every message replaces the last."""
+    Each entity keeps its id from message to message, so every message replaces the last.
+    Everything is drawn upright (:func:`upright`) in the stage's tank (without a stage, the
+    study's)."""
+    height = (stage.tank if stage is not None else Tank().size)[2]
     entities: list[dict[str, Any]] = []
     if scene.slots is not None:
         size = {"x": 0.5 * BODY_LENGTH, "y": 0.5 * BODY_LENGTH, "z": 0.5 * BODY_LENGTH}
         spheres = [
             {"pose": _pose(xyz), "size": size, "color": _colour(TARGET_RGB, 0.5)}
-            for xyz in scene.slots
+            for xyz in upright(scene.slots, height)
         ]
         entities.append(_entity("target", scene.time, spheres=spheres))
     if scene.edges is not None:
@@ -218,7 +233,7 @@ def scene_message(scene: Scene, stage: Stage | None = None) -> bytes:
             "pose": _pose((0.0, 0.0, 0.0)),
             "thickness": 0.004,
             "scale_invariant": False,
-            "points": [_point(xyz) for edge in scene.edges for xyz in edge],
+            "points": [_point(xyz) for edge in upright(scene.edges, height) for xyz in edge],
             "color": _colour(ROLE_RGB["joined"]),
             "colors": [],
             "indices": [],
@@ -239,11 +254,15 @@ def scene_message(scene: Scene, stage: Stage | None = None) -> bytes:
         entities.append(_entity("tank", scene.time, lines=[line]))
         if stage.landmark is not None:
             size = {"x": 0.04, "y": 0.04, "z": 0.04}
-            landmark = {"pose": _pose(stage.landmark), "size": size, "color": _colour(LANDMARK_RGB)}
+            landmark = {
+                "pose": _pose(upright(stage.landmark, height)),
+                "size": size,
+                "color": _colour(LANDMARK_RGB),
+            }
             entities.append(_entity("landmark", scene.time, spheres=[landmark]))
     # The fish entity with an empty arrow list, its arrows spliced in as text.
     fish = json.dumps(_entity("fish", scene.time, arrows=[]), separators=(",", ":"))
-    texts = [fish.replace('"arrows":[]', f'"arrows":[{_fish_arrows(scene)}]')]
+    texts = [fish.replace('"arrows":[]', f'"arrows":[{_fish_arrows(scene, height)}]')]
     texts += [json.dumps(entity, separators=(",", ":")) for entity in entities]
     return f'{{"deletions":[],"entities":[{",".join(texts)}]}}'.encode()
 

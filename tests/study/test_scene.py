@@ -14,7 +14,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from mcap.reader import make_reader
 
-from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.bluebot.parameters import BODY_LENGTH, Tank
 from fishswarm.formations.maps import target_map
 from fishswarm.protocols.messages import Snapshot
 from fishswarm.study.metrics import FormationTarget
@@ -27,6 +27,7 @@ from fishswarm.study.scene import (
     scene_message,
     scene_of,
     tank_edges,
+    upright,
     yaw_quaternion,
 )
 
@@ -133,8 +134,9 @@ def test_a_scene_message_draws_each_fish_the_tank_and_the_landmark() -> None:
         assert entity["frame_id"] == "tank"
         assert entity["timestamp"] == {"sec": 2, "nsec": 500_000_000}
     arrows = entities["fish"]["arrows"]
+    # Drawn upright in the 1.17-m tank: 0.2 m deep is 0.97 m above the floor.
     assert [a["pose"]["position"] for a in arrows] == [
-        {"x": 0.5, "y": 0.5, "z": 0.2}, {"x": 1.0, "y": 0.25, "z": 0.4},
+        {"x": 0.5, "y": 0.5, "z": 0.97}, {"x": 1.0, "y": 0.25, "z": 0.77},
     ]  # fmt: skip
     # Five decimals kept: a quarter turn's quaternion to 1e-5.
     quarter = yaw_quaternion(math.pi / 2)
@@ -146,7 +148,7 @@ def test_a_scene_message_draws_each_fish_the_tank_and_the_landmark() -> None:
     (walls,) = entities["tank"]["lines"]
     assert walls["type"] == 2 and len(walls["points"]) == 24
     (landmark,) = entities["landmark"]["spheres"]
-    assert landmark["pose"]["position"] == {"x": 0.89, "y": 0.89, "z": 0.3}
+    assert landmark["pose"]["position"] == {"x": 0.89, "y": 0.89, "z": 0.87}
     # Without a stage, the fish alone; with a formation target, its slots too.
     slots = target_map("pyramid", 2, spacing=0.3) + 0.5
     target = FormationTarget(slots, 0.3, 0.1)
@@ -182,4 +184,20 @@ def test_every_arrow_points_along_its_fish_whatever_the_yaw() -> None:
     for arrow, angle, xyz in zip(arrows, yaw, position, strict=True):
         turned = _rotate(arrow["pose"]["orientation"], np.array([1.0, 0.0, 0.0]))
         np.testing.assert_allclose(turned, [math.cos(angle), math.sin(angle), 0.0], atol=1e-4)
-        np.testing.assert_allclose(list(arrow["pose"]["position"].values()), xyz, atol=1e-5)
+        drawn = [xyz[0], xyz[1], Tank().size[2] - xyz[2]]  # no stage: the study's tank
+        np.testing.assert_allclose(list(arrow["pose"]["position"].values()), drawn, atol=1e-5)
+
+
+def test_fish_near_the_surface_are_drawn_at_the_top_of_the_tank() -> None:
+    # Depth 0.05 m and 1.10 m in a 1.17-m tank: 1.12 m and 0.07 m above the floor; the
+    # walls span the floor (0) to the surface (1.17); x and y stay.
+    position = np.array([[0.3, 0.4, 0.05], [0.3, 0.4, 1.10]])
+    data = json.loads(
+        scene_message(scene_of(_snapshot(position, [0.0, 0.0])), Stage((1.78, 1.78, 1.17)))
+    )
+    entities = {e["id"]: e for e in data["entities"]}
+    heights = [a["pose"]["position"]["z"] for a in entities["fish"]["arrows"]]
+    assert heights == pytest.approx([1.12, 0.07])
+    walls = [point["z"] for point in entities["tank"]["lines"][0]["points"]]
+    assert (min(walls), max(walls)) == (0.0, 1.17)
+    np.testing.assert_allclose(upright(position, 1.17), [[0.3, 0.4, 1.12], [0.3, 0.4, 0.07]])
