@@ -5,8 +5,9 @@ Everything a run writes goes to one folder:
 - ``checkpoint.npz``: the whole state, every few generations; ``--resume`` continues from it
   exactly where it stopped (same results as a run that never stopped).
 - ``history.csv``: best and mean fitness of both populations per generation.
-- ``best_replica.npz``: the fittest model of the last generation (``weights``) with the
-  run's settings (``settings`` as JSON);
+- ``best_replica.npz``: the kept replica (``weights``: with a hall of fame, the winner of a
+  tournament of the last generations' champions; without, the fittest model of the last
+  generation), with the run's settings (``settings`` as JSON);
   :func:`fishswarm.learning.replica_file.load_replica` reads it back.
 - ``radii.md``: the learned radii, mean and s.d. over the final classifier population (the
   study's Table I).
