@@ -106,8 +106,11 @@ def test_bad_settings_are_explained() -> None:
         LearningSettings(behavior="schooling")
     with pytest.raises(ValueError, match=r"virulence must be in \(0, 1\], got 0"):
         LearningSettings(virulence=0.0)
-    with pytest.raises(ValueError, match="soft_weight must be 0 or more, got nan"):
-        LearningSettings(soft_weight=float("nan"))
+    for weight in ("nan", "inf", "-1"):
+        with pytest.raises(
+            ValueError, match=f"soft_weight must be a finite number, 0 or more, got {float(weight)}"
+        ):
+            LearningSettings(soft_weight=float(weight))
 
 
 def test_hall_of_fame_keeps_champions_and_resumes_exactly(tmp_path: Path) -> None:
