@@ -85,7 +85,10 @@ class Channel:
             task_status.started()
             while True:
                 snapshot = await self._next_snapshot()
-                if snapshot.tick == 0 or int(snapshot.broadcasts.sum()) == 0:
+                if snapshot.tick == 0:
+                    continue
+                if int(snapshot.broadcasts.sum()) == 0:
+                    self._settle(snapshot.tick - 1, {})  # nothing announced: nothing to wait for
                     continue
                 broadcasts = await self._gather(snapshot)
                 self._deliver(bus, snapshot, broadcasts)
@@ -150,6 +153,22 @@ class Channel:
                     and len(kept[broadcast.sender_id]) <= wanted.get(broadcast.sender_id, 0)
                 ):
                     remaining -= 1
+        chosen = self._settle(sent_tick, wanted)
+        wanted_total = sum(wanted.values())
+        if len(chosen) < wanted_total:
+            self._missing += wanted_total - len(chosen)
+            log.warning(
+                "channel: %d of %d broadcasts of tick %d never arrived",
+                wanted_total - len(chosen),
+                wanted_total,
+                sent_tick,
+            )
+        return chosen
+
+    def _settle(self, sent_tick: int, wanted: dict[int, int]) -> list[Broadcast]:
+        """Take the broadcasts of ``sent_tick`` out of the outbox (and any older ones): each
+        sender's first ``wanted`` of them, by sender; the rest, which no snapshot announced,
+        are counted as rejected."""
         for old in [t for t in self._outbox if t < sent_tick]:
             del self._outbox[old]
         got = self._outbox.pop(sent_tick, {})
@@ -160,15 +179,6 @@ class Channel:
                     self.keys.outbox(fish), "unannounced",
                     f"a broadcast of tick {sent_tick} that its snapshot does not announce",
                 )  # fmt: skip
-        wanted_total = sum(wanted.values())
-        if len(chosen) < wanted_total:
-            self._missing += wanted_total - len(chosen)
-            log.warning(
-                "channel: %d of %d broadcasts of tick %d never arrived",
-                wanted_total - len(chosen),
-                wanted_total,
-                sent_tick,
-            )
         return chosen
 
     def _deliver(self, bus: Bus, snapshot: Snapshot, broadcasts: list[Broadcast]) -> None:

@@ -67,4 +67,4 @@ async def ask_scenario(
         raise ConfigError(f"the world's scenario is not JSON: {error}") from None
     if not isinstance(settings, dict):
         raise ConfigError(f"the world's scenario is not a table: {answers[0][:80]!r}")
-    return Scenario.from_mapping(settings, source="the world's scenario")
+    return Scenario.as_recorded(settings, source="the world's scenario")

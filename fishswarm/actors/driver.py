@@ -299,6 +299,8 @@ class Driver:
                 try:
                     depth, neighbors = await self._run_blocking(self._look)
                 except SENSOR_ERRORS as error:
+                    if isinstance(error, NotImplementedError | RecursionError):
+                        raise  # RuntimeErrors that are defects, not a sensor's failure
                     self._missed(error)
                 else:
                     if self._failure is not None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -72,6 +73,11 @@ class RobotSettings:
         if self.hardware not in HARDWARE:
             raise ValueError(
                 f"hardware must be one of {', '.join(HARDWARE)}, got {self.hardware!r}"
+            )
+        if not (math.isfinite(self.perception_timeout) and self.perception_timeout > 0):
+            raise ValueError(
+                "perception_timeout must be a positive number of seconds, got "
+                f"{self.perception_timeout:g}"
             )
 
 
@@ -230,7 +236,9 @@ def unconfirmed(fleet: list[FleetEntry], order: RobotOrder) -> dict[int, str]:
     obeyed by a robot that says it is ``stopped``, a resume by one that no longer does.
 
     An order is one message: a robot whose link was down when it went out never hears it,
-    and a robot that restarts comes back unstopped, so the operator must know.
+    and a robot that restarts comes back unstopped, so the operator must know. An order to
+    every robot is checked against the robots heard from: one that is silent is not known
+    to be missing (with none heard from, the command says so).
     """
     heard = {entry.robot_id: entry for entry in fleet}
     wanted = order.robot_ids.tolist() or sorted(heard)

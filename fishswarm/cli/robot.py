@@ -94,6 +94,13 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
         print(fleet_table(fleet))
     if not sent:
         return 0
+    if not fleet:
+        print(
+            f"no robot was heard from, so none is known to have obeyed the {sent[0].action}: "
+            "are they up and connected to this router? send it again once they are",
+            file=sys.stderr,
+        )
+        return 1
     missing = unconfirmed(fleet, sent[0])
     for robot_id, why in missing.items():
         print(

@@ -209,7 +209,7 @@ def _orbit_of(settings: dict[str, Any]) -> OrbitTarget | None:
     from fishswarm.study.metrics import orbit_target_of
 
     try:
-        return orbit_target_of(Scenario.from_mapping(settings, source="the recording"))
+        return orbit_target_of(Scenario.as_recorded(settings))
     except ConfigError:
         return None
 
@@ -221,7 +221,7 @@ def _formations_of(recording: Recording) -> list[FormationTarget] | None:
     from fishswarm.study.metrics import FormationTargets, scheduled_shape
 
     try:
-        ran = Scenario.from_mapping(recording.scenario, source="the recording")
+        ran = Scenario.as_recorded(recording.scenario)
     except ConfigError:
         return None
     targets = FormationTargets.of(ran)

@@ -63,7 +63,7 @@ def _replay(path: Path, settings: ViewSettings) -> None:
     if not recording.snapshots:
         raise UserError(f"{path} holds no snapshots: nothing to show")
     try:
-        ran: Scenario | None = Scenario.from_mapping(recording.scenario, source=str(path))
+        ran: Scenario | None = Scenario.as_recorded(recording.scenario, source=str(path))
     except ConfigError:  # an observer's recording does not say what ran
         ran = None
     targets = None if ran is None else FormationTargets.of(ran)

@@ -479,6 +479,17 @@ class Scenario:
         return data
 
     @classmethod
+    def as_recorded(cls, data: Mapping[str, Any], *, source: str = "the recording") -> Scenario:
+        """The scenario a recording (or summary, or running world) says ran, read as it ran:
+        a formation in jitter mode recorded with flags on, from before such runs were
+        refused, ran without them (flags are not delivered in that mode)."""
+        settings = dict(data)
+        forming = settings.get("behavior") == "formation"
+        if forming and settings.get("time_mode") == "jitter" and settings.get("flags", True):
+            settings["flags"] = False
+        return cls.from_mapping(settings, source=source)
+
+    @classmethod
     def from_mapping(cls, data: Mapping[str, Any], *, source: str = "scenario") -> Scenario:
         """Build from a mapping (a parsed TOML table, or :meth:`to_dict`'s settings read back
         from a recording or summary, where None means "not set"), rejecting unknown keys."""

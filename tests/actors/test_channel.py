@@ -73,3 +73,25 @@ def test_only_announced_broadcasts_are_delivered_however_they_arrive() -> None:
     statistics = channel.statistics()
     assert statistics.missing_broadcasts == 0 and statistics.rejected == 1  # fish 1's
     assert statistics.delivered == 4
+
+
+def test_broadcasts_a_snapshot_announces_none_of_are_counted_and_let_go() -> None:
+    # Every broadcaster of a tick was late (realtime mode): the snapshot announces nothing,
+    # and what came is counted, not kept for ever.
+    async def main() -> Channel:
+        bus = MemoryBus()
+        channel = Channel(SCENARIO)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(channel.run, bus)
+            bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0]))
+            for tick in range(1, 50):
+                await trio.sleep(0.01)
+                bus.put(KEYS.outbox(1), broadcast(1, tick - 1, tick))
+                bus.put(KEYS.snapshot, snapshot(tick, [0, 0, 0]))
+            await trio.sleep(0.01)
+            nursery.cancel_scope.cancel()
+        return channel
+
+    channel = run_mock(main)
+    assert channel.statistics().rejected == 49
+    assert channel.statistics().delivered == 0

@@ -164,6 +164,9 @@ def test_mock_robots_join_obey_a_stop_and_survive_losing_the_router(
                 assert "robot 10 did not" not in said and robots[0].state == "stopped"
                 code, said = await robots_command("--resume", "10")
                 assert code == 0 and "did not confirm" not in said, said
+                # Another swarm's name on this router: no robot answers an order to all.
+                code, said = await robots_command("--swarm", "nobody", "--stop")
+                assert code == 1 and "no robot was heard from" in said, said
                 await until(lambda: all(r.state == "swimming" for r in robots), timeout=5)
 
             # The router (and the world) die: no more frames, no more commands, fins off.

@@ -161,6 +161,10 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["robot", "--id", "1", "--link-timeout", "inf"], "'inf' is not a finite number"),
         (["robots", "--stop", "2", "x"], "'x' is not a whole number"),
         (["learn", "--soft-weight", "inf"], "soft_weight must be a finite number"),
+        (
+            ["robot", "--id", "1", "--perception-timeout", "0"],
+            "perception_timeout must be a positive",
+        ),
         (["learn", "--out", __file__], "is a file: give a folder to write into"),
         (["experiment", "blindspot", "--out", __file__], "is a file: give a folder"),
     ],

@@ -105,6 +105,12 @@ def test_settings_are_checked_together_and_name_what_the_user_set() -> None:
         Scenario(behavior="formation", time_mode="jitter")
     assert not Scenario(behavior="formation", time_mode="jitter", flags=False).flags
     assert Scenario(behavior="dispersion", time_mode="jitter").flags  # flags only matter there
+    # A recording of such a run, made before they were refused, reads as it ran: no flags.
+    recorded = Scenario(behavior="formation").to_dict() | {"time_mode": "jitter"}
+    with pytest.raises(ConfigError, match="not delivered in jitter mode"):
+        Scenario.from_mapping(recorded)
+    ran = Scenario.as_recorded(recorded)
+    assert (ran.behavior, ran.time_mode, ran.flags) == ("formation", "jitter", False)
 
 
 @pytest.mark.parametrize(
