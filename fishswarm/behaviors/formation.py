@@ -421,7 +421,10 @@ def share_effort(
         return _Swaps(swap_to, swap_from, memory.swap_since, np.where(busy, swap_from, STAY))
     holds = memory.joined & (place >= 0) & ~busy
     asked = in_map & heard.joined & (told_swap == place[:, None]) & holds[:, None]
-    answered = in_map & ~heard.joined & (slot == place[:, None]) & (told_swap >= 0) & holds[:, None]
+    # The slot a seeker offers must be on this fish's map too: a flag from a fish with a
+    # larger map (or a forged one) may name one past its end.
+    offered = (told_swap >= 0) & (told_swap < slots)
+    answered = in_map & ~heard.joined & (slot == place[:, None]) & offered & holds[:, None]
     agree, go = asked.any(axis=1), answered.any(axis=1) & ~asked.any(axis=1)
     new_slot = np.where(
         agree, slot[rows, np.argmax(asked, axis=1)], told_swap[rows, np.argmax(answered, axis=1)]

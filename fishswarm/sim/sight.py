@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from fishswarm.behaviors.core import pad_rows
 from fishswarm.bluebot.dynamics import rotate_to_tank
 from fishswarm.bluebot.fisheye import Fisheye
-from fishswarm.bluebot.leds import LedVision, perceive_leds
+from fishswarm.bluebot.leds import FrameUnusable, LedVision, perceive_leds
 from fishswarm.bluebot.parameters import BlueBot
 from fishswarm.bluebot.vision import Perceived
 from fishswarm.sim.camera import Optics, render_views
@@ -81,14 +81,18 @@ def perceive_through_cameras(
             robot=cameras.robot,
             rng=rngs[viewer],
         )
-        found.append(
-            perceive_leds(
+        try:
+            seen = perceive_leds(
                 images,
                 depth=float(position[viewer, 2]),
                 fisheye=cameras.fisheye,
                 vision=cameras.leds,
             )
-        )
+        except FrameUnusable:
+            # More lit spots than LEDs make (a school packed in front of the cameras): a
+            # robot would skip the period; the simulated fish sees nothing this tick.
+            seen = np.zeros((0, 3))
+        found.append(seen)
     counts = np.array([rows.shape[0] for rows in found], dtype=np.int64)
     neighbors, mask = pad_rows(counts, np.concatenate(found or [np.zeros((0, 3))]).reshape(-1, 3))
     index = _match(position, yaw, neighbors, mask)

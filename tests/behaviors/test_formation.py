@@ -397,6 +397,13 @@ def test_effort_sharing_by_a_handshake_of_flags_drawn_on_paper() -> None:
     still = FormationParams("column", count=3, spacing=0.3)
     _, unmoved = steer_formation(_holding(0), behind, answer, params=still)
     np.testing.assert_array_equal(unmoved.target, [[0.0, 0.0, 0.0]])
+    # A seeker offering a slot past the end of T's map (a fish with a larger map, or a
+    # forged flag) is not answered: T holds its slot.
+    beyond = dataclasses.replace(agreed, swap=40)
+    odd = inbox_of([[(FLAG, beyond.values(), np.array([-0.3, 0.0, 0.0]))]])
+    memory_odd, steering_odd = steer_formation(_holding(0), behind, odd, params=params)
+    assert memory_odd.swap_to.tolist() == [-1]
+    np.testing.assert_array_equal(steering_odd.target, [[0.0, 0.0, 0.0]])
 
 
 def test_a_swap_goes_on_until_the_fish_arrives_or_gives_up_and_then_it_rests() -> None:

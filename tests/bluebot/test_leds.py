@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fishswarm.bluebot.leds import LedVision, pair_leds
+from fishswarm.bluebot.fisheye import Fisheye
+from fishswarm.bluebot.leds import FrameUnusable, LedVision, pair_leds, perceive_leds
 from fishswarm.bluebot.parameters import LED_SPACING
 
 VISION = LedVision()
@@ -123,3 +124,17 @@ def test_rays_off_a_vertical_line_are_not_a_pair() -> None:
 def test_settings_out_of_range_are_refused(name: str) -> None:
     with pytest.raises(ValueError, match=name):
         LedVision(**{name: -1})
+
+
+def test_a_frame_of_glare_or_noise_is_refused_quickly_not_paired() -> None:
+    # Sensor noise in a dark frame: over a thousand lit spots, which pairing would need
+    # gigabytes for; refused before pairing, so that the driver skips the period.
+    rng = np.random.default_rng(3)
+    noisy = np.clip(rng.normal(25.0, 15.0, (192, 256, 3)), 0, 255).astype(np.uint8)
+    dark = np.zeros_like(noisy)
+    with pytest.raises(FrameUnusable, match=r"the left camera's image has \d+ lit spots"):
+        perceive_leds(
+            {"left": noisy, "right": dark}, depth=0.5, fisheye=Fisheye(), vision=LedVision()
+        )
+    with pytest.raises(ValueError, match="max_blobs must be at least 2"):
+        LedVision(max_blobs=1)
