@@ -26,7 +26,8 @@ def _output_device(pin: int, pin_factory: Any) -> Any:
         from gpiozero import DigitalOutputDevice
     except ImportError as error:
         raise ImportError(
-            "the fins and LEDs need gpiozero: pip install 'fishswarm[robot]'"
+            "the fins and LEDs need gpiozero: on Raspberry Pi OS apt install python3-gpiozero "
+            "(deploy/ does), elsewhere pip install 'fishswarm[robot]'"
         ) from error
     return DigitalOutputDevice(pin, initial_value=False, pin_factory=pin_factory)
 

@@ -320,7 +320,8 @@ def open_depth_sensor(
         from smbus2 import SMBus
     except ImportError as error:
         raise ImportError(
-            "the depth sensor needs smbus2: pip install 'fishswarm[robot]'"
+            "the depth sensor needs smbus2: on Raspberry Pi OS apt install python3-smbus2 "
+            "(deploy/ does), elsewhere pip install 'fishswarm[robot]'"
         ) from error
     bus = SMBus(wiring.depth_bus)
     try:
