@@ -175,6 +175,10 @@ CAMERA_FRAME_RATE = 60.0
 CAMERA_COLOUR_GAINS = (1.0, 1.0)
 """Red and blue gains with automatic white balance off (SPEC §6): the LED pipeline's blue
 threshold and its brightness-for-range check assume colours that do not drift."""
+CAMERA_CAPTURE_TIMEOUT = 1.0
+"""Longest wait for one frame, s (60 frames come in a second): a camera that stalls raises
+``TimeoutError`` (picamera2's ``wait`` given in seconds) and the driver skips the period,
+rather than its sensing waiting for ever."""
 CAMERA_SWITCH_FRAMES = 2
 """Frames dropped after the multiplexer switches cameras: the frames already in flight were
 exposed, at least in part, through the other camera (SPEC §6: expect dropped frames after a

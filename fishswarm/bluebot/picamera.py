@@ -8,8 +8,9 @@ Frames come from picamera2 (Raspberry Pi OS's ``python3-picamera2``, reached thr
 venv's system site packages) streaming video at the robot's 256 × 192 and 60 fps, automatic
 white balance off with gains (1, 1), as SPEC §6 has it: its ``RGB888`` format lays pixels out
 as blue, green, red, so each frame is flipped to the RGB the LED pipeline expects. After the
-multiplexer switches cameras the frames already in flight are dropped. Both libraries are
-imported only when the cameras are opened.
+multiplexer switches cameras the frames already in flight are dropped, and a frame that
+does not come within a second raises ``TimeoutError`` (the driver skips the period). Both
+libraries are imported only when the cameras are opened.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.bluebot.parameters import (
+    CAMERA_CAPTURE_TIMEOUT,
     CAMERA_COLOUR_GAINS,
     CAMERA_FRAME_RATE,
     CAMERA_RESOLUTION,
@@ -84,8 +86,8 @@ class PiCameras:
             self._select(level)
             self._level = level
             for _ in range(CAMERA_SWITCH_FRAMES):
-                self._camera.capture_array("main")
-        frame = np.asarray(self._camera.capture_array("main"))
+                self._camera.capture_array("main", wait=CAMERA_CAPTURE_TIMEOUT)
+        frame = np.asarray(self._camera.capture_array("main", wait=CAMERA_CAPTURE_TIMEOUT))
         width, height = self._resolution
         if frame.shape[:2] != (height, width) or frame.shape[2] < 3:
             raise RuntimeError(

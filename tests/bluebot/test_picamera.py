@@ -38,6 +38,7 @@ class MuxedCamera:
         self.late = 0
         self.in_flight = in_flight
         self.frames = 0
+        self.waits: set[float | None] = set()
         self.calls: list[Any] = []
 
     def select(self, level: bool) -> None:
@@ -57,7 +58,8 @@ class MuxedCamera:
     def start(self) -> None:
         self.calls.append("start")
 
-    def capture_array(self, stream: str) -> np.ndarray:
+    def capture_array(self, stream: str, wait: float | None = None) -> np.ndarray:
+        self.waits.add(wait)
         self.frames += 1
         if self.late:
             self.late -= 1
@@ -83,8 +85,10 @@ def test_each_side_selects_its_camera_and_frames_come_back_rgb() -> None:
     ]
     right, left = cameras.capture("right"), cameras.capture("left")
     assert device.calls[2:] == [("select", True), ("select", False)]
-    # Each switch dropped the frames in flight, which still showed the other camera.
+    # Each switch dropped the frames in flight, which still showed the other camera; every
+    # frame was waited for at most a second.
     assert device.frames == 2 * (CAMERA_SWITCH_FRAMES + 1)
+    assert device.waits == {1.0}
     np.testing.assert_array_equal(right, IMAGES["right"])
     np.testing.assert_array_equal(left, IMAGES["left"])
     # The pipeline finds the neighbour in what the port returns.
@@ -161,3 +165,22 @@ def test_a_camera_switch_line_that_cannot_be_claimed_is_a_clear_error(
     with pytest.raises(RuntimeError, match="cannot claim GPIO 40 for the camera switch: GPIO busy"):
         PiCameras(camera=MuxedCamera())
     assert lgpio.closed == [7]  # the chip is not left open
+
+
+class StalledCamera(MuxedCamera):
+    """A camera that stops delivering frames: picamera2 raises after ``wait`` seconds."""
+
+    def capture_array(self, stream: str, wait: float | None = None) -> np.ndarray:
+        if wait is None:
+            raise AssertionError("a capture without a timeout would wait for ever")
+        raise TimeoutError(f"no frame within {wait} s")
+
+
+def test_a_stalled_camera_is_a_sensor_failure_the_driver_skips() -> None:
+    from fishswarm.actors.driver import SENSOR_ERRORS
+
+    device = StalledCamera()
+    cameras = PiCameras(camera=device, select=device.select)
+    with pytest.raises(TimeoutError) as stalled:
+        cameras.capture("left")
+    assert isinstance(stalled.value, SENSOR_ERRORS)
