@@ -229,7 +229,8 @@ class Observer:
             metrics = await trio.to_thread.run_sync(swarm_metrics, *measure)
         else:
             metrics = swarm_metrics(*measure)
-        target = None if self.formations is None else self.formations.at(snapshot.formation)
+        formations = self.formations
+        target = None if formations is None else formations.told(snapshot.formation, snapshot.time)
         if target is not None:
             try:
                 metrics.update(target.metrics(snapshot.position))

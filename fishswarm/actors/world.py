@@ -449,7 +449,7 @@ class World:
                 time=event.time,
                 run=self.run_id,
                 heading=self.sim.state.yaw,  # the simulated fish's compass
-                formation=self._formation or self.params.formation_at(event.time),
+                formation=self._told(event.time),
                 rows=rows,
             ):
                 self._put(bus, key, encode(message))
@@ -478,8 +478,13 @@ class World:
             seen,
             broadcasts,
             self.sim.effort,
-            (self._formation or self.params.formation_at(time)) if forming else None,
+            self._told(time) if forming else None,
         )
+
+    def _told(self, time: float) -> str | None:
+        """The formation the fish are told to take at ``time``: an operator's switch, else
+        the scenario's own (None: as configured)."""
+        return self._formation or self.params.formation_at(time)
 
     def _defers(self, event: Event) -> bool:
         """Whether this tick's snapshot can wait until the perceptions are out, so that it

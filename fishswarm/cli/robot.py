@@ -76,35 +76,34 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
     if args.resume is not None:
         order = ("resume", args.resume)
 
-    sent: list[RobotOrder] = []
-
-    async def main() -> list[FleetEntry]:
+    async def main() -> tuple[RobotOrder | None, list[FleetEntry]]:
         async with open_session(client_settings(args, "admin")) as session:
             bus = ZenohBus(session)
+            sent = None
             if order is not None:
-                sent.append(order_fleet(bus, keys, order[0], order[1]))
-                whom = ", ".join(map(str, sent[0].robot_ids.tolist())) or "every robot"
+                sent = order_fleet(bus, keys, order[0], order[1])
+                whom = ", ".join(map(str, sent.robot_ids.tolist())) or "every robot"
                 print(f"sent {order[0]} to {whom}", file=sys.stderr)
-            return await survey_fleet(bus, keys, listen=args.listen)
+            return sent, await survey_fleet(bus, keys, listen=args.listen)
 
-    fleet: list[FleetEntry] = run_trio(main)
+    sent, fleet = run_trio(main)
     if args.json:
         print(json.dumps([_as_dict(entry) for entry in fleet], indent=2))
     else:
         print(fleet_table(fleet))
-    if not sent:
+    if sent is None:
         return 0
     if not fleet:
         print(
-            f"no robot was heard from, so none is known to have obeyed the {sent[0].action}: "
+            f"no robot was heard from, so none is known to have obeyed the {sent.action}: "
             "are they up and connected to this router? send it again once they are",
             file=sys.stderr,
         )
         return 1
-    missing = unconfirmed(fleet, sent[0])
+    missing = unconfirmed(fleet, sent)
     for robot_id, why in missing.items():
         print(
-            f"robot {robot_id} did not confirm the {sent[0].action} ({why}): a robot whose "
+            f"robot {robot_id} did not confirm the {sent.action} ({why}): a robot whose "
             f"link is down never hears it, and one that restarts comes back unstopped; "
             "send it again",
             file=sys.stderr,

@@ -116,6 +116,7 @@ def engine_named(name: str) -> Engine:
 
 def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm experiment NAME``."""
+    from fishswarm.cli.common import prepare_folder
     from fishswarm.study.experiment import find
     from fishswarm.study.progress import ProgressLine, bar
     from fishswarm.study.report import write_report
@@ -133,8 +134,6 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
         profile=args.profile,
     )
     out = args.out or Path("runs/experiments") / chosen.name
-    from fishswarm.cli.common import prepare_folder
-
     prepare_folder(out, "--out")
     total = len(chosen.runs())
     groups = f" for {' and '.join(chosen.group_names)}" if chosen.groups else ""
@@ -218,7 +217,7 @@ def _formations_of(recording: Recording) -> list[FormationTarget] | None:
     """The target of each snapshot of a recorded formation run: the shape the snapshot says
     the fish were told to take, or (recorded before snapshots said) the scenario's own
     switch. None for other runs, and for recordings that do not say what ran."""
-    from fishswarm.study.metrics import FormationTargets, scheduled_shape
+    from fishswarm.study.metrics import FormationTargets
 
     try:
         ran = Scenario.as_recorded(recording.scenario)
@@ -227,10 +226,7 @@ def _formations_of(recording: Recording) -> list[FormationTarget] | None:
     targets = FormationTargets.of(ran)
     if targets is None:
         return None
-    return [
-        targets.at(snapshot.formation or scheduled_shape(ran, snapshot.time))
-        for snapshot in recording.snapshots
-    ]
+    return [targets.told(snapshot.formation, snapshot.time) for snapshot in recording.snapshots]
 
 
 def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:

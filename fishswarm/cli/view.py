@@ -22,7 +22,7 @@ from fishswarm.cli.swarm import _run_trio, view_settings, wait_for_ctrl_c
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.live_view import LiveView, open_live_view
-from fishswarm.study.metrics import FormationTargets, scheduled_shape
+from fishswarm.study.metrics import FormationTargets
 from fishswarm.study.recording import RecordingError, read_recording
 from fishswarm.study.scene import Stage, scene_of, stage_of
 from fishswarm.study.view_settings import ViewError, ViewSettings
@@ -72,11 +72,7 @@ def _replay(path: Path, settings: ViewSettings) -> None:
         view.show_stage(stage)
         for snapshot, record in zip(recording.snapshots, recording.metrics, strict=False):
             metrics = {k: v for k, v in record.items() if k not in NOT_METRICS}
-            target = None
-            if targets is not None and ran is not None:
-                # The shape the snapshot says, or (recorded before snapshots said) the
-                # scenario's own switch.
-                target = targets.at(snapshot.formation or scheduled_shape(ran, snapshot.time))
+            target = None if targets is None else targets.told(snapshot.formation, snapshot.time)
             view.show(scene_of(snapshot, target), metrics)
         first, last = recording.snapshots[0].time, recording.snapshots[-1].time
         note = "" if recording.complete else " (cut short: the run did not finish)"

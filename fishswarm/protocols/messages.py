@@ -507,10 +507,8 @@ class ControlReply(Message):
         check_int("tick", self.tick)
         check_float("time", self.time, low=0.0)
         check_int("live_fish", self.live_fish, high=MAX_ROWS)
-        if self.refused is not None and not (
-            isinstance(self.refused, str) and 0 < len(self.refused) <= 200
-        ):
-            raise ValueError("refused must be a reason of 1 to 200 characters")
+        if self.refused is not None:
+            check_text("refused", self.refused)
 
 
 @dataclass(frozen=True, eq=False)

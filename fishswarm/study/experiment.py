@@ -33,7 +33,6 @@ from fishswarm.study.metrics import (
     linked_centroid_distance,
     orbit_metrics,
     orbit_target_of,
-    scheduled_shape,
     swarm_metrics,
 )
 
@@ -313,7 +312,7 @@ class Experiment:
             at = np.arange(position.shape[0]) * scenario.control_period if times is None else times
             rows = []
             for p, e, t in zip(position, spent, at, strict=True):
-                target = targets.at(scheduled_shape(scenario, float(t)))
+                target = targets.told(None, float(t))
                 metrics = target.metrics(p)
                 rows.append([*(metrics[name] for name in FORMATION_METRIC_NAMES), effort_spread(e)])
             return np.array(rows)

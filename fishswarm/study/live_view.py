@@ -129,36 +129,28 @@ class LiveView:
         rr, log = self._rr, self._recording.log
         self._recording.set_time(TIMELINE, duration=scene.time)
         colours = scene.colours()
-        position = upright(scene.position, self._height)
+        scene = scene.upright(self._height)
         log(
             "tank/fish",
-            rr.Points3D(position, colors=colours, radii=0.25 * BODY_LENGTH),
+            rr.Points3D(scene.position, colors=colours, radii=0.25 * BODY_LENGTH),
         )
-        # Headings lie in the horizontal plane: turning depth into height leaves them as
-        # they are.
         log(
             "tank/heading",
             rr.Arrows3D(
-                origins=position, vectors=scene.heading * BODY_LENGTH, colors=colours,
+                origins=scene.position, vectors=scene.heading * BODY_LENGTH, colors=colours,
                 radii=0.06 * BODY_LENGTH,
             ),
         )  # fmt: skip
         if scene.slots is not None:
             log(
                 "tank/target",
-                rr.Points3D(
-                    upright(scene.slots, self._height), colors=TARGET_RGB,
-                    radii=0.1 * BODY_LENGTH,
-                ),
-            )  # fmt: skip
+                rr.Points3D(scene.slots, colors=TARGET_RGB, radii=0.1 * BODY_LENGTH),
+            )
         if scene.edges is not None:
             log(
                 "tank/shapes",
-                rr.LineStrips3D(
-                    list(upright(scene.edges, self._height)), colors=ROLE_RGB["joined"],
-                    radii=0.002,
-                ),
-            )  # fmt: skip
+                rr.LineStrips3D(list(scene.edges), colors=ROLE_RGB["joined"], radii=0.002),
+            )
         for name, value in metrics.items():
             if value is None or not math.isfinite(value):
                 continue

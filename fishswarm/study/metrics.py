@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -27,6 +28,7 @@ from fishswarm.formations.metrics import (
     shape_summary,
 )
 from fishswarm.sim import kernels
+from fishswarm.sim.physics import WorldParams
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study import distance_kernels
 
@@ -434,17 +436,32 @@ class FormationTargets:
     for, those of the shapes its fish are switched to (by the scenario, or by an operator's
     ``fishswarm formation``) — the same spacing, tolerance and heading, another shape."""
 
-    def __init__(self, params: FormationParams) -> None:
+    def __init__(
+        self,
+        params: FormationParams,
+        schedule: Callable[[float], str | None] = lambda time: None,
+    ) -> None:
         self._params = params
+        self._schedule = schedule
         self._targets: dict[str, FormationTarget] = {}
 
     @classmethod
     def of(cls, scenario: Scenario) -> FormationTargets | None:
-        """The targets of a formation scenario (None for other runs)."""
+        """The targets of a formation scenario (None for other runs), with its own switch
+        (:meth:`WorldParams.formation_at <fishswarm.sim.physics.WorldParams.formation_at>`,
+        what the world tells the fish)."""
         if scenario.behavior != "formation":
             return None
         params = scenario.fish_params().steering
-        return cls(params) if isinstance(params, FormationParams) else None
+        if not isinstance(params, FormationParams):
+            return None
+        return cls(params, WorldParams.of(scenario).formation_at)
+
+    def told(self, formation: str | None, time: float) -> FormationTarget:
+        """The target of the shape the fish were told to take at ``time``, s: ``formation``
+        as a snapshot names it, or where it names none (recorded before snapshots did, or
+        a batch engine's run) the scenario's own switch."""
+        return self.at(formation or self._schedule(time))
 
     def at(self, shape: str | None) -> FormationTarget:
         """The target of ``shape`` (None: the configured one)."""
@@ -454,15 +471,6 @@ class FormationTargets:
             target = formation_target(dataclasses.replace(self._params, shape=name))
             self._targets[name] = target
         return target
-
-
-def scheduled_shape(scenario: Scenario, time: float) -> str | None:
-    """The shape the scenario's own switch tells its fish to take at ``time``, s (None:
-    as configured). What a snapshot that does not say (recorded before snapshots did) is
-    measured against."""
-    if scenario.switch_formation is not None and time >= scenario.switch_at:
-        return scenario.switch_formation
-    return None
 
 
 def formation_summary(times: list[float], series: list[dict[str, float]]) -> dict[str, Any]:

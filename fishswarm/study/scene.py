@@ -7,6 +7,7 @@ Foxglove or Lichtblick as it does in ``fishswarm view``.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass
@@ -88,6 +89,16 @@ class Scene:
     roles: tuple[str, ...]
     slots: FloatArray | None = None
     edges: FloatArray | None = None
+
+    def upright(self, height: float) -> Scene:
+        """The scene as drawn in a tank ``height`` m high: its positions, slots and shapes'
+        sides turned from depth to height (:func:`upright`; headings are horizontal)."""
+        return dataclasses.replace(
+            self,
+            position=upright(self.position, height),
+            slots=None if self.slots is None else upright(self.slots, height),
+            edges=None if self.edges is None else upright(self.edges, height),
+        )
 
     def colours(self) -> NDArray[np.uint8]:
         """(N, 3) each fish's colour by its role, 8-bit RGB."""
@@ -183,7 +194,7 @@ def _entity(name: str, time: float, **primitives: list[dict[str, Any]]) -> dict[
     }
 
 
-def _fish_arrows(scene: Scene, height: float) -> str:
+def _fish_arrows(scene: Scene) -> str:
     """The JSON of one arrow per fish, written row by row from a template (a dict and
     ``json.dumps`` per fish took 20 ms a snapshot at 1 000 fish; this takes a tenth)."""
     dimensions = json.dumps(
@@ -199,9 +210,7 @@ def _fish_arrows(scene: Scene, height: float) -> str:
         role: json.dumps(_colour(rgb), separators=(",", ":")) for role, rgb in ROLE_RGB.items()
     }
     half_yaw = np.arctan2(scene.heading[:, 1], scene.heading[:, 0]) / 2
-    rows = np.column_stack(
-        [upright(scene.position, height), np.sin(half_yaw), np.cos(half_yaw)]
-    ).round(DIGITS)
+    rows = np.column_stack([scene.position, np.sin(half_yaw), np.cos(half_yaw)]).round(DIGITS)
     return ",".join(
         f'{{"pose":{{"position":{{"x":{x!r},"y":{y!r},"z":{z!r}}},"orientation":'
         f'{{"x":0.0,"y":0.0,"z":{qz!r},"w":{qw!r}}}}},{dimensions},"color":{colours[role]}}}'
@@ -219,12 +228,13 @@ def scene_message(scene: Scene, stage: Stage | None = None) -> bytes:
     Everything is drawn upright (:func:`upright`) in the stage's tank (without a stage, the
     study's)."""
     height = (stage.tank if stage is not None else Tank().size)[2]
+    scene = scene.upright(height)
     entities: list[dict[str, Any]] = []
     if scene.slots is not None:
         size = {"x": 0.5 * BODY_LENGTH, "y": 0.5 * BODY_LENGTH, "z": 0.5 * BODY_LENGTH}
         spheres = [
             {"pose": _pose(xyz), "size": size, "color": _colour(TARGET_RGB, 0.5)}
-            for xyz in upright(scene.slots, height)
+            for xyz in scene.slots
         ]
         entities.append(_entity("target", scene.time, spheres=spheres))
     if scene.edges is not None:
@@ -233,7 +243,7 @@ def scene_message(scene: Scene, stage: Stage | None = None) -> bytes:
             "pose": _pose((0.0, 0.0, 0.0)),
             "thickness": 0.004,
             "scale_invariant": False,
-            "points": [_point(xyz) for edge in upright(scene.edges, height) for xyz in edge],
+            "points": [_point(xyz) for edge in scene.edges for xyz in edge],
             "color": _colour(ROLE_RGB["joined"]),
             "colors": [],
             "indices": [],
@@ -262,7 +272,7 @@ def scene_message(scene: Scene, stage: Stage | None = None) -> bytes:
             entities.append(_entity("landmark", scene.time, spheres=[landmark]))
     # The fish entity with an empty arrow list, its arrows spliced in as text.
     fish = json.dumps(_entity("fish", scene.time, arrows=[]), separators=(",", ":"))
-    texts = [fish.replace('"arrows":[]', f'"arrows":[{_fish_arrows(scene, height)}]')]
+    texts = [fish.replace('"arrows":[]', f'"arrows":[{_fish_arrows(scene)}]')]
     texts += [json.dumps(entity, separators=(",", ":")) for entity in entities]
     return f'{{"deletions":[],"entities":[{",".join(texts)}]}}'.encode()
 
