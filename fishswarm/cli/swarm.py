@@ -284,6 +284,11 @@ def _summary_text(summary: dict[str, Any]) -> str:
             f"lattice energy {formation['lattice_energy']:.3f}, "
             f"collisions at most {formation['most_collisions']:.0f}"
         )
+        if formation.get("fitness_total") is not None:
+            lines.append(
+                f"  the study's fitness ΣF: {formation['fitness']:.2f} m at the end, "
+                f"{formation['fitness_total']:.1f} m summed over {formation['snapshots']} snapshots"
+            )
     effort = summary.get("effort")
     if effort:
         lines.append(

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.formations.local import LOCAL_SHAPES
 from fishswarm.sim.scenario import ConfigError, Scenario, read_toml
 from fishswarm.study.catalog import EXPERIMENTS_FOLDER, available
 from fishswarm.study.metrics import (
@@ -58,6 +59,7 @@ METRIC_LABELS = {
     "shape_error": "shape error (m)",
     "joined_fraction": "fraction in their slots",
     "lattice_energy": "lattice energy",
+    "fitness": "the study's fitness ΣF (m)",
     "effort_spread": "effort spread (max/mean)",
 }
 
@@ -181,6 +183,13 @@ FORMATION_SUMMARIES = (
     Summary("effort_spread", "effort spread, end (max/mean)", "effort_spread", _last, 3),
 )
 
+STUDY_FITNESS_SUMMARIES = (
+    Summary("fitness", "study's fitness ΣF, end (m)", "fitness", _last, 2),
+    Summary("fitness_total", "study's fitness ΣF, summed over time (m)", "fitness", _total, 1),
+)
+"""The columns a global map's table adds: SPEC §5's fitness of the school (lower is better),
+at the end and summed over the snapshots as the study sums it."""
+
 SWEEPABLE = (
     "blind_width",
     "sphere_radius",
@@ -286,7 +295,9 @@ class Experiment:
     def summaries(self) -> tuple[Summary, ...]:
         """The columns of the experiment's table."""
         if self.forming:
-            return FORMATION_SUMMARIES
+            if self.scenario.formation in LOCAL_SHAPES:
+                return FORMATION_SUMMARIES
+            return (*FORMATION_SUMMARIES, *STUDY_FITNESS_SUMMARIES)
         if self.orbiting:
             return ORBIT_SUMMARIES
         if self._study_mean_distance:

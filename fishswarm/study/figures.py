@@ -321,9 +321,7 @@ def experiment_figures(
     paths = []
 
     summaries = experiment.summaries
-    figure, axes = plt.subplots(
-        1, len(summaries), figsize=(3.4 * len(summaries), 3.6), layout="constrained"
-    )
+    figure, axes = _panels(len(summaries), width=3.4)
     groups = experiment.group_names
     for ax, summary in zip(axes, summaries, strict=True):
         for group in groups:
@@ -339,16 +337,18 @@ def experiment_figures(
             ax.plot(values, expected, "--", color="red", linewidth=0.8, label=reference)
         if (summary.key == "radius" and expected is not None) or len(groups) > 1:
             ax.legend(fontsize=7)
-        ax.set_xticks(values, [f"{v:g}" for v in values])
+        # Values drawn where they are may crowd their labels: turned, they do not overlap.
+        ax.set_xticks(
+            values, [f"{v:g}" for v in values], rotation=40 if len(values) > 3 else 0,
+            ha="right" if len(values) > 3 else "center",
+        )  # fmt: skip
         ax.set_xlabel(experiment.label)
         ax.set_title(summary.label, fontsize=9)
         ax.grid(alpha=0.3)
     figure.suptitle(f"{experiment.title}: {experiment.spread_text}")
     paths.append(_save(figure, folder / "metrics_vs_parameter.png"))
 
-    figure, axes = plt.subplots(
-        1, len(names), figsize=(3.8 * len(names), 3.6), layout="constrained"
-    )
+    figure, axes = _panels(len(names), width=3.8)
     colors = _colors(len(values))
     styles = ("-", "--", ":", "-.")
     for ax, (column, name) in zip(axes, enumerate(names), strict=True):
@@ -409,6 +409,26 @@ def experiment_figures(
     figure.suptitle(f"{experiment.title}: tracks from above and from the side")
     paths.append(_save(figure, folder / "tracks.png"))
     return paths
+
+
+PANELS_PER_ROW = 5
+"""More panels than this wrap onto further rows (a formation's table has ten columns)."""
+
+
+def _panels(count: int, *, width: float) -> tuple[Figure, list[Any]]:
+    """A figure of ``count`` panels, each ``width`` inches wide, in rows of at most
+    :data:`PANELS_PER_ROW`; the unused places of the last row left empty."""
+    plt = _pyplot()
+    columns = min(count, PANELS_PER_ROW)
+    rows = -(-count // columns)
+    figure, axes = plt.subplots(
+        rows, columns, figsize=(width * columns, 3.6 * rows), layout="constrained",
+        squeeze=False,
+    )  # fmt: skip
+    places = list(axes.flat)
+    for empty in places[count:]:
+        empty.set_visible(False)
+    return figure, places[:count]
 
 
 def _save(figure: Figure, path: Path) -> Path:

@@ -23,6 +23,7 @@ from fishswarm.formations.metrics import (
     align,
     collisions,
     deviation_energy,
+    fish_fitness,
     local_shape_errors,
     shape_edges,
     shape_summary,
@@ -301,10 +302,22 @@ class OrbitTracker:
         }
 
 
-FORMATION_METRIC_NAMES = ("shape_error", "joined_fraction", "lattice_energy", "collisions")
+FORMATION_METRIC_NAMES = (
+    "shape_error",
+    "joined_fraction",
+    "lattice_energy",
+    "collisions",
+    "fitness",
+)
 """A formation's metrics per snapshot: RMS error after the best rigid alignment and
 assignment (m), the fraction of fish within the tolerance of their slot, the α-lattice
-deviation energy, and pairs closer than a body length."""
+deviation energy, pairs closer than a body length, and the study's fitness of the school
+(Σ F over its fish, m; a global map's only, NaN for a local shape)."""
+
+CROWDING_SHARE = 0.125
+"""The study's crowding radius as a share of the spacing: its code counts a neighbour as
+crowding within 0.25 units of a fish on maps of spacing 2 units (``fitnes`` and
+``valid_move`` in FishFormationSimulator/fish.py, fberlinger/FISH)."""
 
 
 @dataclass(frozen=True)
@@ -346,9 +359,15 @@ class FormationTarget:
             self._last[key] = fit
         return fit
 
+    @property
+    def crowding_radius(self) -> float:
+        """Within this distance another fish crowds a fish in the study's fitness, m."""
+        return CROWDING_SHARE * self.spacing
+
     def metrics(self, position: FloatArray) -> dict[str, float]:
         """The formation metrics of one snapshot. A global map: the school against its
-        first N slots. A local shape: every fish's group (it and its nearest neighbours)
+        first N slots, and the study's fitness against those slots where the alignment
+        lays them. A local shape: every fish's group (it and its nearest neighbours)
         against the ideal shape, errors averaged over fish; joined when within tolerance."""
         count = position.shape[0]
         if count == 0:
@@ -357,12 +376,24 @@ class FormationTarget:
             assert self.slots is not None
             if self.slots.shape[0] < count:
                 return dict.fromkeys(FORMATION_METRIC_NAMES, math.nan)
-        rms, joined = shape_summary(self._fit(position), self.tolerance)
+        fit = self._fit(position)
+        rms, joined = shape_summary(fit, self.tolerance)
+        fitness = math.nan
+        if isinstance(fit, Alignment):
+            fitness = float(
+                fish_fitness(
+                    position,
+                    fit.slots,
+                    tolerance=self.tolerance,
+                    crowding_radius=self.crowding_radius,
+                ).sum()
+            )
         return {
             "shape_error": rms,
             "joined_fraction": joined,
             "lattice_energy": deviation_energy(position, spacing=self.spacing),
             "collisions": float(collisions(position)),
+            "fitness": fitness,
         }
 
     def roles(self, position: FloatArray) -> FormationRoles:
@@ -475,11 +506,16 @@ class FormationTargets:
 
 def formation_summary(times: list[float], series: list[dict[str, float]]) -> dict[str, Any]:
     """A formation run in a few numbers: the final metrics, the first time 90 % of the fish
-    were in their slots (None if never), and the most colliding pairs at once."""
+    were in their slots (None if never), the most colliding pairs at once, and the study's
+    fitness summed over the snapshots (SPEC §5: over fish and over time; None for a local
+    shape)."""
     final = {name: series[-1][name] for name in FORMATION_METRIC_NAMES}
     joined = [t for t, m in zip(times, series, strict=True) if m["joined_fraction"] >= 0.9]
+    fitness = [m.get("fitness", math.nan) for m in series]
     return {
         **final,
         "time_to_90_percent_joined": joined[0] if joined else None,
         "most_collisions": max(m["collisions"] for m in series),
+        "fitness_total": None if math.isnan(sum(fitness)) else sum(fitness),
+        "snapshots": len(series),
     }

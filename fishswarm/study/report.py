@@ -144,7 +144,11 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
             "Shape error: RMS distance of the fish from the target map after the best rigid "
             "alignment and assignment; in their slots: within the tolerance of their slot; "
             "lattice energy: mean squared relative deviation of neighbour distances from the "
-            "spacing; collisions: pairs closer than one body length, summed over snapshots."
+            "spacing; collisions: pairs closer than one body length, summed over snapshots; "
+            "the study's fitness: ΣF over the fish, F = C + min D (C: the tolerance for each "
+            "other fish within an eighth of the spacing; D: the distance to the nearest slot "
+            "no other fish is within the tolerance of, or the tolerance when none is free), "
+            "against the aligned map; lower is better."
         )
     elif experiment.orbiting:
         explain = (

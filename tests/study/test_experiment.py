@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -252,8 +253,20 @@ def test_groups_compare_the_sweep_under_named_settings(tmp_path: Path) -> None:
     # Without flags nothing goes over the channel, so its loss changes nothing.
     no_flags = [r for r in rows if r["group"] == "no flags"]
     assert no_flags[0]["shape_error_mean"] == no_flags[1]["shape_error_mean"]
+    # A global map's table carries the study's fitness, summed over the snapshots (five
+    # of them in 2 s at 2 Hz) as the study sums it.
+    outcome = outcomes[0]
+    fitness = outcome.metrics[:, experiment.metric_names.index("fitness")]
+    assert fitness.shape == (5,) and (fitness > 0).all()
+    assert rows[0]["fitness_total_mean"] == pytest.approx(fitness.sum())
+    assert rows[0]["fitness_mean"] == pytest.approx(fitness[-1])
     text = markdown_table(experiment, rows)
     assert "| group | channel_loss |" in text and "| no flags | 0.5 |" in text
+    assert "study's fitness ΣF, summed over time (m)" in text
+    local = dataclasses.replace(
+        experiment, scenario=dataclasses.replace(experiment.scenario, formation="triangle")
+    )
+    assert "fitness" not in [summary.key for summary in local.summaries]
     assert "Groups: flags: flags = true; no flags: flags = false." in text
     write_report(experiment, outcomes, tmp_path / "out", engine="batch", wall_time=1.0)
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())

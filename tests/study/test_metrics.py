@@ -192,6 +192,35 @@ def test_formation_metrics_against_the_target_and_their_summary() -> None:
     summary = formation_summary([0.0, 1.0, 2.0], [apart, in_shape, in_shape])
     assert summary["time_to_90_percent_joined"] == 1.0
     assert summary["joined_fraction"] == 1.0 and summary["most_collisions"] == 0.0
+    assert in_shape["fitness"] == pytest.approx(0.0, abs=1e-9)
+    assert summary["fitness_total"] == pytest.approx(apart["fitness"]) and apart["fitness"] > 0
+    assert summary["snapshots"] == 3
+
+
+def test_the_study_fitness_of_a_school_drawn_on_paper() -> None:
+    from fishswarm.sim.scenario import Scenario
+    from fishswarm.study.metrics import FormationTarget, formation_summary, formation_target_of
+
+    # Three slots 1 m apart on a line, tolerance 0.2 m, so a fish crowds another within
+    # 0.125 m (the study's 0.25 units at a spacing of 2 units).
+    target = FormationTarget(np.array([[-1.0, 0, 0], [0, 0, 0], [1, 0, 0]]), 1.0, 0.2)
+    assert target.crowding_radius == 0.125
+    centre = np.array([2.0, 1.5, 0.5])
+    # Stretched twice: the slots land at −1, 0, 1 about the fish's centre; the outer fish
+    # are 1 m from their free slots, the middle one on its own: ΣF = 1 + 0 + 1.
+    stretched = np.array([[-2.0, 0, 0], [0, 0, 0], [2, 0, 0]]) + centre
+    assert target.metrics(stretched)["fitness"] == pytest.approx(2.0)
+    # Squeezed onto the middle slot, 5 cm apart: that slot is nobody's to take (the others
+    # are within the tolerance of it), so each fish's nearest free slot is an outer one
+    # (0.95, 1, 0.95 m), and each is crowded by both others (C = 2 × 0.2 m).
+    squeezed = np.array([[-0.05, 0, 0], [0, 0, 0], [0.05, 0, 0]]) + centre
+    assert target.metrics(squeezed)["fitness"] == pytest.approx(0.95 + 1 + 0.95 + 3 * 0.4)
+    # A local shape has no map of slots to be fit to: no study fitness, and no total.
+    local = formation_target_of(Scenario(fish=3, behavior="formation", formation="triangle"))
+    assert local is not None
+    metrics = local.metrics(stretched)
+    assert math.isnan(metrics["fitness"])
+    assert formation_summary([0.0], [metrics])["fitness_total"] is None
 
 
 def test_local_shape_error_around_every_fish() -> None:
