@@ -29,6 +29,10 @@ from fishswarm.sim.streams import Stream, stream
 log = logging.getLogger(__name__)
 
 
+OUTBOX_TIMEOUT = 5.0
+"""How long the channel waits for the broadcasts a snapshot announces, s."""
+
+
 @dataclass(frozen=True)
 class ChannelStatistics:
     """Counters of the channel.
@@ -52,7 +56,7 @@ class Channel:
         outbox_timeout: longest wait for the broadcasts a snapshot announces, s.
     """
 
-    def __init__(self, scenario: Scenario, *, outbox_timeout: float = 5.0) -> None:
+    def __init__(self, scenario: Scenario, *, outbox_timeout: float = OUTBOX_TIMEOUT) -> None:
         self.scenario = scenario
         self.keys = scenario.keys
         self.outbox_timeout = outbox_timeout

@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from fishswarm import __version__
 from fishswarm.actors.bus import Bus, Declared, open_alive_events, open_subscriber, open_token
+from fishswarm.actors.channel import OUTBOX_TIMEOUT
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.actors.perceptions import perception_messages
@@ -97,7 +98,10 @@ class WorldSettings:
         expected_fish: ids the world waits for before the first tick.
         start_timeout: longest wait for them, s.
         command_timeout: a fish that has not answered a tick within this is marked lost, s.
-        channel_timeout: longest wait for the channel's report on a tick, s.
+        channel_timeout: longest wait for the channel's report on a tick, s: longer than
+            the channel's own wait for announced broadcasts, so that a broadcast lost on
+            the way costs its deliveries (the channel reports without it), not the tick's
+            report.
         admit_delay: a fish that comes up is admitted at the first event at least this long
             after the world subscribed to its commands, s (the subscription must reach the
             router first when the world runs as a client).
@@ -113,7 +117,7 @@ class WorldSettings:
     expected_fish: tuple[int, ...] = ()
     start_timeout: float = 30.0
     command_timeout: float = 10.0
-    channel_timeout: float = 5.0
+    channel_timeout: float = OUTBOX_TIMEOUT + 1.0
     admit_delay: float = 0.1
     pulse_period: float = 1.0
     vouched_only: bool = False

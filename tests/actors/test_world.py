@@ -185,6 +185,65 @@ def test_broadcasts_decided_at_a_tick_are_heard_at_the_next_and_match_the_batch_
     assert world.statistics().rejected_total == 0
 
 
+class LosingBus:
+    """A MemoryBus that loses one put: the first on ``lost_key`` after ``after`` of them."""
+
+    def __init__(self, lost_key: str, *, after: int) -> None:
+        self._bus = MemoryBus()
+        self._lost_key = lost_key
+        self._left = after
+        self.lost = 0
+        self.subscribe = self._bus.subscribe
+        self.declare_token = self._bus.declare_token
+        self.watch_alive = self._bus.watch_alive
+
+    def put(self, key: str, payload: bytes) -> None:
+        if key == self._lost_key and not self.lost:
+            if self._left == 0:
+                self.lost = 1
+                return
+            self._left -= 1
+        self._bus.put(key, payload)
+
+
+def test_a_broadcast_lost_on_the_way_costs_its_deliveries_not_the_tick(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # Fish 4's broadcast of tick 1 never reaches the channel. The channel gives up on it
+    # before the world gives up on the channel, so tick 2 still has its report: the other
+    # four broadcasts are delivered, announced and waited for, and nobody is lost.
+    behavior = registered().name
+    scenario = Scenario(fish=5, duration=4.0, seed=2, behavior=behavior)
+
+    async def main() -> tuple[list[Delivery], World, Channel, LosingBus]:
+        bus = LosingBus(scenario.keys.outbox(4), after=1)
+        world = World(WorldSettings(scenario, expected_fish=tuple(range(5))))
+        medium = Channel(scenario)
+        params = scenario.fish_params()
+        async with (
+            subscription(bus, f"{scenario.keys.prefix}/fish/*/inbox") as inboxes,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(medium.run, bus)
+            for fish_id in range(5):
+                await nursery.start(Fish(FishSettings((fish_id,), params, scenario.keys)).run, bus)
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return [decode(p, Delivery) for _, p in inboxes.drain()], world, medium, bus
+
+    with caplog.at_level("WARNING"):
+        deliveries, world, medium, bus = run_mock(main)
+    assert bus.lost == 1
+    assert medium.statistics().missing_broadcasts == 1
+    assert "no channel report" not in caplog.text
+    at_two = [d for d in deliveries if d.tick == 2]
+    # Four senders, each heard by the four others (all in range, no loss): fish 4 hears
+    # all four, every other fish the three senders besides itself.
+    heard = [sum(d.receiver_id == fish_id for d in at_two) for fish_id in range(5)]
+    assert heard == [3, 3, 3, 3, 4]
+    assert world.lost == [] and world.statistics().rejected_total == 0
+
+
 @pytest.mark.parametrize("broadcasting", [False, True])
 def test_a_snapshot_goes_out_while_the_fish_decide_unless_the_channel_needs_it_first(
     broadcasting: bool,
