@@ -198,7 +198,8 @@ def animation_figure(
     figure = plt.figure(figsize=(12, 9), dpi=80, layout="constrained")
     grid = figure.add_gridspec(2, 2, height_ratios=(tank[1], max(tank[2], 0.6 * tank[1])))
     above = figure.add_subplot(grid[0, 0])
-    above.set(xlim=(0, tank[0]), ylim=(0, tank[1]), aspect="equal", xlabel="x (m)")
+    # Seen from above, the tank frame (z down, right-handed) has y pointing down the page.
+    above.set(xlim=(0, tank[0]), ylim=(tank[1], 0), aspect="equal", xlabel="x (m)")
     above.set_ylabel("y (m)")
     above.set_title("from above", fontsize=10)
     side = figure.add_subplot(grid[1, 0])
@@ -263,7 +264,9 @@ def animation_figure(
 
 
 def _tank_axes(ax: Any, tank: Sequence[float]) -> None:
-    ax.set(xlim=(0, tank[0]), ylim=(0, tank[1]), zlim=(tank[2], 0))
+    # Depth drawn downwards, and y turned with it: a rotation of the tank frame, not a
+    # mirror image of it.
+    ax.set(xlim=(0, tank[0]), ylim=(tank[1], 0), zlim=(tank[2], 0))
     ax.set_xlabel("x (m)", fontsize=8)
     ax.set_ylabel("y (m)", fontsize=8)
     ax.set_zlabel("depth (m)", fontsize=8)

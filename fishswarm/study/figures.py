@@ -68,7 +68,8 @@ def draw_tracks(
             _key_entry((3, 0, -90), "end, pointing where it swam", markersize=7),
         ]
         overhead.legend(handles=key, fontsize=7, loc="upper right", framealpha=0.8)
-    overhead.set(xlim=(0, tank[0]), ylim=(0, tank[1]), aspect="equal", xlabel="x (m)")
+    # Seen from above, the tank frame (z down, right-handed) has y pointing down the page.
+    overhead.set(xlim=(0, tank[0]), ylim=(tank[1], 0), aspect="equal", xlabel="x (m)")
     overhead.set_ylabel("y (m)")
     overhead.set_title(title, fontsize=9)
     side.set(xlim=(0, tank[0]), ylim=(tank[2], 0), aspect="equal", xlabel="x (m)")
@@ -77,11 +78,13 @@ def draw_tracks(
 
 def _arrowhead(track: FloatArray) -> tuple[int, int, float]:
     """A triangle marker pointing along a track's last move seen from above (matplotlib's
-    (sides, style, angle): a triangle at angle 0 points up, angles turn it anticlockwise)."""
+    (sides, style, angle): a triangle at angle 0 points up the page, angles turn it
+    anticlockwise on the page; the view from above has y down the page, so a heading
+    turned towards +y turns the marker clockwise)."""
     present = track[~np.isnan(track[:, 0])]
     step = present[-1, :2] - present[-2, :2] if present.shape[0] > 1 else np.array([1.0, 0.0])
     heading_deg = float(np.degrees(np.arctan2(step[1], step[0])))
-    return (3, 0, heading_deg - 90.0)
+    return (3, 0, -heading_deg - 90.0)
 
 
 def _key_entry(marker: Any, label: str, *, markersize: float) -> Any:

@@ -100,13 +100,13 @@ class LiveView:
         self.settings = settings
         self.scenes = 0
         self._metrics: set[str] = set()
-        self._height = Tank().size[2]
-        """The tank's height, m: what is drawn is drawn upright in it (:func:`upright`)."""
+        self._tank: tuple[float, float, float] = Tank().size
+        """The tank's size, m: what is drawn is drawn upright in it (:func:`upright`)."""
 
     def show_stage(self, stage: Stage) -> None:
         """Draw the tank's walls and the landmark (they stay for the whole view)."""
         rr, log = self._rr, self._recording.log
-        self._height = stage.tank[2]
+        self._tank = stage.tank
         log("tank", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         log(
             "tank/walls",
@@ -116,9 +116,7 @@ class LiveView:
         if stage.landmark is not None:
             log(
                 "tank/landmark",
-                rr.Points3D(
-                    [upright(stage.landmark, self._height)], colors=LANDMARK_RGB, radii=0.02
-                ),
+                rr.Points3D([upright(stage.landmark, self._tank)], colors=LANDMARK_RGB, radii=0.02),
                 static=True,
             )
 
@@ -129,7 +127,7 @@ class LiveView:
         rr, log = self._rr, self._recording.log
         self._recording.set_time(TIMELINE, duration=scene.time)
         colours = scene.colours()
-        scene = scene.upright(self._height)
+        scene = scene.upright(self._tank)
         log(
             "tank/fish",
             rr.Points3D(scene.position, colors=colours, radii=0.25 * BODY_LENGTH),

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -45,8 +46,9 @@ SCENE_SCHEMA = "foxglove.SceneUpdate"
 """The schema name under which Foxglove and Lichtblick recognise a scene."""
 
 FRAME = "tank"
-"""The frame every scene entity is drawn in: x and y along the tank's walls as in the tank
-frame, z up from the floor (the tank frame's z is depth, down: see :func:`upright`)."""
+"""The frame every scene entity is drawn in: the tank frame turned upright (x as in the tank
+frame, y from the far wall, z up from the floor; the tank frame's z is depth, down: see
+:func:`upright`)."""
 
 
 @dataclass(frozen=True)
@@ -90,14 +92,17 @@ class Scene:
     slots: FloatArray | None = None
     edges: FloatArray | None = None
 
-    def upright(self, height: float) -> Scene:
-        """The scene as drawn in a tank ``height`` m high: its positions, slots and shapes'
-        sides turned from depth to height (:func:`upright`; headings are horizontal)."""
+    def upright(self, tank: Sequence[float]) -> Scene:
+        """The scene as drawn in a tank of size ``tank`` (x, y, z), m: its positions, slots,
+        shapes' sides and headings turned upright (:func:`upright`)."""
+        heading = np.array(self.heading, dtype=np.float64)
+        heading[:, 1:] *= -1.0
         return dataclasses.replace(
             self,
-            position=upright(self.position, height),
-            slots=None if self.slots is None else upright(self.slots, height),
-            edges=None if self.edges is None else upright(self.edges, height),
+            position=upright(self.position, tank),
+            heading=heading,
+            slots=None if self.slots is None else upright(self.slots, tank),
+            edges=None if self.edges is None else upright(self.edges, tank),
         )
 
     def colours(self) -> NDArray[np.uint8]:
@@ -132,12 +137,16 @@ def scene_of(snapshot: Snapshot, formation: FormationTarget | None = None) -> Sc
     return Scene(snapshot.time, snapshot.ids, snapshot.position, heading, roles, slots, edges)
 
 
-def upright(points: Any, height: float) -> FloatArray:
-    """(..., 3) points of the tank frame (z: depth below the surface, down) as drawn (z:
-    height above the floor, up): x and y the same, z = ``height`` − depth, so that fish near
-    the surface are drawn at the top, as in the side views of ``plot`` and ``animate``."""
+def upright(points: Any, tank: Sequence[float]) -> FloatArray:
+    """(..., 3) points of the tank frame (right-handed, z: depth below the surface, down)
+    as drawn in a tank of size ``tank`` (x, y, z), m, in a viewer's right-handed frame with z
+    up: turned half a turn about the x axis, so x stays, y = width − y and z = height −
+    depth. Fish near the surface are drawn at the top, as in the side views of ``plot`` and
+    ``animate``, and a fish turning right is seen turning right (turning z alone over would
+    draw the tank's mirror image)."""
     drawn = np.array(points, dtype=np.float64)
-    drawn[..., 2] = height - drawn[..., 2]
+    drawn[..., 1] = tank[1] - drawn[..., 1]
+    drawn[..., 2] = tank[2] - drawn[..., 2]
     return drawn
 
 
@@ -227,8 +236,8 @@ def scene_message(scene: Scene, stage: Stage | None = None) -> bytes:
     Each entity keeps its id from message to message, so every message replaces the last.
     Everything is drawn upright (:func:`upright`) in the stage's tank (without a stage, the
     study's)."""
-    height = (stage.tank if stage is not None else Tank().size)[2]
-    scene = scene.upright(height)
+    tank = stage.tank if stage is not None else Tank().size
+    scene = scene.upright(tank)
     entities: list[dict[str, Any]] = []
     if scene.slots is not None:
         size = {"x": 0.5 * BODY_LENGTH, "y": 0.5 * BODY_LENGTH, "z": 0.5 * BODY_LENGTH}
@@ -265,7 +274,7 @@ def scene_message(scene: Scene, stage: Stage | None = None) -> bytes:
         if stage.landmark is not None:
             size = {"x": 0.04, "y": 0.04, "z": 0.04}
             landmark = {
-                "pose": _pose(upright(stage.landmark, height)),
+                "pose": _pose(upright(stage.landmark, tank)),
                 "size": size,
                 "color": _colour(LANDMARK_RGB),
             }

@@ -63,9 +63,12 @@ def test_an_orbit_runs_figure_shows_the_post_the_radius_and_the_circling() -> No
         "end, pointing where it swam",
     ]
     # The last step goes from 45° round the centre to 0°: a chord heading 22.5° − 90° =
-    # −67.5° (clockwise); the triangle (pointing up, 90°, unturned) is turned to it.
+    # −67.5° in the tank. Seen from above, y runs down the page, so on the page the chord
+    # points 67.5° anticlockwise from the x axis; the triangle (pointing up the page, 90°,
+    # unturned) is turned by 67.5° − 90°.
+    assert above.yaxis_inverted()
     arrowhead: Any = above.get_lines()[2]
-    assert arrowhead.get_marker() == (3, 0, pytest.approx(-67.5 - 90.0))
+    assert arrowhead.get_marker() == (3, 0, pytest.approx(67.5 - 90.0))
 
 
 def test_a_swarm_runs_figure_keeps_its_distance_panels() -> None:

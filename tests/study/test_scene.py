@@ -22,6 +22,7 @@ from fishswarm.study.recording import SCENE_TOPIC, open_recorder, read_recording
 from fishswarm.study.scene import (
     ROLE_RGB,
     SCENE_SCHEMA,
+    Scene,
     Stage,
     scene_json_schema,
     scene_message,
@@ -134,12 +135,14 @@ def test_a_scene_message_draws_each_fish_the_tank_and_the_landmark() -> None:
         assert entity["frame_id"] == "tank"
         assert entity["timestamp"] == {"sec": 2, "nsec": 500_000_000}
     arrows = entities["fish"]["arrows"]
-    # Drawn upright in the 1.17-m tank: 0.2 m deep is 0.97 m above the floor.
+    # Drawn upright in the 1.78 × 1.78 × 1.17-m tank: 0.2 m deep is 0.97 m above the
+    # floor, 0.25 m from the y = 0 wall is 1.53 m from the far one.
     assert [a["pose"]["position"] for a in arrows] == [
-        {"x": 0.5, "y": 0.5, "z": 0.97}, {"x": 1.0, "y": 0.25, "z": 0.77},
+        {"x": 0.5, "y": 1.28, "z": 0.97}, {"x": 1.0, "y": 1.53, "z": 0.77},
     ]  # fmt: skip
-    # Five decimals kept: a quarter turn's quaternion to 1e-5.
-    quarter = yaw_quaternion(math.pi / 2)
+    # Five decimals kept: a quarter turn's quaternion to 1e-5 (towards +y in the tank is
+    # towards −y as drawn).
+    quarter = yaw_quaternion(-math.pi / 2)
     assert arrows[1]["pose"]["orientation"] == pytest.approx(quarter, abs=1e-5)
     assert arrows[0]["shaft_length"] + arrows[0]["head_length"] == pytest.approx(BODY_LENGTH)
     assert arrows[0]["color"] == pytest.approx(
@@ -183,8 +186,10 @@ def test_every_arrow_points_along_its_fish_whatever_the_yaw() -> None:
     arrows = message["entities"][0]["arrows"]
     for arrow, angle, xyz in zip(arrows, yaw, position, strict=True):
         turned = _rotate(arrow["pose"]["orientation"], np.array([1.0, 0.0, 0.0]))
-        np.testing.assert_allclose(turned, [math.cos(angle), math.sin(angle), 0.0], atol=1e-4)
-        drawn = [xyz[0], xyz[1], Tank().size[2] - xyz[2]]  # no stage: the study's tank
+        # Drawn upright (half a turn about x): the heading's y turns over with the tank's.
+        np.testing.assert_allclose(turned, [math.cos(angle), -math.sin(angle), 0.0], atol=1e-4)
+        width, height = Tank().size[1:]  # no stage: the study's tank
+        drawn = [xyz[0], width - xyz[1], height - xyz[2]]
         np.testing.assert_allclose(list(arrow["pose"]["position"].values()), drawn, atol=1e-5)
 
 
@@ -200,4 +205,25 @@ def test_fish_near_the_surface_are_drawn_at_the_top_of_the_tank() -> None:
     assert heights == pytest.approx([1.12, 0.07])
     walls = [point["z"] for point in entities["tank"]["lines"][0]["points"]]
     assert (min(walls), max(walls)) == (0.0, 1.17)
-    np.testing.assert_allclose(upright(position, 1.17), [[0.3, 0.4, 1.12], [0.3, 0.4, 0.07]])
+    np.testing.assert_allclose(
+        upright(position, (1.78, 1.78, 1.17)), [[0.3, 1.38, 1.12], [0.3, 1.38, 0.07]]
+    )
+
+
+def test_the_drawn_tank_is_turned_not_mirrored() -> None:
+    # A fish at the tank's centre heading +x, a neighbour to its right (+y in the tank
+    # frame, whose z points down) and one below it. Drawn in a right-handed frame with z up,
+    # the neighbour on the right must still be on the right, along forward × up (facing +x
+    # with z up, +y is on the left and x × z = −y).
+    tank = (2.0, 2.0, 1.0)
+    fish = np.array([1.0, 1.0, 0.5])
+    right, below = fish + np.array([0, 0.3, 0]), fish + np.array([0, 0, 0.3])
+    drawn = upright(np.array([fish, right, below]), tank)
+    scene = Scene(0.0, np.array([0]), fish[None], np.array([[1.0, 0.0, 0.0]]), ("fish",))
+    forward = scene.upright(tank).heading[0]
+    up = np.array([0.0, 0.0, 1.0])
+    assert np.dot(drawn[1] - drawn[0], np.cross(forward, up)) > 0  # on the right
+    assert drawn[2][2] < drawn[0][2]  # deeper is lower
+    # A fish heading +y (turned right from +x) is drawn turned right from +x as well.
+    turned = Scene(0.0, np.array([0]), fish[None], np.array([[0.0, 1.0, 0.0]]), ("fish",))
+    assert np.cross(forward, turned.upright(tank).heading[0])[2] < 0  # clockwise from above
