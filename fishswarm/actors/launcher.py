@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
 import logging
 import os
 import signal
@@ -40,6 +39,7 @@ from fishswarm.actors.workers import (
 )
 from fishswarm.actors.world import World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus
+from fishswarm.protocols.jsontext import json_text
 from fishswarm.sim.decision_kernels import with_compiled_decisions
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import ORBIT_SUMMARIES
@@ -200,7 +200,7 @@ async def run_swarm(
             )
             if settings.summary is not None:
                 settings.summary.parent.mkdir(parents=True, exist_ok=True)
-                settings.summary.write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+                settings.summary.write_text(json_text(summary, indent=2) + "\n", encoding="utf-8")
     exit_code = (
         EXIT_INTERRUPTED
         if status == "interrupted"

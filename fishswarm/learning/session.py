@@ -42,6 +42,7 @@ from fishswarm.learning.arena import (
 )
 from fishswarm.learning.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from fishswarm.learning.coevolution import Coevolution, LearningSettings
+from fishswarm.protocols.jsontext import json_text
 
 FloatArray = NDArray[np.float64]
 CHECKPOINT = "checkpoint.npz"
@@ -240,7 +241,7 @@ def write_results(run: Coevolution, out: Path) -> dict[str, Any]:
         },
         "target": target_report(evaluation, settings.arena),
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
+    (out / "summary.json").write_text(json_text(summary, indent=2) + "\n", encoding="utf-8")
     _pictures(run, evaluation, out)
     return summary
 

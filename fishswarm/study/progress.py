@@ -23,20 +23,24 @@ class ProgressLine:
     def __init__(self, stream: TextIO | None = None) -> None:
         self.stream = sys.stderr if stream is None else stream
         self.tty = self.stream.isatty()
+        self._open = False
 
     def show(self, line: str, *, last: bool = False) -> None:
         """Show a line; ``last`` ends the updating line on a terminal."""
         if self.tty:
             self.stream.write("\r" + line + ("\n" if last else ""))
+            self._open = not last
         else:
             self.stream.write(line + "\n")
         self.stream.flush()
 
     def close(self) -> None:
-        """End an updating line on a terminal (before other output, e.g. after Ctrl-C)."""
-        if self.tty:
+        """End an updating line on a terminal, if one is open (before other output: after
+        Ctrl-C, or a run that ended before its last tick)."""
+        if self._open:
             self.stream.write("\n")
             self.stream.flush()
+            self._open = False
 
 
 def ids_text(ids: list[int], limit: int = 20) -> str:

@@ -30,12 +30,13 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import Writer
 
 from fishswarm.protocols.codec import MessageError, decode
+from fishswarm.protocols.jsontext import json_text, number_or_nan
 from fishswarm.protocols.messages import Snapshot
 from fishswarm.study.scene import FRAME, SCENE_SCHEMA, scene_json_schema
 
 CHUNK_SIZE = 32 * 1024
-"""Bytes of messages per chunk: what a killed run can lose at most (about four snapshots of
-25 fish with their metrics and scenes)."""
+"""Bytes of messages per chunk: what a killed run can lose at most (three or four snapshots
+of 25 fish with their metrics and scenes; from about 400 fish on, a snapshot's own chunk)."""
 SNAPSHOT_TOPIC = "snapshot"
 METRICS_TOPIC = "metrics"
 EVENTS_TOPIC = "events"
@@ -85,7 +86,7 @@ class Recorder:
 
     def metrics(self, time: float, values: dict[str, Any]) -> None:
         """Record the metrics of one snapshot."""
-        self._add(METRICS_TOPIC, time, json.dumps(values).encode())
+        self._add(METRICS_TOPIC, time, json_text(values).encode())
 
     def scene(self, time: float, message: bytes) -> None:
         """Record what the swarm looked like (a Foxglove ``SceneUpdate``, JSON)."""
@@ -93,7 +94,7 @@ class Recorder:
 
     def event(self, time: float, values: dict[str, Any]) -> None:
         """Record an event (fish joined, fish lost, …)."""
-        self._add(EVENTS_TOPIC, time, json.dumps(values).encode())
+        self._add(EVENTS_TOPIC, time, json_text(values).encode())
 
     def finish(self) -> None:
         """Write the summary sections and the footer."""
@@ -217,8 +218,9 @@ def read_recording(path: Path) -> Recording:
         except Exception as error:
             raise RecordingError(f"{path} is not a readable MCAP recording: {error}") from None
     contents.snapshots.sort(key=lambda s: s.tick)
-    if not complete and contents.metrics:
-        # Each snapshot is followed by its metrics; a cut may fall between the two.
+    if not complete:
+        # Each snapshot is followed by its metrics; a cut may fall between the two (in a
+        # large swarm a snapshot fills a chunk of its own, and its metrics are in the next).
         whole = min(len(contents.snapshots), len(contents.metrics))
         del contents.snapshots[whole:], contents.metrics[whole:]
     return Recording(
@@ -249,7 +251,8 @@ class _Contents:
             except MessageError as error:
                 raise RecordingError(f"{path} holds an invalid snapshot: {error}") from None
         elif topic == METRICS_TOPIC:
-            self.metrics.append(json.loads(data))
+            values = json.loads(data)
+            self.metrics.append({name: number_or_nan(value) for name, value in values.items()})
         elif topic == EVENTS_TOPIC:
             self.events.append(json.loads(data))
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import itertools
-import json
 import logging
 from collections.abc import Mapping
 from pathlib import Path
@@ -13,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from fishswarm.formations.local import LOCAL_SHAPES
+from fishswarm.protocols.jsontext import json_text
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import Experiment, RunOutcome
 from fishswarm.study.figures import FiguresUnavailable, experiment_figures
@@ -118,7 +118,7 @@ def write_report(
         "runs_total": len(outcomes) + missing,
     }
     summary_path = folder / "summary.json"
-    summary_path.write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    summary_path.write_text(json_text(summary, indent=2), encoding="utf-8")
     paths.append(summary_path)
     try:
         paths += experiment_figures(experiment, outcomes, rows, folder)

@@ -95,3 +95,54 @@ def test_a_recording_cut_anywhere_reads_up_to_its_last_whole_chunk(tmp_path: Pat
         f"warning: {cut} was cut short (the run that wrote it was killed?): read "
         f"{counts[-1]} snapshots, up to tick {counts[-1] - 1}"
     )
+
+
+def test_a_large_swarm_cut_after_its_first_snapshot_reads_as_nothing_whole(
+    tmp_path: Path,
+) -> None:
+    # 1 000 fish: one snapshot (about 90 kB) fills a chunk of its own, and its metrics go
+    # into the next. Cut between the two, the snapshot is there without its metrics: read
+    # as cut before it, so that nothing downstream pairs snapshots with missing metrics.
+    path = tmp_path / "large.mcap"
+    rng = np.random.default_rng(3)
+    with open_recorder(path, {"fish": 1000}) as recorder:
+        for tick in range(2):
+            snapshot = Snapshot(
+                tick, float(tick), np.arange(1000), rng.uniform(0, 1.78, (1000, 3)),
+                rng.normal(size=(1000, 3)), rng.uniform(-3, 3, 1000),
+                np.ones(1000, dtype=np.int64), np.zeros(1000, dtype=np.int64),
+            )  # fmt: skip
+            recorder.snapshot(snapshot.time, encode(snapshot))
+            recorder.metrics(snapshot.time, {"tick": tick, "fitness": float("nan")})
+    data = path.read_bytes()
+    whole = read_recording(path)
+    assert len(whole.snapshots) == 2 and np.isnan(whole.metrics[0]["fitness"])
+    cuts = {}
+    for end in range(1000, len(data), 251):
+        (tmp_path / "cut.mcap").write_bytes(data[:end])
+        recording = read_recording(tmp_path / "cut.mcap")
+        assert len(recording.snapshots) == len(recording.metrics)
+        cuts[len(recording.snapshots)] = end
+    assert 0 in cuts and 1 in cuts  # both seen: cut before and after the first pair
+
+
+def test_metrics_are_strict_json_and_undefined_ones_read_back_as_nan(tmp_path: Path) -> None:
+    import json
+
+    from mcap.reader import make_reader
+
+    path = tmp_path / "nan.mcap"
+    with open_recorder(path, {"fish": 2}) as recorder:
+        snapshot = _snapshot(0, [0, 1])
+        recorder.snapshot(0.0, encode(snapshot))
+        recorder.metrics(0.0, {"shape_error": 0.5, "fitness": float("nan")})
+    with path.open("rb") as stream:
+        ((_, _, message),) = list(make_reader(stream).iter_messages(topics=["metrics"]))
+
+    def refuse(word: str) -> None:
+        raise ValueError(word)
+
+    # As Foxglove's JSON.parse reads it: no bare NaN.
+    assert json.loads(message.data, parse_constant=refuse) == {"shape_error": 0.5, "fitness": None}
+    (metrics,) = read_recording(path).metrics
+    assert metrics["shape_error"] == 0.5 and np.isnan(metrics["fitness"])
