@@ -9,9 +9,10 @@ base station's commands in :mod:`fishswarm.cli.swarm`.
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import trio
 
@@ -19,6 +20,9 @@ from fishswarm.actors.robot import HardwareError
 from fishswarm.actors.security import SecurityError, session_security
 from fishswarm.actors.session import ConnectError, SessionSettings, check_endpoint
 from fishswarm.sim.scenario import ConfigError
+
+if TYPE_CHECKING:
+    from fishswarm.study.recording import Recording
 
 
 class UserError(RuntimeError):
@@ -105,6 +109,34 @@ def _first_message(error: BaseException) -> str:
     return str(error)
 
 
+def prepare_file(path: Path | None, flag: str, *, example: str, suffix: str | None = None) -> None:
+    """Check, before any work goes into it, that a command can write the file ``path`` of
+    ``flag`` (None: not asked for); its folder is made.
+
+    Args:
+        path: the file.
+        flag: the option that names it, for messages.
+        example: a good value, for messages (e.g. ``runs/latest.mcap``).
+        suffix: the suffix the file must have (e.g. ``.npz``: NumPy adds it to any other
+            name), or None.
+
+    Raises:
+        ConfigError: it names a folder, lacks ``suffix``, or its folder cannot be made or
+            written to; with which and how to fix it.
+    """
+    if path is None:
+        return
+    if str(path) in ("", ".") or path.is_dir():
+        raise ConfigError(
+            f"{flag} must name a file, e.g. {flag} {example}; {str(path)!r} is a folder"
+        )
+    if suffix is not None and path.suffix != suffix:
+        raise ConfigError(
+            f"{flag} must name a {suffix} file, e.g. {flag} {example}; got {path.name}"
+        )
+    prepare_folder(path.parent, flag)
+
+
 def prepare_folder(folder: Path, flag: str) -> None:
     """Make the output folder now, before hours of work go into it.
 
@@ -120,3 +152,24 @@ def prepare_folder(folder: Path, flag: str) -> None:
         probe.unlink()
     except OSError as error:
         raise ConfigError(f"{flag} {folder}: cannot write there ({error.strerror})") from None
+
+
+def read_recording_for(path: Path, *, at_least: int, purpose: str) -> Recording:
+    """The recording at ``path`` with at least ``at_least`` snapshots (a note on standard
+    error when it was cut short).
+
+    Raises:
+        UserError: it cannot be read, or holds too few snapshots to ``purpose``.
+    """
+    from fishswarm.study.recording import RecordingError, read_recording
+
+    try:
+        recording = read_recording(path)
+    except RecordingError as error:
+        raise UserError(str(error)) from None
+    if note := recording.note(path):
+        print(note, file=sys.stderr)
+    if len(recording.snapshots) < at_least:
+        few = "no snapshots" if at_least == 1 else f"fewer than {at_least} snapshots"
+        raise UserError(f"{path} holds {few}: nothing to {purpose}")
+    return recording

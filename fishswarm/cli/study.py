@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -10,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from fishswarm.cli.common import prepare_file, prepare_folder, read_recording_for
 from fishswarm.sim.scenario import (
     PROFILES,
     STUDY_CODE_SWITCHES,
@@ -19,6 +21,7 @@ from fishswarm.sim.scenario import (
 )
 
 if TYPE_CHECKING:
+    from fishswarm.bluebot.vision import Vision
     from fishswarm.study.metrics import FormationTarget, OrbitTarget
     from fishswarm.study.recording import Recording
     from fishswarm.study.sweep import Engine
@@ -116,7 +119,6 @@ def engine_named(name: str) -> Engine:
 
 def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm experiment NAME``."""
-    from fishswarm.cli.common import prepare_folder
     from fishswarm.study.experiment import find
     from fishswarm.study.progress import ProgressLine, bar
     from fishswarm.study.report import write_report
@@ -242,7 +244,8 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     out = args.out or args.recording.with_suffix(".png")
     if out.suffix not in (".png", ".svg", ".pdf"):
         raise ConfigError(f"--out must end in .png, .svg or .pdf, got {out.name}")
-    recording = _read(args.recording, at_least=1, purpose="draw")
+    prepare_file(out, "--out", example="runs/latest.png")
+    recording = read_recording_for(args.recording, at_least=1, purpose="draw")
     arrays = recording.arrays()
     metrics = {
         name: np.array([m[name] for m in recording.metrics])
@@ -284,7 +287,6 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
 def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm animate RECORDING --out FILE``."""
-    from fishswarm.bluebot.vision import Vision
     from fishswarm.study.animation import AnimationError, frame_duration, resample
     from fishswarm.study.animation import animate as make_animation
     from fishswarm.study.progress import ProgressLine, bar
@@ -295,24 +297,20 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
         shown = frame_duration(args.out.suffix, args.fps)
     except AnimationError as error:
         raise ConfigError(f"--fps: {error}") from None
-    recording = _read(args.recording, at_least=2, purpose="animate")
+    prepare_file(args.out, "--out", example="runs/latest.gif")
+    recording = read_recording_for(args.recording, at_least=2, purpose="animate")
     arrays = recording.arrays()
     settings = recording.scenario
     frames = resample(
         arrays["t"], arrays["pos"], arrays["yaw"], arrays["ids"], step=args.speed * shown
     )
-    vision = Vision(
-        float(settings.get("visual_range", 3.0)),
-        float(settings.get("blind_width", 0.05)),
-        float(settings.get("sphere_radius", 0.065)),
-    )
+    vision = _vision_of(settings)
     output = ProgressLine()
 
     def show(done: int, total: int) -> None:
         if not args.quiet and (done % 10 == 0 or done == total):
             output.show(f"{bar(done, total)} frame {done}/{total}", last=done == total)
 
-    args.out.parent.mkdir(parents=True, exist_ok=True)
     try:
         make_animation(
             frames,
@@ -331,6 +329,21 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
     return 0
 
 
+def _vision_of(settings: dict[str, Any]) -> Vision:
+    """The geometric vision model the recorded run's fish saw with (range, blind spot,
+    occlusion, the study code's Manhattan range), without noise: the fish's-eye view draws
+    where the neighbours it sees are. A recording that does not say what ran (an
+    observer's) gets a BlueBot's; a run with camera vision, the geometric model of the
+    same settings."""
+    from fishswarm.bluebot.vision import Vision
+
+    try:
+        ran = Scenario.as_recorded(settings)
+    except ConfigError:
+        return Vision()
+    return dataclasses.replace(ran.vision(), noise=0.0)
+
+
 def _animated_formation(recording: Recording) -> dict[str, Any]:
     """The animation's formation arguments: the first snapshot's target, and each later
     target from the time the fish were told to take it."""
@@ -344,20 +357,3 @@ def _animated_formation(recording: Recording) -> dict[str, Any]:
         if target is not before
     ]
     return {"formation": formations[0], "switches": switches}
-
-
-def _read(path: Path, *, at_least: int, purpose: str) -> Recording:
-    """A recording with at least ``at_least`` snapshots, or a usage error saying why not."""
-    from fishswarm.cli.common import UserError
-    from fishswarm.study.recording import RecordingError, read_recording
-
-    try:
-        recording = read_recording(path)
-    except RecordingError as error:
-        raise UserError(str(error)) from None
-    if note := recording.note(path):
-        print(note, file=sys.stderr)
-    if len(recording.snapshots) < at_least:
-        few = "no snapshots" if at_least == 1 else f"fewer than {at_least} snapshots"
-        raise UserError(f"{path} holds {few}: nothing to {purpose}")
-    return recording

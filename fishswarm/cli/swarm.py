@@ -9,7 +9,6 @@ import json
 import sys
 import time
 from collections.abc import Awaitable, Callable
-from pathlib import Path
 from typing import Any
 
 import trio
@@ -42,6 +41,8 @@ from fishswarm.cli.common import (
     UserError,
     client_settings,
     endpoint_of,
+    prepare_file,
+    read_recording_for,
     run_trio,
     secure_extra,
 )
@@ -58,7 +59,6 @@ from fishswarm.study.recording import (
     export_csv,
     export_npz,
     open_recorder,
-    read_recording,
 )
 from fishswarm.study.scene import stage_of
 from fishswarm.study.view_settings import ViewError, ViewSettings
@@ -84,11 +84,16 @@ def _run_trio(main: Callable[[], Any]) -> Any:
     return run_trio(main, errors=USER_ERRORS)
 
 
-def progress_printer(ticks: int, stream: Any = sys.stderr) -> Callable[[Progress], None]:
+def progress_printer(
+    ticks: int | None, output: ProgressLine | None = None
+) -> Callable[[Progress], None]:
     """Print a progress line per snapshot (about 20 lines for long runs; one updating line on
-    a terminal)."""
-    every = max(1, ticks // 20)
-    output = ProgressLine(stream)
+    a terminal). With ``ticks`` None (an observer that does not know when the run ends),
+    no bar and no total: every snapshot on a terminal, every tenth otherwise. The caller
+    that passes ``output`` closes it (:meth:`~ProgressLine.close` ends an updating line
+    the run left open)."""
+    output = ProgressLine(sys.stderr) if output is None else output
+    every = (1 if output.tty else 10) if ticks is None else max(1, ticks // 20)
 
     def show(progress: Progress) -> None:
         if progress.tick % every and progress.tick != ticks:
@@ -103,22 +108,16 @@ def progress_printer(ticks: int, stream: Any = sys.stderr) -> Callable[[Progress
             f"pairwise {m['pairwise_distance']:.3f} m  "
             f"nearest {m['nearest_neighbor_distance']:.3f} m"
         )
+        count = (
+            f"{progress.tick}" if ticks is None else f"{progress.tick:>{len(str(ticks))}}/{ticks}"
+        )
         line = (
-            f"{prefix}tick {progress.tick:>{len(str(ticks))}}/{ticks}  t={progress.time:7.1f} s  "
+            f"{prefix}tick {count}  t={progress.time:7.1f} s  "
             f"fish {progress.fish}  {measures}  seen {m['neighbors_seen']:.1f}"
         )
-        output.show(line, last=progress.tick >= ticks)
+        output.show(line, last=ticks is not None and progress.tick >= ticks)
 
     return show
-
-
-def _check_file_path(flag: str, path: Path | None) -> None:
-    """A path a command is to write a file to must not name a directory."""
-    if path is not None and (str(path) in ("", ".") or path.is_dir()):
-        raise ConfigError(
-            f"{flag} must name a file, e.g. {flag} runs/latest"
-            f"{'.json' if flag == '--summary' else '.mcap'}; {str(path)!r} is a directory"
-        )
 
 
 CROWDED_SPACING = BODY_LENGTH / 4
@@ -164,8 +163,8 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
             f"{args.perception_timeout:g}"
         )
     scenario.fish_params()  # reads a replica model now: a bad one is a usage error, not a crash
-    for flag, path in (("--record", args.record), ("--summary", args.summary)):
-        _check_file_path(flag, path)
+    prepare_file(args.record, "--record", example="runs/latest.mcap")
+    prepare_file(args.summary, "--summary", example="runs/latest.json")
     settings = LaunchSettings(
         scenario=scenario,
         procs=args.procs,
@@ -404,7 +403,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                     await observer.wait_for_tick(actor.tick)
                 nursery.cancel_scope.cancel()
 
-    _check_file_path("--record", args.record)
+    prepare_file(args.record, "--record", example="runs/world.mcap")
     _run_trio(main)
     if args.record is not None:
         print(f"recording: {args.record}", file=sys.stderr)
@@ -427,9 +426,10 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm observe``: watch a swarm from anywhere."""
     keys = KeySpace(args.swarm)
     ticks = args.ticks
+    prepare_file(args.record, "--record", example="runs/observed.mcap")
 
     async def main() -> None:
-        show = progress_printer(ticks or 0, sys.stderr)
+        show = progress_printer(ticks, line)
         recorder_context = open_recorder(args.record, {"observed": True}) if args.record else None
         recorder = recorder_context.__enter__() if recorder_context else None
         try:
@@ -457,7 +457,11 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                 recorder_context.__exit__(None, None, None)
 
     history: list[Progress] = []
-    _run_trio(main)
+    line = ProgressLine(sys.stderr)
+    try:
+        _run_trio(main)
+    finally:
+        line.close()
     if history:
         last = history[-1]
         print(
@@ -542,12 +546,9 @@ def export(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm export``."""
     if args.npz is None and args.csv is None:
         raise ConfigError("say what to write: --npz OUT.npz and/or --csv OUT.csv")
-    try:
-        recording = read_recording(args.recording)
-    except RecordingError as error:
-        raise UserError(str(error)) from None
-    if note := recording.note(args.recording):
-        print(note, file=sys.stderr)
+    prepare_file(args.npz, "--npz", example="runs/latest.npz", suffix=".npz")
+    prepare_file(args.csv, "--csv", example="runs/latest.csv")
+    recording = read_recording_for(args.recording, at_least=1, purpose="export")
     if args.npz is not None:
         export_npz(recording, args.npz)
         print(f"wrote {args.npz}", file=sys.stderr)

@@ -474,9 +474,17 @@ def test_a_formation_run_reports_its_shape_and_flags(tmp_path: Path) -> None:
     )
     assert result.returncode == 0, result.stderr
     assert "formation: shape error" in result.stderr
-    data = json.loads(summary.read_text())
+    assert (
+        "the study's fitness ΣF:" in result.stderr and "summed over 11 snapshots" in result.stderr
+    )
+
+    def refuse(word: str) -> None:
+        raise ValueError(f"{word} is not JSON")
+
+    data = json.loads(summary.read_text(), parse_constant=refuse)
     formation = data["formation"]
     assert 0.0 <= formation["joined_fraction"] <= 1.0 and formation["shape_error"] > 0.0
+    assert formation["fitness_total"] >= formation["fitness"] > 0.0
     # Every fish flags at every decision (2 Hz for 5 s); each flag reaches the 5 others.
     assert data["counts"]["broadcasts"] == 6 * 10
     assert data["counts"]["deliveries"] >= 5 * 6 * 9

@@ -66,3 +66,55 @@ def test_an_animation_plays_at_the_speed_asked_for(tmp_path: Path) -> None:
             shown.append(gif.info["duration"] / 1000)
     played = sum(shown) - shown[-1]  # until the last frame appears
     assert played == pytest.approx(12 / 6, rel=0.05)
+
+
+def test_outputs_that_cannot_be_written_are_refused_before_any_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    recording = _observed(tmp_path / "observed.mcap")
+    folder = tmp_path / "a folder"
+    folder.mkdir()
+    for args, message in (
+        (["export", str(recording), "--npz", str(tmp_path / "arrays")],
+         "--npz must name a .npz file, e.g. --npz runs/latest.npz; got arrays"),
+        (["export", str(recording), "--npz", str(folder)], f"{str(folder)!r} is a folder"),
+        (["export", str(recording), "--csv", str(folder)], "--csv must name a file"),
+        (["plot", str(recording), "--out", "/proc/none/x.png"],
+         "--out /proc/none: cannot write there"),
+        (["animate", str(recording), "--out", str(folder / "sub" / "x.gif"), "--fps", "4"],
+         None),
+        (["observe", "--connect", "tcp/127.0.0.1:1", "--record", str(folder)],
+         "--record must name a file, e.g. --record runs/observed.mcap"),
+    ):  # fmt: skip
+        try:
+            code = main(args)
+        except SystemExit as usage:  # a usage error ends as argparse's do
+            code = usage.code
+        err = capsys.readouterr().err
+        if message is None:  # a folder that does not exist yet is made
+            assert code == 0 and (folder / "sub" / "x.gif").exists(), err
+            continue
+        assert code == 2 and message in err and "Traceback" not in err, (args, err)
+    assert not (tmp_path / "arrays.npz").exists()
+
+
+def test_a_recording_without_snapshots_has_nothing_to_export(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    recording = _observed(tmp_path / "nothing.mcap", ticks=0)
+    assert main(["export", str(recording), "--npz", str(tmp_path / "x.npz")]) == 1
+    assert "holds no snapshots: nothing to export" in capsys.readouterr().err
+    assert not (tmp_path / "x.npz").exists()
+
+
+def test_the_fish_eye_view_sees_with_the_recorded_runs_vision_model() -> None:
+    from fishswarm.bluebot.vision import Vision
+    from fishswarm.cli.study import _vision_of
+    from fishswarm.sim.scenario import Scenario
+
+    ran = Scenario(profile="study-code", blind_width=0.25, vision_noise=0.1)
+    vision = _vision_of(ran.to_dict())
+    # The study code's range is Manhattan; the noise is left out (the view draws where
+    # neighbours are); the blind spot is the run's.
+    assert vision == Vision(3.0, 0.25, 0.065, 0.0, manhattan=True)
+    assert _vision_of({"observed": True}) == Vision()  # an observer's: a BlueBot's
