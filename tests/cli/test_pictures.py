@@ -86,6 +86,7 @@ def test_outputs_that_cannot_be_written_are_refused_before_any_work(
         (["observe", "--connect", "tcp/127.0.0.1:1", "--record", str(folder)],
          "--record must name a file, e.g. --record runs/observed.mcap"),
     ):  # fmt: skip
+        code: int | str | None
         try:
             code = main(args)
         except SystemExit as usage:  # a usage error ends as argparse's do
