@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -362,10 +362,26 @@ class Scenario:
             isinstance(self.switch_at, int | float) and 0 <= self.switch_at <= self.duration,
             f"switch_at must be a time within the run, [0, duration] s, got {self.switch_at!r}",
         )
+        need(
+            _real(self.formation_heading_deg),
+            f"formation_heading_deg must be a finite angle, got {self.formation_heading_deg!r}",
+        )
+        for name in ("spacing", "tolerance"):
+            value = getattr(self, name)
+            need(
+                value is None or _positive(value), f"{name} must be positive metres, got {value!r}"
+            )
+        periods = self.duration / self.control_period
+        need(
+            abs(periods - round(periods)) <= 1e-9 * max(1.0, periods),
+            f"duration ({self.duration:g} s) must be a whole number of control periods "
+            f"({self.control_period:g} s): e.g. {math.floor(periods) * self.control_period:g} "
+            f"or {math.ceil(periods) * self.control_period:g} s",
+        )
 
     @property
     def ticks(self) -> int:
-        """Number of control periods in the run."""
+        """Number of control periods in the run (a whole number: checked on construction)."""
         return max(1, round(self.duration / self.control_period))
 
     @property
@@ -516,6 +532,10 @@ class Scenario:
                     raise ConfigError(
                         f"{source}: {point} must be a list of three lengths, got {given!r}"
                     )
+                if not all(_real(v) for v in given):
+                    raise ConfigError(
+                        f"{source}: {point} must be a list of three numbers (m), got {given!r}"
+                    )
                 values[point] = tuple(float(v) for v in given)
         for name in (
             "duration",
@@ -544,6 +564,10 @@ class Scenario:
         ):
             if isinstance(values.get(name), int) and not isinstance(values[name], bool):
                 values[name] = float(values[name])
+        for name, value in values.items():
+            wanted = _SETTING_KINDS.get(str(known[name].type).split(" | ")[0])
+            if wanted is not None and not wanted[0](value):
+                raise ConfigError(f"{source}: {name} must be {wanted[1]}, got {value!r}")
         try:
             return cls(**values)
         except ConfigError as error:
@@ -573,6 +597,21 @@ def read_toml(path: Path, kind: str) -> dict[str, Any]:
         raise ConfigError(f"{kind} file {path} does not exist") from None
     except tomllib.TOMLDecodeError as error:
         raise ConfigError(f"{path} is not valid TOML: {error}") from None
+
+
+def _real(value: object) -> bool:
+    """A finite number (a bool is not one, though Python counts it as an int)."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+_SETTING_KINDS: dict[str, tuple[Callable[[object], bool], str]] = {
+    "float": (_real, "a finite number"),
+    "int": (lambda value: isinstance(value, int) and not isinstance(value, bool), "a whole number"),
+    "str": (lambda value: isinstance(value, str), "text (in quotes)"),
+    "bool": (lambda value: isinstance(value, bool), "true or false"),
+}
+"""What a setting read from a file must be, by the type its field declares (a setting given
+as None is "not set", and never checked)."""
 
 
 def _positive(value: object) -> bool:

@@ -65,11 +65,44 @@ def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
         ({"station_distance": 0.2}, r"with a landmark to hold station behind \(landmark ="),
         ({"effort_margin": -1.0}, "effort_margin must be 0 or more"),
         ({"rotate_effort": "yes"}, "flags and rotate_effort must be true or false"),
+        ({"formation_heading_deg": math.nan}, "formation_heading_deg must be a finite angle"),
+        ({"spacing": math.inf}, "spacing must be positive metres"),
+        ({"tolerance": 0.0}, "tolerance must be positive metres"),
+        (
+            {"duration": 2.5},
+            r"duration \(2.5 s\) must be a whole number of control periods "
+            r"\(1 s\): e.g. 2 or 3 s",
+        ),
     ],
 )
 def test_bad_settings_say_what_is_wrong(changes: dict[str, object], message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         Scenario().replace(**changes)
+
+
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        ("fish = true", "fish must be a whole number, got True"),
+        ("seed = 1.5", "seed must be a whole number, got 1.5"),
+        ("tank = [1.78, 1.78, true]", r"tank must be a list of three numbers \(m\)"),
+        ('flow = ["a", 0, 0]', r"flow must be a list of three numbers \(m\)"),
+        ('wake_saving = "0.3"', "wake_saving must be a finite number, got '0.3'"),
+        ("sphere_radius = nan", "sphere_radius must be a finite number, got nan"),
+        ("formation_heading_deg = inf", "formation_heading_deg must be a finite number"),
+        ("swarm = 3", r"swarm must be text \(in quotes\), got 3"),
+        ("model = 3", r"model must be text \(in quotes\), got 3"),
+        ('flags = "yes"', "flags must be true or false, got 'yes'"),
+    ],
+)
+def test_a_file_setting_of_the_wrong_kind_is_named(tmp_path: Path, line: str, message: str) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(f"[scenario]\n{line}\n")
+    with pytest.raises(ConfigError, match=f"s.toml: {message}"):
+        Scenario.from_toml(path)
+    # Durations and periods that are whole numbers and periods that divide them are fine.
+    path.write_text("[scenario]\nduration = 3\ncontrol_period = 0.1\nseed = 2\n")
+    assert Scenario.from_toml(path).ticks == 30
 
 
 SHIPPED = sorted(EXPERIMENTS_FOLDER.glob("*.toml"))
