@@ -631,7 +631,8 @@ def with_formation(params: FishParams, shape: str) -> FishParams:
         ValueError: an unknown shape.
     """
     steering = params.steering
-    if params.behavior is not FORMATION or not isinstance(steering, FormationParams):
+    # By name: parameters that crossed into a worker process carry a copy of the behaviour.
+    if params.behavior.name != FORMATION.name or not isinstance(steering, FormationParams):
         return params
     if steering.shape == shape:
         return params

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing
 import os
 import signal
@@ -333,6 +334,25 @@ def test_a_formation_with_flags_flowing_is_the_same_across_processes_and_engines
         assert result.summary["counts"]["broadcasts"] == 8 * 8
         assert result.summary["formation"]["shape_error"] > 0.0
         np.testing.assert_array_equal(read_recording(path).arrays()["pos"], reference.position)
+
+
+def test_a_scheduled_formation_switch_reaches_fish_in_worker_processes(
+    endpoint: str, tmp_path: Path
+) -> None:
+    # The fish of `fishswarm run` decide in spawned worker processes, where their
+    # parameters arrive as copies: the switch must reach them there as in the batch engine.
+    scenario = Scenario(
+        fish=6, behavior="formation", formation="pyramid", switch_formation="diamond",
+        switch_at=1.0, duration=4.0, seed=2, control_period=0.5, controller="pid",
+        spawn_radius=0.4, spacing=0.25,
+    )  # fmt: skip
+    reference = run_batch(scenario)
+    unswitched = run_batch(dataclasses.replace(scenario, switch_formation=None))
+    assert not np.array_equal(reference.position[-1], unswitched.position[-1])
+    path = tmp_path / "switch.mcap"
+    result = _launch(scenario, endpoint, path)
+    assert result.exit_code == 0
+    np.testing.assert_array_equal(read_recording(path).arrays()["pos"], reference.position)
 
 
 def test_effort_sharing_in_a_flow_is_the_same_across_processes_and_engines(

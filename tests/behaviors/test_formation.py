@@ -289,6 +289,11 @@ def test_with_formation_leaves_other_behaviours_alone() -> None:
     )
     assert with_formation(formation, "pyramid") is formation
     assert with_formation(formation, "diamond").steering.shape == "diamond"
+    # As a worker process receives them: a copy, whose behaviour is not the same object.
+    import pickle
+
+    copied = pickle.loads(pickle.dumps(formation))
+    assert with_formation(copied, "diamond").steering.shape == "diamond"
 
 
 def test_a_fish_closing_on_its_place_aims_short_of_it_by_its_drift() -> None:
