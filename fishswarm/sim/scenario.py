@@ -483,8 +483,18 @@ class Scenario:
         return behavior_named(self.behavior).spawn_radius
 
     def replace(self, **changes: Any) -> Scenario:
-        """A copy with some settings changed (``None`` values are ignored)."""
-        return dataclasses.replace(self, **{k: v for k, v in changes.items() if v is not None})
+        """A copy with some settings changed (``None`` values are ignored). Another
+        behaviour without a controller named brings its own default controller, unless this
+        scenario's controller was chosen (differs from its behaviour's default)."""
+        given = {k: v for k, v in changes.items() if v is not None}
+        behavior = given.get("behavior", self.behavior)
+        if (
+            behavior != self.behavior
+            and "controller" not in given
+            and self.controller == behavior_named(self.behavior).controller
+        ):
+            given["controller"] = None  # resolved again from the new behaviour
+        return dataclasses.replace(self, **given)
 
     def to_dict(self) -> dict[str, Any]:
         """The settings as plain data (for the summary and the recording)."""

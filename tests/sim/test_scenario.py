@@ -36,6 +36,23 @@ def test_the_controller_defaults_to_the_behaviours_and_a_named_one_stays() -> No
     assert Scenario.from_mapping(formation.to_dict()).controller == "pid"
     assert fish_params({"behavior": "formation"}).controller == "pid"
     assert fish_params({"behavior": "orbit", "orbit_radius": 0.45}).controller == "homing"
+    # Another behaviour given later (fishswarm run --behavior over the defaults or a file)
+    # brings its own default, unless a controller was chosen.
+    assert Scenario().replace(behavior="formation").controller == "pid"
+    assert Scenario().replace(behavior="formation", controller="homing").controller == "homing"
+    assert Scenario(controller="pid").replace(behavior="aggregation").controller == "pid"
+    assert formation.replace(behavior="orbit").controller == "homing"
+
+
+def test_run_behavior_formation_steers_with_pid_from_the_command_line() -> None:
+    from fishswarm.cli.parsers import build_parser, scenario_from
+
+    parser = build_parser()
+    chosen = scenario_from(parser.parse_args(["run", "--behavior", "formation"]))
+    assert chosen.controller == "pid"
+    named = scenario_from(parser.parse_args(["run", "--behavior", "formation", "--controller",
+                                             "homing"]))  # fmt: skip
+    assert named.controller == "homing"
 
 
 def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
