@@ -144,63 +144,68 @@ async def run_swarm(
             extra=router_extra,
             shared_memory_pool=shared_memory_pool(scenario.fish),
         )
-        recorder = (
-            files.enter_context(open_recorder(settings.record, scenario.to_dict()))
-            if settings.record is not None
-            else None
-        )
-        observer = Observer.of(
-            scenario, recorder=recorder, on_progress=on_progress, on_scene=on_scene
-        )
-        try:
-            async with open_session(router) as session, trio.open_nursery() as nursery:
-                bus = ZenohBus(session)
-                await nursery.start(observer.run, bus)
-                await nursery.start(channel.run, bus)
-                await nursery.start(serve_control, session, world)
-                params = with_compiled_decisions(scenario.fish_params(), scenario.fish)
-                for index, ids in enumerate(schools):
-                    spec = WorkerSpec(
-                        index,
-                        ids,
-                        params,
-                        scenario.swarm,
-                        _connect_to(settings.listen),
-                        perception_timeout=settings.perception_timeout,
-                        log_level=settings.log_level,
-                        session_extra=worker_extra.get(school_of(index), {}),
-                    )
-                    workers.append(start_worker(spec))
-                nursery.start_soon(_watch_workers, workers, died, world)
-                if settings.handle_signals:
-                    nursery.start_soon(_watch_signals, interrupted, nursery.cancel_scope)
-                await world.run(bus)
-                with trio.move_on_after(5.0):
-                    await observer.wait_for_tick(world.tick)
-                status = "stopped" if world.state_name == "stopped" else "finished"
-                nursery.cancel_scope.cancel()
-            if interrupted.is_set():
-                status = "interrupted"
-        except BaseException as error:
-            if _contains(error, KeyboardInterrupt):
-                status = "interrupted"
-            raise
-        finally:
-            with trio.CancelScope(shield=True):
-                await _stop_all(workers)
-            summary = _summary(
-                settings,
-                status,
-                world,
-                channel,
-                observer,
-                workers,
-                died,
-                time.perf_counter() - started,
+        # The router first: a run that cannot open it (the port is taken) fails before
+        # it replaces the last run's recording and summary.
+        async with open_session(router) as session:
+            recorder = (
+                files.enter_context(open_recorder(settings.record, scenario.to_dict()))
+                if settings.record is not None
+                else None
             )
-            if settings.summary is not None:
-                settings.summary.parent.mkdir(parents=True, exist_ok=True)
-                settings.summary.write_text(json_text(summary, indent=2) + "\n", encoding="utf-8")
+            observer = Observer.of(
+                scenario, recorder=recorder, on_progress=on_progress, on_scene=on_scene
+            )
+            try:
+                async with trio.open_nursery() as nursery:
+                    bus = ZenohBus(session)
+                    await nursery.start(observer.run, bus)
+                    await nursery.start(channel.run, bus)
+                    await nursery.start(serve_control, session, world)
+                    params = with_compiled_decisions(scenario.fish_params(), scenario.fish)
+                    for index, ids in enumerate(schools):
+                        spec = WorkerSpec(
+                            index,
+                            ids,
+                            params,
+                            scenario.swarm,
+                            _connect_to(settings.listen),
+                            perception_timeout=settings.perception_timeout,
+                            log_level=settings.log_level,
+                            session_extra=worker_extra.get(school_of(index), {}),
+                        )
+                        workers.append(start_worker(spec))
+                    nursery.start_soon(_watch_workers, workers, died, world)
+                    if settings.handle_signals:
+                        nursery.start_soon(_watch_signals, interrupted, nursery.cancel_scope)
+                    await world.run(bus)
+                    with trio.move_on_after(5.0):
+                        await observer.wait_for_tick(world.tick)
+                    status = "stopped" if world.state_name == "stopped" else "finished"
+                    nursery.cancel_scope.cancel()
+                if interrupted.is_set():
+                    status = "interrupted"
+            except BaseException as error:
+                if _contains(error, KeyboardInterrupt):
+                    status = "interrupted"
+                raise
+            finally:
+                with trio.CancelScope(shield=True):
+                    await _stop_all(workers)
+                summary = _summary(
+                    settings,
+                    status,
+                    world,
+                    channel,
+                    observer,
+                    workers,
+                    died,
+                    time.perf_counter() - started,
+                )
+                if settings.summary is not None:
+                    settings.summary.parent.mkdir(parents=True, exist_ok=True)
+                    settings.summary.write_text(
+                        json_text(summary, indent=2) + "\n", encoding="utf-8"
+                    )
     exit_code = (
         EXIT_INTERRUPTED
         if status == "interrupted"

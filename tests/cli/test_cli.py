@@ -347,6 +347,25 @@ def test_a_run_killed_outright_leaves_a_recording_readable_to_its_last_chunk(
     assert plotted.returncode == 0 and "was cut short" in plotted.stderr
 
 
+def test_a_run_that_cannot_open_its_router_keeps_the_last_runs_files(tmp_path: Path) -> None:
+    import socket
+
+    record, summary = tmp_path / "latest.mcap", tmp_path / "latest.json"
+    record.write_bytes(b"the last run's recording")
+    summary.write_text('{"status": "finished"}')
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = _run("run", "--fish", "2", "--duration", "2", "--quiet",
+                      "--listen", f"tcp/127.0.0.1:{port}", "--record", str(record),
+                      "--summary", str(summary), timeout=60)  # fmt: skip
+    assert result.returncode == 1, result.stderr
+    assert "cannot open a router session" in result.stderr
+    assert record.read_bytes() == b"the last run's recording"
+    assert summary.read_text() == '{"status": "finished"}'
+
+
 def test_fish_alone_without_router_fails_clearly() -> None:
     result = _run(
         "fish",
