@@ -203,22 +203,30 @@ def init_secure(
     hosts: Sequence[str] = ("localhost", "127.0.0.1"),
     swarm: str = "default",
     days: int = DEFAULT_DAYS,
+    replace: bool = False,
 ) -> list[Path]:
-    """Make a secured swarm's authority, certificates and access control in ``folder``.
+    """Make a secured swarm's authority, certificates and access control in ``folder``; or,
+    where ``folder`` already holds an authority, add to it: certificates for the subjects
+    that have none yet, signed by it (those given out stay valid), and the access control
+    rewritten for every subject with a certificate there.
 
     Args:
-        folder: where (created; existing files of the same names are replaced).
+        folder: where (created).
         robots: robot ids to make certificates for.
         observers: names of observers to make certificates for (besides ``observer``).
         hosts: names and addresses the router is reached by (its certificate's names).
         swarm: the swarm whose keys the access control names.
         days: how long the certificates are valid.
+        replace: make a new authority even where ``folder`` holds one (every certificate
+            the old one signed stops being accepted).
 
     Returns:
         The files written.
 
     Raises:
         ValueError: a bad robot id, observer name, host or number of days.
+        SecurityError: ``folder`` holds half an authority (its certificate or its key
+            alone), or one that cannot be read.
     """
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes
@@ -242,6 +250,31 @@ def init_secure(
     folder.mkdir(parents=True, exist_ok=True)
     now = datetime.datetime.now(datetime.UTC)
     start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=days)
+    parts = [(folder / f"{AUTHORITY}{suffix}").is_file() for suffix in (".pem", ".key")]
+    if any(parts) and not replace:
+        if not all(parts):
+            raise SecurityError(
+                f"{folder} holds half an authority ({AUTHORITY}.pem or {AUTHORITY}.key alone): "
+                "put the missing file back, or make a new authority with --force (the "
+                "certificates already given out then stop being accepted)"
+            )
+        authority_key, authority = _load_authority(folder)
+        held = sorted(
+            path.stem
+            for path in folder.glob("*.pem")
+            if path.stem != AUTHORITY and path.with_suffix(".key").is_file()
+        )
+        everyone = [*subjects, *(subject for subject in held if subject not in subjects)]
+        end = min(end, authority.not_valid_after_utc)
+        written: list[Path] = []
+        for subject in subjects:
+            if subject not in held:
+                written += _issue(
+                    folder, subject, authority_key, authority.subject, names, start, end
+                )
+        access = folder / ACCESS_FILE
+        access.write_text(json.dumps(access_control(everyone, keys), indent=2), encoding="utf-8")
+        return [*written, access]
     authority_key = ec.generate_private_key(ec.SECP256R1())
     authority_name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, f"fishswarm {swarm}")])
     usage = dict.fromkeys(
@@ -325,21 +358,16 @@ def issue_for_run(folder: Path, subjects: Sequence[str], out: Path, *, hours: fl
         SecurityError: the authority's key or certificate is missing or unreadable.
     """
     from cryptography import x509
-    from cryptography.hazmat.primitives import serialization
 
-    key_path, certificate_path = folder / f"{AUTHORITY}.key", folder / f"{AUTHORITY}.pem"
-    for path in (key_path, certificate_path):
+    for path in (folder / f"{AUTHORITY}.key", folder / f"{AUTHORITY}.pem"):
         if not path.is_file():
             raise SecurityError(
                 f"{path} is missing: a secured run signs certificates for its worker "
                 "processes with the authority's key (run it where 'fishswarm secure init' "
                 "wrote its files)"
             )
-    try:
-        authority_key = serialization.load_pem_private_key(key_path.read_bytes(), None)
-        authority = x509.load_pem_x509_certificate(certificate_path.read_bytes())
-    except ValueError as error:
-        raise SecurityError(f"{key_path} or {certificate_path} is unreadable: {error}") from None
+    authority_key, authority = _load_authority(folder)
+    certificate_path = folder / f"{AUTHORITY}.pem"
     now = datetime.datetime.now(datetime.UTC)
     start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(hours=hours)
     names = [x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]
@@ -347,6 +375,24 @@ def issue_for_run(folder: Path, subjects: Sequence[str], out: Path, *, hours: fl
     (out / f"{AUTHORITY}.pem").write_bytes(certificate_path.read_bytes())
     for subject in subjects:
         _issue(out, subject, authority_key, authority.subject, names, start, end)
+
+
+def _load_authority(folder: Path) -> tuple[Any, Any]:
+    """The key and certificate of the authority in ``folder``.
+
+    Raises:
+        SecurityError: either cannot be read.
+    """
+    from cryptography import x509
+    from cryptography.hazmat.primitives import serialization
+
+    key_path, certificate_path = folder / f"{AUTHORITY}.key", folder / f"{AUTHORITY}.pem"
+    try:
+        key = serialization.load_pem_private_key(key_path.read_bytes(), None)
+        certificate = x509.load_pem_x509_certificate(certificate_path.read_bytes())
+    except (OSError, ValueError) as error:
+        raise SecurityError(f"{key_path} or {certificate_path} is unreadable: {error}") from None
+    return key, certificate
 
 
 def _write(folder: Path, name: str, key: Any, certificate: Any) -> list[Path]:
@@ -365,6 +411,15 @@ def _write(folder: Path, name: str, key: Any, certificate: Any) -> list[Path]:
     return [certificate_path, key_path]
 
 
+def _option_for(subject: str) -> str:
+    """What ``secure init`` needs to be told to make ``subject``'s certificate."""
+    if subject.startswith("robot-"):
+        return f" --robots {subject.removeprefix('robot-')}"
+    if subject.startswith("observer-"):
+        return f" --observers {subject.removeprefix('observer-')}"
+    return ""
+
+
 def check_subject(folder: Path, subject: str) -> None:
     """Check that ``folder`` holds a usable certificate of its authority for ``subject``.
 
@@ -377,7 +432,7 @@ def check_subject(folder: Path, subject: str) -> None:
     from cryptography.hazmat.primitives.asymmetric import ec
     from cryptography.x509.oid import NameOID
 
-    fix = f"make them with: fishswarm secure init {folder}"
+    fix = f"make them with: fishswarm secure init {folder}{_option_for(subject)}"
     paths = [folder / f"{AUTHORITY}.pem", folder / f"{subject}.pem", folder / f"{subject}.key"]
     for path in paths:
         if not path.is_file():

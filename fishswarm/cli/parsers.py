@@ -529,6 +529,13 @@ def build_parser() -> argparse.ArgumentParser:
     init.add_argument("--swarm", default="default", help="swarm name (default default)")
     init.add_argument("--days", type=int, default=365,
                       help="how long the certificates are valid (default 365)")  # fmt: skip
+    init.add_argument(
+        "--force",
+        action="store_true",
+        help="make a new authority even if DIR holds one (without it, certificates for new "
+        "robots and observers are added to DIR's authority, and those given out stay valid; "
+        "with it, every certificate the old authority signed stops being accepted)",
+    )
 
     learn = commands.add_parser(
         "learn",

@@ -519,6 +519,8 @@ def router(args: argparse.Namespace, scenario: Scenario | None) -> int:
 def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm secure init DIR``: a secured swarm's authority, certificates and access
     control."""
+    authority = args.folder / f"{AUTHORITY}.pem"
+    adding = authority.exists() and not args.force
     try:
         written = init_secure(
             args.folder,
@@ -527,12 +529,22 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
             hosts=args.host or ("localhost", "127.0.0.1"),
             swarm=args.swarm,
             days=args.days,
+            replace=args.force,
         )
     except ValueError as error:
         raise ConfigError(str(error)) from None
     except OSError as error:
         raise UserError(f"cannot write into {args.folder}: {error}") from None
     subjects = sorted({p.stem for p in written if p.suffix == ".pem"} - {AUTHORITY})
+    if adding:
+        made = f"certificates for {', '.join(subjects)}" if subjects else "no new certificate"
+        print(
+            f"{args.folder} already holds an authority: added {made} (signed by it; those "
+            f"given out stay valid) and rewrote the router's access control in {ACCESS_FILE} "
+            "(give the router the new one). --force makes a new authority instead.",
+            file=sys.stderr,
+        )
+        return 0
     print(
         f"wrote {len(written)} files to {args.folder}: certificates for {', '.join(subjects)}; "
         f"the router's access control in {ACCESS_FILE}. Keep ca.key off the robots; give "

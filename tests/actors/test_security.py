@@ -76,7 +76,9 @@ def test_certificates_that_cannot_be_used_get_a_clear_message(
     secure_dir: Path, tmp_path: Path
 ) -> None:
     with pytest.raises(
-        SecurityError, match=r"robot-7.pem is missing: no certificate for 'robot-7'"
+        SecurityError,
+        match=r"robot-7.pem is missing: no certificate for 'robot-7' \(make them with: "
+        r"fishswarm secure init .* --robots 7\)",
     ):
         check_subject(secure_dir, "robot-7")
     # Robot 1's certificate copied under robot 2's name is still robot 1's.
@@ -98,6 +100,37 @@ def test_certificates_that_cannot_be_used_get_a_clear_message(
     (copy / ACCESS_FILE).unlink()
     with pytest.raises(SecurityError, match=r"access_control.json is missing"):
         session_security(copy, "router", router=True)
+
+
+def test_secure_init_on_a_folder_with_an_authority_adds_to_it(
+    secure_dir: Path, tmp_path: Path
+) -> None:
+    folder = tmp_path / "lab"
+    shutil.copytree(secure_dir, folder)
+    given_out = {name: (folder / name).read_bytes() for name in ("ca.pem", "robot-2.pem")}
+    written = init_secure(folder, robots=[1, 3], observers=["bob"])
+    # Only the subjects without a certificate get one, signed by the same authority, and
+    # everything given out before stays as it was and valid.
+    assert sorted(path.name for path in written) == [
+        "access_control.json", "observer-bob.key", "observer-bob.pem", "robot-3.key",
+        "robot-3.pem",
+    ]  # fmt: skip
+    for name, content in given_out.items():
+        assert (folder / name).read_bytes() == content
+    for subject in ("robot-1", "robot-2", "robot-3", "observer-lab", "observer-bob", "world"):
+        check_subject(folder, subject)
+    # The router's access control names every subject with a certificate there.
+    rules = {rule["id"] for rule in json.loads((folder / ACCESS_FILE).read_text())["rules"]}
+    assert {"robot-2-publish", "robot-3-publish", "observer-lab-subscribe"} <= rules
+    # A new authority only when asked for: the old certificates are then not accepted.
+    init_secure(folder, robots=[1], replace=True)
+    assert (folder / "ca.pem").read_bytes() != given_out["ca.pem"]
+    with pytest.raises(SecurityError, match="was not signed by the authority"):
+        check_subject(folder, "robot-2")
+    # Half an authority is not guessed at.
+    (folder / "ca.key").unlink()
+    with pytest.raises(SecurityError, match=r"holds half an authority.*--force"):
+        init_secure(folder, robots=[4])
 
 
 def _expired(folder: Path, subject: str) -> None:
