@@ -83,9 +83,17 @@ def split_fish(ids: list[int], procs: int) -> list[tuple[int, ...]]:
     return groups
 
 
+STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+"""What stops a run: the launcher's to handle, never a worker's."""
+
+
 def worker_main(spec: WorkerSpec, connection: Connection) -> None:
-    """Entry point of a worker process."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    """Entry point of a worker process: Ctrl-C and SIGTERM are the launcher's to act on
+    (sent to the whole process group, they reach the worker too), which stops the worker
+    through its pipe and collects its counters."""
+    for number in STOP_SIGNALS:
+        signal.signal(number, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
     tune_allocator()
     logging.basicConfig(level=spec.log_level, format="%(levelname)s %(name)s: %(message)s")
     prepare(spec.params)
@@ -148,7 +156,14 @@ def start_worker(spec: WorkerSpec) -> Worker:
     process = context.Process(
         target=worker_main, args=(spec, theirs), name=f"fishswarm-worker-{spec.index}", daemon=True
     )
-    process.start()
+    # Started with Ctrl-C and SIGTERM held back (the mask is inherited), so that one sent to
+    # the process group while the new interpreter imports fishswarm does not end it with a
+    # traceback; worker_main ignores them and lets them through.
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    try:
+        process.start()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
     theirs.close()
     return Worker(spec, process, ours)
 

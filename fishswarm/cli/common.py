@@ -9,6 +9,7 @@ base station's commands in :mod:`fishswarm.cli.swarm`.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -85,22 +86,53 @@ def secure_extra(
 def run_trio(
     main: Callable[[], Any], *, errors: tuple[type[BaseException], ...] = USER_ERRORS
 ) -> Any:
-    """Run ``main`` under trio; ``errors`` (a user can fix them) come out as one
-    :class:`UserError` with the first one's message."""
+    """Run ``main`` under trio, SIGTERM stopping it as Ctrl-C does (a KeyboardInterrupt
+    after its sessions and files are closed: what systemd and ``docker stop`` send).
+
+    Raises:
+        ConfigError: a bad argument found on the way (the command's usage error).
+        UserError: another of ``errors`` (a user can fix them), with the first one's message.
+        KeyboardInterrupt: Ctrl-C or SIGTERM.
+    """
     try:
-        return trio.run(main)
+        return trio.run(_stopped_by_sigterm, main)
     except KeyboardInterrupt:
         raise
     except BaseExceptionGroup as group:
         interrupted, _ = group.split(KeyboardInterrupt)
         if interrupted is not None:
             raise KeyboardInterrupt from None
+        usage, rest = group.split(ConfigError)
+        if usage is not None and rest is None:
+            raise ConfigError(_first_message(usage)) from None
         matched, rest = group.split(errors)
         if matched is not None and rest is None:
             raise UserError(_first_message(matched)) from None
         raise
+    except ConfigError:
+        raise
     except errors as error:
         raise UserError(str(error)) from None
+
+
+async def _stopped_by_sigterm(main: Callable[[], Any]) -> Any:
+    """``main``, cancelled by SIGTERM, which then comes out as a KeyboardInterrupt (a
+    receiver opened later inside ``main``, e.g. a launcher's, takes SIGTERM while open)."""
+    result: list[Any] = []
+    async with trio.open_nursery() as nursery:
+
+        async def watch() -> None:
+            with trio.open_signal_receiver(signal.SIGTERM) as signals:
+                async for _ in signals:
+                    raise KeyboardInterrupt
+
+        async def serve() -> None:
+            result.append(await main())
+            nursery.cancel_scope.cancel()
+
+        nursery.start_soon(watch)
+        nursery.start_soon(serve)
+    return result[0] if result else None
 
 
 def _first_message(error: BaseException) -> str:

@@ -6,6 +6,7 @@ import argparse
 import contextlib
 import dataclasses
 import json
+import signal
 import sys
 import time
 from collections.abc import Awaitable, Callable
@@ -210,11 +211,20 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
 
 
 def wait_for_ctrl_c() -> None:
-    """Sleep until Ctrl-C (KeyboardInterrupt) while other threads serve."""
-    while True:
-        # Plain sleeps: a KeyboardInterrupt inside threading.Event.wait can leave its lock
-        # broken ("release unlocked lock").
-        time.sleep(3600)
+    """Sleep until Ctrl-C or SIGTERM (either a KeyboardInterrupt) while other threads
+    serve."""
+
+    def interrupt(number: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        while True:
+            # Plain sleeps: a KeyboardInterrupt inside threading.Event.wait can leave its
+            # lock broken ("release unlocked lock").
+            time.sleep(3600)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def view_settings(args: argparse.Namespace) -> ViewSettings:

@@ -589,6 +589,11 @@ class Scenario:
     def from_toml(cls, path: Path) -> Scenario:
         """Load a scenario from a TOML file (keys as the attribute names; all optional)."""
         data = read_toml(path, "scenario")
+        if "experiment" in data:
+            raise ConfigError(
+                f"{path} is an experiment (it has an [experiment] table), not a scenario: run "
+                f"it with 'fishswarm experiment {path}'"
+            )
         table = data.get("scenario", data)
         if not isinstance(table, dict):
             raise ConfigError(f"{path}: [scenario] must be a table")
@@ -599,12 +604,19 @@ def read_toml(path: Path, kind: str) -> dict[str, Any]:
     """Parse a settings file.
 
     Raises:
-        ConfigError: the ``kind`` file (e.g. "scenario") is missing or not valid TOML.
+        ConfigError: the ``kind`` file (e.g. "scenario") is missing, a folder, unreadable,
+            not text (UTF-8) or not valid TOML.
     """
     try:
         return tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ConfigError(f"{kind} file {path} does not exist") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path} is a folder, not a {kind} file (a .toml file)") from None
+    except OSError as error:
+        raise ConfigError(f"{kind} file {path} cannot be read: {error.strerror}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path} is not a text file (UTF-8): not a {kind} file") from None
     except tomllib.TOMLDecodeError as error:
         raise ConfigError(f"{path} is not valid TOML: {error}") from None
 

@@ -167,6 +167,14 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         ),
         (["learn", "--out", __file__], "is a file: give a folder to write into"),
         (["experiment", "blindspot", "--out", __file__], "is a file: give a folder"),
+        (["fish", "--id", "1", "--connect", "bogus"], "--connect: endpoint 'bogus'"),
+        (["world", "--connect", "bogus"], "--connect: endpoint 'bogus'"),
+        (["run", "--config", str(Path(__file__).parent)], "is a folder, not a scenario file"),
+        (
+            ["run", "--config", str(Path(__file__).parents[2] / "experiments" / "orbit.toml")],
+            "is an experiment (it has an [experiment] table), not a scenario: run it with "
+            "'fishswarm experiment",
+        ),
     ],
 )
 def test_bad_arguments_exit_nonzero_with_a_reason(args: list[str], message: str) -> None:
@@ -422,6 +430,30 @@ def test_ctrl_c_stops_the_run_within_two_seconds(tmp_path: Path) -> None:
     summary = json.loads((tmp_path / "s.json").read_text())
     assert summary["status"] == "interrupted", summary
     assert _no_worker_left()
+
+
+def test_sigterm_to_the_process_group_mid_run_keeps_the_fish_counters(tmp_path: Path) -> None:
+    with subprocess.Popen(
+        [*FISHSWARM, "run", "--fish", "4", "--duration", "1000000", "--procs", "2",
+         "--time", "realtime", "--period", "0.2", "--listen", f"tcp/127.0.0.1:{free_port()}",
+         "--record", str(tmp_path / "r.mcap"), "--summary", str(tmp_path / "s.json")],
+        stderr=subprocess.PIPE, text=True, start_new_session=True,
+    ) as process:  # fmt: skip
+        try:
+            assert process.stderr is not None
+            deadline = time.monotonic() + 60
+            while "tick" not in process.stderr.readline():
+                assert time.monotonic() < deadline, "the run never started"
+            time.sleep(1.0)
+            os.killpg(process.pid, signal.SIGTERM)
+            _, errors = process.communicate(timeout=20)
+        finally:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == 130, errors
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["status"] == "interrupted" and summary["counts"]["lost_fish"] == 0
+    assert summary["fish"]["commands"] >= 4 * 3, summary["fish"]
 
 
 def _no_worker_left() -> bool:

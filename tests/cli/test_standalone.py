@@ -8,6 +8,7 @@ import re
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -185,3 +186,45 @@ def test_a_secured_swarm_runs_and_is_watched_as_a_plain_one(tmp_path: Path) -> N
     observed = read_recording(record).arrays()
     reference = run_batch(Scenario(fish=2, duration=5, seed=4))
     np.testing.assert_array_equal(observed["pos"], reference.position)
+
+
+def test_sigterm_stops_each_actor_as_ctrl_c_does_and_keeps_the_worlds_recording(
+    tmp_path: Path,
+) -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    record = tmp_path / "world.mcap"
+    processes: list[subprocess.Popen[str]] = []
+
+    def start(*args: str) -> subprocess.Popen[str]:
+        process = subprocess.Popen(
+            [*FISHSWARM, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        processes.append(process)
+        return process
+
+    try:
+        router = start("router", "--listen", endpoint)
+        wait_for_port(port)
+        fish = start("fish", "--id", "0", "--id", "1", "--connect", endpoint)
+        world = start("world", "--connect", endpoint, "--fish", "2", "--duration", "600",
+                      "--period", "0.2", "--time", "realtime", "--record", str(record))  # fmt: skip
+        lines = Lines(world)
+        lines.wait_for(r"tick +0/", timeout=60)
+        time.sleep(1.5)  # about seven ticks of 0.2 s in real time
+        world.send_signal(signal.SIGTERM)
+        assert world.wait(timeout=15) == 130, lines.seen
+        lines.close()
+        assert world.stdout is not None
+        world.stdout.close()
+        for process in (fish, router):
+            process.send_signal(signal.SIGTERM)
+            _, errors = process.communicate(timeout=15)
+            assert process.returncode == 130, (process.args, errors)
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.kill()
+                process.communicate()
+    recording = read_recording(record)
+    assert recording.complete and len(recording.snapshots) >= 5
