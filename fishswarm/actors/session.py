@@ -107,11 +107,12 @@ def check_endpoint(endpoint: str) -> str:
     protocol, _, address = endpoint.partition("/")
     host, _, port = address.rpartition(":")
     if protocol not in ("tcp", "udp", "quic", "tls", "ws", "unixsock-stream") or (
-        protocol != "unixsock-stream" and (not host or not port.isdigit() or int(port) > 65535)
+        protocol != "unixsock-stream"
+        and (not host or not port.isdigit() or not 1 <= int(port) <= 65535)
     ):
         raise ValueError(
-            f"endpoint {endpoint!r} is not valid: write PROTOCOL/HOST:PORT, "
-            "e.g. tcp/127.0.0.1:7447 or tcp/0.0.0.0:7447"
+            f"endpoint {endpoint!r} is not valid: write PROTOCOL/HOST:PORT with a port from "
+            "1 to 65535, e.g. tcp/127.0.0.1:7447 or tcp/0.0.0.0:7447"
         )
     return endpoint
 

@@ -68,11 +68,18 @@ def secure_extra(
     """The session settings of ``--secure DIR`` for ``subject`` (none without it).
 
     Raises:
-        ConfigError: ``--secure`` with an endpoint that is not ``tls/``.
+        ConfigError: ``--secure`` with an endpoint that is not ``tls/``, or a ``tls/`` one
+            without ``--secure``.
         SecurityError: the subject's certificate cannot be used (which file, and why).
     """
     folder = getattr(args, "secure", None)
     if folder is None:
+        if endpoint.startswith("tls/"):
+            flag = "--listen" if router else "--connect"
+            raise ConfigError(
+                f"{flag} {endpoint} is a secured (tls/) endpoint: give --secure DIR, the "
+                "folder 'fishswarm secure init' wrote"
+            )
         return {}
     if not endpoint.startswith("tls/"):
         flag = "--listen" if router else "--connect"

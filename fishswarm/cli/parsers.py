@@ -485,8 +485,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     router.add_argument(
         "--listen",
-        default="tcp/0.0.0.0:7447",
-        help="endpoint to listen on (default tcp/0.0.0.0:7447; with --secure a tls/ one, "
+        default="tcp/127.0.0.1:7447",
+        help="endpoint to listen on (default tcp/127.0.0.1:7447: this machine only, as "
+        "for run; tcp/0.0.0.0:7447 lets robots and other machines connect, and anyone who "
+        "reaches it can command the fish unless it is secured: with --secure a tls/ one, "
         "e.g. tls/0.0.0.0:7447)",
     )
     router.add_argument(

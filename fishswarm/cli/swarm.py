@@ -432,6 +432,21 @@ def channel(args: argparse.Namespace, scenario: Scenario) -> int:
     return 0
 
 
+QUIET_OBSERVER_NOTE = 10.0
+"""After this long without a snapshot an observer says what it waits for, s."""
+
+
+async def _say_if_nothing_comes(observer: Observer, swarm: str) -> None:
+    await trio.sleep(QUIET_OBSERVER_NOTE)
+    if not observer.history:
+        print(
+            f"no snapshot of swarm {swarm!r} after {QUIET_OBSERVER_NOTE:g} s: waiting for its "
+            "world (is a fishswarm run or world going on this router, and under this "
+            "--swarm?); Ctrl-C to stop",
+            file=sys.stderr,
+        )
+
+
 def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm observe``: watch a swarm from anywhere."""
     keys = KeySpace(args.swarm)
@@ -450,6 +465,7 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
             ):
                 await nursery.start(observer.run, ZenohBus(session))
                 print(f"observing swarm {args.swarm!r} on {args.connect}", file=sys.stderr)
+                nursery.start_soon(_say_if_nothing_comes, observer, args.swarm)
                 # Until the snapshot of --ticks, or the end of the run (the world leaves).
                 async with trio.open_nursery() as waiting:
 

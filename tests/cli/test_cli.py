@@ -168,6 +168,11 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["learn", "--out", __file__], "is a file: give a folder to write into"),
         (["experiment", "blindspot", "--out", __file__], "is a file: give a folder"),
         (["fish", "--id", "1", "--connect", "bogus"], "--connect: endpoint 'bogus'"),
+        (
+            ["observe", "--connect", "tls/127.0.0.1:7447"],
+            "is a secured (tls/) endpoint: give --secure DIR",
+        ),
+        (["run", "--listen", "tcp/127.0.0.1:0"], "with a port from 1 to 65535"),
         (["world", "--connect", "bogus"], "--connect: endpoint 'bogus'"),
         (["run", "--config", str(Path(__file__).parent)], "is a folder, not a scenario file"),
         (
@@ -181,6 +186,43 @@ def test_bad_arguments_exit_nonzero_with_a_reason(args: list[str], message: str)
     result = _run(*args, timeout=30)
     assert result.returncode == 2
     assert message in result.stderr
+
+
+def test_a_router_alone_listens_on_this_machine_only_unless_told_otherwise() -> None:
+    from fishswarm.cli.parsers import build_parser
+
+    parser = build_parser()
+    assert parser.parse_args(["router"]).listen == "tcp/127.0.0.1:7447"
+    assert parser.parse_args(["router", "--listen", "tcp/0.0.0.0:7447"]).listen.startswith(
+        "tcp/0.0.0.0"
+    )
+
+
+def test_an_observer_with_no_world_to_watch_says_what_it_waits_for() -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    router = subprocess.Popen([*FISHSWARM, "router", "--listen", endpoint],
+                              stderr=subprocess.DEVNULL)  # fmt: skip
+    observer = None
+    try:
+        wait_for_port(port)
+        observer = subprocess.Popen(
+            [*FISHSWARM, "observe", "--connect", endpoint, "--swarm", "tank2"],
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        assert observer.stderr is not None
+        lines = [observer.stderr.readline() for _ in range(2)]
+        assert "observing swarm 'tank2'" in lines[0]
+        assert "no snapshot of swarm 'tank2' after 10 s: waiting for its world" in lines[1]
+        observer.send_signal(signal.SIGINT)
+        assert observer.wait(timeout=15) == 130
+    finally:
+        for process in (observer, router):
+            if process is not None and process.poll() is None:
+                process.kill()
+            if process is not None:
+                process.communicate()
 
 
 def test_fish_piled_on_one_another_at_the_start_are_warned_of_with_the_way_out() -> None:
