@@ -185,8 +185,8 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         )
     print(
         f"fishswarm: {scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
-        f"{1 / scenario.control_period:g} Hz, seed {scenario.seed}, {args.procs} worker "
-        f"process(es), listening on {settings.listen}",
+        f"{1 / scenario.control_period:g} Hz, seed {scenario.seed}, "
+        f"{min(args.procs, scenario.fish)} worker process(es), listening on {settings.listen}",
         file=sys.stderr,
     )
     _warn_if_crowded("run", scenario)
