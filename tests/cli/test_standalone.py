@@ -3,12 +3,14 @@ remote observer looks like, on 127.0.0.1."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -21,11 +23,10 @@ pytestmark = pytest.mark.integration
 FISHSWARM = [sys.executable, "-m", "fishswarm"]
 
 
-def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: Path) -> None:
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    record = tmp_path / "observed.mcap"
-    world_record = tmp_path / "world.mcap"
+@contextlib.contextmanager
+def started_commands() -> Iterator[Callable[..., subprocess.Popen[str]]]:
+    """A function that starts ``fishswarm ARGS…`` (output piped); every process it started
+    is ended at the block's exit (terminated, killed if it lingers)."""
     processes: list[subprocess.Popen[str]] = []
 
     def start(*args: str) -> subprocess.Popen[str]:
@@ -36,6 +37,27 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
         return process
 
     try:
+        yield start
+    finally:
+        for process in processes:
+            if process.poll() is None:
+                process.terminate()
+        for process in processes:
+            try:
+                process.communicate(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.communicate()
+            except ValueError:  # its pipes were read and closed by the test
+                process.wait(timeout=10)
+
+
+def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: Path) -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    record = tmp_path / "observed.mcap"
+    world_record = tmp_path / "world.mcap"
+    with started_commands() as start:
         start("router", "--listen", endpoint)
         wait_for_port(port)
         observer = start("observe", "--connect", endpoint, "--ticks", "6", "--record", str(record))
@@ -76,16 +98,6 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
         _, end_errors = until_the_end.communicate(timeout=30)
         assert until_the_end.returncode == 0, end_errors
         assert re.search(r"observed ticks \d+–6 \(\d+ snapshots\), 3 fish at the end", end_errors)
-    finally:
-        for process in processes:
-            if process.poll() is None:
-                process.terminate()
-        for process in processes:
-            try:
-                process.communicate(timeout=10)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.communicate()
     # The world records its own run, with its scenario: plot draws it.
     own = read_recording(world_record)
     assert own.complete and [s.tick for s in own.snapshots] == [0, 1, 2, 3, 4, 5]
@@ -197,16 +209,7 @@ def test_sigterm_stops_each_actor_as_ctrl_c_does_and_keeps_the_worlds_recording(
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     record = tmp_path / "world.mcap"
-    processes: list[subprocess.Popen[str]] = []
-
-    def start(*args: str) -> subprocess.Popen[str]:
-        process = subprocess.Popen(
-            [*FISHSWARM, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-        )
-        processes.append(process)
-        return process
-
-    try:
+    with started_commands() as start:
         router = start("router", "--listen", endpoint)
         wait_for_port(port)
         fish = start("fish", "--id", "0", "--id", "1", "--connect", endpoint)
@@ -224,10 +227,5 @@ def test_sigterm_stops_each_actor_as_ctrl_c_does_and_keeps_the_worlds_recording(
             process.send_signal(signal.SIGTERM)
             _, errors = process.communicate(timeout=15)
             assert process.returncode == 130, (process.args, errors)
-    finally:
-        for process in processes:
-            if process.poll() is None:
-                process.kill()
-                process.communicate()
     recording = read_recording(record)
     assert recording.complete and len(recording.snapshots) >= 5
