@@ -140,3 +140,19 @@ class Lines:
             found = re.search(pattern, line)
             if found:
                 return found
+
+
+def end_processes(processes: list[subprocess.Popen[str]], *, timeout: float = 10.0) -> None:
+    """End the processes a test started: terminated, then killed if one lingers past
+    ``timeout``; their output collected (pipes a test already read and closed are not)."""
+    for process in processes:
+        if process.poll() is None:
+            process.terminate()
+    for process in processes:
+        try:
+            process.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.communicate(timeout=timeout)
+        except ValueError:  # its pipes were read and closed by the test
+            process.wait(timeout=timeout)

@@ -22,7 +22,7 @@ pytest.importorskip("gpiozero.pins.mock")
 from fishswarm.protocols.codec import decode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import RobotStatus
-from tests.conftest import free_port, open_client_bus, run_trio, subscription
+from tests.conftest import end_processes, free_port, open_client_bus, run_trio, subscription
 
 pytestmark = [
     pytest.mark.integration,
@@ -186,12 +186,4 @@ def test_a_robot_whose_link_is_cut_stops_its_fins_and_rejoins_when_it_returns(
         assert fins_off is not None and fins_off <= 2.0, robot_log.lines
         assert back.failsafe_stops >= 1
     finally:
-        for process in processes:
-            if process.poll() is None:
-                process.terminate()
-        for process in processes:
-            try:
-                process.communicate(timeout=15)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.communicate(timeout=15)
+        end_processes(processes, timeout=15)

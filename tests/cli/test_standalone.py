@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from fishswarm.study.recording import read_recording
-from tests.conftest import Lines, free_port, wait_for_port
+from tests.conftest import Lines, end_processes, free_port, wait_for_port
 
 pytestmark = pytest.mark.integration
 
@@ -39,17 +39,7 @@ def started_commands() -> Iterator[Callable[..., subprocess.Popen[str]]]:
     try:
         yield start
     finally:
-        for process in processes:
-            if process.poll() is None:
-                process.terminate()
-        for process in processes:
-            try:
-                process.communicate(timeout=10)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.communicate()
-            except ValueError:  # its pipes were read and closed by the test
-                process.wait(timeout=10)
+        end_processes(processes)
 
 
 def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: Path) -> None:
@@ -188,15 +178,7 @@ def test_a_secured_swarm_runs_and_is_watched_as_a_plain_one(tmp_path: Path) -> N
             view.kill()
         view.wait(timeout=10)
         view_lines.close()
-        for process in processes:
-            if process.poll() is None:
-                process.terminate()
-        for process in processes:
-            try:
-                process.communicate(timeout=10)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.communicate()
+        end_processes(processes)
     # The observer with its certificate saw the run the batch engine computes.
     observed = read_recording(record).arrays()
     reference = run_batch(Scenario(fish=2, duration=5, seed=4))

@@ -17,7 +17,7 @@ import pytest
 from fishswarm.sim.engine import run_batch
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.recording import read_recording
-from tests.conftest import free_port
+from tests.conftest import end_processes, free_port
 
 pytestmark = pytest.mark.integration
 
@@ -126,15 +126,7 @@ def _run_two_hosts(
         statistics: dict[str, Any] = json.loads(world.stderr.strip().splitlines()[-1])
         return statistics
     finally:
-        for process in processes:
-            if process.poll() is None:
-                process.terminate()
-        for process in processes:
-            try:
-                process.communicate(timeout=10)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.communicate()
+        end_processes(processes)
 
 
 def test_workers_on_another_host_give_the_one_host_trajectory_on_fast_and_slow_links(
