@@ -259,6 +259,13 @@ def init_secure(
                 "certificates already given out then stop being accepted)"
             )
         authority_key, authority = _load_authority(folder)
+        named = authority.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+        theirs = str(named[0].value).removeprefix("fishswarm ") if named else None
+        if theirs != swarm:
+            raise SecurityError(
+                f"{folder}'s authority is of swarm {theirs!r}, not {swarm!r}: give --swarm "
+                f"{theirs} to add to it, or --force to make a new authority"
+            )
         held = sorted(
             path.stem
             for path in folder.glob("*.pem")

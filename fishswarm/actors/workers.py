@@ -12,6 +12,7 @@ import logging
 import multiprocessing
 import signal
 from dataclasses import dataclass, field
+from multiprocessing import resource_tracker
 from multiprocessing.connection import Connection
 from typing import Any
 
@@ -159,6 +160,9 @@ def start_worker(spec: WorkerSpec) -> Worker:
     # Started with Ctrl-C and SIGTERM held back (the mask is inherited), so that one sent to
     # the process group while the new interpreter imports fishswarm does not end it with a
     # traceback; worker_main ignores them and lets them through.
+    # The resource tracker, started with the first worker otherwise, unblocks both signals
+    # as it starts: started now, before they are held back.
+    resource_tracker.ensure_running()
     held = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
     try:
         process.start()

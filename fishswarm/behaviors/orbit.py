@@ -1,7 +1,8 @@
 """Orbiting: circle a visible centre (orbit, milling) or each other (waltz). SPEC §2.
 
 All fish orbit the same way round, the centre on their left (body frame: x forward, y right,
-z down); in overhead plots with x right and y up that is clockwise. A fish picks a heading by
+z down); plotted with x right and y up (the study's plots) that is clockwise, and in our
+views from above (y down the page) anticlockwise. A fish picks a heading by
 zone — planar distance to the centre against the orbit radius R, and whether the centre lies
 ahead (within ±90°) or behind:
 

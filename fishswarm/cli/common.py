@@ -74,7 +74,8 @@ def secure_extra(
     """
     folder = getattr(args, "secure", None)
     if folder is None:
-        if endpoint.startswith("tls/"):
+        # TLS may come from a Zenoh configuration file instead (robot --zenoh-config).
+        if endpoint.startswith("tls/") and getattr(args, "zenoh_config", None) is None:
             flag = "--listen" if router else "--connect"
             raise ConfigError(
                 f"{flag} {endpoint} is a secured (tls/) endpoint: give --secure DIR, the "

@@ -200,9 +200,11 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
     base = Scenario.from_toml(args.config) if getattr(args, "config", None) else Scenario()
     overrides = {name: getattr(args, name, None) for name in _SCENARIO_FLAGS}
     try:
-        return base.replace(**overrides)
+        scenario = base.replace(**overrides)
     except TypeError as error:
         raise ConfigError(str(error)) from None
+    # Only commands that run a scenario to its end take --duration.
+    return scenario.check_duration() if hasattr(args, "duration") else scenario
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -29,6 +29,7 @@ from fishswarm.actors.observer import WORLD_END_SETTLE, Observer, Progress
 from fishswarm.actors.security import (
     ACCESS_FILE,
     AUTHORITY,
+    SecurityError,
     init_secure,
     observer_subject,
     robot_subject,
@@ -559,6 +560,8 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
         )
     except ValueError as error:
         raise ConfigError(str(error)) from None
+    except SecurityError as error:
+        raise UserError(str(error)) from None
     except OSError as error:
         raise UserError(f"cannot write into {args.folder}: {error}") from None
     subjects = sorted({p.stem for p in written if p.suffix == ".pem"} - {AUTHORITY})

@@ -17,13 +17,13 @@ from fishswarm.actors.security import observer_subject
 from fishswarm.actors.session import open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.bluebot.parameters import Tank
-from fishswarm.cli.common import UserError, client_settings
+from fishswarm.cli.common import UserError, client_settings, read_recording_for
 from fishswarm.cli.swarm import _run_trio, view_settings, wait_for_ctrl_c
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.live_view import LiveView, open_live_view
 from fishswarm.study.metrics import FormationTargets
-from fishswarm.study.recording import RecordingError, read_recording
+from fishswarm.study.recording import RecordingError
 from fishswarm.study.scene import Stage, scene_of, stage_of
 from fishswarm.study.view_settings import ViewError, ViewSettings
 
@@ -59,9 +59,7 @@ def _announce(view: LiveView, what: str) -> None:
 
 
 def _replay(path: Path, settings: ViewSettings) -> None:
-    recording = read_recording(path)
-    if not recording.snapshots:
-        raise UserError(f"{path} holds no snapshots: nothing to show")
+    recording = read_recording_for(path, at_least=1, purpose="show")
     try:
         ran: Scenario | None = Scenario.as_recorded(recording.scenario, source=str(path))
     except ConfigError:  # an observer's recording does not say what ran

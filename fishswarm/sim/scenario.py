@@ -371,13 +371,24 @@ class Scenario:
             need(
                 value is None or _positive(value), f"{name} must be positive metres, got {value!r}"
             )
+
+    def check_duration(self) -> Scenario:
+        """This scenario, checked to run for a whole number of control periods (called
+        where a run of it starts: ``run``, ``world``, experiments; a robot's fish never
+        uses the duration, and a recording says what already ran).
+
+        Raises:
+            ConfigError: it does not, with the two nearest durations that do.
+        """
         periods = self.duration / self.control_period
-        need(
-            abs(periods - round(periods)) <= 1e-9 * max(1.0, periods),
-            f"duration ({self.duration:g} s) must be a whole number of control periods "
-            f"({self.control_period:g} s): e.g. {math.floor(periods) * self.control_period:g} "
-            f"or {math.ceil(periods) * self.control_period:g} s",
-        )
+        if abs(periods - round(periods)) > 1e-9 * max(1.0, periods):
+            raise ConfigError(
+                f"duration ({self.duration:g} s) must be a whole number of control periods "
+                f"({self.control_period:g} s): e.g. "
+                f"{math.floor(periods) * self.control_period:g} or "
+                f"{math.ceil(periods) * self.control_period:g} s"
+            )
+        return self
 
     @property
     def ticks(self) -> int:

@@ -286,10 +286,17 @@ class Experiment:
     def metric_names(self) -> tuple[str, ...]:
         """The columns of each run's metric series."""
         if self.forming:
-            return (*FORMATION_METRIC_NAMES, "effort_spread")
+            return (*self._formation_metric_names, "effort_spread")
         if self.orbiting:
             return ORBIT_METRIC_NAMES
         return (*METRICS, "linked_centroid_distance") if self._study_mean_distance else METRICS
+
+    @property
+    def _formation_metric_names(self) -> tuple[str, ...]:
+        """A formation's metrics; a local shape has no study fitness (no map for D)."""
+        if self.scenario.formation in LOCAL_SHAPES:
+            return tuple(name for name in FORMATION_METRIC_NAMES if name != "fitness")
+        return FORMATION_METRIC_NAMES
 
     @property
     def summaries(self) -> tuple[Summary, ...]:
@@ -325,7 +332,9 @@ class Experiment:
             for p, e, t in zip(position, spent, at, strict=True):
                 target = targets.told(None, float(t))
                 metrics = target.metrics(p)
-                rows.append([*(metrics[name] for name in FORMATION_METRIC_NAMES), effort_spread(e)])
+                rows.append(
+                    [*(metrics[name] for name in self._formation_metric_names), effort_spread(e)]
+                )
             return np.array(rows)
         if self.orbiting:
             orbit = orbit_target_of(scenario)
@@ -370,7 +379,7 @@ class Experiment:
             base = base.replace(**settings)
         if "side-settings" in base.study_switches:
             base = base.replace(**self.study_settings)
-        return base.replace(**{self.parameter: kind(value), "seed": seed})
+        return base.replace(**{self.parameter: kind(value), "seed": seed}).check_duration()
 
     def runs(self) -> list[RunKey]:
         """Every (group, value, seed), group by group, then value by value."""

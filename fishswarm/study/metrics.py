@@ -189,7 +189,7 @@ def orbit_metrics(
     Returns:
         (T, 4) columns: mean planar distance to the centre (m); revolutions so far (mean over
         fish of the unwrapped angle around the centre / 2π, positive in the direction the
-        fish orbit: clockwise in overhead plots); mean planar speed over the last period
+        fish orbit: clockwise plotted with y up); mean planar speed over the last period
         (m/s, 0 at the first tick); colliding pairs.
     """
     steps = position.shape[0]
@@ -201,7 +201,7 @@ def orbit_metrics(
     offset = position[..., :2] - middle[..., :2]
     radius = np.hypot(offset[..., 0], offset[..., 1]).mean(axis=1)
     angle = np.unwrap(np.arctan2(offset[..., 1], offset[..., 0]), axis=0)
-    # The fish keep the centre on their left with z down: clockwise in overhead plots (y up),
+    # The fish keep the centre on their left with z down: clockwise plotted with y up,
     # the direction of decreasing atan2(y, x); counted positive.
     revolutions = ((angle[0] - angle) / (2 * np.pi)).mean(axis=1)
     speed = np.zeros(steps)
@@ -295,7 +295,7 @@ class OrbitTracker:
         self._xy, self._time = xy[order], time
         return {
             "radius": float(np.hypot(offset[:, 0], offset[:, 1]).mean()),
-            # Clockwise in overhead plots (the fish keep the centre on their left, z down).
+            # Clockwise plotted with y up (the fish keep the centre on their left, z down).
             "revolutions": float(((start - angle) / (2 * np.pi)).mean()),
             "speed": speed,
             "collisions": float(collisions(position, distance=self.contact)),

@@ -122,6 +122,9 @@ def test_secure_init_on_a_folder_with_an_authority_adds_to_it(
     # The router's access control names every subject with a certificate there.
     rules = {rule["id"] for rule in json.loads((folder / ACCESS_FILE).read_text())["rules"]}
     assert {"robot-2-publish", "robot-3-publish", "observer-lab-subscribe"} <= rules
+    # Another swarm's keys are not written over this authority's.
+    with pytest.raises(SecurityError, match=r"authority is of swarm 'default', not 'lab'"):
+        init_secure(folder, robots=[5], swarm="lab")
     # A new authority only when asked for: the old certificates are then not accepted.
     init_secure(folder, robots=[1], replace=True)
     assert (folder / "ca.pem").read_bytes() != given_out["ca.pem"]
@@ -131,6 +134,22 @@ def test_secure_init_on_a_folder_with_an_authority_adds_to_it(
     (folder / "ca.key").unlink()
     with pytest.raises(SecurityError, match=r"holds half an authority.*--force"):
         init_secure(folder, robots=[4])
+    from fishswarm.cli import main
+
+    assert main(["secure", "init", str(folder), "--robots", "4"]) == 1  # a message, no traceback
+
+
+def test_a_tls_endpoint_needs_secure_unless_a_zenoh_configuration_brings_tls() -> None:
+    import argparse
+
+    from fishswarm.cli.common import secure_extra
+    from fishswarm.sim.scenario import ConfigError
+
+    bare = argparse.Namespace(secure=None)
+    with pytest.raises(ConfigError, match=r"is a secured \(tls/\) endpoint: give --secure DIR"):
+        secure_extra(bare, "robot-1", endpoint="tls/10.0.0.1:7447")
+    configured = argparse.Namespace(secure=None, zenoh_config="/etc/fishswarm/zenoh.json5")
+    assert secure_extra(configured, "robot-1", endpoint="tls/10.0.0.1:7447") == {}
 
 
 def _expired(folder: Path, subject: str) -> None:

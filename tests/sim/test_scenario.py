@@ -85,11 +85,6 @@ def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
         ({"formation_heading_deg": math.nan}, "formation_heading_deg must be a finite angle"),
         ({"spacing": math.inf}, "spacing must be positive metres"),
         ({"tolerance": 0.0}, "tolerance must be positive metres"),
-        (
-            {"duration": 2.5},
-            r"duration \(2.5 s\) must be a whole number of control periods "
-            r"\(1 s\): e.g. 2 or 3 s",
-        ),
     ],
 )
 def test_bad_settings_say_what_is_wrong(changes: dict[str, object], message: str) -> None:
@@ -117,9 +112,18 @@ def test_a_file_setting_of_the_wrong_kind_is_named(tmp_path: Path, line: str, me
     path.write_text(f"[scenario]\n{line}\n")
     with pytest.raises(ConfigError, match=f"s.toml: {message}"):
         Scenario.from_toml(path)
+    # A run must last a whole number of periods (where one starts: run, world, experiments;
+    # a robot's fish never uses the duration, and a recording says what already ran).
+    with pytest.raises(
+        ConfigError,
+        match=r"duration \(2.5 s\) must be a whole number of control periods \(1 s\): "
+        r"e.g. 2 or 3 s",
+    ):
+        Scenario(duration=2.5).check_duration()
+    assert Scenario.as_recorded(Scenario(duration=2.5).to_dict()).duration == 2.5
     # Durations and periods that are whole numbers and periods that divide them are fine.
     path.write_text("[scenario]\nduration = 3\ncontrol_period = 0.1\nseed = 2\n")
-    assert Scenario.from_toml(path).ticks == 30
+    assert Scenario.from_toml(path).check_duration().ticks == 30
 
 
 SHIPPED = sorted(EXPERIMENTS_FOLDER.glob("*.toml"))
@@ -271,3 +275,13 @@ def test_a_lone_fish_circles_under_the_study_codes_homing() -> None:
     around = planar[10:] - planar[10:].mean(axis=0)
     bearing = np.unwrap(np.arctan2(around[:, 1], around[:, 0]))
     assert bearing[-1] - bearing[0] < -2 * np.pi
+
+
+def test_a_robots_fish_takes_any_period_and_run_checks_its_duration() -> None:
+    from fishswarm.cli.parsers import build_parser, scenario_from
+
+    parser = build_parser()
+    fish = parser.parse_args(["fish", "--id", "0", "--period", "0.4"])
+    assert scenario_from(fish).control_period == 0.4  # no duration of its own to divide
+    with pytest.raises(ConfigError, match="whole number of control periods"):
+        scenario_from(parser.parse_args(["run", "--period", "0.4"]))

@@ -267,6 +267,7 @@ def test_groups_compare_the_sweep_under_named_settings(tmp_path: Path) -> None:
         experiment, scenario=dataclasses.replace(experiment.scenario, formation="triangle")
     )
     assert "fitness" not in [summary.key for summary in local.summaries]
+    assert "fitness" not in local.metric_names and "fitness" in experiment.metric_names
     assert "Groups: flags: flags = true; no flags: flags = false." in text
     write_report(experiment, outcomes, tmp_path / "out", engine="batch", wall_time=1.0)
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
