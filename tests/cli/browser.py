@@ -62,10 +62,20 @@ def open_page(url: str) -> Iterator[Any]:
 
 
 def screenshot(page: Any, path: Path) -> NDArray[np.uint8]:
-    """Save what the tab shows to ``path`` (PNG) and return it as (H, W, 3) RGB."""
+    """Save what the tab shows to ``path`` (PNG) and return it as (H, W, 3) RGB. A capture
+    the browser refuses while busy ("Unable to capture screenshot", seen on a loaded
+    2-core machine) is tried again, at most three times in all."""
     import matplotlib.image
+    from playwright.sync_api import Error
 
-    page.screenshot(path=str(path))
+    for attempt in range(3):
+        try:
+            page.screenshot(path=str(path))
+            break
+        except Error as error:
+            if "Unable to capture screenshot" not in str(error) or attempt == 2:
+                raise
+            time.sleep(1.0)
     image = matplotlib.image.imread(str(path))
     return np.asarray(np.round(image[..., :3] * 255), dtype=np.uint8)
 
