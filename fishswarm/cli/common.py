@@ -73,17 +73,16 @@ def secure_extra(
         SecurityError: the subject's certificate cannot be used (which file, and why).
     """
     folder = getattr(args, "secure", None)
+    flag = "--listen" if router else "--connect"
     if folder is None:
         # TLS may come from a Zenoh configuration file instead (robot --zenoh-config).
         if endpoint.startswith("tls/") and getattr(args, "zenoh_config", None) is None:
-            flag = "--listen" if router else "--connect"
             raise ConfigError(
                 f"{flag} {endpoint} is a secured (tls/) endpoint: give --secure DIR, the "
                 "folder 'fishswarm secure init' wrote"
             )
         return {}
     if not endpoint.startswith("tls/"):
-        flag = "--listen" if router else "--connect"
         raise ConfigError(
             f"{flag} {endpoint}: a secured swarm talks TLS only: give a tls/ endpoint, e.g. "
             f"tls/{endpoint.partition('/')[2] or '127.0.0.1:7447'}"

@@ -546,8 +546,6 @@ def router(args: argparse.Namespace, scenario: Scenario | None) -> int:
 def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm secure init DIR``: a secured swarm's authority, certificates and access
     control."""
-    authority = args.folder / f"{AUTHORITY}.pem"
-    adding = authority.exists() and not args.force
     try:
         written = init_secure(
             args.folder,
@@ -565,7 +563,7 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
     except OSError as error:
         raise UserError(f"cannot write into {args.folder}: {error}") from None
     subjects = sorted({p.stem for p in written if p.suffix == ".pem"} - {AUTHORITY})
-    if adding:
+    if args.folder / f"{AUTHORITY}.pem" not in written:  # added to the folder's authority
         made = f"certificates for {', '.join(subjects)}" if subjects else "no new certificate"
         print(
             f"{args.folder} already holds an authority: added {made} (signed by it; those "

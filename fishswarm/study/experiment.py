@@ -275,6 +275,12 @@ class Experiment:
         return self.scenario.behavior == "formation"
 
     @property
+    def forming_locally(self) -> bool:
+        """Whether the fish make a local shape (judged with their nearest neighbours: no
+        map of slots, so no study fitness)."""
+        return self.forming and self.scenario.formation in LOCAL_SHAPES
+
+    @property
     def _study_mean_distance(self) -> bool:
         return (
             "mean-distance" in self.scenario.study_switches
@@ -294,7 +300,7 @@ class Experiment:
     @property
     def _formation_metric_names(self) -> tuple[str, ...]:
         """A formation's metrics; a local shape has no study fitness (no map for D)."""
-        if self.scenario.formation in LOCAL_SHAPES:
+        if self.forming_locally:
             return tuple(name for name in FORMATION_METRIC_NAMES if name != "fitness")
         return FORMATION_METRIC_NAMES
 
@@ -302,7 +308,7 @@ class Experiment:
     def summaries(self) -> tuple[Summary, ...]:
         """The columns of the experiment's table."""
         if self.forming:
-            if self.scenario.formation in LOCAL_SHAPES:
+            if self.forming_locally:
                 return FORMATION_SUMMARIES
             return (*FORMATION_SUMMARIES, *STUDY_FITNESS_SUMMARIES)
         if self.orbiting:

@@ -11,7 +11,6 @@ from typing import Any
 
 import numpy as np
 
-from fishswarm.formations.local import LOCAL_SHAPES
 from fishswarm.protocols.jsontext import json_text
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import Experiment, RunOutcome
@@ -130,7 +129,7 @@ def write_report(
 def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
     """The table of an experiment in Markdown, mean ± s.d. over seeds."""
     scenario = experiment.scenario
-    if experiment.forming and scenario.formation in LOCAL_SHAPES:
+    if experiment.forming_locally:
         explain = (
             "Shape error: the RMS distance of each fish's group (it and the nearest "
             "neighbours it makes the shape with) from the ideal shape after the best rigid "
