@@ -125,6 +125,20 @@ def free_loopback_endpoint() -> str:
         return f"tcp/127.0.0.1:{probe.getsockname()[1]}"
 
 
+def _open_failure_hint(settings: SessionSettings, error: str) -> str:
+    """What most likely stopped a session from opening, and what to do about it."""
+    if "os error 99" in error or "Cannot assign requested address" in error:
+        # Zenoh passes the operating system's EADDRNOTAVAIL through: the host named
+        # in a listen endpoint is not one of this machine's addresses.
+        return (
+            "this machine has no such address: listen on one of its own addresses "
+            "(see 'ip -brief address'), or on 0.0.0.0 for all of them"
+        )
+    if settings.connect:
+        return "is a fishswarm run or router listening there?"
+    return "is another program using that port?"
+
+
 @asynccontextmanager
 async def open_session(settings: SessionSettings) -> AsyncIterator[zenoh.Session]:
     """Open a Zenoh session and close it on exit, also when cancelled.
@@ -137,13 +151,9 @@ async def open_session(settings: SessionSettings) -> AsyncIterator[zenoh.Session
         session = await trio.to_thread.run_sync(zenoh.open, config)
     except zenoh.ZError as error:
         where = ", ".join([*settings.listen, *settings.connect]) or "(no endpoint)"
-        hint = (
-            "is a fishswarm run or router listening there?"
-            if settings.connect
-            else "is another program using that port?"
-        )
         raise ConnectError(
-            f"cannot open a {settings.mode} session on {where}: {hint} ({error})"
+            f"cannot open a {settings.mode} session on {where}: "
+            f"{_open_failure_hint(settings, str(error))} ({error})"
         ) from None
     try:
         yield session

@@ -137,6 +137,21 @@ def test_port_in_use_fails_clearly(endpoint: str) -> None:
         run_trio(main)
 
 
+def test_listening_on_an_address_not_of_this_machine_says_so(endpoint: str) -> None:
+    # 192.0.2.1 is in TEST-NET-1 (RFC 5737), reserved for documentation: no machine
+    # here has it, so binding to it fails with EADDRNOTAVAIL, not EADDRINUSE.
+    port = endpoint.rpartition(":")[2]
+    settings = SessionSettings(mode="router", listen=[f"tcp/192.0.2.1:{port}"])
+
+    async def main() -> None:
+        async with open_session(settings):
+            pass
+
+    with pytest.raises(ConnectError, match="this machine has no such address") as failure:
+        run_trio(main)
+    assert "another program" not in str(failure.value)
+
+
 @pytest.mark.parametrize("bad", ["127.0.0.1:7447", "tcp/127.0.0.1", "tcp/:7447", "xyz/a:1"])
 def test_bad_endpoints_are_explained(bad: str) -> None:
     with pytest.raises(ValueError, match="PROTOCOL/HOST:PORT"):
