@@ -217,8 +217,9 @@ def init_secure(
         hosts: names and addresses the router is reached by (its certificate's names).
         swarm: the swarm whose keys the access control names.
         days: how long the certificates are valid.
-        replace: make a new authority even where ``folder`` holds one (every certificate
-            the old one signed stops being accepted).
+        replace: make a new authority even where ``folder`` holds one; the subjects'
+            certificates and keys there are removed (the old authority signed them, so
+            they would be refused).
 
     Returns:
         The files written.
@@ -266,11 +267,7 @@ def init_secure(
                 f"{folder}'s authority is of swarm {theirs!r}, not {swarm!r}: give --swarm "
                 f"{theirs} to add to it, or --force to make a new authority"
             )
-        held = sorted(
-            path.stem
-            for path in folder.glob("*.pem")
-            if path.stem != AUTHORITY and path.with_suffix(".key").is_file()
-        )
+        held = certified_subjects(folder, keys)
         everyone = [*subjects, *(subject for subject in held if subject not in subjects)]
         end = min(end, authority.not_valid_after_utc)
         written: list[Path] = []
@@ -282,6 +279,12 @@ def init_secure(
         access = folder / ACCESS_FILE
         access.write_text(json.dumps(access_control(everyone, keys), indent=2), encoding="utf-8")
         return [*written, access]
+    if any(parts):
+        # A new authority: the old one's certificates would only be refused later, with a
+        # message about a signature, so they go now.
+        for subject in certified_subjects(folder, keys):
+            for suffix in (".pem", ".key"):
+                (folder / f"{subject}{suffix}").unlink()
     authority_key = ec.generate_private_key(ec.SECP256R1())
     authority_name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, f"fishswarm {swarm}")])
     usage = dict.fromkeys(
@@ -312,6 +315,22 @@ def init_secure(
     access = folder / ACCESS_FILE
     access.write_text(json.dumps(access_control(subjects, keys), indent=2), encoding="utf-8")
     return [*written, access]
+
+
+def certified_subjects(folder: Path, keys: KeySpace) -> list[str]:
+    """The subjects of the swarm of ``keys`` that ``folder`` holds a certificate and key for
+    (other files there are not counted)."""
+    held = []
+    for path in sorted(folder.glob("*.pem")):
+        if path.stem == AUTHORITY or not path.with_suffix(".key").is_file():
+            continue
+        try:
+            if path.stem != "router":
+                rights_of(path.stem, keys)
+        except ValueError:
+            continue
+        held.append(path.stem)
+    return held
 
 
 def _issue(

@@ -538,7 +538,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="make a new authority even if DIR holds one (without it, certificates for new "
         "robots and observers are added to DIR's authority, and those given out stay valid; "
-        "with it, every certificate the old authority signed stops being accepted)",
+        "with it, the old certificates in DIR are removed and those given out stop being "
+        "accepted: name every robot and observer again)",
     )
 
     learn = commands.add_parser(

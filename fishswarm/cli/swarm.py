@@ -30,6 +30,7 @@ from fishswarm.actors.security import (
     ACCESS_FILE,
     AUTHORITY,
     SecurityError,
+    certified_subjects,
     init_secure,
     observer_subject,
     robot_subject,
@@ -547,6 +548,7 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm secure init DIR``: a secured swarm's authority, certificates and access
     control."""
     try:
+        before = certified_subjects(args.folder, KeySpace(args.swarm))
         written = init_secure(
             args.folder,
             robots=args.robots,
@@ -572,10 +574,12 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
             file=sys.stderr,
         )
         return 0
+    gone = sorted(set(before) - set(subjects))
+    removed = f" Removed the old authority's certificates of {', '.join(gone)}." if gone else ""
     print(
         f"wrote {len(written)} files to {args.folder}: certificates for {', '.join(subjects)}; "
         f"the router's access control in {ACCESS_FILE}. Keep ca.key off the robots; give "
-        "each machine ca.pem and its own certificate and key.",
+        f"each machine ca.pem and its own certificate and key.{removed}",
         file=sys.stderr,
     )
     return 0

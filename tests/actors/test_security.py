@@ -103,11 +103,14 @@ def test_certificates_that_cannot_be_used_get_a_clear_message(
 
 
 def test_secure_init_on_a_folder_with_an_authority_adds_to_it(
-    secure_dir: Path, tmp_path: Path
+    secure_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     folder = tmp_path / "lab"
     shutil.copytree(secure_dir, folder)
     given_out = {name: (folder / name).read_bytes() for name in ("ca.pem", "robot-2.pem")}
+    # A key pair that is no subject's (the lab's own) is neither counted nor removed.
+    (folder / "notes.pem").write_text("kept")
+    (folder / "notes.key").write_text("kept")
     written = init_secure(folder, robots=[1, 3], observers=["bob"])
     # Only the subjects without a certificate get one, signed by the same authority, and
     # everything given out before stays as it was and valid.
@@ -125,11 +128,17 @@ def test_secure_init_on_a_folder_with_an_authority_adds_to_it(
     # Another swarm's keys are not written over this authority's.
     with pytest.raises(SecurityError, match=r"authority is of swarm 'default', not 'lab'"):
         init_secure(folder, robots=[5], swarm="lab")
-    # A new authority only when asked for: the old certificates are then not accepted.
+    # A new authority only when asked for: the old certificates are then not accepted, and
+    # those of subjects not named again are removed (files that are no subject's stay).
     init_secure(folder, robots=[1], replace=True)
     assert (folder / "ca.pem").read_bytes() != given_out["ca.pem"]
-    with pytest.raises(SecurityError, match="was not signed by the authority"):
+    with pytest.raises(SecurityError, match=r"robot-2.pem is missing.*--robots 2"):
         check_subject(folder, "robot-2")
+    assert sorted(p.stem for p in folder.glob("*.pem")) == [
+        "admin", "ca", "channel", "notes", "observer", "robot-1", "router", "world",
+    ]  # fmt: skip
+    for subject in ("robot-1", "observer", "world"):
+        check_subject(folder, subject)
     # Half an authority is not guessed at.
     (folder / "ca.key").unlink()
     with pytest.raises(SecurityError, match=r"holds half an authority.*--force"):
@@ -137,6 +146,9 @@ def test_secure_init_on_a_folder_with_an_authority_adds_to_it(
     from fishswarm.cli import main
 
     assert main(["secure", "init", str(folder), "--robots", "4"]) == 1  # a message, no traceback
+    assert main(["secure", "init", str(folder), "--force"]) == 0
+    assert "Removed the old authority's certificates of robot-1." in capsys.readouterr().err
+    assert not (folder / "robot-1.pem").exists()
 
 
 def test_a_tls_endpoint_needs_secure_unless_a_zenoh_configuration_brings_tls() -> None:
