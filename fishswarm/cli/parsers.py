@@ -18,6 +18,7 @@ from fishswarm.sim.scenario import (
     STUDY_CODE_SWITCHES,
     ConfigError,
     Scenario,
+    scenario_table,
     switch_names,
 )
 from fishswarm.study.view_settings import GRPC_PORT, WEB_PORT
@@ -197,10 +198,13 @@ def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -
 
 
 def scenario_from(args: argparse.Namespace) -> Scenario:
-    base = Scenario.from_toml(args.config) if getattr(args, "config", None) else Scenario()
+    path = getattr(args, "config", None)
+    table = scenario_table(path) if path else {}
+    base = Scenario.from_mapping(table, source=str(path)) if path else Scenario()
     overrides = {name: getattr(args, name, None) for name in _SCENARIO_FLAGS}
     try:
-        scenario = base.replace(**overrides)
+        # A controller the file names stays when --behavior changes the behaviour.
+        scenario = base.replace(controller_chosen="controller" in table, **overrides)
     except TypeError as error:
         raise ConfigError(str(error)) from None
     # Only commands that run a scenario to its end take --duration.

@@ -493,17 +493,17 @@ class Scenario:
             return self.spawn_radius
         return behavior_named(self.behavior).spawn_radius
 
-    def replace(self, **changes: Any) -> Scenario:
+    def replace(self, *, controller_chosen: bool | None = None, **changes: Any) -> Scenario:
         """A copy with some settings changed (``None`` values are ignored). Another
         behaviour without a controller named brings its own default controller, unless this
-        scenario's controller was chosen (differs from its behaviour's default)."""
+        scenario's controller was chosen: ``controller_chosen`` says whether it was (e.g.
+        named in its file); None guesses it from whether it differs from its behaviour's
+        default."""
         given = {k: v for k, v in changes.items() if v is not None}
         behavior = given.get("behavior", self.behavior)
-        if (
-            behavior != self.behavior
-            and "controller" not in given
-            and self.controller == behavior_named(self.behavior).controller
-        ):
+        if controller_chosen is None:
+            controller_chosen = self.controller != behavior_named(self.behavior).controller
+        if behavior != self.behavior and "controller" not in given and not controller_chosen:
             given["controller"] = None  # resolved again from the new behaviour
         return dataclasses.replace(self, **given)
 
@@ -599,16 +599,25 @@ class Scenario:
     @classmethod
     def from_toml(cls, path: Path) -> Scenario:
         """Load a scenario from a TOML file (keys as the attribute names; all optional)."""
-        data = read_toml(path, "scenario")
-        if "experiment" in data:
-            raise ConfigError(
-                f"{path} is an experiment (it has an [experiment] table), not a scenario: run "
-                f"it with 'fishswarm experiment {path}'"
-            )
-        table = data.get("scenario", data)
-        if not isinstance(table, dict):
-            raise ConfigError(f"{path}: [scenario] must be a table")
-        return cls.from_mapping(table, source=str(path))
+        return cls.from_mapping(scenario_table(path), source=str(path))
+
+
+def scenario_table(path: Path) -> dict[str, Any]:
+    """The settings a scenario file names (its ``[scenario]`` table, or the whole file).
+
+    Raises:
+        ConfigError: the file cannot be read, is an experiment, or its table is not one.
+    """
+    data = read_toml(path, "scenario")
+    if "experiment" in data:
+        raise ConfigError(
+            f"{path} is an experiment (it has an [experiment] table), not a scenario: run "
+            f"it with 'fishswarm experiment {path}'"
+        )
+    table = data.get("scenario", data)
+    if not isinstance(table, dict):
+        raise ConfigError(f"{path}: [scenario] must be a table")
+    return table
 
 
 def read_toml(path: Path, kind: str) -> dict[str, Any]:

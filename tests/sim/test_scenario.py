@@ -44,7 +44,7 @@ def test_the_controller_defaults_to_the_behaviours_and_a_named_one_stays() -> No
     assert formation.replace(behavior="orbit").controller == "homing"
 
 
-def test_run_behavior_formation_steers_with_pid_from_the_command_line() -> None:
+def test_run_behavior_formation_steers_with_pid_from_the_command_line(tmp_path: Path) -> None:
     from fishswarm.cli.parsers import build_parser, scenario_from
 
     parser = build_parser()
@@ -53,6 +53,13 @@ def test_run_behavior_formation_steers_with_pid_from_the_command_line() -> None:
     named = scenario_from(parser.parse_args(["run", "--behavior", "formation", "--controller",
                                              "homing"]))  # fmt: skip
     assert named.controller == "homing"
+    # A file that names the controller keeps it, also when it is the file's behaviour's
+    # default; a file that does not name one lets the new behaviour bring its own.
+    for text, controller in (('controller = "homing"', "homing"), ("fish = 4", "pid")):
+        path = tmp_path / "s.toml"
+        path.write_text(f'[scenario]\nbehavior = "dispersion"\n{text}\n')
+        args = parser.parse_args(["run", "--config", str(path), "--behavior", "formation"])
+        assert scenario_from(args).controller == controller
 
 
 def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
