@@ -493,17 +493,17 @@ class Scenario:
             return self.spawn_radius
         return behavior_named(self.behavior).spawn_radius
 
-    def replace(self, *, controller_chosen: bool | None = None, **changes: Any) -> Scenario:
+    def replace(self, **changes: Any) -> Scenario:
         """A copy with some settings changed (``None`` values are ignored). Another
         behaviour without a controller named brings its own default controller, unless this
-        scenario's controller was chosen: ``controller_chosen`` says whether it was (e.g.
-        named in its file); None guesses it from whether it differs from its behaviour's
-        default."""
+        scenario's controller was chosen (differs from its behaviour's default)."""
         given = {k: v for k, v in changes.items() if v is not None}
         behavior = given.get("behavior", self.behavior)
-        if controller_chosen is None:
-            controller_chosen = self.controller != behavior_named(self.behavior).controller
-        if behavior != self.behavior and "controller" not in given and not controller_chosen:
+        if (
+            behavior != self.behavior
+            and "controller" not in given
+            and self.controller == behavior_named(self.behavior).controller
+        ):
             given["controller"] = None  # resolved again from the new behaviour
         return dataclasses.replace(self, **given)
 
