@@ -256,6 +256,35 @@ def test_a_killed_worker_is_noticed_by_liveliness_not_by_the_command_timeout(
     run_trio(main)
 
 
+def test_a_stop_signal_while_a_worker_starts_neither_kills_it_nor_loses_its_counters(
+    endpoint: str,
+) -> None:
+    # Ctrl-C and SIGTERM reach every process of the group, also a worker still importing
+    # fishswarm; they are the launcher's to act on. Sent right after the start, they land
+    # long before the new interpreter could set its own handlers.
+    from fishswarm.actors.workers import WorkerSpec, start_worker, stop_worker
+
+    scenario = Scenario(fish=2, seed=1)
+
+    async def main() -> None:
+        async with open_session(SessionSettings(mode="router", listen=[endpoint])):
+            spec = WorkerSpec(0, (0, 1), scenario.fish_params(), scenario.swarm, endpoint)
+            worker = start_worker(spec)
+            try:
+                assert worker.process.pid is not None
+                for number in (signal.SIGTERM, signal.SIGINT):
+                    os.kill(worker.process.pid, number)
+                ready = await trio.to_thread.run_sync(worker.connection.poll, 60.0)
+                assert ready and worker.connection.recv() == ("ready", 0)
+                assert worker.process.is_alive()
+            finally:
+                await trio.to_thread.run_sync(stop_worker, worker)
+            assert worker.process.exitcode == 0
+            assert worker.statistics is not None
+
+    run_trio(main, timeout=90)
+
+
 def test_late_fish_is_included_from_a_later_tick(endpoint: str) -> None:
     from fishswarm.actors.fish import Fish, FishSettings
     from fishswarm.actors.observer import Observer
