@@ -11,9 +11,10 @@ the batch engine's leaves out its start-up and first tick; beside it the whole t
 average, first ticks included), the time from launch to the first tick's
 snapshot (what issue 14's start-up target counts), start-up (launch to the end of the run,
 less the tick loop: processes, sessions, tokens, and teardown too), and the ratios issue 14 sets
-targets for: the actor tick over (batch tick + one echo) and the batch engine's speed as a
-share. Then the perception → command round trip of one fish actor on its own keys (as on a
-robot) in a worker process, timed from a plain Zenoh session and from a trio task.
+targets for: the actor tick over (batch tick + one echo) at 25 fish, over the batch tick
+alone at 1 000, and the batch engine's speed as a share at 10 000. Then the perception →
+command round trip of one fish actor on its own keys (as on a robot) in a worker process,
+timed from a plain Zenoh session and from a trio task.
 
 Usage:
     python bench/bench_swarm.py                    # everything, prints Markdown tables
@@ -255,10 +256,10 @@ def main() -> None:
     print(f"Zenoh echo floor: {echo * 1e3:.3f} ms (median of 1000)\n")
     print(
         "| fish | workers | batch ms/tick | actors ms/tick | whole loop ms/tick "
-        "| actors / (batch + echo) | batch speed share | steps/s | to first tick s "
-        "| start-up s | real-time factor |"
+        "| actors / (batch + echo) | actors / batch | batch speed share | steps/s "
+        "| to first tick s | start-up s | real-time factor |"
     )
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for fish in args.fish:
         batch, _ = batch_tick(fish)
         for procs in args.procs:
@@ -268,7 +269,7 @@ def main() -> None:
             print(
                 f"| {fish} | {procs} | {batch * 1e3:.1f} | {tick * 1e3:.1f} | "
                 f"{row['loop_tick'] * 1e3:.1f} | "
-                f"{tick / (batch + echo):.2f} | {batch / tick:.2f} | "
+                f"{tick / (batch + echo):.2f} | {tick / batch:.2f} | {batch / tick:.2f} | "
                 f"{row['steps_per_second']:,.0f} | {row['first_tick']:.2f} | "
                 f"{row['start_up']:.1f} | "
                 f"{row['real_time_factor']:.1f}× |",
