@@ -170,11 +170,17 @@ class Channel:
         return chosen
 
     def _settle(self, sent_tick: int, wanted: dict[int, int]) -> list[Broadcast]:
-        """Take the broadcasts of ``sent_tick`` out of the outbox (and any older ones): each
-        sender's first ``wanted`` of them, by sender; the rest, which no snapshot announced,
-        are counted as rejected."""
-        for old in [t for t in self._outbox if t < sent_tick]:
-            del self._outbox[old]
+        """Take the broadcasts of ``sent_tick`` out of the outbox: each sender's first
+        ``wanted`` of them, by sender; the rest, and any of older ticks, which no snapshot
+        announced, are counted as rejected."""
+        for old in sorted(t for t in self._outbox if t < sent_tick):
+            # Its snapshot never came (lost), or came before the broadcast did.
+            for fish, broadcasts in self._outbox.pop(old).items():
+                for _ in broadcasts:
+                    self._intake.reject(
+                        self.keys.outbox(fish), "unannounced",
+                        f"a broadcast of tick {old}, whose snapshot had gone by",
+                    )  # fmt: skip
         got = self._outbox.pop(sent_tick, {})
         chosen = [b for fish in sorted(wanted) for b in got.get(fish, [])[: wanted[fish]]]
         for fish, broadcasts in got.items():

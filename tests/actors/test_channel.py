@@ -3,11 +3,16 @@ snapshot announces, whatever else arrives and in whatever order."""
 
 from __future__ import annotations
 
+import logging
+import re
+
 import numpy as np
+import pytest
 import trio
 
 from fishswarm.actors.bus import MemoryBus
 from fishswarm.actors.channel import Channel
+from fishswarm.actors.inbox import Inbox
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.messages import Broadcast, ChannelReport, Delivery, Snapshot
 from fishswarm.sim.scenario import Scenario
@@ -95,3 +100,108 @@ def test_broadcasts_a_snapshot_announces_none_of_are_counted_and_let_go() -> Non
     channel = run_mock(main)
     assert channel.statistics().rejected == 49
     assert channel.statistics().delivered == 0
+
+
+async def _serve(
+    steps: list[tuple[str, int, int, int | list[int]]],
+) -> tuple[list[tuple[float, ChannelReport]], list[Delivery], Channel]:
+    """Run a channel on the in-memory Bus through ``steps`` ("snapshot", tick, 0,
+    announced) or ("broadcast", sender, tick, value), 10 ms apart, then 10 s more; the
+    reports with the (mock) time each came at, the deliveries, and the channel."""
+    bus = MemoryBus()
+    channel = Channel(SCENARIO)
+    reports: list[tuple[float, ChannelReport]] = []
+
+    async def collect(inbox: Inbox[tuple[str, bytes]]) -> None:
+        async for _, payload in inbox:
+            reports.append((trio.current_time(), decode(payload, ChannelReport)))
+
+    async with (
+        subscription(bus, KEYS.channel_report) as report_inbox,
+        subscription(bus, KEYS.fish_inboxes()) as inboxes,
+        trio.open_nursery() as nursery,
+    ):
+        await nursery.start(channel.run, bus)
+        nursery.start_soon(collect, report_inbox)
+        for kind, first, second, third in steps:
+            if kind == "snapshot":
+                assert isinstance(third, list)
+                bus.put(KEYS.snapshot, snapshot(first, third))
+            else:
+                assert isinstance(third, int)
+                bus.put(KEYS.outbox(first), broadcast(first, second, third))
+            await trio.sleep(0.01)
+        await trio.sleep(10)
+        nursery.cancel_scope.cancel()
+    deliveries = [decode(payload, Delivery) for _, payload in inboxes.drain()]
+    return reports, deliveries, channel
+
+
+def test_a_tick_is_reported_as_soon_as_its_announced_broadcasts_are_in() -> None:
+    # Not after the 5-s wait for missing ones: the last announced broadcast completes it.
+    reports, deliveries, channel = trio.run(
+        _serve,
+        [("snapshot", 0, 0, [0, 0, 0]), ("snapshot", 1, 0, [2, 0, 0]),
+         ("broadcast", 0, 0, 3), ("broadcast", 0, 0, 4)],
+        clock=trio.testing.MockClock(autojump_threshold=0),
+    )  # fmt: skip
+    assert [report.tick for _, report in reports] == [1]
+    assert reports[0][0] < 0.1  # mock seconds: the steps took 0.04
+    assert sorted((d.receiver_id, int(d.values[0])) for d in deliveries) == [
+        (1, 3), (1, 4), (2, 3), (2, 4),
+    ]  # fmt: skip
+    assert channel.statistics().missing_broadcasts == 0
+
+
+def test_broadcasts_beyond_those_announced_are_not_delivered_but_counted() -> None:
+    reports, deliveries, channel = trio.run(
+        _serve,
+        [("snapshot", 0, 0, [0, 0, 0]), ("broadcast", 2, 0, 1), ("broadcast", 2, 0, 2),
+         ("snapshot", 1, 0, [0, 0, 1])],
+        clock=trio.testing.MockClock(autojump_threshold=0),
+    )  # fmt: skip
+    assert reports[0][1].inbox_counts.tolist() == [1, 1, 0]
+    assert sorted((d.receiver_id, int(d.values[0])) for d in deliveries) == [(0, 1), (1, 1)]
+    assert channel.statistics().rejected == 1
+
+
+def test_stale_and_far_future_broadcasts_are_rejected_near_ones_kept(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # After the snapshot of tick 3, broadcasts of ticks 2 to 5 may still be delivered; one
+    # of tick 1 is stale and one of tick 6 cannot be a real fish's.
+    steps: list[tuple[str, int, int, int | list[int]]] = [
+        ("snapshot", tick, 0, [0, 0, 0]) for tick in range(4)
+    ]
+    steps += [("broadcast", 0, 1, 1), ("broadcast", 1, 2, 2), ("broadcast", 1, 5, 5)]
+    steps += [("broadcast", 2, 6, 6)]
+    steps += [("snapshot", 4, 0, [0, 0, 0]), ("snapshot", 5, 0, [0, 0, 0])]
+    steps += [("snapshot", 6, 0, [0, 1, 0])]
+    with caplog.at_level(logging.WARNING, "fishswarm"):
+        _, deliveries, channel = trio.run(
+            _serve, steps, clock=trio.testing.MockClock(autojump_threshold=0)
+        )
+    # Delivered: the broadcast of tick 5 (announced by the snapshot of tick 6). Rejected:
+    # ticks 1 and 6 as stale when they came, tick 2 as unannounced at the snapshot of 4.
+    assert sorted((d.tick, d.receiver_id, int(d.values[0])) for d in deliveries) == [
+        (6, 0, 5), (6, 2, 5),
+    ]  # fmt: skip
+    assert channel.statistics().rejected == 3
+    pattern = re.compile(r"rejected a (\w+) message on \S+: [^0-9]*tick (\d+)")
+    rejections = sorted(pattern.findall(record.getMessage())[0] for record in caplog.records)
+    assert rejections == [("stale", "1"), ("stale", "6"), ("unannounced", "2")]
+
+
+def test_broadcasts_of_a_tick_whose_snapshot_was_missed_are_counted_when_a_later_one_comes() -> (
+    None
+):
+    # The snapshot of tick 2 never reaches the channel: fish 0's broadcast of tick 1 stays
+    # unannounced, and is let go and counted at the snapshot of tick 3.
+    reports, deliveries, channel = trio.run(
+        _serve,
+        [("snapshot", 0, 0, [0, 0, 0]), ("snapshot", 1, 0, [0, 0, 0]),
+         ("broadcast", 0, 1, 8), ("snapshot", 3, 0, [0, 0, 0])],
+        clock=trio.testing.MockClock(autojump_threshold=0),
+    )  # fmt: skip
+    assert deliveries == [] and reports == []  # a tick that announces nothing is not reported
+    assert channel.statistics().rejected == 1
