@@ -102,9 +102,16 @@ def test_broadcasts_a_snapshot_announces_none_of_are_counted_and_let_go() -> Non
     assert channel.statistics().delivered == 0
 
 
-async def _serve(
-    steps: list[tuple[str, int, int, int | list[int]]],
-) -> tuple[list[tuple[float, ChannelReport]], list[Delivery], Channel]:
+Step = tuple[str, int, int, int | list[int]]
+Served = tuple[list[tuple[float, ChannelReport]], list[Delivery], Channel]
+
+
+def serve(steps: list[Step]) -> Served:
+    """:func:`_serve` under a MockClock."""
+    return run_mock(lambda: _serve(steps))
+
+
+async def _serve(steps: list[Step]) -> Served:
     """Run a channel on the in-memory Bus through ``steps`` ("snapshot", tick, 0,
     announced) or ("broadcast", sender, tick, value), 10 ms apart, then 10 s more; the
     reports with the (mock) time each came at, the deliveries, and the channel."""
@@ -139,11 +146,9 @@ async def _serve(
 
 def test_a_tick_is_reported_as_soon_as_its_announced_broadcasts_are_in() -> None:
     # Not after the 5-s wait for missing ones: the last announced broadcast completes it.
-    reports, deliveries, channel = trio.run(
-        _serve,
+    reports, deliveries, channel = serve(
         [("snapshot", 0, 0, [0, 0, 0]), ("snapshot", 1, 0, [2, 0, 0]),
          ("broadcast", 0, 0, 3), ("broadcast", 0, 0, 4)],
-        clock=trio.testing.MockClock(autojump_threshold=0),
     )  # fmt: skip
     assert [report.tick for _, report in reports] == [1]
     assert reports[0][0] < 0.1  # mock seconds: the steps took 0.04
@@ -154,11 +159,9 @@ def test_a_tick_is_reported_as_soon_as_its_announced_broadcasts_are_in() -> None
 
 
 def test_broadcasts_beyond_those_announced_are_not_delivered_but_counted() -> None:
-    reports, deliveries, channel = trio.run(
-        _serve,
+    reports, deliveries, channel = serve(
         [("snapshot", 0, 0, [0, 0, 0]), ("broadcast", 2, 0, 1), ("broadcast", 2, 0, 2),
          ("snapshot", 1, 0, [0, 0, 1])],
-        clock=trio.testing.MockClock(autojump_threshold=0),
     )  # fmt: skip
     assert reports[0][1].inbox_counts.tolist() == [1, 1, 0]
     assert sorted((d.receiver_id, int(d.values[0])) for d in deliveries) == [(0, 1), (1, 1)]
@@ -170,17 +173,13 @@ def test_stale_and_far_future_broadcasts_are_rejected_near_ones_kept(
 ) -> None:
     # After the snapshot of tick 3, broadcasts of ticks 2 to 5 may still be delivered; one
     # of tick 1 is stale and one of tick 6 cannot be a real fish's.
-    steps: list[tuple[str, int, int, int | list[int]]] = [
-        ("snapshot", tick, 0, [0, 0, 0]) for tick in range(4)
-    ]
+    steps: list[Step] = [("snapshot", tick, 0, [0, 0, 0]) for tick in range(4)]
     steps += [("broadcast", 0, 1, 1), ("broadcast", 1, 2, 2), ("broadcast", 1, 5, 5)]
     steps += [("broadcast", 2, 6, 6)]
     steps += [("snapshot", 4, 0, [0, 0, 0]), ("snapshot", 5, 0, [0, 0, 0])]
     steps += [("snapshot", 6, 0, [0, 1, 0])]
     with caplog.at_level(logging.WARNING, "fishswarm"):
-        _, deliveries, channel = trio.run(
-            _serve, steps, clock=trio.testing.MockClock(autojump_threshold=0)
-        )
+        _, deliveries, channel = serve(steps)
     # Delivered: the broadcast of tick 5 (announced by the snapshot of tick 6). Rejected:
     # ticks 1 and 6 as stale when they came, tick 2 as unannounced at the snapshot of 4.
     assert sorted((d.tick, d.receiver_id, int(d.values[0])) for d in deliveries) == [
@@ -197,11 +196,9 @@ def test_broadcasts_of_a_tick_whose_snapshot_was_missed_are_counted_when_a_later
 ):
     # The snapshot of tick 2 never reaches the channel: fish 0's broadcast of tick 1 stays
     # unannounced, and is let go and counted at the snapshot of tick 3.
-    reports, deliveries, channel = trio.run(
-        _serve,
+    reports, deliveries, channel = serve(
         [("snapshot", 0, 0, [0, 0, 0]), ("snapshot", 1, 0, [0, 0, 0]),
          ("broadcast", 0, 1, 8), ("snapshot", 3, 0, [0, 0, 0])],
-        clock=trio.testing.MockClock(autojump_threshold=0),
     )  # fmt: skip
     assert deliveries == [] and reports == []  # a tick that announces nothing is not reported
     assert channel.statistics().rejected == 1
