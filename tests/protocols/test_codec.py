@@ -6,6 +6,7 @@ import contextlib
 import inspect
 import math
 import struct
+from collections.abc import Callable
 
 import msgpack
 import numpy as np
@@ -435,6 +436,72 @@ def test_bad_messages_cannot_be_built() -> None:
         RobotOrder("stop", np.array([3, 1]))
     with pytest.raises(ValueError, match="state must be one of"):
         WorldPulse(1, 0, "computing")
+
+
+def _snapshot(**overrides: object) -> Snapshot:
+    fields: dict[str, object] = {
+        "tick": 1, "time": 1.0, "ids": np.array([0, 1]), "position": np.zeros((2, 3)),
+        "velocity": np.zeros((2, 3)), "yaw": np.zeros(2),
+        "neighbors_seen": np.zeros(2, dtype=np.int64),
+        "broadcasts": np.zeros(2, dtype=np.int64),
+    }  # fmt: skip
+    fields.update(overrides)
+    return Snapshot(**fields)  # type: ignore[arg-type]
+
+
+def _perception(**overrides: object) -> Perception:
+    fields: dict[str, object] = {
+        "fish_id": 0, "tick": 1, "time": 1.0, "depth": 0.2, "neighbors": np.zeros((0, 3)),
+        "landmarks": np.zeros((0, 3)),
+    }  # fmt: skip
+    fields.update(overrides)
+    return Perception(**fields)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("build", "reason"),
+    [
+        (lambda: _snapshot(ids=np.array([-1, 0])), "ids must be non-negative"),
+        (lambda: _snapshot(position=np.array([[0, 0, np.inf], [0, 0, 0]])), "finite numbers"),
+        (lambda: _snapshot(position=np.array([[0, 0, -np.inf], [0, 0, 0]])), "finite numbers"),
+        (lambda: _snapshot(effort=np.array([1.0, -0.5])), "effort must not be negative"),
+        (lambda: ControlReply("", 0, 0.0, 0), "state must have 1 to"),
+        (lambda: ControlRequest("stop", formation="pyramid"), "only one, names a formation"),
+        (
+            lambda: CommandBatch(
+                1,
+                np.array([0]),
+                np.array([[0.5, -0.1, 0, 0]]),
+                np.array([False]),
+                np.array([0]),
+            ),
+            "fins must be gains in",
+        ),
+        (lambda: _perception(heading=7.0), "heading must be in"),
+        (lambda: _perception(time=-1.0), "time must be in"),
+        (lambda: FormationFlag(0, 0, True, 0, 200_000, 0), "heading_mdeg must be in"),
+        (lambda: FormationFlag(0, 0, True, 0, -180_001, 0), "heading_mdeg must be in"),
+        (lambda: FormationFlag.from_values(np.array([1, 0, 2, 0, 0, 0])), "joined must be 0"),
+        (
+            lambda: Delivery(1, 1, "signal", np.array([1]), np.array([0.1, 0.2])),
+            "sender_position must have 3 rows",
+        ),
+    ],
+)
+def test_each_field_check_refuses_what_it_is_there_for(
+    build: Callable[[], object], reason: str
+) -> None:
+    with pytest.raises((ValueError, TypeError), match=reason):
+        build()
+
+
+def test_a_message_with_a_key_beyond_v_t_f_is_not_a_fishswarm_message() -> None:
+    fields = {"action": "stop", "formation": None}
+    good = msgpack.packb({"v": SCHEMA_VERSION, "t": "control_request", "f": fields})
+    assert decode(good, ControlRequest).action == "stop"
+    extra = msgpack.packb({"v": SCHEMA_VERSION, "t": "control_request", "f": fields, "x": 1})
+    with pytest.raises(MessageError, match="expected a map with keys v, t, f"):
+        decode(extra, ControlRequest)
 
 
 def test_a_robot_order_addresses_its_robots_or_all() -> None:
