@@ -39,6 +39,39 @@ def test_first_euler_step_by_hand() -> None:
     assert state.position[0, 2] - CENTER[2] == pytest.approx(-2e-6)
 
 
+def test_a_pectoral_fin_pushes_back_and_sideways_by_hand() -> None:
+    # The left pectoral at full gain, angled π/6 back from the side: from rest, one 0.01 s
+    # step gives a_x = −sin(π/6)·0.006/0.5 = −0.006 m/s² and a_y = +cos(π/6)·0.006/0.5 =
+    # 0.010392 m/s² (body y to the right): v_x = −6e-5, v_y = +1.0392e-4 m/s. Half dorsal
+    # balances buoyancy, so v_z stays 0.
+    state = _one([0.0, 0.5, 1.0, 0.0], 0.01)
+    np.testing.assert_allclose(
+        state.body_velocity[0], [-6e-5, math.cos(math.pi / 6) * 0.012 * 0.01, 0.0], atol=1e-12
+    )
+    right = _one([0.0, 0.5, 0.0, 1.0], 0.01)
+    np.testing.assert_allclose(
+        right.body_velocity[0], state.body_velocity[0] * [1, -1, 1], atol=1e-12
+    )
+
+
+def test_a_period_that_is_not_a_whole_number_of_steps_ends_on_time() -> None:
+    # 0.025 s is two 0.01-s steps and one of 0.005 s: full caudal from rest reaches
+    # v_x = 0.04 m/s²·0.025 s = 1.0e-3 m/s (drag, 1.6e-6 m/s² at that speed, is negligible),
+    # not the 1.2e-3 of three whole steps.
+    state = _one([1.0, 0.5, 0.0, 0.0], 0.025)
+    assert state.body_velocity[0, 0] == pytest.approx(1.0e-3, rel=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("given", "clipped"),
+    [([2.0, 0.5, 0.0, 0.0], [1.0, 0.5, 0.0, 0.0]), ([-1.0, 0.5, 3.0, -2.0], [0, 0.5, 1, 0])],
+)
+def test_fin_gains_outside_0_to_1_are_clipped(given: list[float], clipped: list[float]) -> None:
+    a, b = _one(given, 1.0), _one(clipped, 1.0)
+    np.testing.assert_array_equal(a.position, b.position)
+    np.testing.assert_array_equal(a.body_velocity, b.body_velocity)
+
+
 def test_yaw_points_thrust_in_the_tank_frame() -> None:
     state = _one([1.0, 0.5, 0.0, 0.0], 2.0, yaw=math.pi / 2)
     moved = state.position[0] - CENTER
