@@ -70,6 +70,10 @@ def test_occlusion_angle_threshold() -> None:
     shown = _seen([[0, 0, 0], [1, 0, 0], [2, 2 * math.tan(math.radians(5)), 0]], [0] * 3, vision)
     assert hidden[0] == {1}
     assert shown[0] == {1, 2}
+    # Close either side of 3.72°: 3.5° hidden, 3.9° seen.
+    for degrees, expected in ((3.5, {1}), (3.9, {1, 2})):
+        target = [2, 2 * math.tan(math.radians(degrees)), 0]
+        assert _seen([[0, 0, 0], [1, 0, 0], target], [0] * 3, vision)[0] == expected
 
 
 def test_only_visible_fish_occlude() -> None:
@@ -113,6 +117,13 @@ def test_noise_is_per_fish_and_proportional_to_distance() -> None:
     np.testing.assert_array_equal(first.neighbors, second.neighbors)
     clean = perceive(positions, np.zeros(3), vision=NO_OCCLUSION)
     assert not np.array_equal(first.neighbors, clean.neighbors)
+    # Fish 0 sees fish 1 at 1 m and fish 2 at 2 m (nearest first; facing +x, so its body
+    # frame is the tank's): each is off by noise·distance·z, z drawn from fish 0's own
+    # generator, one normal triple per neighbour in that order.
+    z = np.random.default_rng(0).normal(0.0, 1.0, (2, 3))
+    np.testing.assert_allclose(
+        first.of(0) - clean.of(0), 0.1 * np.array([[1.0], [2.0]]) * z, atol=1e-12
+    )
     with pytest.raises(ValueError, match="one random generator per fish"):
         perceive(positions, np.zeros(3), vision=vision)
 
@@ -126,6 +137,18 @@ def test_landmark_in_blind_spot_is_hidden() -> None:
     )
     assert result.mask.tolist() == [[False], [True]]
     np.testing.assert_allclose(result.of(1), [[0.5, 0.0, 0.0]])
+
+
+def test_a_landmark_exactly_at_the_visual_range_is_seen() -> None:
+    result = perceive_landmarks(
+        np.array([[0.5, 1.0, 0.5], [0.4, 1.0, 0.5]]),
+        np.zeros(2),
+        np.array([[3.5, 1.0, 0.5]]),
+        vision=Vision(visual_range=3.0),
+    )
+    # 3.0 m ahead of the first fish (seen), 3.1 m ahead of the second (not).
+    assert result.mask.tolist() == [[True], [False]]
+    np.testing.assert_allclose(result.of(0), [[3.0, 0.0, 0.0]])
 
 
 def test_no_landmarks_are_seen_by_every_fish_as_nothing() -> None:

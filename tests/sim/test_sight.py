@@ -8,7 +8,13 @@ import pytest
 from fishswarm.bluebot.vision import Perceived, Vision, perceive, to_body
 from fishswarm.sim.physics import WorldParams
 from fishswarm.sim.scenario import ConfigError, Scenario
-from fishswarm.sim.sight import Cameras, SightCounts, perceive_through_cameras, score_sight
+from fishswarm.sim.sight import (
+    Cameras,
+    SightCounts,
+    _match,
+    perceive_through_cameras,
+    score_sight,
+)
 from fishswarm.sim.tick import WorldSim
 
 CAMERAS = Cameras()
@@ -79,6 +85,33 @@ def test_score_counts_found_missed_and_false_detections_by_hand() -> None:
     assert summary["false_rate"] == pytest.approx(1 / 3)
     assert summary["mean_range_error"] == pytest.approx(0.05)
     assert SightCounts().summary()["recall"] is None
+
+
+def test_a_detection_is_of_the_nearest_fish_only_when_close_enough_to_it() -> None:
+    # Viewer 0 at the origin facing +x; fish 1 1 m ahead, fish 2 0.1 m to the right. A
+    # detection belongs to the nearest fish within 0.3 of its range (at least 0.05 m):
+    # 0.3 m around fish 1, 0.05 m around fish 2.
+    position = np.array([[0.0, 0.0, 0.5], [1.0, 0.0, 0.5], [0.0, 0.1, 0.5]])
+    detections = np.array(
+        [[[1.0, 0.25, 0.0], [1.0, -0.4, 0.0], [0.04, 0.1, 0.0], [0.0, 0.16, 0.0]]]
+    )
+    neighbors = np.zeros((3, 4, 3))
+    neighbors[0] = detections[0]
+    mask = np.zeros((3, 4), dtype=np.bool_)
+    mask[0] = True
+    index = _match(position, np.zeros(3), neighbors, mask)
+    assert index[0].tolist() == [1, -1, 2, -1]
+    assert (index[1:] == -1).all()  # no detections there
+
+
+def test_the_range_error_is_relative_to_the_true_range() -> None:
+    # A fish 2 m away detected at 2.2 m: 10 % off, as a fish 1 m away detected at 1.1 m.
+    position = np.array([[0.0, 0.0, 0.5], [2.0, 0.0, 0.5]])
+    truth = Perceived(np.zeros((2, 1, 3)), np.array([[True], [False]]), np.array([[1], [-1]]))
+    neighbors = np.zeros((2, 1, 3))
+    neighbors[0, 0] = (2.2, 0.0, 0.0)
+    camera = Perceived(neighbors, np.array([[True], [False]]), np.array([[1], [-1]]))
+    assert score_sight(camera, truth, position).range_error == pytest.approx(0.1)
 
 
 def test_the_world_scores_camera_vision_against_the_geometric_model() -> None:
