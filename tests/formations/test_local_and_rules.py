@@ -10,7 +10,13 @@ import pytest
 
 from fishswarm.formations.local import LOCAL_SHAPES, local_spots, nearest_neighbors
 from fishswarm.formations.maps import target_map
-from fishswarm.formations.rules import STAY, choose_spot, leader_and_rank, place_map
+from fishswarm.formations.rules import (
+    STAY,
+    choose_spot,
+    leader_and_rank,
+    nearest_only,
+    place_map,
+)
 
 L = 0.3
 H = L * math.sqrt(3) / 2  # height of an equilateral triangle of side L
@@ -159,3 +165,29 @@ def test_a_fish_ahead_of_all_it_sees_leads_from_where_it_is() -> None:
     neighbors, mask = _one((-1.0, 0.0, 0.0), (-0.5, 0.5, 0.0))
     leader, rank = leader_and_rank(neighbors, mask, np.array([[1.0, 0.0, 0.0]]))
     assert leader.tolist() == [[0.0, 0.0, 0.0]] and rank.tolist() == [0]
+
+
+def test_a_fish_level_with_a_neighbour_ranks_behind_it() -> None:
+    # Orientation +x; a neighbour abreast, 0.3 m to the right, is as far along as the fish.
+    neighbors, mask = _one((0.0, 0.3, 0.0), (-0.4, 0.0, 0.0))
+    _, rank = leader_and_rank(neighbors, mask, np.array([[1.0, 0.0, 0.0]]))
+    assert rank.tolist() == [1]
+
+
+def test_the_conflict_rule_compares_with_the_nearest_after_those_skipped() -> None:
+    neighbors, mask = _one((2.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 3.0, 0.0))
+    assert nearest_only(neighbors, mask).tolist() == [[False, True, False]]
+    assert nearest_only(neighbors, mask, skip=1).tolist() == [[True, False, False]]
+    # A settled neighbour competes for nothing: the next one is marked instead.
+    settled = np.array([[False, True, False]])
+    assert nearest_only(neighbors, mask, settled=settled).tolist() == [[True, False, False]]
+
+
+def test_a_rival_exactly_as_far_from_a_spot_as_the_fish_does_not_take_it() -> None:
+    # Spot 0.3 m ahead; a rival 0.3 m beyond it. Level: the fish takes the spot.
+    neighbors, mask = _one((0.6, 0.0, 0.0))
+    spots = np.array([[[0.3, 0.0, 0.0]]])
+    valid = np.ones((1, 1), dtype=np.bool_)
+    assert choose_spot(spots, valid, neighbors, mask, tolerance=0.075).tolist() == [0]
+    neighbors[0, 0, 0] = 0.59  # nearer than the fish: the spot is the rival's
+    assert choose_spot(spots, valid, neighbors, mask, tolerance=0.075).tolist() == [STAY]

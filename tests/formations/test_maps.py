@@ -83,5 +83,8 @@ def test_bad_maps_are_explained() -> None:
         target_map("circle", 5, spacing=1.0)
     with pytest.raises(ValueError, match="1 to 10000 fish"):
         target_map("pyramid", 0, spacing=1.0)
+    with pytest.raises(ValueError, match="1 to 10000 fish, got 10001"):
+        target_map("column", 10_001, spacing=1.0)
+    assert target_map("column", 10_000, spacing=0.3).shape == (10_000, 3)  # the largest
     with pytest.raises(ValueError, match="positive length"):
         target_map("pyramid", 5, spacing=-1.0)

@@ -8,7 +8,15 @@ import numpy as np
 import pytest
 
 from fishswarm.formations.maps import target_map
-from fishswarm.formations.metrics import collisions, deviation_energy, fish_fitness, shape_error
+from fishswarm.formations.metrics import (
+    Alignment,
+    align,
+    collisions,
+    deviation_energy,
+    fish_fitness,
+    local_shape_error,
+    shape_error,
+)
 
 
 def test_fitness_of_three_fish_drawn_on_paper() -> None:
@@ -72,3 +80,41 @@ def test_alignment_lays_a_drawn_triangle_onto_fish_that_hold_it_turned_and_shuff
     assert fit.joined(0.1).all() and not fit.joined(1e-6).all()
     with pytest.raises(ValueError, match="3 fish against a target of 2 slots"):
         align(fish, target[:2])
+
+
+def test_a_mirror_image_of_a_chiral_map_is_not_the_same_formation() -> None:
+    # The tetrahedral pyramid of 5 has no mirror symmetry: reflected (y → −y), no rigid
+    # motion lays it back onto itself, while any turn and shift does.
+    target = target_map("tetrahedral-pyramid", 5, spacing=0.3)
+    assert align(target + np.array([0.5, 0.5, 0.5]), target).rms == pytest.approx(0.0, abs=1e-9)
+    assert align(target * [1, -1, 1], target).rms > 0.05
+
+
+def test_lattice_neighbours_are_pairs_within_1_2_spacings_and_deviations_are_squared() -> None:
+    # Stretched by 1.25, no pair is within 1.2 spacings: nobody has a neighbour.
+    assert deviation_energy(target_map("pyramid", 10, spacing=0.3) * 1.25, spacing=0.3) == 1.0
+    # Three fish on a line at 0, 0.33 and 0.63 m (spacing 0.3): the neighbour pairs are
+    # 0.33 (10 % long) and 0.30 m (exact); 0.63 m is no neighbour. Mean of squares:
+    # (0.1² + 0²)/2 = 0.005 (the square of the mean would be 0.0025).
+    line = np.array([[0.0, 0, 0], [0.33, 0, 0], [0.63, 0, 0]])
+    assert deviation_energy(line, spacing=0.3) == pytest.approx(0.005)
+
+
+def test_too_few_fish_for_a_local_shape_have_no_error() -> None:
+    # A triangle needs three fish: two have none to complete, and no number is made up.
+    rms, joined = local_shape_error(
+        np.array([[0.0, 0, 0], [0.3, 0, 0]]), "triangle", spacing=0.3, tolerance=0.05
+    )
+    assert math.isnan(rms) and joined == 0.0
+
+
+def test_boundaries_of_crowding_free_targets_and_joining() -> None:
+    # Exactly at the crowding radius is not crowded; a target exactly the tolerance from
+    # another fish is still free; a fish exactly the tolerance from its slot has joined.
+    fish = np.array([[0.0, 0, 0], [0.5, 0, 0]])
+    targets = np.array([[1.0, 0, 0]])
+    # Fish 1 is 0.5 m from the target (not within 0.5): free for fish 0, 1 m away.
+    fitness = fish_fitness(fish, targets, tolerance=0.5, crowding_radius=0.5)
+    np.testing.assert_allclose(fitness, [1.0, 0.5])
+    gaps = Alignment(np.zeros((1, 3)), np.zeros(1, dtype=np.int64), np.array([0.5]))
+    assert gaps.joined(0.5).tolist() == [True]
