@@ -510,3 +510,58 @@ def test_effort_sharing_fish_decide_alone_as_in_a_school() -> None:
         np.testing.assert_array_equal(single.outbox.values[0], together.outbox.values[fish])
     # Some of them asked, agreed or went (the case is not idle).
     assert (together.outbox.values[:, 7] > 0).any()
+
+
+def test_a_fish_exactly_the_margin_more_tired_does_not_ask_one_more_does() -> None:
+    # T leads with R (effort 50) 0.3 m behind it; margin 40.
+    params = FormationParams("column", count=3, spacing=0.3, rotate_effort=True, effort_margin=40)
+    behind = _perception((-0.3, 0.0, 0.0))
+    heard = inbox_of([[(FLAG, _flag(1, True, effort=50), np.array([-0.3, 0.0, 0.0]))]])
+    for effort, swap in ((90.0, -1), (91.0, 1)):
+        _, steering = steer_formation(_holding(0), _tired(behind, effort), heard, params=params)
+        assert FormationFlag.from_values(steering.outbox.values[0]).swap == swap
+
+
+def test_the_flag_carries_the_orientation_in_millidegrees() -> None:
+    params = FormationParams("column", count=3, orientation=math.pi / 2)
+    _, steering = steer_formation(
+        fresh_formation_memory(1), _perception((-0.5, 0.0, 0.0)), Inbox.empty(1), params=params
+    )
+    assert FormationFlag.from_values(steering.outbox.values[0]).heading_mdeg == 90_000
+
+
+def test_a_negative_lead_is_refused() -> None:
+    with pytest.raises(ValueError, match="lead must be a time of 0 s or more"):
+        FormationParams("pyramid", count=15, lead=-1.0)
+
+
+@pytest.mark.parametrize(("leader_y", "joined"), [(-0.38, False), (-0.37, True)])
+def test_a_fish_has_joined_only_within_the_tolerance_of_its_place(
+    leader_y: float, joined: bool
+) -> None:
+    # As the follower above (facing +y, the formation forward to its left), its slot 0.3 m
+    # behind the leader: 0.08 m away (outside the tolerance 0.075) or 0.07 m (inside).
+    params = FormationParams("column", count=3, spacing=0.3, rule="study")
+    leader_flag = FormationFlag(FORMATION_SHAPES.index("column"), 0, True, 0, 0, 4)
+    inbox = inbox_of([[(FLAG, leader_flag.values(), np.array([0.0, leader_y, 0.0]))]])
+    perception = _perception((0.0, leader_y, 0.0), heading=math.pi / 2)
+    memory, steering = steer_formation(fresh_formation_memory(1), perception, inbox, params=params)
+    assert memory.place.tolist() == [1]
+    assert memory.joined.tolist() == [joined] and steering.led.tolist() == [joined]
+
+
+@pytest.mark.parametrize(("seen_x", "merged"), [(1.1, False), (1.03, True)])
+def test_a_seen_fish_where_a_flag_shows_its_sender_is_that_sender(
+    seen_x: float, merged: bool
+) -> None:
+    # A flag's sender appears 1 m ahead; a fish is seen 0.1 m from there (two fish: more
+    # than half the tolerance 0.075 apart) or 0.03 m (one fish, which holds its place).
+    from fishswarm.behaviors.formation import _heard_flags, _with_senders
+
+    params = FormationParams("column", count=3, spacing=0.3)
+    inbox = inbox_of([[(FLAG, _flag(1, True), np.array([1.0, 0.0, 0.0]))]])
+    neighbors = np.array([[[seen_x, 0.0, 0.0], [2.0, 0.0, 0.0]]])
+    mask = np.ones((1, 2), dtype=np.bool_)
+    _, real, holding = _with_senders(neighbors, mask, inbox, _heard_flags(inbox, params), params)
+    assert real.tolist() == [[True, True, not merged]]
+    assert holding.tolist() == [[merged, False, not merged]]
