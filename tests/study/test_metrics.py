@@ -18,6 +18,7 @@ from fishswarm.study.metrics import (
     OrbitTarget,
     OrbitTracker,
     centroid_distance,
+    effort_spread,
     linked_centroid_distance,
     nearest_neighbor_distance,
     orbit_metrics,
@@ -287,3 +288,38 @@ def test_the_pairwise_distance_of_a_huge_swarm_is_estimated_closely_and_repeatab
     assert pairwise_distance(position) == estimate  # the same pairs every snapshot
     # Moving every fish by the same offset leaves it unchanged: it measures the fish only.
     assert pairwise_distance(position + 3.0) == pytest.approx(estimate, rel=1e-12)
+
+
+def test_effort_spread_is_the_most_over_the_mean() -> None:
+    assert effort_spread(np.array([1.0, 2.0, 3.0])) == pytest.approx(1.5)
+    assert effort_spread(np.zeros(3)) == 1.0 and effort_spread(np.zeros(0)) == 1.0
+
+
+def test_the_expected_orbit_radius_is_r_around_a_post_and_half_of_it_for_partners() -> None:
+    assert OrbitTarget(np.array([1.0, 1.0, 0.5]), 0.4).expected_radius == 0.4
+    assert OrbitTarget(None, 0.4).expected_radius == pytest.approx(0.2)
+
+
+def test_a_link_exactly_at_range_counts() -> None:
+    pair = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    assert linked_centroid_distance(pair, link_range=1.0) == pytest.approx(1.0)
+    assert linked_centroid_distance(pair, link_range=0.999) == 0.0
+
+
+def test_two_snapshots_at_one_time_have_no_speed() -> None:
+    tracker = OrbitTracker(OrbitTarget(np.array([1.0, 1.0, 0.5]), 0.5))
+    ids, position = np.array([0]), np.array([[1.5, 1.0, 0.5]])
+    tracker.metrics(ids, position, 2.0)
+    assert tracker.metrics(ids, np.array([[1.5, 1.1, 0.5]]), 2.0)["speed"] == 0.0
+
+
+def test_the_observer_aligns_a_school_as_well_as_many_more_starts_would() -> None:
+    from fishswarm.formations.metrics import align
+    from fishswarm.study.metrics import formation_target_of
+
+    target = formation_target_of(Scenario(fish=6, behavior="formation", formation="pyramid"))
+    assert target is not None and target.slots is not None
+    school = np.random.default_rng(0).uniform(0.0, 0.6, (6, 3))
+    school[:, 2] = 0.5
+    best = align(school, target.slots[:6], starts=48).rms
+    assert target.metrics(school)["shape_error"] == pytest.approx(best, abs=1e-9)
