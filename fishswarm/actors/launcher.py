@@ -191,6 +191,7 @@ async def run_swarm(
             finally:
                 with trio.CancelScope(shield=True):
                     await _stop_all(workers)
+                died += _died_unseen(workers)
                 summary = _summary(
                     settings,
                     status,
@@ -272,13 +273,12 @@ async def _watch_signals(interrupted: trio.Event, scope: trio.CancelScope) -> No
 
 
 async def _watch_workers(workers: list[Worker], died: list[str], world: World) -> None:
-    reported: set[int] = set()
     while True:
         for worker in workers:
-            if worker.stopping or worker.spec.index in reported:
+            if worker.stopping or worker.lost:
                 continue
             if worker.process.exitcode is not None:
-                reported.add(worker.spec.index)
+                worker.lost = True
                 message = f"{worker.spec.describe()} {worker.exit_description()}; its fish are lost"
                 died.append(message)
                 if world.state_name == "waiting":
@@ -288,6 +288,16 @@ async def _watch_workers(workers: list[Worker], died: list[str], world: World) -
                     )
                 log.error(message)
         await trio.sleep(0.05)
+
+
+def _died_unseen(workers: list[Worker]) -> list[str]:
+    """The workers that failed on their own without the watch seeing it (it looks every
+    50 ms; a short run can end first): exited with an error and no counters to give."""
+    return [
+        f"{worker.spec.describe()} {worker.exit_description()}; its fish were lost"
+        for worker in workers
+        if not worker.lost and worker.statistics is None and (worker.process.exitcode or 0) > 0
+    ]
 
 
 async def _stop_all(workers: list[Worker]) -> None:

@@ -22,18 +22,23 @@ from __future__ import annotations
 import datetime
 import ipaddress
 import json
+import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.checks import check_int
+from fishswarm.protocols.keys import MAX_FISH_ID, KeySpace, check_name
 
 AUTHORITY = "ca"
 ACCESS_FILE = "access_control.json"
 BASE_SUBJECTS = ("router", "world", "channel", "admin", "observer")
 """Subjects every secured swarm has; robots and named observers are added to them."""
 DEFAULT_DAYS = 365
+MAX_DAYS = 36_500
+"""Certificates last at most a hundred years (dates past 9999 cannot be written)."""
+_HOST_NAME = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*")
 
 
 class SecurityError(RuntimeError):
@@ -234,19 +239,27 @@ def init_secure(
     from cryptography.hazmat.primitives.asymmetric import ec
     from cryptography.x509.oid import NameOID
 
-    if days < 1:
-        raise ValueError(f"certificates must be valid for at least a day, got {days}")
+    if not 1 <= days <= MAX_DAYS:
+        raise ValueError(f"certificates must be valid for 1 to {MAX_DAYS} days, got {days}")
     keys = KeySpace(swarm)
-    subjects = [*BASE_SUBJECTS, *(observer_subject(n) for n in observers)]
-    subjects += [robot_subject(int(r)) for r in robots]
+    for robot in robots:
+        check_int("robot id", robot, high=MAX_FISH_ID)
+    subjects = [*BASE_SUBJECTS, *(observer_subject(check_name("observer", n)) for n in observers)]
+    # Named twice is made once: the router refuses access control with a rule twice.
+    subjects = list(dict.fromkeys([*subjects, *(robot_subject(int(r)) for r in robots)]))
     for subject in subjects:
         if subject != "router":
             rights_of(subject, keys)  # every subject must have a role
     names: list[x509.GeneralName] = []
-    for host in hosts:
+    for host in dict.fromkeys(hosts):
         try:
             names.append(x509.IPAddress(ipaddress.ip_address(host)))
         except ValueError:
+            if not _HOST_NAME.fullmatch(host):
+                raise ValueError(
+                    f"host {host!r} is neither an IP address nor a host name (letters, "
+                    "digits and '-', parts joined by '.')"
+                ) from None
             names.append(x509.DNSName(host))
     folder.mkdir(parents=True, exist_ok=True)
     now = datetime.datetime.now(datetime.UTC)

@@ -136,6 +136,8 @@ class Worker:
     connection: Connection
     statistics: FishStatistics | None = None
     stopping: bool = False
+    lost: bool = False
+    """Seen to have ended on its own while the run went on."""
 
     def exit_description(self) -> str:
         """How the process ended, in words."""

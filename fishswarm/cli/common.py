@@ -73,21 +73,36 @@ def secure_extra(
         SecurityError: the subject's certificate cannot be used (which file, and why).
     """
     folder = getattr(args, "secure", None)
-    flag = "--listen" if router else "--connect"
-    if folder is None:
+    check_secured_endpoint(
+        endpoint,
+        flag="--listen" if router else "--connect",
+        secured=folder is not None,
         # TLS may come from a Zenoh configuration file instead (robot --zenoh-config).
-        if endpoint.startswith("tls/") and getattr(args, "zenoh_config", None) is None:
-            raise ConfigError(
-                f"{flag} {endpoint} is a secured (tls/) endpoint: give --secure DIR, the "
-                "folder 'fishswarm secure init' wrote"
-            )
-        return {}
-    if not endpoint.startswith("tls/"):
+        tls_elsewhere=getattr(args, "zenoh_config", None) is not None,
+    )
+    return {} if folder is None else session_security(folder, subject, router=router)
+
+
+def check_secured_endpoint(
+    endpoint: str, *, flag: str, secured: bool, tls_elsewhere: bool = False
+) -> None:
+    """Check that ``endpoint`` (given as ``flag``) is a tls/ one exactly when the swarm is
+    secured (``--secure``), or TLS comes from elsewhere.
+
+    Raises:
+        ConfigError: which is missing, and how to fix it.
+    """
+    tls = endpoint.startswith("tls/")
+    if not secured and tls and not tls_elsewhere:
+        raise ConfigError(
+            f"{flag} {endpoint} is a secured (tls/) endpoint: give --secure DIR, the "
+            "folder 'fishswarm secure init' wrote"
+        )
+    if secured and not tls:
         raise ConfigError(
             f"{flag} {endpoint}: a secured swarm talks TLS only: give a tls/ endpoint, e.g. "
             f"tls/{endpoint.partition('/')[2] or '127.0.0.1:7447'}"
         )
-    return session_security(folder, subject, router=router)
 
 
 def run_trio(

@@ -12,6 +12,7 @@ from fishswarm import __version__
 from fishswarm.behaviors.registry import BEHAVIORS
 from fishswarm.cli.study import add_parsers as add_study_parsers
 from fishswarm.learning.arena import REPLICA_KINDS
+from fishswarm.protocols.keys import MAX_FISH_ID, check_name
 from fishswarm.protocols.messages import FORMATION_SHAPES
 from fishswarm.sim.scenario import (
     PROFILES,
@@ -40,14 +41,45 @@ def wait_seconds(text: str) -> float:
 
 
 def fish_id(text: str) -> int:
-    """A fish's (or robot's) id: an integer, 0 or more (an argparse type)."""
+    """A fish's (or robot's) id: an integer from 0 to MAX_FISH_ID (an argparse type)."""
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"{text!r} is negative: fish ids are 0 or more")
+    if value > MAX_FISH_ID:
+        raise argparse.ArgumentTypeError(f"{text} is too large: fish ids go up to {MAX_FISH_ID}")
     return value
+
+
+def tick_number(text: str) -> int:
+    """A tick: an integer, 0 or more (an argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is negative: ticks count from 0")
+    return value
+
+
+def swarm_name(text: str) -> str:
+    """A swarm's name, as keys can hold it (an argparse type)."""
+    return _name("swarm", text)
+
+
+def observer_name(text: str) -> str:
+    """An observer's name, as a certificate's subject and keys can hold it (an argparse
+    type)."""
+    return _name("observer", text)
+
+
+def _name(kind: str, text: str) -> str:
+    try:
+        return check_name(kind, text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
 
 
 def _number(text: str) -> float:
@@ -152,7 +184,11 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
         "--study-code switches) or study-code (every switch: the model the study's published "
         "tables came from; docs/fidelity.md)",
     ),
-    "swarm": ("--swarm", str, "swarm name: several swarms can share a router (default default)"),
+    "swarm": (
+        "--swarm",
+        swarm_name,
+        "swarm name: several swarms can share a router (default default)",
+    ),
     "model": (
         "--model",
         str,
@@ -387,7 +423,9 @@ def build_parser() -> argparse.ArgumentParser:
         "LEDs off on the named robots (all when no id is given) until --resume.",
     )
     _add_connect(robots)
-    robots.add_argument("--swarm", default="default", help="swarm name (default default)")
+    robots.add_argument(
+        "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
+    )
     robots.add_argument(
         "--listen", type=seconds, default=1.5, help="how long to listen, s (default 1.5)"
     )
@@ -442,12 +480,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_connect(observe)
     observe.add_argument(
         "--name",
+        type=observer_name,
         help="with --secure: whose observer certificate to use (observer-NAME; default the "
         "plain observer certificate)",
     )
-    observe.add_argument("--swarm", default="default", help="swarm name (default default)")
+    observe.add_argument(
+        "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
+    )
     observe.add_argument("--record", type=Path, help="MCAP recording to write")
-    observe.add_argument("--ticks", type=int, help="stop after the snapshot of this tick")
+    observe.add_argument(
+        "--ticks", type=tick_number, help="stop after the snapshot of this tick (0 or more)"
+    )
 
     view = commands.add_parser(
         "view",
@@ -468,10 +511,13 @@ def build_parser() -> argparse.ArgumentParser:
     _add_connect(view)
     view.add_argument(
         "--name",
+        type=observer_name,
         help="with --secure: whose observer certificate to use (observer-NAME; default the "
         "plain observer certificate)",
     )
-    view.add_argument("--swarm", default="default", help="swarm name (default default)")
+    view.add_argument(
+        "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
+    )
     _add_view_flags(view)
     view.add_argument("--open", action="store_true", help="open this machine's browser on the page")
 
@@ -483,7 +529,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     formation.add_argument("shape", choices=FORMATION_SHAPES, help="the new formation")
     _add_connect(formation)
-    formation.add_argument("--swarm", default="default", help="swarm name (default default)")
+    formation.add_argument(
+        "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
+    )
 
     router = commands.add_parser(
         "router",
@@ -528,17 +576,22 @@ def build_parser() -> argparse.ArgumentParser:
                       help="robot ids to make certificates for")  # fmt: skip
     init.add_argument(
         "--observers",
+        type=observer_name,
         nargs="*",
         default=[],
         metavar="NAME",
         help="observer names to make certificates for (besides 'observer')",
     )
     init.add_argument("--host", action="append", default=None, metavar="NAME_OR_ADDRESS",
-                      help="a name or address the router is reached by (repeat; default "
-                      "localhost and 127.0.0.1)")  # fmt: skip
-    init.add_argument("--swarm", default="default", help="swarm name (default default)")
-    init.add_argument("--days", type=int, default=365,
-                      help="how long the certificates are valid (default 365)")  # fmt: skip
+                      help="a name or address the router is reached by (repeat; localhost and "
+                      "127.0.0.1 are always named, as a run reaches its router there)")  # fmt: skip
+    init.add_argument(
+        "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
+    )
+    init.add_argument(
+        "--days", type=int, default=365, help="how long the certificates are valid, 1 to 36500 "
+        "(default 365)"
+    )  # fmt: skip
     init.add_argument(
         "--force",
         action="store_true",

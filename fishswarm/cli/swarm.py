@@ -42,6 +42,7 @@ from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.cli.common import USER_ERRORS as COMMON_ERRORS
 from fishswarm.cli.common import (
     UserError,
+    check_secured_endpoint,
     client_settings,
     endpoint_of,
     prepare_file,
@@ -180,11 +181,7 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         handle_signals=True,
         secure=args.secure,
     )
-    if args.secure is not None and not settings.listen.startswith("tls/"):
-        raise ConfigError(
-            f"--listen {settings.listen}: a secured run listens on TLS only: give a tls/ "
-            f"endpoint, e.g. tls/{settings.listen.partition('/')[2]}"
-        )
+    check_secured_endpoint(settings.listen, flag="--listen", secured=args.secure is not None)
     print(
         f"fishswarm: {scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
         f"{1 / scenario.control_period:g} Hz, seed {scenario.seed}, "
@@ -553,7 +550,8 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
             args.folder,
             robots=args.robots,
             observers=args.observers,
-            hosts=args.host or ("localhost", "127.0.0.1"),
+            # The run's own processes reach the router on this machine: always named.
+            hosts=("localhost", "127.0.0.1", *(args.host or ())),
             swarm=args.swarm,
             days=args.days,
             replace=args.force,

@@ -10,7 +10,7 @@ import re
 from dataclasses import dataclass
 
 ROOT = "fishswarm"
-_NAME = re.compile(r"^[A-Za-z0-9_\-]+$")
+_NAME = re.compile(r"[A-Za-z0-9_\-]{1,64}")
 _FISH_ID = re.compile(r"[0-9]{1,18}")
 MAX_FISH_ID = 10**18 - 1
 """The largest fish id a key may name (ids fit in every message's integer fields)."""
@@ -21,10 +21,16 @@ def fish_id_of(text: str) -> int | None:
     return int(text) if _FISH_ID.fullmatch(text) else None
 
 
-def _check_name(kind: str, value: str) -> str:
-    if not _NAME.match(value):
+def check_name(kind: str, value: str) -> str:
+    """``value``, a name that may stand in a key (a swarm's, a school's, an observer's).
+
+    Raises:
+        ValueError: it is empty, longer than 64 characters, or not letters, digits, '-'
+            and '_' only.
+    """
+    if not _NAME.fullmatch(value):
         raise ValueError(
-            f"{kind} name {value!r} is not valid: use letters, digits, '-' and '_' only"
+            f"{kind} name {value!r} is not valid: use 1 to 64 letters, digits, '-' and '_'"
         )
     return value
 
@@ -55,7 +61,7 @@ class KeySpace:
     swarm: str = "default"
 
     def __post_init__(self) -> None:
-        _check_name("swarm", self.swarm)
+        check_name("swarm", self.swarm)
 
     @property
     def prefix(self) -> str:
@@ -84,11 +90,11 @@ class KeySpace:
         A school is a group of fish served by one actor (a worker process). It carries one
         message per tick each way instead of one per fish; robots keep the per-fish keys.
         """
-        return f"{self.prefix}/school/{_check_name('school', school)}/perceptions"
+        return f"{self.prefix}/school/{check_name('school', school)}/perceptions"
 
     def school_commands(self, school: str) -> str:
         """School → world: the commands of all the school's fish for a tick."""
-        return f"{self.prefix}/school/{_check_name('school', school)}/commands"
+        return f"{self.prefix}/school/{check_name('school', school)}/commands"
 
     @property
     def snapshot(self) -> str:
@@ -120,7 +126,7 @@ class KeySpace:
         """Fish actor → world: what its fish run (:class:`FishAbout`), on the fish's own key
         or its school's."""
         if school is not None:
-            return f"{self.prefix}/school/{_check_name('school', school)}/about"
+            return f"{self.prefix}/school/{check_name('school', school)}/about"
         return f"{self.prefix}/fish/{fish_id}/about"
 
     def abouts(self) -> tuple[str, str]:
@@ -146,9 +152,9 @@ class KeySpace:
         A fish served through a school's keys says so in its token:
         ``alive/fish/<id>/<school>``; a fish on its own keys has ``alive/fish/<id>``.
         """
-        _check_name("role", role)
+        check_name("role", role)
         token = f"{self.prefix}/alive/{role}/{member_id}"
-        return token if school is None else f"{token}/{_check_name('school', school)}"
+        return token if school is None else f"{token}/{check_name('school', school)}"
 
     def alive_all(self, role: str = "*") -> str:
         """Key expression matching the liveliness tokens of every member of ``role``."""
@@ -168,7 +174,7 @@ class KeySpace:
     def every_school(self, kind: str) -> str:
         """Key expression matching one kind of school key (``perceptions``, ``commands``,
         ``about``) of every school."""
-        return f"{self.prefix}/school/*/{_check_name('kind', kind)}"
+        return f"{self.prefix}/school/*/{check_name('kind', kind)}"
 
     def fish_outboxes(self) -> str:
         """Key expression matching every fish's outbox key."""

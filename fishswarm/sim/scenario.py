@@ -61,6 +61,11 @@ PROFILES = ("paper", "study-code")
 """``paper``: the paper's equations, plus the switches named in ``study_code``;
 ``study-code``: every switch of :data:`STUDY_CODE_SWITCHES`."""
 
+MAX_CONTROL_PERIOD = 60.0
+"""The longest control period, s: a period's Euler steps are held in memory at once."""
+MAX_TARGET_DISTANCE = 1000.0
+"""The farthest Lennard-Jones r_t, m (beyond some 10²⁵ times the fish's distance, its
+twelfth powers overflow)."""
 START_DELAY_PERIODS = 2
 """Control periods the study code's fish stood still at the start of a run (its fish moved
 only once their clock passed 1)."""
@@ -264,6 +269,12 @@ class Scenario:
             value = getattr(self, name)
             need(_positive(value), f"{name} must be a positive number of seconds, got {value!r}")
         need(
+            self.control_period <= MAX_CONTROL_PERIOD,
+            f"control_period must be at most {MAX_CONTROL_PERIOD:g} s (a fish decides at least "
+            f"once a minute; the physics takes {1 / BlueBot().euler_step:g} steps a second), "
+            f"got {self.control_period:g}",
+        )
+        need(
             isinstance(self.seed, int) and self.seed >= 0,
             f"seed must be a non-negative integer, got {self.seed!r}",
         )
@@ -276,6 +287,11 @@ class Scenario:
             need(
                 value is None or _positive(value), f"{name} must be positive metres, got {value!r}"
             )
+        need(
+            self.target_distance is None or self.target_distance <= MAX_TARGET_DISTANCE,
+            f"target_distance must be at most {MAX_TARGET_DISTANCE:g} m (farther, the "
+            f"Lennard-Jones forces overflow), got {self.target_distance!r}",
+        )
         try:
             Tank(tuple(self.tank))  # type: ignore[arg-type]
             self.vision()

@@ -435,3 +435,42 @@ def test_a_fake_fish_shown_by_a_liveliness_token_is_not_admitted_to_a_secured_ru
         np.testing.assert_array_equal(positions, run_batch(scenario).position)
     else:
         assert ids & {8, 9}  # the threat is real: the world took a fish nobody runs
+
+
+def test_secure_init_makes_each_subject_once_and_refuses_names_it_cannot_use(
+    tmp_path: Path,
+) -> None:
+    folder = tmp_path / "keys"
+    init_secure(folder, robots=[1, 1], observers=["lab", "lab"])
+    rules = [rule["id"] for rule in json.loads((folder / ACCESS_FILE).read_text())["rules"]]
+    assert len(rules) == len(set(rules))  # the router refuses a rule named twice
+    assert rules.count("robot-1-publish") == 1
+    for bad, reason in (
+        ({"observers": [""]}, "observer name '' is not valid"),
+        ({"observers": ["a/b"]}, "observer name 'a/b' is not valid"),
+        ({"hosts": ["not a host!"]}, "neither an IP address nor a host name"),
+        ({"hosts": [""]}, "neither an IP address nor a host name"),
+        ({"days": 36_501}, "1 to 36500 days"),
+        ({"robots": [10**18]}, "robot id must be in"),
+    ):
+        with pytest.raises(ValueError, match=reason):
+            init_secure(tmp_path / "refused", **bad)
+        assert not (tmp_path / "refused").exists()  # nothing half written
+
+
+def test_secure_init_always_names_this_machine_for_the_router(tmp_path: Path) -> None:
+    from cryptography import x509
+
+    from fishswarm.cli import main
+
+    assert main(["secure", "init", str(tmp_path / "k"), "--host", "10.0.0.1"]) == 0
+    router = x509.load_pem_x509_certificate((tmp_path / "k" / "router.pem").read_bytes())
+    names = router.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    assert {str(a) for a in names.get_values_for_type(x509.IPAddress)} == {
+        "127.0.0.1", "10.0.0.1",
+    }  # fmt: skip
+    assert names.get_values_for_type(x509.DNSName) == ["localhost"]
+    for argv in (["--observers", "a/b"], ["--robots", str(10**18)], ["--swarm", "a b"]):
+        with pytest.raises(SystemExit) as refused:
+            main(["secure", "init", str(tmp_path / "r"), *argv])
+        assert refused.value.code == 2

@@ -417,3 +417,29 @@ def test_effort_sharing_in_a_flow_is_the_same_across_processes_and_engines(
         assert result.summary["effort"]["spread"] == pytest.approx(
             reference.effort[-1].max() / reference.effort[-1].mean(), rel=1e-12
         )
+
+
+def test_a_worker_that_failed_before_the_watch_saw_it_is_counted_as_died() -> None:
+    # A short run can end before the launcher's watch (every 50 ms) sees a worker fail:
+    # the worker's own exit code still says it did.
+    import sys
+
+    from fishswarm.actors.launcher import _died_unseen
+    from fishswarm.actors.workers import Worker, WorkerSpec
+
+    context = multiprocessing.get_context("spawn")
+    scenario = Scenario(fish=2)
+    spec = WorkerSpec(0, (0, 1), scenario.fish_params(), scenario.swarm, "tcp/127.0.0.1:1")
+    workers = []
+    for code in (1, 0, 1):
+        process = context.Process(target=sys.exit, args=(code,))
+        process.start()
+        process.join(30)
+        ours, theirs = context.Pipe()
+        theirs.close()
+        workers.append(Worker(spec, process, ours))
+    workers[2].lost = True  # seen by the watch already: reported there
+    assert _died_unseen(workers) == ["worker 0 (fish 0–1) exited with code 1; its fish were lost"]
+    for worker in workers:
+        worker.connection.close()
+        worker.process.close()

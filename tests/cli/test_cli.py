@@ -434,7 +434,7 @@ def test_fish_alone_without_router_fails_clearly() -> None:
 def test_bad_school_name_is_explained() -> None:
     result = _run("fish", "--id", "3", "--school", "a/b", "--connect", "tcp/127.0.0.1:1")
     assert result.returncode == 2
-    assert "school name 'a/b' is not valid: use letters, digits" in result.stderr
+    assert "school name 'a/b' is not valid: use 1 to 64 letters, digits" in result.stderr
 
 
 def test_ctrl_c_stops_the_run_within_two_seconds(tmp_path: Path) -> None:

@@ -152,9 +152,13 @@ def test_settings_are_checked_together_and_name_what_the_user_set() -> None:
     ):
         Scenario(control_period=0.01, time_mode="jitter")
     with pytest.raises(
-        ConfigError, match=r"duration \(10 s\) is shorter than one control period \(100 s\)"
+        ConfigError, match=r"duration \(10 s\) is shorter than one control period \(50 s\)"
     ):
-        Scenario(duration=10.0, control_period=100.0)
+        Scenario(duration=10.0, control_period=50.0)
+    with pytest.raises(ConfigError, match=r"control_period must be at most 60 s"):
+        Scenario(duration=200.0, control_period=100.0)
+    with pytest.raises(ConfigError, match=r"target_distance must be at most 1000 m"):
+        Scenario(target_distance=1e100)
     with pytest.raises(
         ConfigError,
         match=r"orbit_radius \(5 m\) does not fit in the tank \(1.78 × 1.78 m\): keep it below",
