@@ -173,6 +173,12 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
             "is a secured (tls/) endpoint: give --secure DIR",
         ),
         (["run", "--listen", "tcp/127.0.0.1:0"], "with a port from 1 to 65535"),
+        (["robots", "--swarm", "a/b"], "swarm name 'a/b' is not valid"),
+        (["observe", "--name", ""], "observer name '' is not valid"),
+        (["fish", "--id", "9" * 23], "is too large: fish ids go up to"),
+        (["observe", "--ticks", "-1"], "'-1' is negative: ticks count from 0"),
+        (["run", "--listen", "tls/127.0.0.1:7447"], "is a secured (tls/) endpoint: give --secure"),
+        (["run", "--period", "100", "--duration", "200"], "control_period must be at most 60 s"),
         (["world", "--connect", "bogus"], "--connect: endpoint 'bogus'"),
         (["run", "--config", str(Path(__file__).parent)], "is a folder, not a scenario file"),
         (
