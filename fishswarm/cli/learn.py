@@ -46,6 +46,11 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             settings = LearningSettings(**values)
         except ValueError as error:
             raise ConfigError(str(error)) from None
+    if not args.resume and not args.force and (args.out / "checkpoint.npz").is_file():
+        raise ConfigError(
+            f"--out {args.out} holds a learning run (checkpoint.npz): --resume continues it, "
+            "--force starts over and replaces it, or give another --out"
+        )
     prepare_folder(args.out, "--out")
     every = max(1, args.generations // 50)
     output = ProgressLine()

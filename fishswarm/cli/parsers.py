@@ -691,6 +691,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="continue from OUT/checkpoint.npz up to --generations, with the settings it was "
         "learned with (naming a different one stops with a message)",
     )
+    learn.add_argument(
+        "--force",
+        action="store_true",
+        help="start over in an OUT that holds a learning run, replacing it (without it, such "
+        "an OUT is refused)",
+    )
     learn.add_argument("--quiet", action="store_true", help="no progress lines")
 
     export = commands.add_parser(

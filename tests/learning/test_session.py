@@ -250,3 +250,24 @@ def test_an_unbounded_run_resumes_with_the_radius_start_it_was_learned_with(
         assert done.returncode == 0, done.stderr
     assert "resumed from generation 2" in done.stderr
     assert json.loads((tmp_path / "summary.json").read_text())["generations"] == 3
+
+
+def test_learning_again_into_a_finished_run_needs_resume_or_force(tmp_path: Path) -> None:
+    command = [
+        sys.executable, "-m", "fishswarm", "learn", "--models", "4", "--classifiers", "4",
+        "--generations", "1", "--out", str(tmp_path), "--quiet",
+    ]  # fmt: skip
+
+    def learn(*extra: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [*command, *extra], capture_output=True, text=True, timeout=120, check=False
+        )
+
+    assert learn().returncode == 0
+    kept = (tmp_path / "checkpoint.npz").read_bytes()
+    again = learn("--seed", "5")
+    assert again.returncode == 2
+    assert "holds a learning run (checkpoint.npz): --resume continues it, --force" in again.stderr
+    assert (tmp_path / "checkpoint.npz").read_bytes() == kept  # nothing lost
+    assert learn("--seed", "5", "--force").returncode == 0
+    assert (tmp_path / "checkpoint.npz").read_bytes() != kept
