@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 import time
 from pathlib import Path
@@ -25,6 +26,9 @@ if TYPE_CHECKING:
     from fishswarm.study.metrics import FormationTarget, OrbitTarget
     from fishswarm.study.recording import Recording
     from fishswarm.study.sweep import Engine
+
+MAX_FRAMES = 20_000
+"""The most frames an animation may have (about half an hour at 10 frames a second)."""
 
 
 def add_parsers(commands: Any) -> None:
@@ -102,7 +106,12 @@ def add_parsers(commands: Any) -> None:
         "--fish", type=int, default=0, help="whose eyes the fourth view shows (default 0)"
     )
     animate.add_argument("--fps", type=int, default=10, help="frames per second (default 10)")
-    animate.add_argument("--speed", type=float, default=2.0, help="times real time (default 2)")
+    animate.add_argument(
+        "--speed",
+        type=float,
+        default=2.0,
+        help=f"times real time (default 2; at most {MAX_FRAMES} frames are made)",
+    )
     animate.add_argument("--quiet", action="store_true", help="no progress line")
 
 
@@ -291,8 +300,10 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
     from fishswarm.study.animation import animate as make_animation
     from fishswarm.study.progress import ProgressLine, bar
 
-    if not args.speed > 0:
-        raise ConfigError(f"--speed must be positive (times real time), got {args.speed:g}")
+    if not 0 < args.speed < math.inf:
+        raise ConfigError(
+            f"--speed must be a positive finite number (times real time), got {args.speed:g}"
+        )
     try:
         shown = frame_duration(args.out.suffix, args.fps)
     except AnimationError as error:
@@ -301,6 +312,13 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
     recording = read_recording_for(args.recording, at_least=2, purpose="animate")
     arrays = recording.arrays()
     settings = recording.scenario
+    span = float(arrays["t"][-1] - arrays["t"][0])
+    if span / (args.speed * shown) > MAX_FRAMES:
+        raise ConfigError(
+            f"--speed {args.speed:g} makes {span / (args.speed * shown):.0f} frames of this "
+            f"{span:g}-s run, more than {MAX_FRAMES}: give --speed "
+            f"{span / (MAX_FRAMES * shown):.3g} or more"
+        )
     frames = resample(
         arrays["t"], arrays["pos"], arrays["yaw"], arrays["ids"], step=args.speed * shown
     )

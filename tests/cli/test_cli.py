@@ -109,6 +109,12 @@ def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -
     stranger = _run("animate", str(record), "--out", str(gif), "--fish", "99")
     assert stranger.returncode == 2
     assert "fish 99 is not in the recording (fish: 0, 1, 2, 3, 4, 5)" in stranger.stderr
+    # 4 s at 1e-4 of real time, 10 fps: 400 000 frames, far beyond what is worth making.
+    slow = _run("animate", str(record), "--out", str(gif), "--speed", "1e-4")
+    assert slow.returncode == 2
+    assert "makes 400000 frames of this 4-s run, more than 20000: give --speed 0.002 or more" in (
+        slow.stderr
+    )
 
 
 def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
@@ -174,6 +180,7 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         ),
         (["run", "--listen", "tcp/127.0.0.1:0"], "with a port from 1 to 65535"),
         (["robots", "--swarm", "a/b"], "swarm name 'a/b' is not valid"),
+        (["animate", "x.mcap", "--out", "x.gif", "--speed", "inf"], "a positive finite number"),
         (["observe", "--name", ""], "observer name '' is not valid"),
         (["fish", "--id", "9" * 23], "is too large: fish ids go up to"),
         (["observe", "--ticks", "-1"], "'-1' is negative: ticks count from 0"),
