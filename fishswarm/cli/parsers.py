@@ -53,6 +53,24 @@ def fish_id(text: str) -> int:
     return value
 
 
+def secure_folder(text: str) -> Path:
+    """A secured swarm's folder, which must exist (an argparse type)."""
+    path = Path(text)
+    if not path.is_dir():
+        raise argparse.ArgumentTypeError(
+            f"{text} is not a folder: give the one 'fishswarm secure init' wrote"
+        )
+    return path
+
+
+def existing_file(text: str) -> Path:
+    """A file to read, which must exist (an argparse type)."""
+    path = Path(text)
+    if not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text} does not exist or is not a file")
+    return path
+
+
 def tick_number(text: str) -> int:
     """A tick: an integer, 0 or more (an argparse type)."""
     try:
@@ -299,7 +317,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--secure",
-        type=Path,
+        type=secure_folder,
         metavar="DIR",
         help="a secured swarm's folder (made by 'fishswarm secure init', with the authority's "
         "key): listen on TLS only (--listen tls/...), apply its access control, and give each "
@@ -401,7 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     robot.add_argument(
         "--zenoh-config",
-        type=Path,
+        type=existing_file,
         metavar="JSON5",
         help="a Zenoh configuration file to start the robot's session from (transport and "
         "security settings; --connect, client mode and the robot's 1-s lease apply over it)",
@@ -549,7 +567,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     router.add_argument(
         "--secure",
-        type=Path,
+        type=secure_folder,
         metavar="DIR",
         help="a secured swarm's folder (made by 'fishswarm secure init'): listen on TLS only, "
         "ask every client for a certificate of its authority, and apply its access control",
@@ -745,7 +763,7 @@ def _add_connect(parser: argparse.ArgumentParser) -> None:
         default=DEFAULT_ENDPOINT,
         help=f"router endpoint to connect to (default {DEFAULT_ENDPOINT})",
     )
-    parser.add_argument("--secure", type=Path, metavar="DIR", help=SECURE_HELP)
+    parser.add_argument("--secure", type=secure_folder, metavar="DIR", help=SECURE_HELP)
     parser.add_argument(
         "--connect-timeout",
         type=wait_seconds,
