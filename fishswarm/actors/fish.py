@@ -105,8 +105,9 @@ class FishSettings:
     def __post_init__(self) -> None:
         if not self.fish_ids or len(set(self.fish_ids)) != len(self.fish_ids):
             raise ValueError(f"fish_ids must be distinct and not empty, got {self.fish_ids}")
-        if self.perception_timeout <= 0 or self.inbox_timeout <= 0:
-            raise ValueError("perception_timeout and inbox_timeout must be positive")
+        for name in ("perception_timeout", "inbox_timeout"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be a positive number of seconds")
         if self.school is not None:
             self.keys.school_commands(self.school)  # checks the name
 

@@ -317,11 +317,12 @@ class Scenario:
             f"({self.control_period:g} s): nothing would happen; lengthen --duration or "
             "shorten --period",
         )
-        half_side = min(self.tank[0], self.tank[1]) / 2
+        # Around a post the circle's radius is R; partners R apart circle at R/2.
+        widest = min(self.tank[0], self.tank[1]) / (1 if self.behavior == "waltz" else 2)
         need(
-            self.behavior not in ("orbit", "milling") or self.orbit_radius < half_side,
+            self.behavior not in ("orbit", "milling", "waltz") or self.orbit_radius < widest,
             f"orbit_radius ({self.orbit_radius:g} m) does not fit in the tank "
-            f"({self.tank[0]:g} × {self.tank[1]:g} m): keep it below {half_side:g} m",
+            f"({self.tank[0]:g} × {self.tank[1]:g} m): keep it below {widest:g} m",
         )
         unknown = [name for name in self.study_code if name not in STUDY_CODE_SWITCHES]
         need(

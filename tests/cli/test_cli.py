@@ -180,6 +180,7 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         ),
         (["run", "--listen", "tcp/127.0.0.1:0"], "with a port from 1 to 65535"),
         (["robots", "--swarm", "a/b"], "swarm name 'a/b' is not valid"),
+        (["fish", "--id", "1", "--perception-timeout", "0"], "perception_timeout must be a"),
         (["observe", "--secure", "/nonexistent"], "/nonexistent is not a folder: give the one"),
         (["robot", "--id", "1", "--zenoh-config", "/nonexistent.json5"], "does not exist"),
         (["animate", "x.mcap", "--out", "x.gif", "--speed", "inf"], "a positive finite number"),

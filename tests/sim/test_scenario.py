@@ -165,6 +165,8 @@ def test_settings_are_checked_together_and_name_what_the_user_set() -> None:
     ):
         Scenario(behavior="orbit", orbit_radius=5.0)
     assert Scenario(behavior="waltz", orbit_radius=1.0).orbit_radius == 1.0  # a partner distance
+    with pytest.raises(ConfigError, match=r"orbit_radius \(2 m\) does not fit.*below 1.78 m"):
+        Scenario(behavior="waltz", orbit_radius=2.0)  # partners 2 m apart: no room
     # Formation flags are not delivered in jitter mode: refused unless turned off.
     with pytest.raises(ConfigError, match="formation flags are not delivered in jitter mode"):
         Scenario(behavior="formation", time_mode="jitter")
