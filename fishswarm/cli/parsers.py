@@ -63,14 +63,6 @@ def secure_folder(text: str) -> Path:
     return path
 
 
-def existing_file(text: str) -> Path:
-    """A file to read, which must exist (an argparse type)."""
-    path = Path(text)
-    if not path.is_file():
-        raise argparse.ArgumentTypeError(f"{text} does not exist or is not a file")
-    return path
-
-
 def tick_number(text: str) -> int:
     """A tick: an integer, 0 or more (an argparse type)."""
     try:
@@ -419,7 +411,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     robot.add_argument(
         "--zenoh-config",
-        type=existing_file,
+        type=Path,
         metavar="JSON5",
         help="a Zenoh configuration file to start the robot's session from (transport and "
         "security settings; --connect, client mode and the robot's 1-s lease apply over it)",

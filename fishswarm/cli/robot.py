@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 import trio
 
@@ -48,7 +49,7 @@ def robot(args: argparse.Namespace, scenario: Scenario) -> int:
             connect_timeout=args.connect_timeout,
             perception_timeout=args.perception_timeout,
             seed=scenario.seed,
-            zenoh_config=str(args.zenoh_config) if args.zenoh_config else None,
+            zenoh_config=_zenoh_config(args.zenoh_config),
             session_extra=secure_extra(args, robot_subject(args.robot_id), endpoint=args.connect),
         )
     except ValueError as error:
@@ -174,3 +175,15 @@ def fleet_table(fleet: list[FleetEntry]) -> str:
             )
         )
     return "\n".join(lines)
+
+
+def _zenoh_config(path: Path | None) -> str | None:
+    """``--zenoh-config``'s file, checked where the robot starts (its unit names it before
+    the file is installed, so the parser leaves it alone).
+
+    Raises:
+        ConfigError: it does not exist, or is not a file.
+    """
+    if path is not None and not path.is_file():
+        raise ConfigError(f"--zenoh-config {path} does not exist or is not a file")
+    return None if path is None else str(path)
