@@ -244,6 +244,8 @@ def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -
 
 
 def scenario_from(args: argparse.Namespace) -> Scenario:
+    """The scenario a command's arguments describe: its --config file, if any, with the
+    scenario flags given on top."""
     path = getattr(args, "config", None)
     table = scenario_table(path) if path else {}
     base = Scenario.from_mapping(table, source=str(path)) if path else Scenario()
@@ -260,6 +262,7 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``fishswarm`` command line: every command and its options."""
     parser = argparse.ArgumentParser(
         prog="fishswarm",
         description="Run BlueBot robot-fish swarms as async actors over Eclipse Zenoh.",

@@ -29,6 +29,7 @@ def _set(obj: object, name: str, value: object) -> None:
 
 
 def check_int(name: str, value: object, low: int = 0, high: int = MAX_TICK) -> None:
+    """Check that field ``name`` is an integer (not a bool) in [``low``, ``high``]."""
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
         raise TypeError(f"{name} must be an integer, got {type(value).__name__}")
     if not low <= int(value) <= high:
@@ -36,6 +37,7 @@ def check_int(name: str, value: object, low: int = 0, high: int = MAX_TICK) -> N
 
 
 def check_float(name: str, value: object, low: float = -math.inf, high: float = math.inf) -> None:
+    """Check that field ``name`` is a finite number (not a bool) in [``low``, ``high``]."""
     if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
         raise TypeError(f"{name} must be a number, got {type(value).__name__}")
     if not math.isfinite(value):
@@ -45,6 +47,7 @@ def check_float(name: str, value: object, low: float = -math.inf, high: float = 
 
 
 def check_text(name: str, value: object) -> None:
+    """Check that field ``name`` is text of 1 to MAX_TEXT characters."""
     if not isinstance(value, str):
         raise TypeError(f"{name} must be a string, got {type(value).__name__}")
     if not 0 < len(value) <= MAX_TEXT:
@@ -87,6 +90,7 @@ def check_array(
 
 
 def check_ids(ids: IntArray) -> None:
+    """Check that fish ids are strictly ascending and not negative."""
     if ids.shape[0] > 1 and (ids[1:] <= ids[:-1]).any():
         raise ValueError("ids must be strictly ascending")
     if ids.shape[0] and ids[0] < 0:  # ascending: the first is the least
@@ -94,6 +98,8 @@ def check_ids(ids: IntArray) -> None:
 
 
 def check_counts(name: str, counts: IntArray, rows: int, what: str) -> None:
+    """Check that per-fish row counts are not negative and add up to the ``rows`` of the
+    array ``what``."""
     if (counts < 0).any():
         raise ValueError(f"{name} must be non-negative")
     # Each count bounded first, so that the sum cannot wrap around in int64 and come out

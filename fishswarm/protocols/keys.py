@@ -131,7 +131,7 @@ class KeySpace:
 
     def abouts(self) -> tuple[str, str]:
         """Key expressions matching every fish's and every school's ``about`` key."""
-        return f"{self.prefix}/fish/*/about", f"{self.prefix}/school/*/about"
+        return self.about("*"), self.every_school("about")
 
     def robot_status(self, robot_id: int | str) -> str:
         """Robot driver → base station: the robot's :class:`RobotStatus`."""
@@ -178,11 +178,11 @@ class KeySpace:
 
     def fish_outboxes(self) -> str:
         """Key expression matching every fish's outbox key."""
-        return f"{self.prefix}/fish/*/outbox"
+        return self.outbox("*")
 
     def fish_inboxes(self) -> str:
         """Key expression matching every fish's inbox key."""
-        return f"{self.prefix}/fish/*/inbox"
+        return self.inbox("*")
 
     def school_of_key(self, key: str) -> str | None:
         """The school a ``school/<name>/<kind>`` key of this swarm names (None for others)."""

@@ -35,6 +35,8 @@ SCHEMA_VERSION = 1
 FIN_NAMES = ("caudal", "dorsal", "pectoral_left", "pectoral_right")
 """Order of the fin gains in :attr:`Command.fins` and everywhere else."""
 
+WORLD_STATES = ("waiting", "running", "paused", "stopping", "finished", "stopped")
+"""What a world is doing, as its control queryable answers."""
 CONTROL_ACTIONS = ("status", "pause", "resume", "stop", "formation")
 
 BROADCAST_KINDS = ("signal", "formation")
@@ -504,6 +506,8 @@ class ControlReply(Message):
 
     def __post_init__(self) -> None:
         check_text("state", self.state)
+        if self.state not in WORLD_STATES:
+            raise ValueError(f"state must be one of {WORLD_STATES}, got {self.state!r}")
         check_int("tick", self.tick)
         check_float("time", self.time, low=0.0)
         check_int("live_fish", self.live_fish, high=MAX_ROWS)

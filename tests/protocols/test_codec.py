@@ -466,6 +466,7 @@ def _perception(**overrides: object) -> Perception:
         (lambda: _snapshot(position=np.array([[0, 0, -np.inf], [0, 0, 0]])), "finite numbers"),
         (lambda: _snapshot(effort=np.array([1.0, -0.5])), "effort must not be negative"),
         (lambda: ControlReply("", 0, 0.0, 0), "state must have 1 to"),
+        (lambda: ControlReply("dancing", 0, 0.0, 0), "state must be one of"),
         (lambda: ControlRequest("stop", formation="pyramid"), "only one, names a formation"),
         (
             lambda: CommandBatch(
