@@ -110,8 +110,8 @@ class DriverSettings:
     robot_id: int
     behavior: str
     keys: KeySpace = KeySpace()
-    control_period: float = 0.5
-    command_timeout: float = 1.0
+    control_period: float = 1.0
+    command_timeout: float = 2.5
     link_timeout: float = 10.0
     status_period: float = 0.5
     leds: LedVision = field(default_factory=LedVision)

@@ -41,7 +41,7 @@ from fishswarm.actors.world import World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.protocols.jsontext import json_text
 from fishswarm.sim.decision_kernels import with_compiled_decisions
-from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.scenario import START_TIMEOUT, Scenario
 from fishswarm.study.experiment import ORBIT_SUMMARIES
 from fishswarm.study.metrics import METRIC_NAMES, formation_summary
 from fishswarm.study.recording import open_recorder
@@ -89,7 +89,7 @@ class LaunchSettings:
     listen: str = "tcp/127.0.0.1:7447"
     record: Path | None = None
     summary: Path | None = None
-    start_timeout: float = 60.0
+    start_timeout: float = START_TIMEOUT
     command_timeout: float = 10.0
     perception_timeout: float = 5.0
     log_level: str = "WARNING"

@@ -54,7 +54,7 @@ from fishswarm.protocols.messages import (
 )
 from fishswarm.sim.clocks import Event
 from fishswarm.sim.physics import WorldParams
-from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.scenario import START_TIMEOUT, Scenario
 from fishswarm.sim.tick import WorldSim
 from fishswarm.study.progress import ids_text
 
@@ -115,7 +115,7 @@ class WorldSettings:
 
     scenario: Scenario
     expected_fish: tuple[int, ...] = ()
-    start_timeout: float = 30.0
+    start_timeout: float = START_TIMEOUT
     command_timeout: float = 10.0
     channel_timeout: float = OUTBOX_TIMEOUT + 1.0
     admit_delay: float = 0.1

@@ -16,6 +16,7 @@ from fishswarm.protocols.keys import MAX_FISH_ID, check_name
 from fishswarm.protocols.messages import FORMATION_SHAPES
 from fishswarm.sim.scenario import (
     PROFILES,
+    START_TIMEOUT,
     STUDY_CODE_SWITCHES,
     ConfigError,
     Scenario,
@@ -321,8 +322,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--start-timeout",
         type=seconds,
-        default=60.0,
-        help="longest wait for all fish to come up, s (default 60)",
+        default=START_TIMEOUT,
+        help=f"longest wait for all fish to come up, s (default {START_TIMEOUT:g})",
     )
     run.add_argument(
         "--perception-timeout",
@@ -462,8 +463,8 @@ def build_parser() -> argparse.ArgumentParser:
     world.add_argument(
         "--start-timeout",
         type=seconds,
-        default=60.0,
-        help="longest wait for the fish, s (default 60)",
+        default=START_TIMEOUT,
+        help=f"longest wait for the fish, s (default {START_TIMEOUT:g})",
     )
 
     world.add_argument(

@@ -66,6 +66,8 @@ MAX_CONTROL_PERIOD = 60.0
 MAX_TARGET_DISTANCE = 1000.0
 """The farthest Lennard-Jones r_t, m (beyond some 10²⁵ times the fish's distance, its
 twelfth powers overflow)."""
+START_TIMEOUT = 60.0
+"""How long a run's world waits for its fish to come up by default, s."""
 START_DELAY_PERIODS = 2
 """Control periods the study code's fish stood still at the start of a run (its fish moved
 only once their clock passed 1)."""
