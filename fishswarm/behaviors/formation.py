@@ -259,7 +259,7 @@ def _orientation(perception: Perception, params: FormationParams) -> FloatArray:
 
 
 @dataclass(frozen=True)
-class _Heard:
+class HeardFlags:
     """What the formation flags in B fish's inboxes say, row by row (B, M).
 
     Attributes:
@@ -277,7 +277,7 @@ class _Heard:
     fewest_hops: IntArray
 
 
-def _heard_flags(inbox: Inbox, params: FormationParams) -> _Heard:
+def _heard_flags(inbox: Inbox, params: FormationParams) -> HeardFlags:
     """What the flags of this formation in the inbox say (nothing with flags off)."""
     shape = FORMATION_SHAPES.index(params.shape)
     values = inbox.values
@@ -286,11 +286,11 @@ def _heard_flags(inbox: Inbox, params: FormationParams) -> _Heard:
     joined = same & (values[..., 2] == 1)
     hops = np.where(same, values[..., 3], NO_HOPS)
     fewest = hops.min(axis=1) if hops.shape[1] else np.full(inbox.mask.shape[0], NO_HOPS)
-    return _Heard(same, joined, values[..., 1], same & (hops == 0), fewest.astype(np.int64))
+    return HeardFlags(same, joined, values[..., 1], same & (hops == 0), fewest.astype(np.int64))
 
 
 def _with_senders(
-    neighbors: FloatArray, mask: BoolArray, inbox: Inbox, heard: _Heard, params: FormationParams
+    neighbors: FloatArray, mask: BoolArray, inbox: Inbox, heard: HeardFlags, params: FormationParams
 ) -> tuple[FloatArray, BoolArray, BoolArray]:
     """The fish a fish knows of: those it sees and those whose flags it hears (where they
     appear: a flag shows its sender's place even when a nearer fish hides it), each once.
@@ -377,7 +377,8 @@ def share_effort(
     memory: FormationMemory,
     effort: FloatArray,
     inbox: Inbox,
-    heard: _Heard,
+    heard: HeardFlags,
+    *,
     slots: int,
     now: FloatArray,
     params: FormationParams,
@@ -555,7 +556,9 @@ def steer_formation(
     effort = np.zeros(count) if perception.effort is None else perception.effort
     swaps = _Swaps.none(memory)
     if params.rotate_effort and params.flags and not params.is_local:
-        swaps = share_effort(memory, effort, inbox, heard, slots.shape[0], perception.time, params)
+        swaps = share_effort(
+            memory, effort, inbox, heard, slots=slots.shape[0], now=perception.time, params=params
+        )
         chosen = np.where(swaps.swap_to >= 0, swaps.swap_to, chosen)
     has_place = chosen != STAY
     target = np.where(has_place[:, None], places[np.arange(count), np.maximum(chosen, 0)], 0.0)

@@ -66,7 +66,7 @@ def replica_motion(
         if neighbors.shape[1]
         else np.zeros((neighbors.shape[0], 2))
     )
-    velocity = cap_speed(total, arena.speed_cap)
+    velocity = cap_speed(total, cap=arena.speed_cap)
     motion: FloatArray = velocity * period * scale
     return motion
 

@@ -114,7 +114,7 @@ def substeps(duration: float, euler_step: float) -> FloatArray:
 
 
 def period_inputs(
-    state: State, fins: FloatArray, duration: float, robot: BlueBot
+    state: State, fins: FloatArray, *, duration: float, robot: BlueBot
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """What integrating one period needs, checked: (B, 4) accelerations from the fins
     (clipped into [0, 1]; surge, sway, heave in m/s², yaw in rad/s²), (4,) drag factors in
@@ -126,14 +126,14 @@ def period_inputs(
     if duration < 0 or not math.isfinite(duration):
         raise ValueError(f"duration must be a finite non-negative time, got {duration}")
     fins = np.clip(np.asarray(fins, dtype=np.float64), 0.0, 1.0)
-    force, torque = fin_forces(fins, robot)
+    force, torque = fin_forces(fins, robot=robot)
     drag, drag_yaw = drag_coefficients(robot)
     acceleration = np.concatenate([force / robot.mass, (torque / robot.inertia)[:, None]], axis=1)
     velocity = np.concatenate([state.body_velocity, state.yaw_rate[:, None]], axis=1)
     return acceleration, np.append(drag, drag_yaw), substeps(duration, robot.euler_step), velocity
 
 
-def fin_forces(fins: FloatArray, robot: BlueBot) -> tuple[FloatArray, FloatArray]:
+def fin_forces(fins: FloatArray, *, robot: BlueBot) -> tuple[FloatArray, FloatArray]:
     """Thrust in the body frame and yaw torque from fin gains.
 
     Args:
@@ -186,7 +186,9 @@ def step(
     Returns:
         The new state (the input is not modified).
     """
-    acceleration, drag_all, dt, velocity = period_inputs(state, fins, duration, robot)
+    acceleration, drag_all, dt, velocity = period_inputs(
+        state, fins, duration=duration, robot=robot
+    )
     count, steps = velocity.shape[0], dt.size
     # Velocities and yaw rate evolve on their own (fins are held, drag depends only on them):
     # run that recursion first as one (B, 4) array, then integrate yaw and position with

@@ -218,6 +218,7 @@ class VisionKernels(Protocol):
         yaw: FloatArray,
         index: NDArray[np.intp],
         distance: FloatArray,
+        *,
         vision: Vision,
     ) -> Sifted:
         """As :func:`sift`."""
@@ -234,6 +235,7 @@ def sift(
     yaw: FloatArray,
     index: NDArray[np.intp],
     distance: FloatArray,
+    *,
     vision: Vision,
 ) -> Sifted:
     """Which of the fish in range each fish sees: Manhattan links (if asked), blind spot and
@@ -298,10 +300,10 @@ def perceive(
     count = position.shape[0]
     if kernels is None:
         index, distance = _in_range(position, vision.visual_range)
-        sifted = sift(position, yaw, index, distance, vision)
+        sifted = sift(position, yaw, index, distance, vision=vision)
     else:
         index, distance = kernels.in_range(position, vision.visual_range)
-        sifted = kernels.sift(position, yaw, index, distance, vision)
+        sifted = kernels.sift(position, yaw, index, distance, vision=vision)
     seen, chosen, relative_seen, distance_seen = sifted
     if vision.noise > 0:
         if rngs is None or len(rngs) != count:

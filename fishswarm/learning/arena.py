@@ -116,7 +116,7 @@ def neighbors(positions: FloatArray, *, arena: Arena) -> tuple[FloatArray, Float
     return relative, distance, within
 
 
-def cap_speed(velocity: FloatArray, cap: float) -> FloatArray:
+def cap_speed(velocity: FloatArray, *, cap: float) -> FloatArray:
     """Scale velocities (…, 2) down to at most ``cap`` in length."""
     speed = np.sqrt(np.einsum("...d,...d->...", velocity, velocity))
     scale = np.minimum(1.0, cap / np.maximum(speed, 1e-12))
@@ -139,7 +139,7 @@ def ideal_velocity(positions: FloatArray, *, arena: Arena) -> FloatArray:
     magnitude = arena.gain * np.sign(gap) * gap * gap
     unit = relative / np.where(distance > 0, distance, 1.0)[..., None]
     velocity = np.einsum("mij,mijd->mid", magnitude * within, unit)
-    return cap_speed(velocity, arena.speed_cap)
+    return cap_speed(velocity, cap=arena.speed_cap)
 
 
 def replica_velocity(positions: FloatArray, weights: FloatArray, *, arena: Arena) -> FloatArray:
@@ -161,7 +161,7 @@ def replica_velocity(positions: FloatArray, weights: FloatArray, *, arena: Arena
     """
     relative, _, within = neighbors(positions, arena=arena)
     contribution = replica_contributions(weights, relative, within, arena=arena)
-    return cap_speed(contribution.sum(axis=2), arena.speed_cap)
+    return cap_speed(contribution.sum(axis=2), cap=arena.speed_cap)
 
 
 def replica_contributions(

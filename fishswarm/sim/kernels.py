@@ -55,10 +55,11 @@ class CompiledVision:
         yaw: FloatArray,
         index: NDArray[np.intp],
         distance: FloatArray,
+        *,
         vision: Vision,
     ) -> Sifted:
         """See :func:`sift`."""
-        return sift(position, yaw, index, distance, vision)
+        return sift(position, yaw, index, distance, vision=vision)
 
     def body_frame(
         self, relative: FloatArray, yaw: FloatArray, seen: NDArray[np.bool_]
@@ -104,7 +105,7 @@ def step(state: State, fins: FloatArray, *, duration: float, robot: BlueBot, tan
     Raises:
         ValueError: a negative or infinite duration.
     """
-    acceleration, drag, dt, velocity = period_inputs(state, fins, duration, robot)
+    acceleration, drag, dt, velocity = period_inputs(state, fins, duration=duration, robot=robot)
     position = np.ascontiguousarray(state.position, dtype=np.float64).copy()
     yaw = np.ascontiguousarray(state.yaw, dtype=np.float64).copy()
     _call(

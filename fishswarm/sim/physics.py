@@ -155,7 +155,7 @@ def spawn_spacing(params: WorldParams, fish: int) -> float:
 
 
 def observe(
-    params: WorldParams, state: State, rngs: list[np.random.Generator] | None = None
+    state: State, *, params: WorldParams, rngs: list[np.random.Generator] | None = None
 ) -> Perceived:
     """What every fish sees of the others now (SPEC §1.2, or through its cameras), each with
     its own noise stream."""
@@ -180,7 +180,7 @@ def observe_landmarks(params: WorldParams, state: State) -> Perceived:
     return perceive_landmarks(state.position, state.yaw, params.landmarks, vision=params.vision)
 
 
-def advance(params: WorldParams, state: State, fins: FloatArray, duration: float) -> State:
+def advance(state: State, fins: FloatArray, *, duration: float, params: WorldParams) -> State:
     """Every fish swims ``duration`` s with its fins held (in the flow, sheltered by the
     wakes of the fish ahead as they are at the start of the interval)."""
     if params.compiled:

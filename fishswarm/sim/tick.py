@@ -83,7 +83,7 @@ class WorldSim:
             moving = min(duration, event.time - self.params.still_until)
             duration = moving if moving > 0 else None
         if duration is not None:
-            self.state = advance(self.params, self.state, self.fins, duration)
+            self.state = advance(self.state, self.fins, duration=duration, params=self.params)
             self.effort = self.effort + effort_rate(self.fins) * duration
         self.now = event.time
         return event
@@ -144,7 +144,7 @@ class WorldSim:
         """What every fish sees of the others now (each with its own vision-noise stream)."""
         noisy = self.params.cameras is not None or self.params.vision.noise > 0
         rngs = [self._vision_rngs[fish_id] for fish_id in self.ids.tolist()] if noisy else None
-        perceived = observe(self.params, self.state, rngs)
+        perceived = observe(self.state, params=self.params, rngs=rngs)
         if self.params.cameras is not None:
             truth = perceive(self.state.position, self.state.yaw, vision=self._exact_vision)
             self.sight = self.sight + score_sight(perceived, truth, self.state.position)

@@ -400,8 +400,8 @@ def test_effort_sharing_in_a_flow_is_the_same_across_processes_and_engines(
     asking: list[int] = []
     share = formation.share_effort
 
-    def counting(*arguments: Any) -> Any:
-        swaps = share(*arguments)
+    def counting(*arguments: Any, **settings: Any) -> Any:
+        swaps = share(*arguments, **settings)
         asking.append(int((swaps.asking >= 0).sum()))
         return swaps
 

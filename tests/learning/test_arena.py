@@ -35,7 +35,7 @@ def test_ideal_pair_by_hand() -> None:
 
 
 def test_speed_is_capped() -> None:
-    capped = cap_speed(np.array([[30.0, 40.0], [1.0, 0.0]]), 9.0)
+    capped = cap_speed(np.array([[30.0, 40.0], [1.0, 0.0]]), cap=9.0)
     np.testing.assert_allclose(capped, [[5.4, 7.2], [1.0, 0.0]])
 
 

@@ -118,8 +118,8 @@ def test_the_range_search_kernel_at_its_edges() -> None:
 def test_the_sifting_kernel_sees_what_the_reference_sees(vision: Vision) -> None:
     position, yaw = _swarm(np.random.default_rng(3), 400, 8.0)
     index, distance = _in_range(position, vision.visual_range)
-    reference = sift(position, yaw, index, distance, vision)
-    compiled = kernels.sift(position, yaw, index, distance, vision)
+    reference = sift(position, yaw, index, distance, vision=vision)
+    compiled = kernels.sift(position, yaw, index, distance, vision=vision)
     seen = reference[0]
     np.testing.assert_array_equal(compiled[0], seen)
     for ours, theirs in zip(compiled[1:], reference[1:], strict=True):
