@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.behaviors.core import Behavior, Inbox, Perception, Steering, steady
-from fishswarm.bluebot.parameters import BODY_LENGTH
+from fishswarm.bluebot.parameters import BODY_LENGTH, Tank
 from fishswarm.learning.arena import Arena, arena_from, cap_speed, replica_contributions
 from fishswarm.learning.networks import REPLICA_SIZE
 from fishswarm.learning.replica_file import load_replica
@@ -27,7 +27,7 @@ from fishswarm.learning.replica_file import load_replica
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-STUDY_SCALE = 1.78 / 300.0
+STUDY_SCALE = Tank().size[0] / Arena().side
 """Metres per arena unit when the study's tank stands for the arena."""
 
 

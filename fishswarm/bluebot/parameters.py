@@ -14,6 +14,12 @@ from numpy.typing import NDArray
 
 BODY_LENGTH = 0.13
 """Body length used by behaviours and the homing controller, m (SPEC §1.3)."""
+VISUAL_RANGE = 3.0
+"""How far a BlueBot sees its neighbours by default, m (SPEC §1.2)."""
+BLIND_WIDTH = 0.05
+"""Width of the blind strip behind a BlueBot's body, m (SPEC §1.2)."""
+SPHERE_RADIUS = 0.065
+"""Radius of the sphere a BlueBot blocks the view with, m (SPEC §1.2)."""
 
 
 @dataclass(frozen=True)

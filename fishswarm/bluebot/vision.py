@@ -16,6 +16,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.bluebot.parameters import BLIND_WIDTH, SPHERE_RADIUS, VISUAL_RANGE
+
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
@@ -36,9 +38,9 @@ class Vision:
             fish only: landmarks are seen within the straight-line range).
     """
 
-    visual_range: float = 3.0
-    blind_width: float = 0.05
-    sphere_radius: float = 0.065
+    visual_range: float = VISUAL_RANGE
+    blind_width: float = BLIND_WIDTH
+    sphere_radius: float = SPHERE_RADIUS
     noise: float = 0.0
     manhattan: bool = False
 

@@ -10,6 +10,7 @@ from typing import Any
 
 from fishswarm import __version__
 from fishswarm.behaviors.registry import BEHAVIORS
+from fishswarm.bluebot.parameters import BLIND_WIDTH, SPHERE_RADIUS
 from fishswarm.cli.study import add_parsers as add_study_parsers
 from fishswarm.learning.arena import REPLICA_KINDS
 from fishswarm.protocols.keys import MAX_FISH_ID, check_name
@@ -135,8 +136,12 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
         "with --spawn ball: radius of the start ball, m (default 0.26 for dispersion, 1.3 for "
         "the other behaviours)",
     ),
-    "blind_width": ("--blind-width", float, "blind-spot width in m (default 0.05)"),
-    "sphere_radius": ("--sphere-radius", float, "blocking-sphere radius in m (default 0.065)"),
+    "blind_width": ("--blind-width", float, f"blind-spot width in m (default {BLIND_WIDTH:g})"),
+    "sphere_radius": (
+        "--sphere-radius",
+        float,
+        f"blocking-sphere radius in m (default {SPHERE_RADIUS:g})",
+    ),
     "vision_model": (
         "--vision",
         str,

@@ -25,6 +25,7 @@ from fishswarm.behaviors.lennard_jones import (
     LennardJonesParams,
     steer_lennard_jones,
 )
+from fishswarm.behaviors.orbit import ORBIT_RADIUS
 from fishswarm.behaviors.registry import (
     STUDY_HOMING_SWITCH,
     behavior_named,
@@ -32,7 +33,13 @@ from fishswarm.behaviors.registry import (
     names,
 )
 from fishswarm.bluebot.control import CONTROLLERS
-from fishswarm.bluebot.parameters import BlueBot, Tank
+from fishswarm.bluebot.parameters import (
+    BLIND_WIDTH,
+    SPHERE_RADIUS,
+    VISUAL_RANGE,
+    BlueBot,
+    Tank,
+)
 from fishswarm.bluebot.vision import Vision
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import FORMATION_SHAPES
@@ -173,16 +180,16 @@ class Scenario:
     spawn_radius: float | None = None
     spawn_region: str = "ball"
     tank: tuple[float, float, float] = Tank().size
-    visual_range: float = 3.0
-    blind_width: float = 0.05
-    sphere_radius: float = 0.065
+    visual_range: float = VISUAL_RANGE
+    blind_width: float = BLIND_WIDTH
+    sphere_radius: float = SPHERE_RADIUS
     vision_noise: float = 0.0
     vision_model: str = "geometric"
     channel_range: float = 3.0
     channel_loss: float = 0.0
     swarm: str = "default"
     model: str | None = None
-    orbit_radius: float = 0.45
+    orbit_radius: float = ORBIT_RADIUS
     landmark: tuple[float, float, float] | None = None
     time_mode: str = "lockstep"
     jitter: float = 0.05
