@@ -19,7 +19,7 @@ from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.scenario import ConfigError, Scenario
 
 
-async def serve_control(
+async def run_control(
     session: zenoh.Session,
     world: World,
     *,

@@ -25,7 +25,7 @@ import numpy as np
 import trio
 
 from fishswarm.actors.channel import Channel
-from fishswarm.actors.control import serve_control
+from fishswarm.actors.control import run_control
 from fishswarm.actors.observer import Observer, Progress
 from fishswarm.actors.security import secure_run
 from fishswarm.actors.session import SessionSettings, open_session
@@ -160,7 +160,7 @@ async def run_swarm(
                     bus = ZenohBus(session)
                     await nursery.start(observer.run, bus)
                     await nursery.start(channel.run, bus)
-                    await nursery.start(serve_control, session, world)
+                    await nursery.start(run_control, session, world)
                     params = with_compiled_decisions(scenario.fish_params(), scenario.fish)
                     for index, ids in enumerate(schools):
                         spec = WorkerSpec(

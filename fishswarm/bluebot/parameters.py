@@ -89,7 +89,7 @@ class BlueBot:
         return math.sqrt(self.caudal_force / (0.5 * self.water_density * self.drag_x * self.area_x))
 
 
-FIN_FREQUENCY_HZ = ((1.0, 3.0), (6.0, 6.0), (1.0, 10.0), (1.0, 10.0))
+FIN_FREQUENCIES = ((1.0, 3.0), (6.0, 6.0), (1.0, 10.0), (1.0, 10.0))
 """The beat frequency of each fin (caudal, dorsal, pectoral left, pectoral right) from the
 smallest gain above 0 to gain 1, Hz (SPEC §6: caudal about 1–3 Hz, dorsal about 6 Hz,
 pectorals about 1–10 Hz); gain 0 is off."""
@@ -97,8 +97,8 @@ pectorals about 1–10 Hz); gain 0 is off."""
 
 def fin_frequencies(fins: NDArray[np.float64]) -> NDArray[np.float64]:
     """(B, 4) the beat frequency each fin runs at for gains (B, 4) in [0, 1], Hz: linear from
-    the low to the high frequency of :data:`FIN_FREQUENCY_HZ`, 0 for a gain of 0."""
-    low, high = np.array(FIN_FREQUENCY_HZ).T
+    the low to the high frequency of :data:`FIN_FREQUENCIES`, 0 for a gain of 0."""
+    low, high = np.array(FIN_FREQUENCIES).T
     gains = np.clip(fins, 0.0, 1.0)
     frequency: NDArray[np.float64] = np.where(gains > 0.0, low + (high - low) * gains, 0.0)
     return frequency
@@ -192,7 +192,7 @@ switch). At 60 fps this costs 33 ms."""
 LED_SPACING = 0.086
 """Distance between a BlueBot's two rear LEDs (one above the other) and from the upper one to
 the front LED along the heading, m (SPEC §6)."""
-LED_FLASH_HZ = 15.0
+LED_FLASH_FREQUENCY = 15.0
 """The rate at which the research code flashed the LEDs as a signal, Hz (SPEC §6)."""
 GRAVITY = 9.81
 """Gravitational acceleration, m/s² (for depth from pressure)."""

@@ -37,7 +37,7 @@ def seconds(text: str) -> float:
     return value
 
 
-def wait_seconds(text: str) -> float:
+def longest_wait(text: str) -> float:
     """A longest wait, s: a finite number; a negative one waits forever (an argparse type)."""
     return _number(text)
 
@@ -767,7 +767,7 @@ def _add_connect(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--secure", type=secure_folder, metavar="DIR", help=SECURE_HELP)
     parser.add_argument(
         "--connect-timeout",
-        type=wait_seconds,
+        type=longest_wait,
         default=10.0,
         help="longest wait for the router, s; negative waits forever (default 10)",
     )

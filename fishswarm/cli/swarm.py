@@ -15,7 +15,7 @@ from typing import Any
 import trio
 
 from fishswarm.actors.channel import Channel
-from fishswarm.actors.control import serve_control
+from fishswarm.actors.control import run_control
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.launcher import (
     EXIT_WORKER_DIED,
@@ -405,7 +405,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
             ):
                 bus = ZenohBus(session)
                 await nursery.start(observer.run, bus)
-                await nursery.start(serve_control, session, actor)
+                await nursery.start(run_control, session, actor)
                 await actor.run(bus)
                 # Its own last snapshot comes back through the session: record it too.
                 with trio.move_on_after(WORLD_END_SETTLE):

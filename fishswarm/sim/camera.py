@@ -37,7 +37,7 @@ class Optics:
         led_brightness: the peak value of an LED's spot seen from 1 m, before the image
             saturates at 255.
         led_radius: the LED's radius, m (its spot grows with nearness).
-        blur: the optics' blur, standard deviation of a point's spot, px.
+        blur_px: the optics' blur, standard deviation of a point's spot, px.
         absorption: the water's attenuation of blue light, 1/m.
         background: the water's (red, green, blue) level, 0–255.
         noise: standard deviation of the sensor noise, 0–255 units.
@@ -46,7 +46,7 @@ class Optics:
 
     led_brightness: float = 800.0
     led_radius: float = 0.0025
-    blur: float = 0.5
+    blur_px: float = 0.5
     absorption: float = 0.05
     background: tuple[float, float, float] = (4.0, 9.0, 14.0)
     noise: float = 2.0
@@ -183,7 +183,7 @@ def _expose(
     ``spread`` (M,) extra radius, px, over the noisy background."""
     height, width = fisheye.height, fisheye.width
     light = np.zeros((height, width))
-    sigma = np.hypot(optics.blur, spread)
+    sigma = np.hypot(optics.blur_px, spread)
     for (row, column), top, size in zip(pixels, peak, sigma, strict=True):
         # Out to where the spot falls below half a grey level.
         reach = math.ceil(size * math.sqrt(2.0 * math.log(max(2.0 * top, 1.0)))) + 1

@@ -11,7 +11,7 @@ import pytest
 import trio
 
 from fishswarm.actors.channel import Channel
-from fishswarm.actors.control import serve_control
+from fishswarm.actors.control import run_control
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.world import World, WorldSettings
@@ -111,7 +111,7 @@ def test_world_answers_control_queries_over_zenoh(endpoint: str) -> None:
             await nursery.start(
                 Fish(FishSettings((0, 1), params, scenario.keys)).run, ZenohBus(other)
             )
-            await nursery.start(serve_control, hub, world)
+            await nursery.start(run_control, hub, world)
             nursery.start_soon(world.run, ZenohBus(hub))
 
             async def ask(payload: bytes) -> list[bytes]:
