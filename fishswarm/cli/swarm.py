@@ -385,7 +385,11 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
     show = None if args.quiet else progress_printer(scenario.ticks)
 
     async def main() -> None:
-        with contextlib.ExitStack() as files:
+        settings = dataclasses.replace(
+            client_settings(args, "world"), shared_memory_pool=shared_memory_pool(scenario.fish)
+        )
+        # The session first: a world that cannot reach its router writes no recording.
+        async with open_session(settings) as session, contextlib.AsyncExitStack() as files:
             recorder = (
                 files.enter_context(open_recorder(args.record, scenario.to_dict()))
                 if args.record is not None
@@ -394,15 +398,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
             observer = Observer.of(
                 scenario, recorder=recorder, on_progress=show, observer_id="world-cli"
             )
-            async with (
-                open_session(
-                    dataclasses.replace(
-                        client_settings(args, "world"),
-                        shared_memory_pool=shared_memory_pool(scenario.fish),
-                    )
-                ) as session,
-                trio.open_nursery() as nursery,
-            ):
+            async with trio.open_nursery() as nursery:
                 bus = ZenohBus(session)
                 await nursery.start(observer.run, bus)
                 await nursery.start(run_control, session, actor)
@@ -454,14 +450,16 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
     async def main() -> None:
         show = progress_printer(ticks, line)
-        recorder_context = open_recorder(args.record, {"observed": True}) if args.record else None
-        recorder = recorder_context.__enter__() if recorder_context else None
-        try:
+        settings = client_settings(args, observer_subject(args.name))
+        # The session first: an observer that cannot reach the router writes no recording.
+        async with open_session(settings) as session, contextlib.AsyncExitStack() as files:
+            recorder = (
+                files.enter_context(open_recorder(args.record, {"observed": True}))
+                if args.record
+                else None
+            )
             observer = Observer(keys, recorder=recorder, on_progress=show, observer_id="cli")
-            async with (
-                open_session(client_settings(args, observer_subject(args.name))) as session,
-                trio.open_nursery() as nursery,
-            ):
+            async with trio.open_nursery() as nursery:
                 await nursery.start(observer.run, ZenohBus(session))
                 print(f"observing swarm {args.swarm!r} on {args.connect}", file=sys.stderr)
                 nursery.start_soon(_say_if_nothing_comes, observer, args.swarm)
@@ -477,9 +475,6 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                         waiting.start_soon(wait_then_stop, lambda: observer.wait_for_tick(ticks))
                 nursery.cancel_scope.cancel()
             history[:] = observer.history
-        finally:
-            if recorder_context is not None:
-                recorder_context.__exit__(None, None, None)
 
     history: list[Progress] = []
     line = ProgressLine(sys.stderr)

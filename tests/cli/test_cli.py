@@ -712,3 +712,18 @@ def test_an_experiment_stopped_with_ctrl_c_keeps_what_finished(tmp_path: Path) -
     assert not summary["complete"] and 2 <= summary["runs_done"] < summary["runs_total"] == 20
     assert "**Incomplete**" in (out / "table.md").read_text()
     assert (out / "metrics_vs_parameter.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("command", ["world", "observe"])
+def test_a_command_that_cannot_reach_its_router_writes_no_recording(
+    command: str, tmp_path: Path
+) -> None:
+    record = tmp_path / "never.mcap"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"  # nothing listens there
+    result = _run(
+        command, "--connect", endpoint, "--connect-timeout", "0.5", "--record", str(record),
+        timeout=60,
+    )  # fmt: skip
+    assert result.returncode == 1
+    assert "is a fishswarm run or router listening there?" in result.stderr
+    assert not record.exists()
