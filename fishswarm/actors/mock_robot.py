@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -225,6 +226,7 @@ class MockBody:
             self.feed.take(snapshot)
 
 
+@contextlib.contextmanager
 def open_mock_hardware(
     robot_id: int,
     keys: KeySpace,
@@ -232,8 +234,8 @@ def open_mock_hardware(
     control_period: float = 1.0,
     seed: int = 0,
     pin_factory: Any = None,
-) -> tuple[Hardware, MockBody]:
-    """A mock robot's ports and its body in the simulated world.
+) -> Iterator[tuple[Hardware, MockBody]]:
+    """A mock robot's ports and its body in the simulated world (ports released on exit).
 
     Args:
         robot_id: the robot's fish id.
@@ -259,4 +261,7 @@ def open_mock_hardware(
         fins.close()
         raise
     hardware = Hardware(fins, leds, SnapshotCamera(feed, seed=seed), SnapshotDepth(feed))
-    return hardware, MockBody(robot_id, keys, fins, leds, feed)
+    try:
+        yield hardware, MockBody(robot_id, keys, fins, leds, feed)
+    finally:
+        hardware.close()

@@ -14,7 +14,7 @@ import contextlib
 import dataclasses
 import math
 import os
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -85,9 +85,11 @@ class HardwareError(RuntimeError):
     """The robot's hardware could not be opened (a library missing, a device not answering)."""
 
 
-def open_bluebot_hardware() -> Hardware:
-    """The BlueBot's own ports: fins and LEDs on gpiozero, both cameras through picamera2,
-    the MS5803 depth sensor over I²C (each released again if a later one fails to open).
+@contextlib.contextmanager
+def open_bluebot_hardware() -> Iterator[Hardware]:
+    """The BlueBot's own ports, released on exit: fins and LEDs on gpiozero, both cameras
+    through picamera2, the MS5803 depth sensor over I²C (each released again if a later one
+    fails to open).
 
     Under systemd (``StateDirectory=``, as the deployment's unit has it) the depth sensor
     keeps its surface pressure in the robot's state folder, so that a restart in mid-dive
@@ -98,7 +100,7 @@ def open_bluebot_hardware() -> Hardware:
     """
     from fishswarm.bluebot.gpio import GpioFins, GpioLeds
     from fishswarm.bluebot.picamera import PiCameras
-    from fishswarm.bluebot.pressure import SURFACE_FILE, SensorError, open_depth_sensor
+    from fishswarm.bluebot.pressure import SURFACE_FILE, SensorError, i2c_depth_sensor
 
     state = os.environ.get("STATE_DIRECTORY")
     surface_file = Path(state.split(":")[0]) / SURFACE_FILE if state else None
@@ -111,13 +113,17 @@ def open_bluebot_hardware() -> Hardware:
             opened.callback(leds.close)
             camera = PiCameras()
             opened.callback(camera.close)
-            depth = open_depth_sensor(surface_file=surface_file)
+            depth = i2c_depth_sensor(surface_file=surface_file)
             opened.pop_all()
     except (ImportError, OSError, SensorError, RuntimeError) as error:
         raise HardwareError(
             f"cannot open the BlueBot's hardware: {error} (on a laptop, use --hardware mock)"
         ) from error
-    return Hardware(fins, leds, camera, depth)
+    hardware = Hardware(fins, leds, camera, depth)
+    try:
+        yield hardware
+    finally:
+        hardware.close()
 
 
 async def run_robot(
@@ -140,13 +146,16 @@ async def run_robot(
         extra=dict(settings.session_extra),
     )
     body = None
-    if settings.hardware == "mock":
-        hardware, body = open_mock_hardware(
-            robot_id, keys, control_period=settings.driver.control_period, seed=settings.seed
-        )
-    else:
-        hardware = open_bluebot_hardware()
-    try:
+    with contextlib.ExitStack() as ports:
+        if settings.hardware == "mock":
+            hardware, body = ports.enter_context(
+                open_mock_hardware(
+                    robot_id, keys, control_period=settings.driver.control_period,
+                    seed=settings.seed,
+                )
+            )  # fmt: skip
+        else:
+            hardware = ports.enter_context(open_bluebot_hardware())
         async with open_session(session_settings) as session, trio.open_nursery() as nursery:
             remote, local = ZenohBus(session), MemoryBus()
             if body is not None:
@@ -163,8 +172,6 @@ async def run_robot(
             driver = Driver(settings.driver, hardware, link_up=_link_probe(session))
             await nursery.start(driver.run, local, remote)
             task_status.started(driver)
-    finally:
-        hardware.close()
 
 
 def _link_probe(session: zenoh.Session) -> Callable[[], bool]:

@@ -302,7 +302,7 @@ def _keep_surface(path: Path, pressure: float, now: float) -> None:
         log.warning("depth sensor: cannot keep the surface pressure in %s: %s", path, error)
 
 
-def open_depth_sensor(
+def i2c_depth_sensor(
     *,
     wiring: Wiring = Wiring(),
     model: str = "02BA",

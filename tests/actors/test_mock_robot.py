@@ -65,9 +65,6 @@ def test_the_mock_robots_sensors_keep_snapshots_for_its_period() -> None:
     from fishswarm.actors.mock_robot import open_mock_hardware
     from fishswarm.protocols.keys import KeySpace
 
-    hardware, _ = open_mock_hardware(3, KeySpace(), control_period=1.0)
-    try:
+    with open_mock_hardware(3, KeySpace(), control_period=1.0) as (hardware, _):
         assert isinstance(hardware.depth, SnapshotDepth)
         assert hardware.depth.feed.stale_after == pytest.approx(1.5)
-    finally:
-        hardware.close()
