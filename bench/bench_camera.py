@@ -26,7 +26,7 @@ from fishswarm.bluebot.leds import LedVision, perceive_leds
 from fishswarm.bluebot.parameters import BlueBot, Tank
 from fishswarm.bluebot.vision import Vision, perceive
 from fishswarm.sim.camera import SIDES, Optics, render_views
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 
 
@@ -70,7 +70,7 @@ def measure_runs(count: int) -> dict[str, float]:
     for model in ("geometric", "camera"):
         scenario = Scenario(fish=count, behavior="dispersion", seed=1, vision_model=model)
         start = time.perf_counter()
-        run_batch(scenario)
+        simulate_batch(scenario)
         seconds[model] = time.perf_counter() - start
     return {
         "geometric_run_s": seconds["geometric"],

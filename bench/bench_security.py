@@ -24,7 +24,7 @@ import numpy as np
 import trio
 from bench_bridge import PING, PONG, echo_round_trips
 
-from fishswarm.actors.launcher import LaunchSettings, run_swarm
+from fishswarm.actors.launcher import LaunchSettings, launch_swarm
 from fishswarm.actors.security import init_secure, session_security
 from fishswarm.actors.session import free_loopback_endpoint
 from fishswarm.sim.scenario import Scenario
@@ -65,7 +65,7 @@ def swarm(secure: Path | None) -> dict[str, float]:
     settings = LaunchSettings(
         Scenario(fish=25, duration=30.0, seed=2), listen=listen, secure=secure
     )
-    summary = trio.run(lambda: run_swarm(settings)).summary
+    summary = trio.run(lambda: launch_swarm(settings)).summary
     return {
         "real_time_factor": summary["real_time_factor"],
         "tick_ms": 1e3 * summary["loop_time"] / summary["counts"]["ticks"],

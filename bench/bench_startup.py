@@ -4,7 +4,7 @@
 the previous run's worker processes and Zenoh threads may still be winding down. Here every
 measurement starts its own interpreter (the ``spawn`` context), which imports fishswarm,
 warms the batch engine (and the compiled kernels from 200 fish on) as ``fishswarm run``
-would on its first tick, and then times ``run_swarm`` from launch to the first tick's
+would on its first tick, and then times ``launch_swarm`` from launch to the first tick's
 snapshot: what issue 14's start-up target counts.
 
 Usage:
@@ -27,12 +27,12 @@ def first_tick(fish: int, procs: int) -> float:
     """Seconds from launch to the first tick's snapshot of a 2-s crowded run."""
     import trio
 
-    from fishswarm.actors.launcher import LaunchSettings, run_swarm
+    from fishswarm.actors.launcher import LaunchSettings, launch_swarm
     from fishswarm.actors.session import free_loopback_endpoint
-    from fishswarm.sim.engine import run_batch
+    from fishswarm.sim.engine import simulate_batch
     from fishswarm.sim.scenario import Scenario
 
-    run_batch(Scenario.crowded(fish, duration=1.0, seed=1))  # imports and kernels warm
+    simulate_batch(Scenario.crowded(fish, duration=1.0, seed=1))  # imports and kernels warm
     scenario = Scenario.crowded(fish, duration=2.0, seed=1)
     settings = LaunchSettings(
         scenario, procs=procs, listen=free_loopback_endpoint(), start_timeout=120
@@ -44,7 +44,7 @@ def first_tick(fish: int, procs: int) -> float:
             reached.append(time.perf_counter())
 
     launched = time.perf_counter()
-    trio.run(lambda: run_swarm(settings, on_progress=progress))
+    trio.run(lambda: launch_swarm(settings, on_progress=progress))
     return reached[0] - launched
 
 

@@ -40,7 +40,7 @@ from bench_bridge import echo_round_trips
 
 from fishswarm.actors.bus import open_subscriber
 from fishswarm.actors.inbox import Inbox
-from fishswarm.actors.launcher import LaunchSettings, run_swarm
+from fishswarm.actors.launcher import LaunchSettings, launch_swarm
 from fishswarm.actors.observer import Progress
 from fishswarm.actors.session import SessionSettings, free_loopback_endpoint, open_session
 from fishswarm.actors.workers import WorkerSpec, start_worker, stop_worker
@@ -49,7 +49,7 @@ from fishswarm.protocols.codec import encode
 from fishswarm.protocols.messages import Perception
 from fishswarm.sim import kernels
 from fishswarm.sim.allocator import tune_allocator
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 
 DURATION = {25: 600.0, 100: 120.0, 1000: 300.0, 10_000: 40.0}
@@ -73,7 +73,7 @@ def swarm_row(fish: int, procs: int) -> dict[str, float]:
         seen.setdefault(snapshot.tick, time.perf_counter())
 
     launched = time.perf_counter()
-    result = trio.run(lambda: run_swarm(settings, on_progress=progress))
+    result = trio.run(lambda: launch_swarm(settings, on_progress=progress))
     summary = result.summary
     loop_time = summary["loop_time"]
     last = max(seen)
@@ -182,15 +182,15 @@ def batch_tick(fish: int) -> tuple[float, float]:
     over its ticks after the first (runs long enough that start-up jitter stays small)."""
     scenario = Scenario.crowded(fish, duration=BATCH_DURATION.get(fish, 30.0), seed=1)
     first = scenario.replace(duration=1.0)
-    run_batch(first)  # warm up: kernels, imports
+    simulate_batch(first)  # warm up: kernels, imports
     start_ups = []
     for _ in range(3):
         started = time.perf_counter()
-        run_batch(first)
+        simulate_batch(first)
         start_ups.append(time.perf_counter() - started)
     start_up = statistics.median(start_ups)
     started = time.perf_counter()
-    run_batch(scenario)
+    simulate_batch(scenario)
     return (time.perf_counter() - started - start_up) / (scenario.ticks - 1), start_up
 
 

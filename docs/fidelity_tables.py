@@ -15,14 +15,16 @@ import time
 from fishswarm.sim.scenario import STUDY_CODE_SWITCHES
 from fishswarm.study.experiment import Experiment, find
 from fishswarm.study.report import table_rows
-from fishswarm.study.sweep import run_experiment, run_on_batch_engine
+from fishswarm.study.sweep import simulate_on_batch_engine, sweep_experiment
 
 PAIRWISE = "pairwise_distance_change_percent"
 STUDY_MEASURE = "study_mean_distance_change_percent"
 
 
 def _cells(experiment: Experiment, key: str, jobs: int) -> list[str]:
-    rows = table_rows(experiment, run_experiment(experiment, engine=run_on_batch_engine, jobs=jobs))
+    rows = table_rows(
+        experiment, sweep_experiment(experiment, engine=simulate_on_batch_engine, jobs=jobs)
+    )
     return [f"{row[f'{key}_mean']:.1f} ± {row[f'{key}_sd']:.1f}" for row in rows]
 
 
@@ -55,7 +57,7 @@ def orbit_table(jobs: int) -> str:
     for name in ("orbit", "milling", "waltz"):
         for profile in ("paper", "study-code"):
             experiment = find(name).with_changes(profile=profile)
-            outcomes = run_experiment(experiment, engine=run_on_batch_engine, jobs=jobs)
+            outcomes = sweep_experiment(experiment, engine=simulate_on_batch_engine, jobs=jobs)
             if not lines:
                 labels = [summary.label for summary in experiment.summaries]
                 lines += [

@@ -106,7 +106,7 @@ class RunResult:
     history: list[Progress] = field(default_factory=list)
 
 
-async def run_swarm(
+async def launch_swarm(
     settings: LaunchSettings,
     *,
     on_progress: Callable[[Progress], None] | None = None,

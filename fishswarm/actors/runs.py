@@ -2,7 +2,7 @@
 
 Router, world, channel, observer and one fish worker over Zenoh on a free loopback port,
 recorded to a temporary MCAP file that is read back: what
-:func:`fishswarm.study.sweep.run_experiment` calls for ``--engine actors``.
+:func:`fishswarm.study.sweep.sweep_experiment` calls for ``--engine actors``.
 """
 
 from __future__ import annotations
@@ -13,20 +13,20 @@ from pathlib import Path
 import numpy as np
 import trio
 
-from fishswarm.actors.launcher import LaunchSettings, run_swarm
+from fishswarm.actors.launcher import LaunchSettings, launch_swarm
 from fishswarm.actors.session import free_loopback_endpoint
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.recording import read_recording
 from fishswarm.study.sweep import Run
 
 
-def run_on_actors(scenario: Scenario) -> Run:
+def simulate_on_actors(scenario: Scenario) -> Run:
     """Run through the actor system, recording to a temporary MCAP file read back after."""
     endpoint = free_loopback_endpoint()
     with tempfile.TemporaryDirectory(prefix="fishswarm-experiment-") as folder:
         record = Path(folder) / "run.mcap"
         settings = LaunchSettings(scenario, listen=endpoint, record=record)
-        result = trio.run(run_swarm, settings)
+        result = trio.run(launch_swarm, settings)
         if result.summary["status"] != "finished":
             raise RuntimeError(
                 f"run with seed {scenario.seed} ended {result.summary['status']} "

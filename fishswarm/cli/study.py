@@ -118,12 +118,12 @@ def add_parsers(commands: Any) -> None:
 def engine_named(name: str) -> Engine:
     """The experiment engine ``--engine NAME`` stands for."""
     if name == "actors":
-        from fishswarm.actors.runs import run_on_actors
+        from fishswarm.actors.runs import simulate_on_actors
 
-        return run_on_actors
-    from fishswarm.study.sweep import run_on_batch_engine
+        return simulate_on_actors
+    from fishswarm.study.sweep import simulate_on_batch_engine
 
-    return run_on_batch_engine
+    return simulate_on_batch_engine
 
 
 def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
@@ -131,7 +131,7 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
     from fishswarm.study.experiment import find
     from fishswarm.study.progress import ProgressLine, bar
     from fishswarm.study.report import write_report
-    from fishswarm.study.sweep import SweepFailed, SweepInterrupted, run_experiment
+    from fishswarm.study.sweep import SweepFailed, SweepInterrupted, sweep_experiment
 
     chosen = find(args.name)
     if args.seeds is not None and args.seeds < 1:
@@ -170,7 +170,7 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
         )
 
     try:
-        outcomes = run_experiment(
+        outcomes = sweep_experiment(
             chosen, engine=engine_named(args.engine), jobs=args.jobs, on_run=show
         )
     except (SweepInterrupted, SweepFailed) as stop:
@@ -242,7 +242,7 @@ def _formations_of(recording: Recording) -> list[FormationTarget] | None:
 
 def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm plot RECORDING``."""
-    from fishswarm.study.figures import FiguresUnavailable, run_figure
+    from fishswarm.study.figures import FiguresUnavailable, figure_of_run
     from fishswarm.study.metrics import (
         FORMATION_METRIC_NAMES,
         METRIC_NAMES,
@@ -283,7 +283,7 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     try:
         tank = _tank_of(settings, arrays["pos"])
-        figure = run_figure(
+        figure = figure_of_run(
             arrays["t"], arrays["pos"], metrics, tank, title=title, orbit=orbit,
             formation=formation,
         )  # fmt: skip

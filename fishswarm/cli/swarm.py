@@ -22,7 +22,7 @@ from fishswarm.actors.launcher import (
     LaunchSettings,
     RunResult,
     WorkerFailed,
-    run_swarm,
+    launch_swarm,
     shared_memory_pool,
 )
 from fishswarm.actors.observer import WORLD_END_SETTLE, Observer, Progress
@@ -200,7 +200,7 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
             view.show_stage(stage_of(scenario))
             print(f"open {view.settings.page_url} in a browser to watch", file=sys.stderr)
         on_scene = None if view is None else view.show
-        result = _run_trio(lambda: run_swarm(settings, on_progress=show, on_scene=on_scene))
+        result = _run_trio(lambda: launch_swarm(settings, on_progress=show, on_scene=on_scene))
         _report(result)
         if view is not None:
             print("fishswarm run: the view stays up until Ctrl-C", file=sys.stderr)

@@ -94,7 +94,7 @@ class TrajectoryRecorder:
         )
 
 
-def run_batch(scenario: Scenario) -> Trajectory:
+def simulate_batch(scenario: Scenario) -> Trajectory:
     """Run a scenario in this process, all fish as one batch, and record every snapshot.
 
     Tick 0 is the initial state. Returns the fish at every snapshot (whole control periods).

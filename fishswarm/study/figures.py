@@ -109,7 +109,7 @@ def _first_last(track: FloatArray) -> tuple[FloatArray | None, FloatArray | None
     return track[present[0]], track[present[-1]]
 
 
-def run_figure(
+def figure_of_run(
     t: FloatArray,
     position: FloatArray,
     metrics: dict[str, FloatArray],

@@ -1,7 +1,8 @@
 """Running an experiment's (group, value, seed) runs, in parallel processes, with a chosen engine.
 
 An engine turns a scenario into its recorded run: the in-process batch engine
-(:func:`run_on_batch_engine`) or the actor system (``fishswarm.actors.runs.run_on_actors``:
+(:func:`simulate_on_batch_engine`) or the actor system
+(``fishswarm.actors.runs.simulate_on_actors``:
 router, world, channel, observer and a worker process over Zenoh on 127.0.0.1), which gives
 the same trajectories bit for bit (tested). The command line picks the engine; this module
 does not know the actors. Runs are spread over processes started with ``spawn``, one per
@@ -23,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.sim.allocator import tune_allocator
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import Experiment, RunKey, RunOutcome
 
@@ -38,13 +39,13 @@ Engine = Callable[[Scenario], Run]
 """Runs a scenario to its end (a top-level function: runs go to spawned processes)."""
 
 
-def run_on_batch_engine(scenario: Scenario) -> Run:
+def simulate_on_batch_engine(scenario: Scenario) -> Run:
     """The batch engine: every fish in this process, one batch."""
-    trajectory = run_batch(scenario)
+    trajectory = simulate_batch(scenario)
     return trajectory.t, trajectory.position, trajectory.neighbors_seen, trajectory.effort
 
 
-def run_one(experiment: Experiment, key: RunKey, engine: Engine) -> RunOutcome:
+def simulate_one(experiment: Experiment, key: RunKey, engine: Engine) -> RunOutcome:
     """Run one (group, value, seed) of an experiment with ``engine``."""
     group, value, seed = key
     scenario = experiment.scenario_for(value, seed, group)
@@ -86,10 +87,10 @@ def _start_process() -> None:
     tune_allocator()
 
 
-def run_experiment(
+def sweep_experiment(
     experiment: Experiment,
     *,
-    engine: Engine = run_on_batch_engine,
+    engine: Engine = simulate_on_batch_engine,
     jobs: int | None = None,
     on_run: Progress | None = None,
 ) -> list[RunOutcome]:
@@ -121,7 +122,7 @@ def run_experiment(
     try:
         if jobs == 1:
             for key in pairs:
-                done(run_one(experiment, key, engine))
+                done(simulate_one(experiment, key, engine))
         else:
             _run_in_processes(experiment, pairs, engine, jobs, done)
     except KeyboardInterrupt:
@@ -150,7 +151,7 @@ def _run_in_processes(
     pool = concurrent.futures.ProcessPoolExecutor(
         jobs, mp_context=context, initializer=_start_process
     )
-    futures = [pool.submit(run_one, experiment, key, engine) for key in pairs]
+    futures = [pool.submit(simulate_one, experiment, key, engine) for key in pairs]
     handed: set[concurrent.futures.Future[RunOutcome]] = set()
     try:
         for future in concurrent.futures.as_completed(futures):

@@ -10,30 +10,30 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fishswarm.actors.runs import run_on_actors
+from fishswarm.actors.runs import simulate_on_actors
 from fishswarm.cli import main
 from fishswarm.study.experiment import find
 from fishswarm.study.report import table_rows
-from fishswarm.study.sweep import run_experiment, run_on_batch_engine
+from fishswarm.study.sweep import simulate_on_batch_engine, sweep_experiment
 
 pytestmark = pytest.mark.integration
 
 
 def test_actor_and_batch_engines_give_the_same_trajectories() -> None:
     experiment = find("blockingsphere").with_changes(values=(0.0, 0.39), seeds=1, duration=4.0)
-    through_actors = run_experiment(experiment, engine=run_on_actors, jobs=2)
-    in_batch = run_experiment(experiment, engine=run_on_batch_engine, jobs=1)
+    through_actors = sweep_experiment(experiment, engine=simulate_on_actors, jobs=2)
+    in_batch = sweep_experiment(experiment, engine=simulate_on_batch_engine, jobs=1)
     assert [(o.value, o.seed) for o in through_actors] == [(0.0, 0), (0.39, 0)]
     # Orbiting: the landmark travels in perceptions and perception batches alike.
     orbiting = find("milling").with_changes(values=(0.45,), seeds=1, duration=6.0)
-    through_actors += run_experiment(orbiting, engine=run_on_actors, jobs=1)
-    in_batch += run_experiment(orbiting, engine=run_on_batch_engine, jobs=1)
+    through_actors += sweep_experiment(orbiting, engine=simulate_on_actors, jobs=1)
+    in_batch += sweep_experiment(orbiting, engine=simulate_on_batch_engine, jobs=1)
     # The study code's profile: fish-side switches reach the fish processes too.
     studied = find("blindspot").with_changes(
         values=(0.05,), seeds=1, duration=4.0, profile="study-code"
     )
-    through_actors += run_experiment(studied, engine=run_on_actors, jobs=1)
-    in_batch += run_experiment(studied, engine=run_on_batch_engine, jobs=1)
+    through_actors += sweep_experiment(studied, engine=simulate_on_actors, jobs=1)
+    in_batch += sweep_experiment(studied, engine=simulate_on_batch_engine, jobs=1)
     for actors, batch in zip(through_actors, in_batch, strict=True):
         assert actors.position.shape[1:] == (25, 3)
         np.testing.assert_array_equal(actors.position, batch.position)
@@ -73,7 +73,7 @@ def test_experiment_command_end_to_end(
         assert len(list(csv.DictReader(stream))) == 2 * len(experiment.values) * groups
     # The numbers are those of the same runs in the batch engine.
     shrunk = experiment.with_changes(seeds=2, duration=2)
-    expected = table_rows(shrunk, run_experiment(shrunk, engine=run_on_batch_engine, jobs=1))
+    expected = table_rows(shrunk, sweep_experiment(shrunk, engine=simulate_on_batch_engine, jobs=1))
     for row, want in zip(rows, expected, strict=True):
         for summary_spec in experiment.summaries:
             column = f"{summary_spec.key}_mean"
@@ -99,9 +99,11 @@ def test_an_experiment_under_the_study_code_profile(
     with (out / "table.csv").open(encoding="utf-8") as stream:
         rows = list(csv.DictReader(stream))
     studied = find("blindspot").with_changes(seeds=2, duration=5, profile="study-code")
-    expected = table_rows(studied, run_experiment(studied, engine=run_on_batch_engine, jobs=1))
+    expected = table_rows(
+        studied, sweep_experiment(studied, engine=simulate_on_batch_engine, jobs=1)
+    )
     paper = find("blindspot").with_changes(seeds=2, duration=5)
-    against = table_rows(paper, run_experiment(paper, engine=run_on_batch_engine, jobs=1))
+    against = table_rows(paper, sweep_experiment(paper, engine=simulate_on_batch_engine, jobs=1))
     column = "study_mean_distance_change_percent_mean"
     for row, want, other in zip(rows, expected, against, strict=True):
         assert float(row[column]) == pytest.approx(want[column], rel=1e-12)

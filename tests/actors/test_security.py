@@ -318,10 +318,10 @@ def test_a_secured_run_with_an_observer_that_tries_to_steer_it_equals_a_clean_ru
 ) -> None:
     import numpy as np
 
-    from fishswarm.actors.launcher import LaunchSettings, run_swarm
+    from fishswarm.actors.launcher import LaunchSettings, launch_swarm
     from fishswarm.protocols.codec import encode
     from fishswarm.protocols.messages import Command
-    from fishswarm.sim.engine import run_batch
+    from fishswarm.sim.engine import simulate_batch
     from fishswarm.sim.scenario import Scenario
     from fishswarm.study.recording import read_recording
 
@@ -342,7 +342,7 @@ def test_a_secured_run_with_an_observer_that_tries_to_steer_it_equals_a_clean_ru
         attempts = 0
 
         async def launch() -> None:
-            result.append(await run_swarm(settings))
+            result.append(await launch_swarm(settings))
 
         async with trio.open_nursery() as nursery:
             nursery.start_soon(launch)
@@ -368,7 +368,7 @@ def test_a_secured_run_with_an_observer_that_tries_to_steer_it_equals_a_clean_ru
     assert set(result.summary["counts"]["rejected"].values()) == {0}
     assert result.summary["counts"]["deliveries"] > 0
     observed = read_recording(record).arrays()
-    np.testing.assert_array_equal(observed["pos"], run_batch(scenario).position)
+    np.testing.assert_array_equal(observed["pos"], simulate_batch(scenario).position)
 
 
 @pytest.mark.parametrize("vouched_only", [True, False])
@@ -377,8 +377,8 @@ def test_a_fake_fish_shown_by_a_liveliness_token_is_not_admitted_to_a_secured_ru
 ) -> None:
     import numpy as np
 
-    from fishswarm.actors.launcher import LaunchSettings, run_swarm
-    from fishswarm.sim.engine import run_batch
+    from fishswarm.actors.launcher import LaunchSettings, launch_swarm
+    from fishswarm.sim.engine import simulate_batch
     from fishswarm.sim.scenario import Scenario
     from fishswarm.study.recording import read_recording
 
@@ -405,7 +405,7 @@ def test_a_fake_fish_shown_by_a_liveliness_token_is_not_admitted_to_a_secured_ru
         result: list[Any] = []
 
         async def launch() -> None:
-            result.append(await run_swarm(settings))
+            result.append(await launch_swarm(settings))
 
         async with trio.open_nursery() as nursery:
             nursery.start_soon(launch)
@@ -432,7 +432,7 @@ def test_a_fake_fish_shown_by_a_liveliness_token_is_not_admitted_to_a_secured_ru
         assert result.summary["counts"]["joined_fish"] == 0
         assert result.summary["counts"]["lost_fish"] == 0
         positions = read_recording(record).arrays()["pos"]
-        np.testing.assert_array_equal(positions, run_batch(scenario).position)
+        np.testing.assert_array_equal(positions, simulate_batch(scenario).position)
     else:
         assert ids & {8, 9}  # the threat is real: the world took a fish nobody runs
 

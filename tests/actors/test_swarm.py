@@ -18,13 +18,13 @@ from fishswarm.actors.launcher import (
     EXIT_WORKER_DIED,
     LaunchSettings,
     RunResult,
-    run_swarm,
+    launch_swarm,
     shared_memory_pool,
 )
 from fishswarm.actors.observer import Progress
 from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.zenoh_bus import ZenohBus, query
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.recording import read_recording
 from tests.conftest import run_trio
@@ -36,7 +36,7 @@ def _launch(scenario: Scenario, endpoint: str, path: Path, procs: int = 1) -> Ru
     settings = LaunchSettings(
         scenario, procs=procs, listen=endpoint, record=path, summary=path.with_suffix(".json")
     )
-    return run_trio(lambda: run_swarm(settings), timeout=120)
+    return run_trio(lambda: launch_swarm(settings), timeout=120)
 
 
 def test_the_shared_memory_pool_grows_with_the_swarm_within_the_free_space() -> None:
@@ -90,7 +90,7 @@ def test_camera_vision_runs_the_same_over_zenoh_as_in_the_batch_engine(
     endpoint: str, tmp_path: Path
 ) -> None:
     scenario = Scenario(fish=8, duration=4.0, seed=2, vision_model="camera")
-    reference = run_batch(scenario)
+    reference = simulate_batch(scenario)
     path = tmp_path / "camera.mcap"
     result = _launch(scenario, endpoint, path, procs=2)
     assert result.exit_code == 0
@@ -110,7 +110,7 @@ def test_a_large_swarm_runs_over_zenoh_as_in_the_batch_engine(
     # numba, the compiled Lennard-Jones loop in both workers — the same trajectory, bit for
     # bit; in jitter mode the fish decide a few at a time, each batch through the loop.
     scenario = Scenario.crowded(250, duration=4.0, seed=4).replace(time_mode=time_mode)
-    reference = run_batch(scenario)
+    reference = simulate_batch(scenario)
     path = tmp_path / "large.mcap"
     result = _launch(scenario, endpoint, path, procs=2)
     assert result.exit_code == 0 and result.summary["counts"]["lost_fish"] == 0
@@ -126,8 +126,8 @@ def test_same_seed_same_trajectory_across_processes_and_batch_engine(
     endpoint: str, tmp_path: Path, time_mode: str
 ) -> None:
     scenario = Scenario(fish=12, duration=8.0, seed=11, vision_noise=0.05, time_mode=time_mode)
-    reference = run_batch(scenario)
-    np.testing.assert_array_equal(run_batch(scenario).position, reference.position)
+    reference = simulate_batch(scenario)
+    np.testing.assert_array_equal(simulate_batch(scenario).position, reference.position)
     for procs in (1, 2):
         path = tmp_path / f"procs{procs}.mcap"
         result = _launch(scenario, endpoint, path, procs=procs)
@@ -181,7 +181,7 @@ def test_garbage_on_every_key_is_rejected_and_changes_nothing(
                         await trio.sleep(0.001)
 
             nursery.start_soon(vandal)
-            result = await run_swarm(settings)
+            result = await launch_swarm(settings)
             nursery.cancel_scope.cancel()
             return result
 
@@ -193,7 +193,7 @@ def test_garbage_on_every_key_is_rejected_and_changes_nothing(
     assert rejected["fish"] > 0
     assert rejected["channel"] > 0
     arrays = read_recording(tmp_path / "bad.mcap").arrays()
-    np.testing.assert_array_equal(arrays["pos"], run_batch(scenario).position)
+    np.testing.assert_array_equal(arrays["pos"], simulate_batch(scenario).position)
 
 
 def test_killed_worker_loses_its_fish_and_the_run_completes(endpoint: str, tmp_path: Path) -> None:
@@ -211,7 +211,7 @@ def test_killed_worker_loses_its_fish_and_the_run_completes(endpoint: str, tmp_p
             killed["tick"] = progress.tick
 
     settings = LaunchSettings(scenario, procs=2, listen=endpoint, summary=tmp_path / "summary.json")
-    result = run_trio(lambda: run_swarm(settings, on_progress=kill_at_tick_5), timeout=120)
+    result = run_trio(lambda: launch_swarm(settings, on_progress=kill_at_tick_5), timeout=120)
     summary = result.summary
     assert result.exit_code == EXIT_WORKER_DIED
     assert summary["status"] == "finished"
@@ -344,7 +344,7 @@ def test_broadcasts_cross_processes_and_are_counted_in_the_summary(
     assert counts["deliveries"] in (4 * 6 * 5, 5 * 6 * 5)
     assert result.summary["fish"]["deliveries"] == 4 * 6 * 5
     arrays = read_recording(tmp_path / "signal.mcap").arrays()
-    np.testing.assert_array_equal(arrays["pos"], run_batch(scenario).position)
+    np.testing.assert_array_equal(arrays["pos"], simulate_batch(scenario).position)
 
 
 @pytest.mark.parametrize("shape", ["tetrahedral-pyramid", "triangle", "trigonal-planar"])
@@ -355,7 +355,7 @@ def test_a_formation_with_flags_flowing_is_the_same_across_processes_and_engines
         fish=8, behavior="formation", formation=shape, duration=4.0, seed=6,
         control_period=0.5, controller="pid", spawn_radius=0.4, spacing=0.25, channel_loss=0.2,
     )  # fmt: skip
-    reference = run_batch(scenario)
+    reference = simulate_batch(scenario)
     for procs in (1, 2):
         path = tmp_path / f"formation{procs}.mcap"
         result = _launch(scenario, endpoint, path, procs=procs)
@@ -375,8 +375,8 @@ def test_a_scheduled_formation_switch_reaches_fish_in_worker_processes(
         switch_at=1.0, duration=4.0, seed=2, control_period=0.5, controller="pid",
         spawn_radius=0.4, spacing=0.25,
     )  # fmt: skip
-    reference = run_batch(scenario)
-    unswitched = run_batch(dataclasses.replace(scenario, switch_formation=None))
+    reference = simulate_batch(scenario)
+    unswitched = simulate_batch(dataclasses.replace(scenario, switch_formation=None))
     assert not np.array_equal(reference.position[-1], unswitched.position[-1])
     path = tmp_path / "switch.mcap"
     result = _launch(scenario, endpoint, path)
@@ -407,7 +407,7 @@ def test_effort_sharing_in_a_flow_is_the_same_across_processes_and_engines(
 
     with monkeypatch.context() as patch:
         patch.setattr(formation, "share_effort", counting)
-        reference = run_batch(scenario)
+        reference = simulate_batch(scenario)
     assert sum(asking) > 20  # swaps were asked for, agreed and made: the flags carried them
     for procs in (1, 2):
         path = tmp_path / f"energy{procs}.mcap"

@@ -28,7 +28,7 @@ from fishswarm.protocols.messages import (
     PerceptionBatch,
     Snapshot,
 )
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 from tests.behaviors.signal_behavior import registered
 from tests.conftest import run_mock, subscription
@@ -102,7 +102,7 @@ def test_the_actors_give_the_batch_engines_trajectory(changes: dict[str, object]
     scenario = Scenario(fish=7, duration=6.0, seed=5).replace(**changes)
     world, snapshots = run_mock(lambda: _swarm(scenario, schools=3))
     assert world.state_name == "finished" and world.lost == []
-    reference = run_batch(scenario)
+    reference = simulate_batch(scenario)
     np.testing.assert_array_equal(np.array([s.position for s in snapshots]), reference.position)
     np.testing.assert_array_equal(np.array([s.yaw for s in snapshots]), reference.yaw)
     # Each snapshot names the shape the fish are told to take once the scenario switches.
@@ -135,7 +135,7 @@ def test_schools_whose_perceptions_come_in_parts_decide_as_with_one_batch(
     world, snapshots = run_mock(lambda: _swarm(scenario, schools=2))
     assert world.state_name == "finished" and world.lost == []
     assert max(parts) > 2  # more than one part for a school of 7
-    reference = run_batch(scenario)
+    reference = simulate_batch(scenario)
     np.testing.assert_array_equal(np.array([s.position for s in snapshots]), reference.position)
 
 
@@ -170,7 +170,7 @@ def test_broadcasts_decided_at_a_tick_are_heard_at_the_next_and_match_the_batch_
 
     snapshots, deliveries, world, medium = run_mock(main)
     positions = np.array([s.position for s in snapshots])
-    np.testing.assert_array_equal(positions, run_batch(scenario).position)
+    np.testing.assert_array_equal(positions, simulate_batch(scenario).position)
     # Every fish broadcasts at every decision (ticks 0–4); each is heard at the next tick.
     assert [s.broadcasts.tolist() for s in snapshots] == [[0] * 5] + [[1] * 5] * 5
     # The channel delivers at every snapshot after one with broadcasts; the last one (tick 5,

@@ -18,7 +18,7 @@ from fishswarm.behaviors.formation import (
 )
 from fishswarm.behaviors.registry import fish_params
 from fishswarm.protocols.messages import BROADCAST_KINDS, FORMATION_SHAPES, FormationFlag
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 
 FLAG = BROADCAST_KINDS.index("formation")
@@ -217,7 +217,7 @@ def test_two_fish_form_a_column_in_the_batch_engine() -> None:
         fish=2, behavior="formation", formation="column", duration=40, seed=1,
         spawn_region="tank", controller="pid", control_period=0.5,
     )  # fmt: skip
-    trajectory = run_batch(scenario)
+    trajectory = simulate_batch(scenario)
     gap = np.linalg.norm(trajectory.position[:, 0] - trajectory.position[:, 1], axis=1)
     late = gap[trajectory.t >= 30.0]
     assert gap[0] > 1.0
@@ -268,7 +268,7 @@ def test_a_school_switched_to_another_shape_re_forms() -> None:
         spawn_radius=0.4, spacing=0.25, controller="pid", control_period=0.5,
         switch_formation="diamond", switch_at=30.0,
     )  # fmt: skip
-    trajectory = run_batch(scenario)
+    trajectory = simulate_batch(scenario)
 
     def error(tick: int, shape: str) -> float:
         target = target_map(shape, 15, spacing=0.25)
@@ -330,7 +330,7 @@ def test_fifteen_fish_hold_their_places(shape: str) -> None:
         fish=15, behavior="formation", formation=shape, duration=30, seed=0,
         spawn_radius=0.4, spacing=0.25, controller="pid", control_period=0.5,
     )  # fmt: skip
-    trajectory = run_batch(scenario)
+    trajectory = simulate_batch(scenario)
     target = formation_target_of(scenario)
     assert target is not None
     final = target.metrics(trajectory.position[-1])

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fishswarm.behaviors.orbit import milling, orbit, waltz
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 
 
@@ -63,7 +63,7 @@ def test_milling_pushes_off_a_close_neighbour() -> None:
 
 def test_one_fish_settles_on_a_circle_near_r() -> None:
     scenario = Scenario(fish=1, behavior="orbit", duration=120, spawn_radius=0.6, seed=2)
-    trajectory = run_batch(scenario)
+    trajectory = simulate_batch(scenario)
     centre = scenario.landmarks()[0]
     radius = np.hypot(*(trajectory.position[60:, 0, :2] - centre[:2]).T)
     assert abs(radius.mean() - 0.45) < 0.03
@@ -74,7 +74,7 @@ def test_one_fish_settles_on_a_circle_near_r() -> None:
 
 def test_two_waltzing_fish_stay_together_and_their_barycentre_barely_moves() -> None:
     scenario = Scenario(fish=2, behavior="waltz", duration=120, spawn_radius=0.3, seed=1)
-    position = run_batch(scenario).position[30:]
+    position = simulate_batch(scenario).position[30:]
     separation = np.linalg.norm(position[:, 0] - position[:, 1], axis=1)
     assert separation.min() > 0.3 and separation.max() < 0.7  # R = 0.45
     barycentre = position.mean(axis=1)
@@ -88,7 +88,7 @@ def test_milling_fish_stay_around_the_centre_with_few_collisions() -> None:
     scenario = Scenario(
         fish=25, behavior="milling", duration=90, spawn_radius=0.6, seed=3, orbit_radius=0.6
     )
-    position = run_batch(scenario).position
+    position = simulate_batch(scenario).position
     centre = scenario.landmarks()[0]
     radius = np.hypot(position[45:, :, 0] - centre[0], position[45:, :, 1] - centre[1])
     assert abs(radius.mean() - 0.6) < 0.1

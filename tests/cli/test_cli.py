@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.recording import read_recording
 from tests.conftest import free_port, wait_for_port
@@ -553,7 +553,7 @@ def test_run_a_learned_replica_in_the_swarm(tmp_path: Path) -> None:
     # The replica swam as it does in the batch engine, bit for bit, and it did swim.
     scenario = Scenario(behavior="replica", model=str(model), fish=5, duration=3.0)
     recorded = read_recording(tmp_path / "r.mcap").arrays()["pos"]
-    np.testing.assert_array_equal(recorded, run_batch(scenario).position)
+    np.testing.assert_array_equal(recorded, simulate_batch(scenario).position)
     assert np.abs(recorded[-1] - recorded[0]).max() > 0.01
 
 

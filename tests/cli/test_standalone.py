@@ -109,7 +109,7 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
 def test_a_secured_swarm_runs_and_is_watched_as_a_plain_one(tmp_path: Path) -> None:
     import numpy as np
 
-    from fishswarm.sim.engine import run_batch
+    from fishswarm.sim.engine import simulate_batch
     from fishswarm.sim.scenario import Scenario
 
     secure = tmp_path / "secure"
@@ -181,7 +181,7 @@ def test_a_secured_swarm_runs_and_is_watched_as_a_plain_one(tmp_path: Path) -> N
         end_processes(processes)
     # The observer with its certificate saw the run the batch engine computes.
     observed = read_recording(record).arrays()
-    reference = run_batch(Scenario(fish=2, duration=5, seed=4))
+    reference = simulate_batch(Scenario(fish=2, duration=5, seed=4))
     np.testing.assert_array_equal(observed["pos"], reference.position)
 
 

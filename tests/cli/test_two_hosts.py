@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.recording import read_recording
 from tests.conftest import end_processes, free_port
@@ -136,7 +136,7 @@ def test_workers_on_another_host_give_the_one_host_trajectory_on_fast_and_slow_l
     # 40 ms each way on the second run instead: lockstep waits for it, the trajectory does
     # not change, and the world's answer times show the added 80 ms round trip.
     base, workers, address = two_hosts
-    reference = run_batch(Scenario(fish=8, duration=6.0, seed=6, behavior="aggregation"))
+    reference = simulate_batch(Scenario(fish=8, duration=6.0, seed=6, behavior="aggregation"))
     answers = []
     for delay in (0.0, 0.04):
         record = tmp_path / f"delay-{delay}.mcap"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fishswarm.sim.clocks import Event, JitterClock, LockstepClock, draw_period
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.sim.streams import Stream, stream
 
@@ -82,12 +82,12 @@ def test_lockstep_snapshots_and_decides_every_period_and_ends_with_a_snapshot() 
 
 def test_jitter_runs_are_deterministic_and_differ_from_lockstep() -> None:
     jittered = Scenario(fish=10, duration=10, seed=8, time_mode="jitter")
-    first, again = run_batch(jittered), run_batch(jittered)
+    first, again = simulate_batch(jittered), simulate_batch(jittered)
     np.testing.assert_array_equal(first.position, again.position)
     np.testing.assert_array_equal(first.t, np.arange(11.0))
-    lockstep = run_batch(jittered.replace(time_mode="lockstep"))
+    lockstep = simulate_batch(jittered.replace(time_mode="lockstep"))
     assert not np.array_equal(first.position, lockstep.position)
-    other_seed = run_batch(jittered.replace(seed=9))
+    other_seed = simulate_batch(jittered.replace(seed=9))
     assert not np.array_equal(first.position, other_seed.position)
 
 

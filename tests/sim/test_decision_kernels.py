@@ -22,7 +22,7 @@ from fishswarm.sim.decision_kernels import (
     prepare,
     with_compiled_decisions,
 )
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 
 needs_numba = pytest.mark.skipif(not kernels.available(), reason="numba is not installed")
@@ -228,5 +228,5 @@ def test_the_batch_engine_of_a_large_swarm_decides_with_the_loop(
         return original(neighbors, mask, **options)  # type: ignore[arg-type]
 
     monkeypatch.setattr(decision_kernels, "lennard_jones_target_vectors", spy)
-    run_batch(Scenario.crowded(kernels.COMPILED_MIN_FISH, duration=2.0, seed=1))
+    simulate_batch(Scenario.crowded(kernels.COMPILED_MIN_FISH, duration=2.0, seed=1))
     assert calls and set(calls) == {kernels.COMPILED_MIN_FISH}

@@ -10,7 +10,7 @@ from fishswarm.bluebot.dynamics import State, step
 from fishswarm.bluebot.parameters import BlueBot, Tank
 from fishswarm.bluebot.vision import Vision, _in_range, perceive, sift
 from fishswarm.sim import kernels
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.physics import WorldParams
 from fishswarm.sim.scenario import Scenario
 
@@ -141,10 +141,10 @@ def test_large_scenarios_integrate_and_see_with_the_kernels_and_match_the_refere
     scenario = Scenario.crowded(300, duration=5.0, seed=4, vision_noise=0.05)
     assert WorldParams.of(scenario).compiled
     assert not WorldParams.of(Scenario()).compiled  # 25 fish: the numpy reference
-    compiled = run_batch(scenario)
-    np.testing.assert_array_equal(run_batch(scenario).position, compiled.position)
+    compiled = simulate_batch(scenario)
+    np.testing.assert_array_equal(simulate_batch(scenario).position, compiled.position)
     monkeypatch.setattr(kernels, "COMPILED_MIN_FISH", 10**9)
     assert not WorldParams.of(scenario).compiled
-    reference = run_batch(scenario)
+    reference = simulate_batch(scenario)
     np.testing.assert_allclose(compiled.position, reference.position, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(compiled.neighbors_seen, reference.neighbors_seen)

@@ -57,7 +57,7 @@ def _experiment_cases() -> dict[str, tuple[str, str]]:
 
 def compute(model: Path) -> dict[str, np.ndarray]:
     """Every reference run's positions, velocities and yaws, as named arrays."""
-    from fishswarm.sim.engine import run_batch
+    from fishswarm.sim.engine import simulate_batch
     from fishswarm.sim.scenario import Scenario
     from fishswarm.study.experiment import find
 
@@ -70,7 +70,7 @@ def compute(model: Path) -> dict[str, np.ndarray]:
         scenarios[name] = experiment.scenario_for(value, 0)
     arrays: dict[str, np.ndarray] = {}
     for name, scenario in scenarios.items():
-        trajectory = run_batch(scenario)
+        trajectory = simulate_batch(scenario)
         arrays[f"{name}/position"] = trajectory.position
         arrays[f"{name}/velocity"] = trajectory.velocity
         arrays[f"{name}/yaw"] = trajectory.yaw

@@ -197,7 +197,7 @@ def test_settings_read_back_from_a_recording_give_the_same_scenario(scenario: Sc
 
 
 def test_study_code_switches_change_only_what_they_name(tmp_path: Path) -> None:
-    from fishswarm.sim.engine import run_batch
+    from fishswarm.sim.engine import simulate_batch
 
     assert Scenario().robot() == Scenario(study_code=()).robot()
     euler = Scenario(study_code=("euler-step",)).robot()
@@ -214,9 +214,9 @@ def test_study_code_switches_change_only_what_they_name(tmp_path: Path) -> None:
     again = Scenario.from_mapping(loaded.to_dict())
     assert again.study_code == loaded.study_code
     # Deterministic, and not the paper's trajectory.
-    first, second = run_batch(loaded), run_batch(loaded)
+    first, second = simulate_batch(loaded), simulate_batch(loaded)
     np.testing.assert_array_equal(first.position, second.position)
-    paper = run_batch(loaded.replace(study_code=()))
+    paper = simulate_batch(loaded.replace(study_code=()))
     assert np.abs(first.position[-1] - paper.position[-1]).max() > 1e-3
 
 
@@ -267,14 +267,14 @@ def test_bad_profiles_and_manhattan_with_cameras_are_refused() -> None:
 
 
 def test_a_lone_fish_circles_under_the_study_codes_homing() -> None:
-    from fishswarm.sim.engine import run_batch
+    from fishswarm.sim.engine import simulate_batch
 
     # Alone it sees nobody: the target is zero, bearing 0. The paper's controller runs only
     # the caudal fin (0.1) and the fish swims straight; the study's code drives the right
     # pectoral at 0.6 too, which turns the fish to its own left (z down) — clockwise in a
     # plan view with y up, how the study and fishswarm draw the tank ("circles right").
-    paper = run_batch(Scenario(fish=1, duration=60))
-    study = run_batch(Scenario(fish=1, duration=60, study_code=("homing",)))
+    paper = simulate_batch(Scenario(fish=1, duration=60))
+    study = simulate_batch(Scenario(fish=1, duration=60, study_code=("homing",)))
     np.testing.assert_array_equal(paper.yaw, np.full_like(paper.yaw, paper.yaw[0]))
     yaw = np.unwrap(study.yaw[:, 0])
     assert np.all(np.diff(yaw)[1:] < 0)  # turning the same way all along

@@ -55,11 +55,11 @@ def test_effort_counts_fin_beats_and_follows_a_fish_that_leaves_and_returns() ->
 
 
 def test_the_study_codes_start_delay_holds_every_fish_for_two_periods() -> None:
-    from fishswarm.sim.engine import run_batch
+    from fishswarm.sim.engine import simulate_batch
 
     for time_mode in ("lockstep", "jitter"):
         scenario = Scenario(fish=6, duration=6, time_mode=time_mode, study_code=("start-delay",))
-        held = run_batch(scenario)
+        held = simulate_batch(scenario)
         early = held.t < 2.0 + 1e-9
         np.testing.assert_array_equal(
             held.position[early], held.position[:1].repeat(early.sum(), 0)
@@ -67,5 +67,5 @@ def test_the_study_codes_start_delay_holds_every_fish_for_two_periods() -> None:
         np.testing.assert_array_equal(held.effort[early], 0.0)
         assert np.abs(held.position[-1] - held.position[0]).max() > 0.01
     # Without the switch the fish move from the first period.
-    free = run_batch(Scenario(fish=6, duration=6))
+    free = simulate_batch(Scenario(fish=6, duration=6))
     assert np.abs(free.position[1] - free.position[0]).max() > 1e-3

@@ -164,7 +164,7 @@ def test_ctrl_c_in_a_sweep_returns_the_runs_that_finished(tmp_path: Path) -> Non
     import json
 
     from fishswarm.study.report import write_report
-    from fishswarm.study.sweep import SweepInterrupted, run_experiment, run_on_batch_engine
+    from fishswarm.study.sweep import SweepInterrupted, simulate_on_batch_engine, sweep_experiment
 
     experiment = find("blindspot").with_changes(seeds=2, duration=2.0)
     calls = []
@@ -173,10 +173,10 @@ def test_ctrl_c_in_a_sweep_returns_the_runs_that_finished(tmp_path: Path) -> Non
         calls.append(scenario.seed)
         if len(calls) == 3:
             raise KeyboardInterrupt
-        return run_on_batch_engine(scenario)
+        return simulate_on_batch_engine(scenario)
 
     with pytest.raises(SweepInterrupted) as stop:
-        run_experiment(experiment, engine=interrupted_at_the_third_run, jobs=1)  # type: ignore[arg-type]
+        sweep_experiment(experiment, engine=interrupted_at_the_third_run, jobs=1)  # type: ignore[arg-type]
     assert [(o.group, o.value, o.seed) for o in stop.value.outcomes] == experiment.runs()[:2]
     assert stop.value.total == len(experiment.runs()) == 2 * len(experiment.values)
     # What finished is reported, marked incomplete.
@@ -194,22 +194,22 @@ def failing_first_seed(scenario: Scenario) -> tuple[np.ndarray, ...]:
     others take two seconds before they run."""
     import time
 
-    from fishswarm.study.sweep import run_on_batch_engine
+    from fishswarm.study.sweep import simulate_on_batch_engine
 
     if scenario.seed == 0:
         raise RuntimeError(f"run with seed 0 ended degraded (blind width {scenario.blind_width:g})")
     time.sleep(2.0)
-    return run_on_batch_engine(scenario)
+    return simulate_on_batch_engine(scenario)
 
 
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_a_failed_run_stops_the_sweep_and_returns_the_runs_that_finished(jobs: int) -> None:
-    from fishswarm.study.sweep import SweepFailed, run_experiment
+    from fishswarm.study.sweep import SweepFailed, sweep_experiment
 
     experiment = find("blindspot").with_changes(seeds=2, duration=2.0)
     # Runs go value by value, seeds 0 and 1: the first run fails.
     with pytest.raises(SweepFailed, match="RuntimeError: run with seed 0 ended degraded") as stop:
-        run_experiment(experiment, engine=failing_first_seed, jobs=jobs)  # type: ignore[arg-type]
+        sweep_experiment(experiment, engine=failing_first_seed, jobs=jobs)  # type: ignore[arg-type]
     assert stop.value.total == len(experiment.runs()) == 8
     # Nothing ran after the failure in this process. In two processes, the runs already
     # handed to them finish (the executor keeps one more queued than it has processes, and
@@ -223,7 +223,7 @@ def test_groups_compare_the_sweep_under_named_settings(tmp_path: Path) -> None:
     import json
 
     from fishswarm.study.report import write_report
-    from fishswarm.study.sweep import run_experiment
+    from fishswarm.study.sweep import sweep_experiment
 
     folder = tmp_path / "experiments"
     folder.mkdir()
@@ -246,7 +246,7 @@ def test_groups_compare_the_sweep_under_named_settings(tmp_path: Path) -> None:
     assert experiment.scenario_for(0.5, 3, "flags").flags is True
     with pytest.raises(ConfigError, match="no group 'sometimes'; groups: flags, no flags"):
         experiment.scenario_for(0.0, 0, "sometimes")
-    outcomes = run_experiment(experiment, jobs=1)
+    outcomes = sweep_experiment(experiment, jobs=1)
     assert [(o.group, o.value) for o in outcomes] == [key[:2] for key in experiment.runs()]
     rows = table_rows(experiment, outcomes)
     assert [(r["group"], r["channel_loss"]) for r in rows] == [key[:2] for key in experiment.runs()]
@@ -330,11 +330,11 @@ def test_the_experiment_command_writes_what_finished_when_a_run_fails(
     from fishswarm.cli import study as study_command
 
     def fails_at_the_second_run(scenario: Scenario) -> tuple[np.ndarray, ...]:
-        from fishswarm.study.sweep import run_on_batch_engine
+        from fishswarm.study.sweep import simulate_on_batch_engine
 
         if scenario.seed == 1:
             raise RuntimeError("run with seed 1 ended degraded")
-        return run_on_batch_engine(scenario)
+        return simulate_on_batch_engine(scenario)
 
     monkeypatch.setattr(study_command, "engine_named", lambda name: fails_at_the_second_run)
     out = tmp_path / "out"

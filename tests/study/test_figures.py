@@ -14,11 +14,11 @@ from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import Experiment
 from fishswarm.study.metrics import OrbitTarget
 from fishswarm.study.report import markdown_table, table_rows
-from fishswarm.study.sweep import run_experiment
+from fishswarm.study.sweep import sweep_experiment
 
 pytest.importorskip("matplotlib")
 
-from fishswarm.study.figures import experiment_figures, run_figure
+from fishswarm.study.figures import experiment_figures, figure_of_run
 
 
 def _circle(steps: int = 9) -> np.ndarray:
@@ -43,7 +43,7 @@ def test_an_orbit_runs_figure_shows_the_post_the_radius_and_the_circling() -> No
         "neighbors_seen": np.zeros(9),
     }
     target = OrbitTarget(np.array([0.9, 0.9, 0.5]), 0.45)
-    figure = run_figure(t, position, metrics, (1.78, 1.78, 1.17), title="orbit", orbit=target)
+    figure = figure_of_run(t, position, metrics, (1.78, 1.78, 1.17), title="orbit", orbit=target)
     axes: list[Any] = figure.axes
     above, side, radius, turns, speed = axes
     assert _labels(above) == ("x (m)", "y (m)")
@@ -76,7 +76,7 @@ def test_a_swarm_runs_figure_keeps_its_distance_panels() -> None:
     names = ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance")
     metrics = {name: np.linspace(0.2, 0.5, 5) for name in names}
     metrics["neighbors_seen"] = np.full(5, 3.0)
-    figure = run_figure(np.arange(5.0), position, metrics, (1.78, 1.78, 1.17), title="run")
+    figure = figure_of_run(np.arange(5.0), position, metrics, (1.78, 1.78, 1.17), title="run")
     assert [_labels(ax) for ax in figure.axes] == [
         ("x (m)", "y (m)"),
         ("x (m)", "depth (m)"),
@@ -104,7 +104,7 @@ def test_a_formation_runs_figure_colours_fish_by_role_and_lays_the_target_on_the
         "joined_fraction": np.array([0.0, 5 / 6]),
         "collisions": np.array([1.0, 0.0]),
     }
-    figure = run_figure(
+    figure = figure_of_run(
         np.arange(2.0), position, metrics, (1.78, 1.78, 1.17), title="f", formation=target
     )
     axes: list[Any] = figure.axes
@@ -152,7 +152,7 @@ def test_experiment_figures_space_uneven_values_as_they_are_with_one_seed(
     from matplotlib.figure import Figure
 
     experiment = _orbit_experiment((0.3, 0.35, 0.6), seeds=1)
-    outcomes = run_experiment(experiment, jobs=1)
+    outcomes = sweep_experiment(experiment, jobs=1)
     rows = table_rows(experiment, outcomes)
     captured: list[Any] = []
     original = Figure.savefig

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from scipy.spatial.distance import pdist
 
-from fishswarm.sim.engine import run_batch
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.metrics import (
     ORBIT_METRIC_NAMES,
@@ -115,7 +115,7 @@ def test_orbit_metrics_of_a_pair_use_the_barycentre_and_count_contacts() -> None
 @pytest.mark.parametrize("behavior", ["milling", "waltz"])
 def test_orbit_tracker_snapshot_by_snapshot_equals_the_whole_runs_metrics(behavior: str) -> None:
     scenario = Scenario(behavior=behavior, fish=6 if behavior == "milling" else 2, duration=30)
-    run = run_batch(scenario)
+    run = simulate_batch(scenario)
     target = orbit_target_of(scenario)
     assert target is not None
     whole = orbit_metrics(
