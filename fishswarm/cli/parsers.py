@@ -9,6 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from fishswarm import __version__
+from fishswarm.behaviors.formation import DEFAULT_SPACING
+from fishswarm.behaviors.lennard_jones import AGGREGATION_DISTANCE
 from fishswarm.behaviors.registry import BEHAVIORS
 from fishswarm.bluebot.parameters import BLIND_WIDTH, SPHERE_RADIUS
 from fishswarm.cli.study import add_parsers as add_study_parsers
@@ -108,11 +110,24 @@ SWITCH_ON = object()
 """The kind of a flag that turns a setting on (``bool``: one that turns it off)."""
 
 _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
-    "fish": ("--fish", int, "number of fish (default 25)"),
-    "behavior": ("--behavior", str, f"one of {', '.join(BEHAVIORS)} (default dispersion)"),
-    "duration": ("--duration", float, "simulated seconds (default 15)"),
-    "seed": ("--seed", int, "master seed; the same seed gives the same run (default 0)"),
-    "control_period": ("--period", float, "control period in s (default 1: 1 Hz)"),
+    "fish": ("--fish", int, f"number of fish (default {Scenario.fish})"),
+    "behavior": (
+        "--behavior",
+        str,
+        f"one of {', '.join(BEHAVIORS)} (default {Scenario.behavior})",
+    ),
+    "duration": ("--duration", float, f"simulated seconds (default {Scenario.duration:g})"),
+    "seed": (
+        "--seed",
+        int,
+        f"master seed; the same seed gives the same run (default {Scenario.seed})",
+    ),
+    "control_period": (
+        "--period",
+        float,
+        f"control period in s (default {Scenario.control_period:g}: "
+        f"{1 / Scenario.control_period:g} Hz)",
+    ),
     "controller": (
         "--controller",
         str,
@@ -121,8 +136,8 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
     "target_distance": (
         "--target-distance",
         float,
-        "Lennard-Jones target distance in m (default 0.26 for aggregation, "
-        "the tank diagonal for dispersion)",
+        f"Lennard-Jones target distance in m (default {AGGREGATION_DISTANCE:g} for "
+        "aggregation, the tank diagonal for dispersion)",
     ),
     "spawn_region": (
         "--spawn",
@@ -153,7 +168,7 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
         "--orbit-radius",
         float,
         "orbit radius R of orbit and milling around the post at the tank centre, partner "
-        "distance of waltz, m (default 0.45)",
+        f"distance of waltz, m (default {Scenario.orbit_radius:g})",
     ),
     "time_mode": (
         "--time",
@@ -166,14 +181,18 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
     "jitter": (
         "--jitter",
         float,
-        "with --time jitter: s.d. of each fish's control period, s (default 0.05)",
+        f"with --time jitter: s.d. of each fish's control period, s (default {Scenario.jitter:g})",
     ),
     "formation": (
         "--formation",
         str,
         f"with --behavior formation: {', '.join(FORMATION_SHAPES)} (default pyramid)",
     ),
-    "spacing": ("--spacing", float, "distance between places of a formation, m (default 0.3)"),
+    "spacing": (
+        "--spacing",
+        float,
+        f"distance between places of a formation, m (default {DEFAULT_SPACING:g})",
+    ),
     "flags": (
         "--no-flags",
         bool,
