@@ -46,12 +46,7 @@ def longest_wait(text: str) -> float:
 
 def fish_id(text: str) -> int:
     """A fish's (or robot's) id: an integer from 0 to MAX_FISH_ID (an argparse type)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is negative: fish ids are 0 or more")
+    value = _whole_number(text, negative="fish ids are 0 or more")
     if value > MAX_FISH_ID:
         raise argparse.ArgumentTypeError(f"{text} is too large: fish ids go up to {MAX_FISH_ID}")
     return value
@@ -69,12 +64,17 @@ def secure_folder(text: str) -> Path:
 
 def tick_number(text: str) -> int:
     """A tick: an integer, 0 or more (an argparse type)."""
+    return _whole_number(text, negative="ticks count from 0")
+
+
+def _whole_number(text: str, *, negative: str) -> int:
+    """``text`` as an integer, 0 or more; ``negative`` says why a negative one is refused."""
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
     if value < 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is negative: ticks count from 0")
+        raise argparse.ArgumentTypeError(f"{text!r} is negative: {negative}")
     return value
 
 
