@@ -279,7 +279,7 @@ async def _watch_workers(workers: list[Worker], died: list[str], world: World) -
                 continue
             if worker.process.exitcode is not None:
                 worker.lost = True
-                message = f"{worker.spec.describe()} {worker.exit_description()}; its fish are lost"
+                message = _death_of(worker)
                 died.append(message)
                 if world.state_name == "waiting":
                     raise WorkerFailed(
@@ -292,12 +292,19 @@ async def _watch_workers(workers: list[Worker], died: list[str], world: World) -
 
 def _died_unseen(workers: list[Worker]) -> list[str]:
     """The workers that failed on their own without the watch seeing it (it looks every
-    50 ms; a short run can end first): exited with an error and no counters to give."""
+    50 ms; a short run can end first): ended with an error or a signal we did not send, and
+    no counters to give."""
     return [
-        f"{worker.spec.describe()} {worker.exit_description()}; its fish were lost"
+        _death_of(worker)
         for worker in workers
-        if not worker.lost and worker.statistics is None and (worker.process.exitcode or 0) > 0
+        if not (worker.lost or worker.killed)
+        and worker.statistics is None
+        and worker.process.exitcode not in (0, None)
     ]
+
+
+def _death_of(worker: Worker) -> str:
+    return f"{worker.spec.describe()} {worker.exit_description()}; its fish are lost"
 
 
 async def _stop_all(workers: list[Worker]) -> None:

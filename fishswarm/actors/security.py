@@ -38,7 +38,11 @@ BASE_SUBJECTS = ("router", "world", "channel", "admin", "observer")
 DEFAULT_DAYS = 365
 MAX_DAYS = 36_500
 """Certificates last at most a hundred years (dates past 9999 cannot be written)."""
-_HOST_NAME = re.compile(r"(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*")
+_HOST_NAME = re.compile(
+    r"(\*\.)?(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*\.?"
+)
+"""A DNS name as a certificate may hold it: labels joined by dots, a leading ``*.`` for a
+wildcard, a trailing dot for a fully qualified name."""
 
 
 class SecurityError(RuntimeError):
@@ -292,12 +296,11 @@ def init_secure(
         access = folder / ACCESS_FILE
         access.write_text(json.dumps(access_control(everyone, keys), indent=2), encoding="utf-8")
         return [*written, access]
-    if any(parts):
-        # A new authority: the old one's certificates would only be refused later, with a
-        # message about a signature, so they go now.
-        for subject in certified_subjects(folder, keys):
-            for suffix in (".pem", ".key"):
-                (folder / f"{subject}{suffix}").unlink()
+    # A new authority: certificates already in the folder (of an old authority, replaced
+    # or lost) would only be refused later, with a message about a signature, so they go.
+    for subject in certified_subjects(folder, keys):
+        for suffix in (".pem", ".key"):
+            (folder / f"{subject}{suffix}").unlink()
     authority_key = ec.generate_private_key(ec.SECP256R1())
     authority_name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, f"fishswarm {swarm}")])
     usage = dict.fromkeys(

@@ -138,6 +138,8 @@ class Worker:
     stopping: bool = False
     lost: bool = False
     """Seen to have ended on its own while the run went on."""
+    killed: bool = False
+    """Killed by :func:`stop_worker`, as it did not stop when asked."""
 
     def exit_description(self) -> str:
         """How the process ended, in words."""
@@ -192,6 +194,7 @@ def stop_worker(worker: Worker, *, timeout: float = 1.5) -> None:
         pass
     worker.process.join(timeout)
     if worker.process.is_alive():
+        worker.killed = True
         worker.process.kill()
         worker.process.join(1.0)
     worker.connection.close()

@@ -110,7 +110,8 @@ def add_parsers(commands: Any) -> None:
         "--speed",
         type=float,
         default=2.0,
-        help=f"times real time (default 2; at most {MAX_FRAMES} frames are made)",
+        help=f"times real time (default 2; a speed that needs more than {MAX_FRAMES} frames "
+        "is refused)",
     )
     animate.add_argument("--quiet", action="store_true", help="no progress line")
 
@@ -294,6 +295,15 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     return 0
 
 
+def _rounded_up(value: float, digits: int = 3) -> float:
+    """``value`` rounded up to ``digits`` significant digits (advice that is then taken
+    must not fall short)."""
+    unit = 10.0 ** (math.floor(math.log10(value)) - digits + 1)
+    # Less a hair, so that a value already on the grid (0.002 as 200.00000000000003 units)
+    # is not pushed a step up.
+    return float(f"{math.ceil(value / unit - 1e-9) * unit:.{digits}g}")
+
+
 def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm animate RECORDING --out FILE``."""
     from fishswarm.study.animation import AnimationError, frame_duration, resample
@@ -317,7 +327,7 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
         raise ConfigError(
             f"--speed {args.speed:g} makes {span / (args.speed * shown):.0f} frames of this "
             f"{span:g}-s run, more than {MAX_FRAMES}: give --speed "
-            f"{span / (MAX_FRAMES * shown):.3g} or more"
+            f"{_rounded_up(span / (MAX_FRAMES * shown)):g} or more"
         )
     frames = resample(
         arrays["t"], arrays["pos"], arrays["yaw"], arrays["ids"], step=args.speed * shown

@@ -470,6 +470,14 @@ def test_secure_init_always_names_this_machine_for_the_router(tmp_path: Path) ->
         "127.0.0.1", "10.0.0.1",
     }  # fmt: skip
     assert names.get_values_for_type(x509.DNSName) == ["localhost"]
+    # Wildcard and fully qualified names are certificate names too.
+    assert main(["secure", "init", str(tmp_path / "w"), "--host", "*.lab", "--host", "r.lab."]) == 0
+    # Certificates left without their authority (its files lost) go with a new one.
+    (tmp_path / "k" / "ca.pem").unlink()
+    (tmp_path / "k" / "ca.key").unlink()
+    assert main(["secure", "init", str(tmp_path / "k"), "--robots", "2"]) == 0
+    for subject in ("robot-2", "observer", "world"):
+        check_subject(tmp_path / "k", subject)
     for argv in (["--observers", "a/b"], ["--robots", str(10**18)], ["--swarm", "a b"]):
         with pytest.raises(SystemExit) as refused:
             main(["secure", "init", str(tmp_path / "r"), *argv])

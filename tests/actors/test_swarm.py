@@ -431,15 +431,25 @@ def test_a_worker_that_failed_before_the_watch_saw_it_is_counted_as_died() -> No
     scenario = Scenario(fish=2)
     spec = WorkerSpec(0, (0, 1), scenario.fish_params(), scenario.swarm, "tcp/127.0.0.1:1")
     workers = []
-    for code in (1, 0, 1):
-        process = context.Process(target=sys.exit, args=(code,))
-        process.start()
+    for code in (1, 0, 1, -signal.SIGKILL, -signal.SIGSEGV):
+        if code >= 0:
+            process = context.Process(target=sys.exit, args=(code,))
+            process.start()
+        else:  # ended by a signal: one stop_worker sent, or one of its own (a crash)
+            process = context.Process(target=time.sleep, args=(60,))
+            process.start()
+            assert process.pid is not None
+            os.kill(process.pid, -code)
         process.join(30)
         ours, theirs = context.Pipe()
         theirs.close()
         workers.append(Worker(spec, process, ours))
     workers[2].lost = True  # seen by the watch already: reported there
-    assert _died_unseen(workers) == ["worker 0 (fish 0–1) exited with code 1; its fish were lost"]
+    workers[3].killed = True  # killed by stop_worker: the launcher's doing, not a failure
+    assert _died_unseen(workers) == [
+        "worker 0 (fish 0–1) exited with code 1; its fish are lost",
+        "worker 0 (fish 0–1) was killed by SIGSEGV; its fish are lost",
+    ]
     for worker in workers:
         worker.connection.close()
         worker.process.close()

@@ -727,3 +727,13 @@ def test_a_command_that_cannot_reach_its_router_writes_no_recording(
     assert result.returncode == 1
     assert "is a fishswarm run or router listening there?" in result.stderr
     assert not record.exists()
+
+
+def test_the_speed_animate_advises_is_one_it_then_accepts() -> None:
+    from fishswarm.cli.study import MAX_FRAMES, _rounded_up
+
+    # A 15-s run at 25 frames a second needs --speed 0.01875 or more: advised as 0.0188
+    # (0.0187 would make 20 053 frames, and be refused again).
+    assert _rounded_up(15 / (MAX_FRAMES * 0.04)) == 0.0188
+    assert MAX_FRAMES >= 15 / (0.0188 * 0.04)
+    assert _rounded_up(0.002) == 0.002  # on the grid already: not a step up

@@ -317,9 +317,13 @@ def test_the_observer_aligns_a_school_as_well_as_many_more_starts_would() -> Non
     from fishswarm.formations.metrics import align
     from fishswarm.study.metrics import formation_target_of
 
-    target = formation_target_of(Scenario(fish=6, behavior="formation", formation="pyramid"))
+    # A school on which fewer than six starting turns miss the best alignment (found by
+    # trying seeds): 3, 4 and 5 starts leave it 0.133-0.144 m off, six find 0.1301 m.
+    scenario = Scenario(fish=6, behavior="formation", formation="tetrahedral-pyramid")
+    target = formation_target_of(scenario)
     assert target is not None and target.slots is not None
-    school = np.random.default_rng(0).uniform(0.0, 0.6, (6, 3))
+    school = np.random.default_rng(19).uniform(0.0, 0.6, (6, 3))
     school[:, 2] = 0.5
     best = align(school, target.slots[:6], starts=48).rms
+    assert align(school, target.slots[:6], starts=5).rms > best + 1e-3
     assert target.metrics(school)["shape_error"] == pytest.approx(best, abs=1e-9)
