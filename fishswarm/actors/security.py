@@ -226,9 +226,9 @@ def init_secure(
         hosts: names and addresses the router is reached by (its certificate's names).
         swarm: the swarm whose keys the access control names.
         days: how long the certificates are valid.
-        replace: make a new authority even where ``folder`` holds one; the subjects'
-            certificates and keys there are removed (the old authority signed them, so
-            they would be refused).
+        replace: make a new authority even where ``folder`` holds one. Whenever a new
+            authority is made, the subjects' certificates and keys already in ``folder``
+            are removed (another authority signed them, so they would be refused).
 
     Returns:
         The files written.
