@@ -354,7 +354,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=seconds,
         default=5.0,
         help="each fish's safety watchdog: fins off after this long without a perception or "
-        "a pulse of the world, s (default 5); a run in which it fired ends 'degraded', exit 4",
+        "a pulse of the world, s (default %(default)g); a run in which it fired ends 'degraded', "
+        "exit 4",
     )
     run.add_argument("--quiet", action="store_true", help="no progress lines")
     run.add_argument(
@@ -388,7 +389,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--perception-timeout",
         type=seconds,
         default=5.0,
-        help="fins off after this long without a perception or a pulse of the world, s (default 5)",
+        help="fins off after this long without a perception or a pulse of the world, s (default "
+        "%(default)g)",
     )
     fish.add_argument(
         "--school",
@@ -435,7 +437,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=seconds,
         default=10.0,
         help="with the link to the router lost, swim on the robot's own perception for this "
-        "long, then stop the fins until it returns, s (default 10)",
+        "long, then stop the fins until it returns, s (default %(default)g)",
     )
     robot.add_argument(
         "--zenoh-config",
@@ -449,7 +451,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=seconds,
         default=3.0,
         help="the fish actor's own watchdog: fins off after this long without a perception, "
-        "s (default 3)",
+        "s (default %(default)g)",
     )
 
     robots = commands.add_parser(
@@ -465,7 +467,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
     )
     robots.add_argument(
-        "--listen", type=seconds, default=1.5, help="how long to listen, s (default 1.5)"
+        "--listen", type=seconds, default=1.5, help="how long to listen, s (default %(default)g)"
     )
     order = robots.add_mutually_exclusive_group()
     order.add_argument(
@@ -666,7 +668,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="bounded: radii folded back into [0, 300] units (a triangle wave of the genome, "
         "not clipped); unbounded: started in [-40, 300] and free (default bounded)",
     )
-    learn.add_argument("--generations", type=int, default=500, help="default 500")
+    learn.add_argument("--generations", type=int, default=500, help="default %(default)s")
     learn.add_argument("--models", type=int, help="replica population (default 100)")
     learn.add_argument("--classifiers", type=int, help="classifier population (default 100)")
     learn.add_argument("--seed", type=int, help="master seed (default 0)")
@@ -788,5 +790,5 @@ def _add_connect(parser: argparse.ArgumentParser) -> None:
         "--connect-timeout",
         type=longest_wait,
         default=10.0,
-        help="longest wait for the router, s; negative waits forever (default 10)",
+        help="longest wait for the router, s; negative waits forever (default %(default)g)",
     )

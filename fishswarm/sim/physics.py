@@ -21,7 +21,7 @@ from fishswarm.sim import kernels
 from fishswarm.sim.scenario import Scenario
 from fishswarm.sim.sight import Cameras, perceive_through_cameras
 from fishswarm.sim.streams import Stream, stream
-from fishswarm.sim.wake import wake_shelter
+from fishswarm.sim.wake import WAKE_LENGTH, WAKE_WIDTH, wake_shelter
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -78,8 +78,8 @@ class WorldParams:
     compiled: bool = False
     flow: tuple[float, float, float] = (0.0, 0.0, 0.0)
     wake_saving: float = 0.0
-    wake_length: float = 0.5
-    wake_width: float = 0.15
+    wake_length: float = WAKE_LENGTH
+    wake_width: float = WAKE_WIDTH
 
     @classmethod
     def of(cls, scenario: Scenario) -> WorldParams:

@@ -43,6 +43,7 @@ from fishswarm.bluebot.parameters import (
 from fishswarm.bluebot.vision import Vision
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import FORMATION_SHAPES
+from fishswarm.sim.wake import WAKE_LENGTH, WAKE_WIDTH
 
 SPAWN_REGIONS = ("ball", "tank")
 TIME_MODES = ("lockstep", "jitter", "realtime")
@@ -205,8 +206,8 @@ class Scenario:
     switch_at: float = 0.0
     flow: tuple[float, float, float] = (0.0, 0.0, 0.0)
     wake_saving: float = 0.0
-    wake_length: float = 0.5
-    wake_width: float = 0.15
+    wake_length: float = WAKE_LENGTH
+    wake_width: float = WAKE_WIDTH
     station_distance: float | None = None
     rotate_effort: bool = False
     effort_margin: float = DEFAULT_EFFORT_MARGIN

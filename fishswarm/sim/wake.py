@@ -26,6 +26,11 @@ from numpy.typing import NDArray
 
 from fishswarm.bluebot.dynamics import State
 
+WAKE_LENGTH = 0.5
+"""How far behind a swimming fish its wake reaches by default, m."""
+WAKE_WIDTH = 0.15
+"""The default radius of a fish's wake about its axis, m."""
+
 FloatArray = NDArray[np.float64]
 
 
