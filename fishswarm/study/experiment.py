@@ -223,6 +223,8 @@ class Experiment:
             (its ``[study_code]`` table), applied under the ``side-settings`` switch.
         groups: named sets of scenario settings compared (each runs every value and seed);
             none: one unnamed group, the scenario as it is.
+        controller_named: the file's ``[scenario]`` names its controller, which then stays
+            when a group or the study's settings change the behaviour.
     """
 
     name: str
@@ -234,6 +236,7 @@ class Experiment:
     scenario: Scenario
     study_settings: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     groups: tuple[tuple[str, Mapping[str, Any]], ...] = ()
+    controller_named: bool = False
 
     def __post_init__(self) -> None:
         if self.parameter not in SWEEPABLE:
@@ -382,10 +385,15 @@ class Experiment:
                     f"experiment {self.name}: no group {group!r}; groups: "
                     f"{', '.join(self.group_names)}"
                 )
-            base = base.replace(**settings)
+            base = base.replace(**self._keeping_controller(settings))
         if "side-settings" in base.study_switches:
-            base = base.replace(**self.study_settings)
+            base = base.replace(**self._keeping_controller(self.study_settings))
         return base.replace(**{self.parameter: kind(value), "seed": seed}).check_duration()
+
+    def _keeping_controller(self, settings: Mapping[str, Any]) -> dict[str, Any]:
+        if self.controller_named and "controller" not in settings:
+            return {**settings, "controller": self.scenario.controller}
+        return dict(settings)
 
     def runs(self) -> list[RunKey]:
         """Every (group, value, seed), group by group, then value by value."""
@@ -477,6 +485,7 @@ class Experiment:
             scenario,
             dict(study_settings),
             tuple((str(group), dict(settings)) for group, settings in groups.items()),
+            controller_named="controller" in scenario_table,
         )
 
 

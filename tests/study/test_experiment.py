@@ -219,6 +219,24 @@ def test_a_failed_run_stops_the_sweep_and_returns_the_runs_that_finished(jobs: i
     assert all(outcome.seed == 1 for outcome in stop.value.outcomes)
 
 
+@pytest.mark.parametrize(
+    ("named", "controller"), [('controller = "homing"\n', "homing"), ("", "pid")]
+)
+def test_a_controller_the_scenario_names_stays_in_a_group_of_another_behaviour(
+    tmp_path: Path, named: str, controller: str
+) -> None:
+    # The file's dispersion fish steer with homing (its default, named or not); a group
+    # of formation fish keeps a named controller and otherwise takes formation's own, pid.
+    path = tmp_path / "grouped.toml"
+    path.write_text(
+        '[experiment]\nname = "grouped"\nparameter = "channel_loss"\nvalues = [0.0]\n'
+        'seeds = 1\n[experiment.groups]\n"formed" = { behavior = "formation" }\n'
+        f'[scenario]\nfish = 4\nbehavior = "dispersion"\n{named}',
+        encoding="utf-8",
+    )
+    assert find(str(path)).scenario_for(0.0, 0, "formed").controller == controller
+
+
 def test_groups_compare_the_sweep_under_named_settings(tmp_path: Path) -> None:
     import json
 
