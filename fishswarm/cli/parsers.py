@@ -275,11 +275,9 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
     table = scenario_table(path) if path else {}
     base = Scenario.from_mapping(table, source=str(path)) if path else Scenario()
     overrides = {name: getattr(args, name, None) for name in _SCENARIO_FLAGS}
-    if overrides["controller"] is None and "controller" in table:
-        # The file chose it: it stays when --behavior changes the behaviour.
-        overrides["controller"] = base.controller
     try:
-        scenario = base.replace(**overrides)
+        # A controller the file names stays when --behavior changes the behaviour.
+        scenario = base.with_settings(overrides, controller_chosen="controller" in table)
     except TypeError as error:
         raise ConfigError(str(error)) from None
     # Only commands that run a scenario to its end take --duration.

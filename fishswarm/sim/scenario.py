@@ -521,16 +521,23 @@ class Scenario:
         return behavior_named(self.behavior).spawn_radius
 
     def replace(self, **changes: Any) -> Scenario:
+        """A copy with some settings changed (``None`` values are ignored); see
+        :meth:`with_settings`, whose guess it takes on whether the controller was chosen."""
+        return self.with_settings(changes)
+
+    def with_settings(
+        self, changes: Mapping[str, Any], *, controller_chosen: bool | None = None
+    ) -> Scenario:
         """A copy with some settings changed (``None`` values are ignored). Another
         behaviour without a controller named brings its own default controller, unless this
-        scenario's controller was chosen (differs from its behaviour's default)."""
+        scenario's controller was chosen: ``controller_chosen`` says whether it was (e.g.
+        named in its file); None guesses it from whether it differs from its behaviour's
+        default."""
         given = {k: v for k, v in changes.items() if v is not None}
         behavior = given.get("behavior", self.behavior)
-        if (
-            behavior != self.behavior
-            and "controller" not in given
-            and self.controller == behavior_named(self.behavior).controller
-        ):
+        if controller_chosen is None:
+            controller_chosen = self.controller != behavior_named(self.behavior).controller
+        if behavior != self.behavior and "controller" not in given and not controller_chosen:
             given["controller"] = None  # resolved again from the new behaviour
         return dataclasses.replace(self, **given)
 

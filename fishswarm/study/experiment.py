@@ -385,15 +385,17 @@ class Experiment:
                     f"experiment {self.name}: no group {group!r}; groups: "
                     f"{', '.join(self.group_names)}"
                 )
-            base = base.replace(**self._keeping_controller(settings))
+            base = base.with_settings(settings, controller_chosen=self._controller_chosen)
         if "side-settings" in base.study_switches:
-            base = base.replace(**self._keeping_controller(self.study_settings))
+            base = base.with_settings(
+                self.study_settings, controller_chosen=self._controller_chosen
+            )
         return base.replace(**{self.parameter: kind(value), "seed": seed}).check_duration()
 
-    def _keeping_controller(self, settings: Mapping[str, Any]) -> dict[str, Any]:
-        if self.controller_named and "controller" not in settings:
-            return {**settings, "controller": self.scenario.controller}
-        return dict(settings)
+    @property
+    def _controller_chosen(self) -> bool | None:
+        # Named in the file: chosen; otherwise a group may have chosen one: guessed.
+        return True if self.controller_named else None
 
     def runs(self) -> list[RunKey]:
         """Every (group, value, seed), group by group, then value by value."""
