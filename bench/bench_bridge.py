@@ -106,7 +106,9 @@ def echo_round_trips(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=2000)
+    parser.add_argument(
+        "--samples", type=int, default=2000, help="echo round trips timed (default 2000)"
+    )
     args = parser.parse_args()
     for target in ("zenoh", "trio"):
         times = echo_round_trips(target, args.samples)

@@ -24,8 +24,9 @@ from fishswarm.bluebot.blobs import find_blobs
 from fishswarm.bluebot.fisheye import Fisheye
 from fishswarm.bluebot.leds import LedVision, perceive_leds
 from fishswarm.bluebot.parameters import BlueBot, Tank
+from fishswarm.bluebot.ports import CAMERA_SIDES
 from fishswarm.bluebot.vision import Vision, perceive
-from fishswarm.sim.camera import SIDES, Optics, render_views
+from fishswarm.sim.camera import Optics, render_views
 from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 
@@ -92,7 +93,7 @@ def picture(path: str) -> None:
         position, yaw, 0, fisheye=Fisheye(), optics=Optics(), robot=BlueBot(), rng=rng
     )
     figure, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for axis, side in zip(axes, SIDES, strict=True):
+    for axis, side in zip(axes, CAMERA_SIDES, strict=True):
         image = images[side]
         blobs = find_blobs(image[:, :, 2], threshold=40, saddle_ratio=0.7)
         axis.imshow(np.clip(image.astype(np.float64) * 3, 0, 255).astype(np.uint8))

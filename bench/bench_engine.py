@@ -39,7 +39,13 @@ def tick_seconds(fish: int, compiled: bool) -> tuple[float, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--fish", type=int, nargs="+", default=[25, 1000, 10_000])
+    parser.add_argument(
+        "--fish",
+        type=int,
+        nargs="+",
+        default=[25, 1000, 10_000],
+        help="swarm sizes to time (default: 25 1000 10000)",
+    )
     args = parser.parse_args()
     if not kernels.available():
         raise SystemExit("numba is not installed: pip install -e '.[fast]'")

@@ -30,8 +30,15 @@ from fishswarm.learning.coevolution import Coevolution, LearningSettings
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--generations", type=int, default=10)
-    parser.add_argument("--warm-up", type=int, default=2)
+    parser.add_argument(
+        "--generations", type=int, default=10, help="generations timed (default 10)"
+    )
+    parser.add_argument(
+        "--warm-up",
+        type=int,
+        default=2,
+        help="generations run before the timing starts (default 2)",
+    )
     parser.add_argument(
         "--inputs",
         nargs="+",

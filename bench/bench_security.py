@@ -74,7 +74,9 @@ def swarm(secure: Path | None) -> dict[str, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=2000)
+    parser.add_argument(
+        "--samples", type=int, default=2000, help="echo round trips timed (default 2000)"
+    )
     parser.add_argument("--repeats", type=int, default=3, help="25-fish runs of each kind")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as text:

@@ -50,8 +50,20 @@ def first_tick(fish: int, procs: int) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--fish", type=int, nargs="+", default=[25, 10_000])
-    parser.add_argument("--procs", type=int, nargs="+", default=[1, 2])
+    parser.add_argument(
+        "--fish",
+        type=int,
+        nargs="+",
+        default=[25, 10_000],
+        help="swarm sizes to start (default: 25 10000)",
+    )
+    parser.add_argument(
+        "--procs",
+        type=int,
+        nargs="+",
+        default=[1, 2],
+        help="worker processes for each size (default: 1 2)",
+    )
     parser.add_argument("--repeat", type=int, default=3, help="fresh runs per row")
     args = parser.parse_args()
     context = multiprocessing.get_context("spawn")

@@ -238,9 +238,27 @@ def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--fish", type=int, nargs="+", default=[25, 1000, 10_000])
-    parser.add_argument("--procs", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--round-trips", type=int, default=2000)
+    parser.add_argument(
+        "--fish",
+        type=int,
+        nargs="+",
+        default=[25, 1000, 10_000],
+        help="swarm sizes to time (default: 25 1000 10000)",
+    )
+    parser.add_argument(
+        "--procs",
+        type=int,
+        nargs="+",
+        default=[1, 2],
+        help="worker processes for each size (default: 1 2)",
+    )
+    parser.add_argument(
+        "--round-trips",
+        type=int,
+        default=2000,
+        help="one fish actor's perception-to-command round trips to time at the end "
+        "(default 2000; 0 skips this part)",
+    )
     parser.add_argument("--plot", help="also draw tick time against fish count to this file")
     args = parser.parse_args()
     # As the fishswarm command and its workers do: the batch engine and the launcher run here.

@@ -64,10 +64,15 @@ def fit(settings: LearningSettings, *, iterations: int, seed: int) -> FloatArray
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--behavior", choices=sorted(SPREADS), default="dispersion")
+    parser.add_argument(
+        "--behavior",
+        choices=sorted(SPREADS),
+        default="dispersion",
+        help="the ideal fish to fit (default: %(default)s)",
+    )
     parser.add_argument("--scales", default="100,40", help="replica input scales to try")
     parser.add_argument("--iterations", type=int, default=300, help="CMA-ES iterations")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=int, default=0, help="seed of CMA-ES and the trials")
     args = parser.parse_args()
     print(
         f"{args.behavior}: a replica fitted straight to the ideal fish ({args.iterations} "

@@ -25,7 +25,12 @@ from fishswarm.learning.session import JUDGED_FROM, JUDGED_UNTIL, SPACING_TOLERA
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", type=Path, nargs="+", help="folders written by fishswarm learn")
-    parser.add_argument("--out", type=Path, default=Path("docs/images/learning_curves.png"))
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("docs/images/learning_curves.png"),
+        help="the picture to write (default: %(default)s)",
+    )
     args = parser.parse_args()
     summaries = [json.loads((run / "summary.json").read_text()) for run in args.runs]
     behaviors = sorted({s["settings"]["behavior"] for s in summaries})

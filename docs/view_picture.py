@@ -22,7 +22,12 @@ from tests.conftest import Lines, free_port
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--after", type=float, default=30.0, help="seconds into the run")
-    parser.add_argument("--out", type=Path, default=Path("docs/images/live_view.png"))
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("docs/images/live_view.png"),
+        help="the screenshot to write (default: %(default)s)",
+    )
     args = parser.parse_args()
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     fishswarm = [sys.executable, "-m", "fishswarm"]

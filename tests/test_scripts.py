@@ -1,0 +1,66 @@
+"""The benchmark and documentation scripts still import, and their ``--help`` explains every
+option: nothing else runs them between the sessions that write their results."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import importlib.util
+import io
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPTS = sorted([*ROOT.glob("bench/*.py"), *ROOT.glob("docs/*.py")])
+
+
+def _load(path: Path, monkeypatch: pytest.MonkeyPatch) -> ModuleType:
+    # bench_swarm imports bench_bridge as its neighbour, as when run from its folder.
+    monkeypatch.syspath_prepend(str(path.parent))
+    spec = importlib.util.spec_from_file_location(f"script_{path.stem}", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _help_of(module: ModuleType, monkeypatch: pytest.MonkeyPatch) -> str:
+    monkeypatch.setattr(sys, "argv", [f"{module.__name__}.py", "--help"])
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), pytest.raises(SystemExit) as stopped:
+        module.main()
+    assert stopped.value.code == 0
+    return out.getvalue()
+
+
+def test_there_are_scripts_to_check() -> None:
+    names = {path.name for path in SCRIPTS}
+    assert {"bench_swarm.py", "bench_engine.py", "bench_camera.py", "view_picture.py"} <= names
+
+
+@pytest.mark.parametrize("path", SCRIPTS, ids=[f"{p.parent.name}/{p.name}" for p in SCRIPTS])
+def test_a_script_imports_and_its_help_explains_every_option(
+    path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    module = _load(path, monkeypatch)
+    assert module.__doc__, f"{path.name} says nothing about what it does"
+    parsers: list[argparse.ArgumentParser] = []
+    real_parse = argparse.ArgumentParser.parse_args
+
+    def spy(self: argparse.ArgumentParser, *args: object, **kwargs: object) -> object:
+        parsers.append(self)
+        return real_parse(self, *args, **kwargs)
+
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", spy)
+    text = _help_of(module, monkeypatch)
+    assert text.startswith("usage:"), text
+    (parser,) = parsers
+    unexplained = [
+        action.option_strings[0]
+        for action in parser._actions
+        if action.option_strings and action.help in (None, "")
+    ]
+    assert unexplained == [], f"{path.name}: options without help: {unexplained}"
