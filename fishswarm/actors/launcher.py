@@ -142,7 +142,7 @@ async def launch_swarm(
             mode="router",
             listen=[settings.listen],
             extra=router_extra,
-            shared_memory_pool=shared_memory_pool(scenario.fish),
+            shared_memory_pool_bytes=shared_memory_pool_bytes(scenario.fish),
         )
         # The router first: a run that cannot open it (the port is taken) fails before
         # it replaces the last run's recording and summary.
@@ -219,7 +219,7 @@ async def launch_swarm(
     return RunResult(exit_code, summary, observer.history)
 
 
-def shared_memory_pool(fish: int, *, free: int | None = None) -> int | None:
+def shared_memory_pool_bytes(fish: int, *, free: int | None = None) -> int | None:
     """Bytes of shared memory for the world's Zenoh session (the launcher's, or that of
     ``fishswarm world``) to copy its large messages into for the fish on this machine:
     8 KiB a fish beyond Zenoh's default of 16 MiB (None: the default, up to 2 048 fish), at

@@ -38,7 +38,7 @@ class SessionSettings:
         connect_timeout: how long a client waits for its router, s (< 0: forever).
         lease: link lease, s: how soon a frozen peer is noticed.
         extra: further settings, by their path in Zenoh's configuration.
-        shared_memory_pool: bytes of the shared memory Zenoh copies large messages into
+        shared_memory_pool_bytes: size of the shared memory Zenoh copies large messages into
             for processes on the same machine (None: Zenoh's default, 16 MiB). A message
             that finds the pool full goes through the socket instead, several times slower.
         config_file: a Zenoh configuration file (JSON5) to start from, e.g. a robot's with
@@ -51,16 +51,16 @@ class SessionSettings:
     connect_timeout: float = 10.0
     lease: float = 3.0
     extra: dict[str, Any] = field(default_factory=dict)
-    shared_memory_pool: int | None = None
+    shared_memory_pool_bytes: int | None = None
     config_file: str | None = None
 
     def __post_init__(self) -> None:
         if self.mode not in ("router", "peer", "client"):
             raise ValueError(f"session mode must be router, peer or client, got {self.mode!r}")
-        if self.shared_memory_pool is not None and self.shared_memory_pool <= 0:
+        if self.shared_memory_pool_bytes is not None and self.shared_memory_pool_bytes <= 0:
             raise ValueError(
                 f"the shared memory pool must be a positive number of bytes, "
-                f"got {self.shared_memory_pool}"
+                f"got {self.shared_memory_pool_bytes}"
             )
         for endpoint in (*self.listen, *self.connect):
             check_endpoint(endpoint)
@@ -91,8 +91,8 @@ class SessionSettings:
         # default); with scouting off there is nothing to wait for (a run started 0.5 s later).
         config.insert_json5("scouting/delay", "0")
         config.insert_json5("transport/link/tx/lease", json.dumps(int(self.lease * 1000)))
-        if self.shared_memory_pool is not None:
-            config.insert_json5(SHARED_MEMORY_POOL, json.dumps(self.shared_memory_pool))
+        if self.shared_memory_pool_bytes is not None:
+            config.insert_json5(SHARED_MEMORY_POOL, json.dumps(self.shared_memory_pool_bytes))
         for key, value in self.extra.items():
             config.insert_json5(key, json.dumps(value))
         return config

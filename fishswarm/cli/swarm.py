@@ -23,7 +23,7 @@ from fishswarm.actors.launcher import (
     RunResult,
     WorkerFailed,
     launch_swarm,
-    shared_memory_pool,
+    shared_memory_pool_bytes,
 )
 from fishswarm.actors.observer import WORLD_END_SETTLE, Observer, Progress
 from fishswarm.actors.security import (
@@ -386,7 +386,8 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
 
     async def main() -> None:
         settings = dataclasses.replace(
-            client_settings(args, "world"), shared_memory_pool=shared_memory_pool(scenario.fish)
+            client_settings(args, "world"),
+            shared_memory_pool_bytes=shared_memory_pool_bytes(scenario.fish),
         )
         # The session first: a world that cannot reach its router writes no recording.
         async with open_session(settings) as session, contextlib.AsyncExitStack() as files:

@@ -19,7 +19,7 @@ from fishswarm.actors.launcher import (
     LaunchSettings,
     RunResult,
     launch_swarm,
-    shared_memory_pool,
+    shared_memory_pool_bytes,
 )
 from fishswarm.actors.observer import Progress
 from fishswarm.actors.session import SessionSettings, open_session
@@ -42,14 +42,14 @@ def _launch(scenario: Scenario, endpoint: str, path: Path, procs: int = 1) -> Ru
 def test_the_shared_memory_pool_grows_with_the_swarm_within_the_free_space() -> None:
     mebibyte, plenty = 2**20, 2**40
     # Up to 2 048 fish Zenoh's default (16 MiB) holds a tick several times over.
-    assert shared_memory_pool(25, free=plenty) is None
-    assert shared_memory_pool(2048, free=plenty) is None
-    assert shared_memory_pool(2049, free=plenty) == 2049 * 8 * 1024
+    assert shared_memory_pool_bytes(25, free=plenty) is None
+    assert shared_memory_pool_bytes(2048, free=plenty) is None
+    assert shared_memory_pool_bytes(2049, free=plenty) == 2049 * 8 * 1024
     # 10 000 fish in a crowded tank put about 6.5 MB a tick: the pool holds a dozen ticks.
-    assert shared_memory_pool(10_000, free=plenty) == 80_000 * 1024
+    assert shared_memory_pool_bytes(10_000, free=plenty) == 80_000 * 1024
     # Docker's 64 MB /dev/shm: half of it; with less room than that, Zenoh's default.
-    assert shared_memory_pool(10_000, free=64 * mebibyte) == 32 * mebibyte
-    assert shared_memory_pool(10_000, free=20 * mebibyte) is None
+    assert shared_memory_pool_bytes(10_000, free=64 * mebibyte) == 32 * mebibyte
+    assert shared_memory_pool_bytes(10_000, free=20 * mebibyte) is None
 
 
 @pytest.mark.parametrize(("behavior", "sign"), [("dispersion", 1), ("aggregation", -1)])

@@ -171,7 +171,7 @@ def test_large_messages_go_through_shared_memory_when_the_pool_holds_them(
     router = SessionSettings(
         mode="router",
         listen=[endpoint],
-        shared_memory_pool=pool,
+        shared_memory_pool_bytes=pool,
         extra={"transport/shared_memory/mode": "init"},
     )
     client = SessionSettings(mode="client", connect=[endpoint])
@@ -205,4 +205,4 @@ def test_large_messages_go_through_shared_memory_when_the_pool_holds_them(
 
 def test_a_shared_memory_pool_must_have_room() -> None:
     with pytest.raises(ValueError, match="positive number of bytes, got 0"):
-        SessionSettings(mode="router", shared_memory_pool=0)
+        SessionSettings(mode="router", shared_memory_pool_bytes=0)
