@@ -1,6 +1,6 @@
 """The world's queryables over Zenoh: ``world/control``, which anyone allowed (an operator, a
 test, another program) asks for status, pause, resume, stop or a new formation, and
-``world/scenario``, which tells observers the run's settings (JSON).
+``world/scenario``, which tells observers the run's settings (a :class:`RunSettings`).
 
 Zenoh-only (the Bus has no queries): the launcher and ``fishswarm world`` serve them beside
 the world. A request that is not a control request is rejected and counted by the world.
@@ -8,14 +8,15 @@ the world. A request that is not a control request is rejected and counted by th
 
 from __future__ import annotations
 
-import json
-
 import trio
 import zenoh
 
+from fishswarm import __version__
 from fishswarm.actors.world import World
 from fishswarm.actors.zenoh_bus import open_queryable, query, reply
+from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.messages import RunSettings
 from fishswarm.sim.scenario import ConfigError, Scenario
 
 
@@ -26,7 +27,7 @@ async def run_control(
     task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
 ) -> None:
     """Answer the world's control and scenario queries until cancelled."""
-    settings = json.dumps(world.scenario.to_dict()).encode()
+    settings = encode(RunSettings(world.scenario.to_dict()))
     async with (
         open_queryable(session, world.keys.control) as queries,
         open_queryable(session, world.keys.scenario) as asked,
@@ -56,15 +57,17 @@ async def ask_scenario(
     within ``timeout`` seconds).
 
     Raises:
-        ConfigError: the answer is not a scenario.
+        ConfigError: the answer is not the settings of a run this fishswarm can read (not
+            a :class:`RunSettings`, another schema version, or settings it does not know).
     """
     answers = await query(session, keys.scenario, b"", timeout=timeout)
     if not answers:
         return None
     try:
-        settings = json.loads(answers[0])
-    except ValueError as error:
-        raise ConfigError(f"the world's scenario is not JSON: {error}") from None
-    if not isinstance(settings, dict):
-        raise ConfigError(f"the world's scenario is not a table: {answers[0][:80]!r}")
-    return Scenario.as_recorded(settings, source="the world's scenario")
+        settings = decode(answers[0], RunSettings)
+    except MessageError as error:
+        raise ConfigError(
+            f"the world's answer on {keys.scenario} is no run settings: {error} (does the "
+            f"world run this version of fishswarm, {__version__}?)"
+        ) from None
+    return Scenario.as_recorded(settings.scenario, source="the world's scenario")

@@ -19,6 +19,7 @@ import numpy as np
 
 from fishswarm.protocols.checks import (
     MAX_ROWS,
+    MAX_TICK,
     BoolArray,
     FloatArray,
     IntArray,
@@ -577,6 +578,65 @@ class WorldPulse(Message):
 WORLD_PULSE_STATES = ("running", "paused", "stopping", "ended")
 
 
+MAX_SETTINGS = 200
+"""Most settings a :class:`RunSettings` may carry."""
+MAX_SETTING_TEXT = 4096
+"""Most characters of a setting's text (a model's path may be long)."""
+MAX_SETTING_LIST = 64
+"""Most values of a setting that is a list."""
+
+
+def _check_setting(name: str, value: object) -> object:
+    """A setting's value if it is plain data: None, a boolean, an integer, a finite number,
+    text, or a short list of those (given back as a tuple, so the message cannot change)."""
+    if value is None or isinstance(value, bool):
+        return value
+    if isinstance(value, int):
+        check_int(name, value, low=-MAX_TICK, high=MAX_TICK)
+        return value
+    if isinstance(value, float):
+        check_float(name, value)
+        return value
+    if isinstance(value, str):
+        if len(value) > MAX_SETTING_TEXT:
+            raise ValueError(f"{name} must have at most {MAX_SETTING_TEXT} characters")
+        return value
+    if isinstance(value, list | tuple):
+        if len(value) > MAX_SETTING_LIST:
+            raise ValueError(f"{name} must have at most {MAX_SETTING_LIST} values")
+        items = tuple(_check_setting(f"{name}[{index}]", item) for index, item in enumerate(value))
+        if any(isinstance(item, tuple) for item in items):
+            raise TypeError(f"{name} must be a list of plain values, not of lists")
+        return items
+    raise TypeError(f"{name} must be plain data, got {type(value).__name__}")
+
+
+@dataclass(frozen=True, eq=False)
+class RunSettings(Message):
+    """World → whoever asks its ``world/scenario`` queryable: the settings of the run.
+
+    Attributes:
+        scenario: the scenario as plain data (``Scenario.to_dict``): setting names to None,
+            booleans, integers, finite numbers, text, or lists of those (the tank's size,
+            the flow, the study code's switches). The settings themselves are checked by
+            whoever builds a scenario from them.
+    """
+
+    type_name: ClassVar[str] = "run_settings"
+    scenario: dict[str, Any]
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.scenario, dict):
+            raise TypeError(f"scenario must be a table, got {type(self.scenario).__name__}")
+        if len(self.scenario) > MAX_SETTINGS:
+            raise ValueError(f"scenario must have at most {MAX_SETTINGS} settings")
+        checked: dict[str, Any] = {}
+        for name, value in self.scenario.items():
+            check_text("a setting's name", name)
+            checked[name] = _check_setting(name, value)
+        object.__setattr__(self, "scenario", checked)
+
+
 ROBOT_STATES = ("swimming", "waiting", "failsafe", "stranded", "stopped")
 """What a robot's driver is doing: swimming (commands arrive), waiting (no perception yet),
 failsafe (no command for too long: fins off), stranded (link to the base station lost for
@@ -679,6 +739,7 @@ MESSAGE_TYPES: dict[str, type[Message]] = {
         RobotOrder,
         FishAbout,
         WorldPulse,
+        RunSettings,
     )
 }
 

@@ -1,8 +1,9 @@
 """Single actors over real Zenoh on 127.0.0.1: the channel's situated deliveries, and the
-world's control queryable."""
+world's control and scenario queryables."""
 
 from __future__ import annotations
 
+import json
 import math
 import time
 
@@ -11,11 +12,11 @@ import pytest
 import trio
 
 from fishswarm.actors.channel import Channel
-from fishswarm.actors.control import run_control
+from fishswarm.actors.control import ask_scenario, run_control
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.world import World, WorldSettings
-from fishswarm.actors.zenoh_bus import ZenohBus, query
+from fishswarm.actors.zenoh_bus import ZenohBus, open_queryable, query, reply
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.messages import (
     Broadcast,
@@ -25,7 +26,7 @@ from fishswarm.protocols.messages import (
     Delivery,
     Snapshot,
 )
-from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.scenario import ConfigError, Scenario
 from tests.conftest import run_trio, subscription
 
 pytestmark = pytest.mark.integration
@@ -135,6 +136,83 @@ def test_world_answers_control_queries_over_zenoh(endpoint: str) -> None:
     assert (pause.state, status.state, stop.state) == ("paused", "paused", "stopping")
     assert status.live_fish == 2 and status.tick in (pause.tick, pause.tick + 1)
     assert malformed == 1
+
+
+def test_a_view_learns_the_runs_settings_from_the_worlds_scenario_queryable(
+    endpoint: str,
+) -> None:
+    scenario = Scenario(
+        fish=3,
+        behavior="formation",
+        formation="diamond",
+        tank=(2.0, 1.5, 1.0),
+        landmark=(0.5, 0.25, 0.5),
+        study_code=("lennard-jones",),
+        swarm="lab-a",
+        duration=100_000.0,
+    )
+
+    async def main() -> tuple[Scenario | None, Scenario | None]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        client = SessionSettings(mode="client", connect=[endpoint])
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2)))
+        async with (
+            open_session(router) as hub,
+            open_session(client) as other,
+            trio.open_nursery() as nursery,
+        ):
+            # Asked before any world serves: no answer within the wait.
+            nobody = await ask_scenario(other, scenario.keys, timeout=0.3)
+            await nursery.start(run_control, hub, world)
+            with trio.fail_after(10):
+                told = None
+                while told is None:  # until the queryable is known to the asker's router
+                    told = await ask_scenario(other, scenario.keys, timeout=1.0)
+            nursery.cancel_scope.cancel()
+        return nobody, told
+
+    nobody, told = run_trio(main)
+    assert nobody is None
+    assert told is not None and told.to_dict() == scenario.to_dict()
+
+
+@pytest.mark.parametrize(
+    ("answer", "reason"),
+    [
+        # What a world of the last schema answered: the settings as JSON text.
+        (json.dumps(Scenario().to_dict()).encode(), "is no run settings: not msgpack"),
+        (encode(ControlReply("running", 4, 4.0, 25)), "expected a run_settings message"),
+    ],
+)
+def test_an_answer_on_the_scenario_key_that_is_no_run_settings_is_refused_with_why(
+    endpoint: str, answer: bytes, reason: str
+) -> None:
+    keys = Scenario().keys
+
+    async def main() -> None:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        client = SessionSettings(mode="client", connect=[endpoint])
+        async with (
+            open_session(router) as hub,
+            open_session(client) as other,
+            open_queryable(hub, keys.scenario) as asked,
+            trio.open_nursery() as nursery,
+        ):
+
+            async def answer_badly() -> None:
+                async for request in asked:
+                    reply(request, answer)
+
+            async def ask_until_answered() -> None:
+                while True:  # until the queryable is known to the asker's router
+                    await ask_scenario(other, keys, timeout=1.0)
+
+            nursery.start_soon(answer_badly)
+            with trio.fail_after(10), pytest.raises(ConfigError, match=reason):
+                await ask_until_answered()
+            nursery.cancel_scope.cancel()
+
+    run_trio(main)
 
 
 @pytest.mark.parametrize("pulse_period", [0.1, 60.0])

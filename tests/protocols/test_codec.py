@@ -34,6 +34,7 @@ from fishswarm.protocols.messages import (
     PerceptionBatch,
     RobotOrder,
     RobotStatus,
+    RunSettings,
     Snapshot,
     WorldPulse,
 )
@@ -84,6 +85,9 @@ EXAMPLES: list[Message] = [
     FishAbout(np.array([4]), "aggregation", "0.1.0", 2, "lennard-jones,homing"),
     RobotOrder("resume", np.array([2, 5])),
     WorldPulse(2**61 + 5, 12, "paused"),
+    RunSettings(
+        {"fish": 25, "duration": 15.0, "tank": (1.78, 1.78, 1.17), "model": None, "flags": True}
+    ),
 ]
 
 
@@ -487,6 +491,15 @@ def _perception(**overrides: object) -> Perception:
             lambda: Delivery(1, 1, "signal", np.array([1]), np.array([0.1, 0.2])),
             "sender_position must have 3 rows",
         ),
+        (lambda: RunSettings([("fish", 25)]), "scenario must be a table"),  # type: ignore[arg-type]
+        (lambda: RunSettings({"": 1}), "a setting's name must have 1 to"),
+        (lambda: RunSettings({"duration": math.nan}), "duration must be finite"),
+        (lambda: RunSettings({"seed": 2**63}), "seed must be in"),
+        (lambda: RunSettings({"model": "m" * 4097}), "model must have at most 4096"),
+        (lambda: RunSettings({"tank": [1.0, [2.0]]}), "tank must be a list of plain values"),
+        (lambda: RunSettings({"tank": [0.0] * 65}), "tank must have at most 64 values"),
+        (lambda: RunSettings({"flow": {"x": 1.0}}), "flow must be plain data, got dict"),
+        (lambda: RunSettings({f"s{n}": 0 for n in range(201)}), "at most 200 settings"),
     ],
 )
 def test_each_field_check_refuses_what_it_is_there_for(
