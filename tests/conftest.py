@@ -20,6 +20,7 @@ import trio.testing
 from fishswarm.actors.bus import Bus
 from fishswarm.actors.inbox import Inbox, open_subscription
 from fishswarm.actors.session import SessionSettings, open_session
+from fishswarm.actors.shared_memory import release_shared_memory_at_exit
 from fishswarm.actors.zenoh_bus import ZenohBus
 
 T = TypeVar("T")
@@ -156,3 +157,9 @@ def end_processes(processes: list[subprocess.Popen[str]], *, timeout: float = 10
             process.communicate(timeout=timeout)
         except ValueError:  # its pipes were read and closed by the test
             process.wait(timeout=timeout)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The suite's own runs leave Zenoh's shared-memory files behind as any process does;
+    released when the suite's process exits, as every fishswarm command's are."""
+    release_shared_memory_at_exit()

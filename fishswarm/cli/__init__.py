@@ -8,6 +8,7 @@ import logging
 import sys
 from collections.abc import Sequence
 
+from fishswarm.actors.shared_memory import release_shared_memory_at_exit
 from fishswarm.cli.common import UserError
 from fishswarm.cli.parsers import build_parser, scenario_from
 from fishswarm.sim.allocator import tune_allocator
@@ -43,6 +44,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=args.log_level, format="%(levelname)s %(name)s: %(message)s")
     if args.command != "robot":  # a robot's small process keeps glibc's own settings
         tune_allocator()
+    # Zenoh leaves a shared-memory file behind for each process that sent through it.
+    release_shared_memory_at_exit()
     module, function = HANDLERS[args.command]
     handler = getattr(importlib.import_module(f"fishswarm.cli.{module}"), function)
     try:
