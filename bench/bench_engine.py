@@ -21,6 +21,7 @@ import os
 import platform
 
 from bench_swarm import batch_tick
+from options import add_sizes
 
 from fishswarm.sim import kernels
 from fishswarm.sim.allocator import tune_allocator
@@ -39,13 +40,7 @@ def tick_seconds(fish: int, compiled: bool) -> tuple[float, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--fish",
-        type=int,
-        nargs="+",
-        default=[25, 1000, 10_000],
-        help="swarm sizes to time (default: 25 1000 10000)",
-    )
+    add_sizes(parser, fish=[25, 1000, 10_000])
     args = parser.parse_args()
     if not kernels.available():
         raise SystemExit("numba is not installed: pip install -e '.[fast]'")

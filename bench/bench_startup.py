@@ -22,6 +22,8 @@ import statistics
 import time
 from concurrent.futures import ProcessPoolExecutor
 
+from options import add_sizes
+
 
 def first_tick(fish: int, procs: int) -> float:
     """Seconds from launch to the first tick's snapshot of a 2-s crowded run."""
@@ -50,20 +52,7 @@ def first_tick(fish: int, procs: int) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--fish",
-        type=int,
-        nargs="+",
-        default=[25, 10_000],
-        help="swarm sizes to start (default: 25 10000)",
-    )
-    parser.add_argument(
-        "--procs",
-        type=int,
-        nargs="+",
-        default=[1, 2],
-        help="worker processes for each size (default: 1 2)",
-    )
+    add_sizes(parser, fish=[25, 10_000], procs=[1, 2])
     parser.add_argument("--repeat", type=int, default=3, help="fresh runs per row")
     args = parser.parse_args()
     context = multiprocessing.get_context("spawn")

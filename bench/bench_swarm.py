@@ -37,6 +37,7 @@ import numpy as np
 import trio
 import zenoh
 from bench_bridge import echo_round_trips
+from options import add_sizes
 
 from fishswarm.actors.bus import open_subscriber
 from fishswarm.actors.inbox import Inbox
@@ -238,20 +239,7 @@ def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--fish",
-        type=int,
-        nargs="+",
-        default=[25, 1000, 10_000],
-        help="swarm sizes to time (default: 25 1000 10000)",
-    )
-    parser.add_argument(
-        "--procs",
-        type=int,
-        nargs="+",
-        default=[1, 2],
-        help="worker processes for each size (default: 1 2)",
-    )
+    add_sizes(parser, fish=[25, 1000, 10_000], procs=[1, 2])
     parser.add_argument(
         "--round-trips",
         type=int,

@@ -14,7 +14,11 @@ from types import ModuleType
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPTS = sorted([*ROOT.glob("bench/*.py"), *ROOT.glob("docs/*.py")])
+SCRIPTS = sorted(
+    path
+    for path in [*ROOT.glob("bench/*.py"), *ROOT.glob("docs/*.py")]
+    if 'if __name__ == "__main__":' in path.read_text()
+)
 
 
 def _load(path: Path, monkeypatch: pytest.MonkeyPatch) -> ModuleType:
