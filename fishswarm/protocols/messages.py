@@ -604,10 +604,11 @@ def _check_setting(name: str, value: object) -> object:
     if isinstance(value, list | tuple):
         if len(value) > MAX_SETTING_LIST:
             raise ValueError(f"{name} must have at most {MAX_SETTING_LIST} values")
-        items = tuple(_check_setting(f"{name}[{index}]", item) for index, item in enumerate(value))
-        if any(isinstance(item, tuple) for item in items):
+        # Checked before looking inside: a list of lists is refused at the first level,
+        # however deep a hostile payload nests them.
+        if any(isinstance(item, list | tuple) for item in value):
             raise TypeError(f"{name} must be a list of plain values, not of lists")
-        return items
+        return tuple(_check_setting(f"{name}[{index}]", item) for index, item in enumerate(value))
     raise TypeError(f"{name} must be plain data, got {type(value).__name__}")
 
 
