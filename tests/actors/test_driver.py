@@ -194,6 +194,10 @@ def test_with_the_link_down_it_swims_on_then_stops_until_the_link_returns(
             states.append((trio.current_time() - start, driver.state))  # still swimming
             await trio.sleep(1.2)
             states.append((trio.current_time() - start, driver.state))  # stranded
+            # Stranded, the robot does not sense: its fish has nothing to decide on.
+            sensed = driver.statistics().perceptions
+            await trio.sleep(2.0)
+            assert driver.statistics().perceptions == sensed
             local.put(KEYS.command(ROBOT), command([0.5, 0.0, 0.0, 0.0]))
             await trio.sleep(0.01)
             states.append((trio.current_time() - start, driver.state))  # commands ignored
@@ -251,6 +255,96 @@ def test_an_operators_stop_turns_fins_and_leds_off_until_resumed(
             nursery.cancel_scope.cancel()
 
     run_mock(main)
+
+
+def test_a_resume_leaves_a_swimming_robot_swimming_under_its_failsafe(hardware: Hardware) -> None:
+    """An operator resumes every robot while this one swims: it swims on, and the failsafe,
+    which watches swimming robots, still stops its fins when commands stop."""
+
+    async def main() -> tuple[str, float, Driver]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True])
+        async with trio.open_nursery() as nursery:
+            await nursery.start(driver.run, local, remote)
+            local.put(KEYS.command(ROBOT), command([1.0, 0.0, 0.0, 0.0]))
+            await trio.sleep(0.01)
+            start = trio.current_time()
+            remote.put(KEYS.robot_order, encode(RobotOrder("resume")))
+            await trio.sleep(0.01)
+            after_resume = driver.state
+            while driver.state != "failsafe":
+                await trio.sleep(0.01)
+            stopped_after = trio.current_time() - start
+            nursery.cancel_scope.cancel()
+        return after_resume, stopped_after, driver
+
+    after_resume, stopped_after, driver = run_mock(main)
+    assert after_resume == "swimming"
+    assert 0.9 <= stopped_after <= 1.11  # the 1-s timeout from the last command, one poll
+    assert hardware.fins.frequencies == (0.0, 0.0, 0.0, 0.0)  # type: ignore[attr-defined]
+    assert driver.statistics().orders == 1
+
+
+def test_each_perception_is_timed_from_the_start_and_announces_its_own_deliveries(
+    hardware: Hardware,
+) -> None:
+    async def main() -> list[Perception]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True])
+        await trio.sleep(7.0)  # the driver starts at 7 s on the clock, its time at 0
+        got = []
+        async with (
+            subscription(local, KEYS.perception(ROBOT)) as perceptions,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(driver.run, local, remote)
+            got.append(decode((await perceptions.receive())[1], Perception))
+            delivery = Delivery(ROBOT, 0, "signal", np.array([9]), np.array([0.3, 0.0, 0.0]))
+            remote.put(KEYS.inbox(ROBOT), encode(delivery))
+            remote.put(KEYS.inbox(ROBOT), encode(delivery))
+            for _ in range(2):
+                got.append(decode((await perceptions.receive())[1], Perception))
+            nursery.cancel_scope.cancel()
+        return got
+
+    first, second, third = run_mock(main)
+    assert [p.time for p in (first, second, third)] == [0.0, 0.5, 1.0]
+    assert [p.tick for p in (first, second, third)] == [0, 1, 2]
+    # Two deliveries came between the first and the second perception, none after.
+    assert [p.inbox_count for p in (first, second, third)] == [0, 2, 0]
+
+
+def test_a_slow_frame_does_not_make_the_robot_catch_up_the_periods_it_took(
+    hardware: Hardware,
+) -> None:
+    """The second frame takes 1.6 s, over three 0.5-s periods. The period under way when it
+    ends is sensed at once; after it, one frame a period, as before: the periods the slow
+    frame took are not made up for by frames back to back."""
+    calls = [0]
+
+    async def slow_second(function: Callable[[], Look]) -> Look:
+        calls[0] += 1
+        if calls[0] == 2:
+            await trio.sleep(1.6)
+        return function()
+
+    async def main() -> list[float]:
+        local, remote = MemoryBus(), MemoryBus()
+        settings = DriverSettings(ROBOT, "dispersion", KEYS, control_period=0.5)
+        driver = Driver(settings, hardware, link_up=lambda: True, run_blocking=slow_second)
+        times = []
+        async with (
+            subscription(local, KEYS.perception(ROBOT)) as perceptions,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(driver.run, local, remote)
+            for _ in range(5):
+                times.append(decode((await perceptions.receive())[1], Perception).time)
+            nursery.cancel_scope.cancel()
+        return times
+
+    times = run_mock(main)
+    np.testing.assert_allclose(times, [0.0, 2.1, 2.1, 2.6, 3.1], atol=1e-9)
 
 
 def test_broadcasts_go_out_and_deliveries_come_in_announced(hardware: Hardware) -> None:
