@@ -11,7 +11,7 @@ import trio
 
 from fishswarm import __version__
 from fishswarm.actors.bus import MemoryBus
-from fishswarm.actors.fish import Fish, FishSettings, FishStatistics
+from fishswarm.actors.fish import MAX_WAITING_DELIVERIES, Fish, FishSettings, FishStatistics
 from fishswarm.actors.inbox import Inbox
 from fishswarm.behaviors.core import FishMemory, Perception, decide, pad_rows
 from fishswarm.behaviors.core import Inbox as CoreInbox
@@ -322,3 +322,64 @@ def test_a_new_run_frees_every_fish_of_a_batch_it_drops() -> None:
     answered, statistics = run_mock(main)
     assert sorted(answered) == [[1], [2]]
     assert statistics.rejected == 0 and statistics.runs == 1
+
+
+def test_deliveries_are_held_to_what_the_perceptions_announce() -> None:
+    """A flood beyond the mailbox's bound, deliveries nobody announced or for a tick already
+    decided, more deliveries than announced, and a perception that comes while the last one
+    still waits for its deliveries: each is refused or left out, and counted."""
+    params = Scenario(behavior=registered().name).fish_params()
+    settings = FishSettings((4,), params, KEYS, inbox_timeout=2.0)
+
+    def delivery(tick: int) -> bytes:
+        return encode(Delivery(4, tick, "signal", np.array([3]), np.array([0.2, 0.1, 0.0])))
+
+    async def main() -> tuple[list[tuple[float, Command]], list[Broadcast], FishStatistics]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        got: list[tuple[float, Command]] = []
+        async with (
+            subscription(bus, KEYS.command(4)) as commands,
+            subscription(bus, KEYS.outbox(4)) as outbox,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(fish.run, bus)
+            started = trio.current_time()
+
+            async def next_command() -> None:
+                _, payload = await commands.receive()
+                got.append((trio.current_time() - started, decode(payload, Command)))
+
+            bus.put(KEYS.perception(4), _perception(4, 1))  # the run starts, mail empty
+            await next_command()
+            flood = delivery(2)
+            for _ in range(MAX_WAITING_DELIVERIES + 1):  # the last one is one too many
+                bus.put(KEYS.inbox(4), flood)
+            # Tick 2 announces none: what waits for it is dropped with its decision.
+            bus.put(KEYS.perception(4), _perception(4, 2))
+            await next_command()
+            bus.put(KEYS.inbox(4), delivery(2))  # for a tick decided: stale
+            # Three for tick 3, which announces two: the third is not heard.
+            for _ in range(3):
+                bus.put(KEYS.inbox(4), delivery(3))
+            bus.put(KEYS.perception(4), _perception(4, 3, inbox_count=2))
+            await next_command()
+            # Tick 4 waits for a delivery that never comes; tick 5 meanwhile is refused.
+            bus.put(KEYS.perception(4), _perception(4, 4, inbox_count=1))
+            await trio.sleep(0.5)
+            bus.put(KEYS.perception(4), _perception(4, 5))
+            await next_command()
+            await trio.sleep(1.0)  # within the watchdog's 5 s: nothing more comes
+            nursery.cancel_scope.cancel()
+            leftover = commands.drain()
+            broadcasts = [decode(payload, Broadcast) for _, payload in outbox.drain()]
+        assert leftover == []  # nothing for tick 5
+        return got, broadcasts, fish.statistics()
+
+    got, broadcasts, statistics = run_mock(main)
+    assert [(at, command.tick) for at, command in got] == [(0.0, 1), (0.0, 2), (0.0, 3), (2.0, 4)]
+    # The test behaviour broadcasts how many signals it heard: none, none, two, none.
+    assert [b.values[0] for b in broadcasts] == [0, 0, 2, 0]
+    assert statistics.deliveries == 2 and statistics.deliveries_missed == 1
+    assert statistics.perceptions == 4
+    assert statistics.rejected == 3  # the flood's last, the stale delivery, tick 5
