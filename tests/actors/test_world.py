@@ -551,7 +551,8 @@ def test_pausing_twice_is_pausing_once_and_a_finished_run_only_reports() -> None
             nursery.start_soon(world.run, bus)
             await observer.wait_for_tick(1)
             ask("pause")
-            ask("pause")
+            await trio.sleep(50.0)  # the world now waits to be resumed
+            ask("pause")  # while it waits: it must still hear the one resume
             await trio.sleep(50.0)
             ask("resume")
             await observer.wait_for_tick(6)
@@ -564,6 +565,41 @@ def test_pausing_twice_is_pausing_once_and_a_finished_run_only_reports() -> None
     answers, state = run_mock(main)
     assert [a[0] for a in answers] == ["paused", "paused", "running", "finished"]
     assert answers[-1][1] == 6 and state == "finished"
+
+
+def test_a_stop_reaches_a_paused_world_and_a_resume_does_not_undo_it() -> None:
+    scenario = Scenario(fish=1, duration=1000.0)
+
+    async def main() -> tuple[list[tuple[str, int]], str, int]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,)))
+        observer = Observer(scenario.keys)
+        answers = []
+
+        def ask(action: str) -> None:
+            reply = world.control(ControlRequest(action))
+            answers.append((reply.state, reply.tick))
+
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(
+                Fish(FishSettings((0,), scenario.fish_params(), scenario.keys)).run, bus
+            )
+            nursery.start_soon(world.run, bus)
+            await observer.wait_for_tick(1)
+            ask("pause")
+            await trio.sleep(50.0)  # the world waits to be resumed
+            ask("stop")
+            ask("resume")  # too late: the world is stopping
+            with trio.fail_after(10.0):
+                while world.state_name != "stopped":
+                    await trio.sleep(0.01)
+            nursery.cancel_scope.cancel()
+        return answers, world.state_name, world.tick
+
+    answers, state, tick = run_mock(main)
+    assert [a[0] for a in answers] == ["paused", "stopping", "stopping"]
+    assert state == "stopped" and tick == 3  # the snapshot after the pause, and no more
 
 
 def test_liveliness_tokens_no_fish_could_have_leave_the_world_running() -> None:
