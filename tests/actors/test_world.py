@@ -515,6 +515,9 @@ def test_realtime_keeps_wall_clock_pace_and_a_silent_fish_keeps_its_last_command
                 command = Command(0, perception.tick, np.array([1.0, 0.0, 0.0, 0.0]))
                 bus.put(keys.command(0), encode(command))
             started = trio.current_time()
+            # The answer to tick 1 again, a tick late: normal in realtime, not bad input.
+            await perceptions.receive()
+            bus.put(keys.command(0), encode(command))
             while world.state_name != "finished":
                 await trio.sleep(0.01)
             elapsed = trio.current_time() - started
@@ -525,6 +528,7 @@ def test_realtime_keeps_wall_clock_pace_and_a_silent_fish_keeps_its_last_command
     world, snapshots, elapsed = run_mock(main)
     assert world.tick == 12 and world.lost == []
     assert world.late_commands == 10  # ticks 2–11 had no answer
+    assert world.statistics().rejected_total == 0
     assert elapsed == pytest.approx(1.1, abs=0.011)  # 11 periods after the answer to tick 1
     speeds = [float(np.linalg.norm(s.velocity[0, :2])) for s in snapshots]
     assert speeds[-1] > speeds[2] > 0  # still accelerating on the last command: caudal on
@@ -799,3 +803,6 @@ def test_the_worlds_statistics_say_where_its_ticks_went(monkeypatch: pytest.Monk
     # every tick but the last.
     assert len(world._phase_times["physics"]) == len(world._phase_times["vision"]) == 5
     assert len(world._phase_times["perceptions"]) == 4
+    # Five snapshots, a batch for each of the two schools at four ticks, the last pulse
+    # (and any pulses the run lasted long enough for).
+    assert statistics.messages_out >= 5 + 2 * 4 + 1
