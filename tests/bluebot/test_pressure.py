@@ -56,6 +56,40 @@ def test_cold_water_gets_the_second_order_correction() -> None:
     assert second == Reading(107522.0, 9.58)
 
 
+def test_the_one_bar_models_second_order_correction_by_hand() -> None:
+    # Cold, 9.99 °C (dT = −297 841, TEMP = 999): T2 = dT²/2^31 = 41;
+    # OFF2 = 3·1001² = 3 006 003; SENS2 = 7·1001²/2^3 = 876 750. OFF = 2 817 553 744 and
+    # SENS = 1 485 709 252 give P = 53 797 before, 53 806 after.
+    d2 = (31553 << 8) - 297841
+    assert compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, d2, model="01BA") == Reading(53797.0, 9.99)
+    cold = compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, d2, model="01BA", second_order=True)
+    assert cold == Reading(53806.0, 9.58)
+    # Hot, 85 °C (dT = 1 936 000, TEMP = 8 500): above 45 °C, SENS2 = −(8500 − 4500)²/2^3
+    # = −2 000 000, so SENS grows from 1 739 276 383 to 1 741 276 383; with OFF =
+    # 3 303 449 066, P = 62 825 before, 63 014 after; T unchanged.
+    d2 = (31553 << 8) + 1_936_000
+    assert compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, d2, model="01BA") == Reading(62825.0, 85.0)
+    hot = compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, d2, model="01BA", second_order=True)
+    assert hot == Reading(63014.0, 85.0)
+
+
+def test_below_minus_15_degrees_both_models_add_their_last_terms() -> None:
+    # dT = −1 100 000: TEMP = −1 694 (−16.94 °C), T2 = 563; TEMP − 2000 = −3 694 and
+    # TEMP + 1500 = −194.
+    d2 = (31553 << 8) - 1_100_000
+    # 01BA: OFF2 = 3·3694² = 40 936 908; SENS2 = 7·3694²/2^3 + 2·194² = 12 015 203;
+    # P = 50 555 before (OFF 2 643 071 628, SENS 1 394 654 805), 50 674 after.
+    one_bar = compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, d2, model="01BA", second_order=True)
+    assert one_bar == Reading(50674.0, -22.57)
+    # 02BA: OFF2 = 61·3694²/2^4 + 20·194² = 52 776 707; SENS2 = 2·3694² + 12·194²
+    # = 27 742 904; P = 101 110 before (OFF 5 286 143 257, SENS 2 789 309 610), 100 111 after.
+    assert compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, d2, model="02BA") == Reading(
+        101110.0, -16.94
+    )
+    two_bar = compensate(EXAMPLE_CALIBRATION, EXAMPLE_D1, d2, model="02BA", second_order=True)
+    assert two_bar == Reading(100111.0, -22.57)
+
+
 def test_bad_models_and_calibrations_are_refused() -> None:
     with pytest.raises(ValueError, match="01BA, 02BA"):
         compensate(EXAMPLE_CALIBRATION, 1, 1, model="14BA")
@@ -116,6 +150,15 @@ def test_a_missing_sensor_is_named() -> None:
     chip = SimulatedChip(EXAMPLE_CALIBRATION, EXAMPLE_D1, EXAMPLE_D2, address=0x76)
     with pytest.raises(SensorError, match="no MS5803 answers at I2C address 0x77"):
         Ms5803(chip, sleep=lambda _: None)  # the chip answers at 0x76, we ask 0x77
+
+
+@pytest.mark.parametrize("empty", [CONVERT_PRESSURE, CONVERT_TEMPERATURE])
+def test_an_empty_conversion_is_a_sensor_error_not_a_reading(empty: int) -> None:
+    chip = SimulatedChip(EXAMPLE_CALIBRATION, EXAMPLE_D1, EXAMPLE_D2)
+    chip.raw[empty] = 0  # read before the conversion finished
+    sensor = Ms5803(chip, model="02BA", sleep=lambda _: None)
+    with pytest.raises(SensorError, match="empty conversion"):
+        sensor.read()
 
 
 class StepPressure:
@@ -191,7 +234,17 @@ def test_a_start_at_the_surface_or_an_old_surface_takes_it_anew(
     assert json.loads(kept.read_text())["time"] == age  # taken anew, and kept
 
 
-@pytest.mark.parametrize("content", ["", "{not json", '{"pressure": "high", "time": 0}', "[]"])
+@pytest.mark.parametrize(
+    "content",
+    [
+        "",
+        "{not json",
+        '{"pressure": "high", "time": 0}',
+        "[]",
+        '{"pressure": 0.0, "time": 0}',  # no surface has no pressure
+        '{"pressure": -5.0, "time": 0}',
+    ],
+)
 def test_a_damaged_kept_surface_is_taken_anew(tmp_path: Path, content: str) -> None:
     kept = tmp_path / "surface-pressure.json"
     kept.write_text(content)
