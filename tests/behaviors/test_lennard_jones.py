@@ -80,6 +80,19 @@ def test_study_form_repulsion_by_hand() -> None:
     assert _study([[0.13, 0.0, 0.0]], 0.26) == pytest.approx([-483_840.0, 0.0, 0.0], rel=1e-12)
 
 
+def test_study_form_floors_distances_at_a_micrometre_not_a_millimetre() -> None:
+    # As above at a thousandth of the scale: r = 0.1 mm, r_t = 0.2 mm, ratio 2 again, so
+    # the same −483 840 m. Floored at the paper form's millimetre instead, the ratio would
+    # be 0.2 and the neighbour would attract (+7.7e-4 m).
+    assert _study([[1e-4, 0.0, 0.0]], 2e-4) == pytest.approx([-483_840.0, 0.0, 0.0], rel=1e-9)
+
+
+def test_a_target_distance_of_zero_or_less_is_refused() -> None:
+    for target in (0.0, -0.26):
+        with pytest.raises(ValueError, match="target_distance must be positive"):
+            lennard_jones(np.ones((1, 1, 3)), np.ones((1, 1), bool), target_distance=target)
+
+
 def test_study_form_attraction_is_capped_but_grows_with_the_offset() -> None:
     # 0.5 m to the right, r_t = 0.26: r is capped at r_t + 1 body length = 0.39, ratio 2/3:
     # (2/3)¹² − (2/3)⁶ = (4096 − 46656)/531441 = −42560/531441, so
