@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from fishswarm.behaviors.orbit import milling, orbit, waltz
+from fishswarm.behaviors.core import Inbox, NoMemory, Perception
+from fishswarm.behaviors.orbit import OrbitParams, milling, orbit, steer_orbit, waltz
 from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
 
@@ -41,6 +42,36 @@ def test_heading_rule_by_zone() -> None:
     assert target[0, 2] == pytest.approx(0.1)  # holds the centre's depth
 
 
+def test_just_outside_the_circle_the_fish_heads_for_the_tangent_point() -> None:
+    # The centre dead ahead at 1.02 R: the tangent point lies asin(1/1.02) = 78.6° right,
+    # where veering out as from inside would give 90° − 90°·0.02 = 88.2°.
+    target = orbit(np.array([[0.51, 0.0, 0.0]]), np.array([True]), radius=0.5)
+    assert _heading_deg(target)[0] == pytest.approx(math.degrees(math.asin(0.5 / 0.51)))
+    assert _heading_deg(target)[0] == pytest.approx(78.636, abs=1e-3)
+
+
+def test_an_orbit_radius_of_zero_or_less_is_refused() -> None:
+    for radius in (0.0, -0.5):
+        with pytest.raises(ValueError, match="radius must be positive"):
+            orbit(np.array([[1.0, 0.0, 0.0]]), np.array([True]), radius=radius)
+
+
+def test_the_first_landmark_seen_is_the_centre() -> None:
+    # Two landmarks: the post (first) 1 m ahead, another 1 m to the left.
+    perception = Perception(
+        time=np.zeros(1),
+        depth=np.zeros(1),
+        neighbors=np.zeros((1, 0, 3)),
+        neighbor_mask=np.zeros((1, 0), bool),
+        landmarks=np.array([[[1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]]),
+        landmark_mask=np.array([[True, True]]),
+    )
+    _, steering = steer_orbit(
+        NoMemory(), perception, Inbox.empty(1), params=OrbitParams(radius=0.5)
+    )
+    assert _heading_deg(steering.target)[0] == pytest.approx(30.0)  # as the zone test's
+
+
 def test_waltz_orbits_the_nearest_neighbour() -> None:
     neighbors = np.array([[[2.0, 0.0, 0.0], [0.0, -0.5, 0.0]]])
     mask = np.array([[True, True]])
@@ -58,6 +89,10 @@ def test_milling_pushes_off_a_close_neighbour() -> None:
     assert target[0, 1] < 0  # pushed left, away from the neighbour
     far = np.array([[[0.0, 1.0, 0.0]]])
     unchanged = milling(centre, seen, far, np.array([[True]]), radius=0.5)
+    np.testing.assert_array_equal(unchanged, orbit(centre, seen, radius=0.5))
+    # Just beyond the spacing (0.3 against 0.26 m): ignored, not pulled towards.
+    beyond = np.array([[[0.0, 0.3, 0.0]]])
+    unchanged = milling(centre, seen, beyond, np.array([[True]]), radius=0.5)
     np.testing.assert_array_equal(unchanged, orbit(centre, seen, radius=0.5))
 
 
