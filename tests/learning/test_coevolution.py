@@ -159,6 +159,70 @@ def test_a_checkpoint_is_plain_data_and_a_truncated_one_is_explained(tmp_path: P
         load_checkpoint(tmp_path / "missing.npz")
 
 
+def test_a_loaded_checkpoint_is_the_run_as_it_was_saved(tmp_path: Path) -> None:
+    path = tmp_path / "checkpoint.npz"
+    saved = _run(SMALL, 2)
+    save_checkpoint(saved, path)
+    loaded = load_checkpoint(path)
+    # Before any further generation: the last judgement and the population as they were.
+    assert loaded.generation == 2
+    np.testing.assert_array_equal(loaded.population, saved.population)
+    np.testing.assert_array_equal(loaded.best_model(), saved.best_model())
+    assert saved.last_fitness is not None and loaded.last_fitness is not None
+    for field in dataclasses.fields(saved.last_fitness):
+        np.testing.assert_array_equal(
+            getattr(loaded.last_fitness, field.name), getattr(saved.last_fitness, field.name)
+        )
+
+
+def _rewritten(path: Path, change: str) -> None:
+    """The checkpoint at ``path`` with its metadata changed: ``format`` or ``generation``."""
+    with np.load(path, allow_pickle=False) as data:
+        arrays = {name: data[name] for name in data.files}
+    meta = json.loads(str(arrays["meta"]))
+    if change == "format":
+        meta["format"] = "somebody-elses-checkpoint/1"
+    else:
+        meta["generation"] += 1
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez(path, **arrays)
+
+
+@pytest.mark.parametrize(
+    ("change", "reason"),
+    [
+        ("format", "is not a fishswarm learning checkpoint"),
+        ("generation", "the told scores do not cover every generation"),
+    ],
+)
+def test_a_checkpoint_that_is_not_ours_or_does_not_add_up_is_refused(
+    tmp_path: Path, change: str, reason: str
+) -> None:
+    path = tmp_path / "checkpoint.npz"
+    save_checkpoint(_run(SMALL, 2), path)
+    _rewritten(path, change)
+    with pytest.raises(CheckpointError, match=reason):
+        load_checkpoint(path)
+
+
+def test_a_crash_while_saving_leaves_the_last_checkpoint_whole(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "checkpoint.npz"
+    save_checkpoint(_run(SMALL, 1), path)
+    before = path.read_bytes()
+
+    def crash(stream: object, **arrays: object) -> None:
+        stream.write(b"PK\x03\x04 half a zip")  # type: ignore[attr-defined]
+        raise OSError("disk full")
+
+    monkeypatch.setattr("fishswarm.learning.checkpoint.np.savez", crash)
+    with pytest.raises(OSError, match="disk full"):
+        save_checkpoint(_run(SMALL, 2), path)
+    assert path.read_bytes() == before
+    assert load_checkpoint(path).generation == 1
+
+
 def test_reduced_virulence_peaks_at_lambda_and_keeps_the_order_at_one() -> None:
     # λ = 0.75: 2s/λ − s²/λ² is 1 at s = 0.75, and 0.8889 at both 0.5 and 1 (by hand:
     # 1.3333 − 0.4444 and 2.6667 − 1.7778).
