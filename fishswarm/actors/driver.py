@@ -29,7 +29,7 @@ import trio
 from numpy.typing import NDArray
 
 from fishswarm import __version__
-from fishswarm.actors.bus import Bus, open_token
+from fishswarm.actors.bus import Bus, Declared, open_alive_events, open_token
 from fishswarm.actors.inbox import Inbox, open_subscription
 from fishswarm.actors.intake import Intake
 from fishswarm.bluebot.fisheye import Fisheye
@@ -263,22 +263,33 @@ class Driver:
         self._started = trio.current_time()
         try:
             async with contextlib.AsyncExitStack() as stack:
-                commands, orders, broadcasts, deliveries = [
+                commands, orders, broadcasts, deliveries, abouts = [
                     await stack.enter_async_context(open_subscription(bus, key))
                     for bus, key in (
                         (local, keys.command(robot_id)),
                         (remote, keys.robot_order),
-                        # The bridge: the fish's broadcasts out, deliveries to it in.
+                        # The bridge: the fish's broadcasts out, deliveries to it in, and
+                        # its vouching for itself out (a secured world admits only fish
+                        # vouched for on their own about keys).
                         (local, keys.outbox(robot_id)),
                         (remote, keys.inbox(robot_id)),
+                        (local, keys.about(robot_id)),
                     )
                 ]
+                worlds: Inbox[tuple[str, bool]] = Inbox()
+                await stack.enter_async_context(
+                    open_alive_events(
+                        remote, keys.alive_all("world"), lambda k, up: worlds.push((k, up))
+                    )
+                )
                 await stack.enter_async_context(open_token(remote, keys.alive("robot", robot_id)))
                 async with trio.open_nursery() as nursery:
                     nursery.start_soon(self._obey, commands)
                     nursery.start_soon(self._take_orders, orders)
                     nursery.start_soon(self._pass_deliveries, deliveries, local)
                     nursery.start_soon(self._pass_broadcasts, broadcasts, remote)
+                    nursery.start_soon(self._pass_abouts, abouts, remote)
+                    nursery.start_soon(self._show_worlds, worlds, local)
                     nursery.start_soon(self._guard)
                     nursery.start_soon(self._report, remote)
                     nursery.start_soon(self._sense, local)
@@ -453,6 +464,26 @@ class Driver:
         async for key, payload in broadcasts:
             remote.put(key, payload)
             self._counts["broadcasts"] += 1
+
+    async def _pass_abouts(self, abouts: Inbox[tuple[str, bytes]], remote: Bus) -> None:
+        """The fish's word on what it runs onto the link, as it is."""
+        async for key, payload in abouts:
+            remote.put(key, payload)
+
+    async def _show_worlds(self, worlds: Inbox[tuple[str, bool]], local: Bus) -> None:
+        """Each world that is up on the link, shown to the fish by its liveliness token:
+        the fish vouches for itself again whenever a world appears, as it does on a
+        simulated swarm's bus."""
+        shown: dict[str, Declared] = {}
+        try:
+            async for key, up in worlds:
+                if up and key not in shown:
+                    shown[key] = local.declare_token(key)
+                elif not up and key in shown:
+                    shown.pop(key).undeclare()
+        finally:
+            for token in shown.values():
+                token.undeclare()
 
     async def _pass_deliveries(self, deliveries: Inbox[tuple[str, bytes]], local: Bus) -> None:
         robot_id = self.settings.robot_id

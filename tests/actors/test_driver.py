@@ -32,6 +32,7 @@ from fishswarm.protocols.messages import (  # noqa: E402
     Broadcast,
     Command,
     Delivery,
+    FishAbout,
     Perception,
     RobotOrder,
     RobotStatus,
@@ -345,6 +346,38 @@ def test_a_slow_frame_does_not_make_the_robot_catch_up_the_periods_it_took(
 
     times = run_mock(main)
     np.testing.assert_allclose(times, [0.0, 2.1, 2.1, 2.6, 3.1], atol=1e-9)
+
+
+def test_the_fish_vouches_for_itself_on_the_link_whenever_a_world_comes_up(
+    hardware: Hardware,
+) -> None:
+    async def main() -> list[FishAbout]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True])
+        fish = Fish(FishSettings((ROBOT,), Scenario().fish_params(), KEYS))
+        told = []
+        async with (
+            subscription(remote, KEYS.about(ROBOT)) as abouts,
+            trio.open_nursery() as nursery,
+        ):
+            # A world already up when the robot starts, then a second one later.
+            first = remote.declare_token(KEYS.alive("world", 0))
+            await nursery.start(fish.run, local)
+            await nursery.start(driver.run, local, remote)
+            told.append(decode((await abouts.receive())[1], FishAbout))
+            await trio.sleep(5.0)
+            # Meanwhile the fish has said what it runs for the driver's run of
+            # perceptions; its word for a world (run 0) comes only when one appears.
+            assert all(decode(p, FishAbout).run != 0 for _, p in abouts.drain())
+            first.undeclare()
+            remote.declare_token(KEYS.alive("world", 1))
+            told.append(decode((await abouts.receive())[1], FishAbout))
+            nursery.cancel_scope.cancel()
+        return told
+
+    told = run_mock(main)
+    assert [(about.ids.tolist(), about.run) for about in told] == [([ROBOT], 0), ([ROBOT], 0)]
+    assert all(about.behavior == "dispersion" for about in told)
 
 
 def test_broadcasts_go_out_and_deliveries_come_in_announced(hardware: Hardware) -> None:

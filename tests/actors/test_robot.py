@@ -4,6 +4,7 @@ the router (their camera images come over that link), and swim again when it ret
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -23,10 +24,12 @@ from fishswarm.actors.robot import (
     run_robot,
     survey_fleet,
 )
+from fishswarm.actors.security import init_secure, session_security
 from fishswarm.protocols.codec import decode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import RobotStatus
 from fishswarm.sim.scenario import Scenario
+from fishswarm.study.recording import read_recording
 from tests.conftest import free_port, open_client_bus, run_trio, subscription, wait_for_port
 
 pytestmark = pytest.mark.integration
@@ -35,8 +38,9 @@ KEYS = KeySpace()
 PERIOD = 0.2
 
 
-def start_world(endpoint: str, folder: Path) -> subprocess.Popen[str]:
-    """A realtime simulated swarm of three fish with its router, for 60 s."""
+def start_world(endpoint: str, folder: Path, *extra: str) -> subprocess.Popen[str]:
+    """A realtime simulated swarm of three fish with its router, for 60 s (``extra``: more
+    arguments to ``fishswarm run``)."""
     return subprocess.Popen(
         [
             sys.executable,
@@ -58,6 +62,7 @@ def start_world(endpoint: str, folder: Path) -> subprocess.Popen[str]:
             str(folder / "run.mcap"),
             "--summary",
             str(folder / "run.json"),
+            *extra,
         ],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
@@ -194,3 +199,34 @@ def test_mock_robots_join_obey_a_stop_and_survive_losing_the_router(
     run_trio(main, timeout=120)
     assert measured["stop"] <= 1.0, measured
     assert measured["fins_off"] <= 2.0, measured
+
+
+def test_a_mock_robot_vouches_for_itself_and_joins_a_secured_swarm(
+    tmp_path: Path, worlds: list[subprocess.Popen[str]]
+) -> None:
+    """A secured world admits only fish vouched for on their own about keys: the robot's
+    fish actor vouches on its driver's in-memory bus, and the driver carries that onto the
+    link, and shows the fish each world that comes up (so it vouches again for a world
+    started after it)."""
+    folder = tmp_path / "secure"
+    init_secure(folder, robots=(10,))
+    port = free_port()
+    endpoint = f"tls/127.0.0.1:{port}"
+
+    async def main() -> None:
+        secured = dataclasses.replace(
+            settings(10, endpoint), session_extra=session_security(folder, "robot-10")
+        )
+        worlds.append(start_world(endpoint, tmp_path, "--secure", str(folder)))
+        async with trio.open_nursery() as nursery:
+            driver: Driver = await nursery.start(run_robot, secured)
+            await until(lambda: driver.state == "swimming", timeout=30)
+            await trio.sleep(1.0)  # a few ticks with the robot in the world
+            nursery.cancel_scope.cancel()
+
+    run_trio(main, timeout=90)
+    world = worlds[0]
+    world.terminate()  # as Ctrl-C: the recording is closed whole
+    world.communicate(timeout=30)
+    ids = {int(i) for s in read_recording(tmp_path / "run.mcap").snapshots for i in s.ids}
+    assert ids == {0, 1, 2, 10}
