@@ -146,3 +146,48 @@ def test_metrics_are_strict_json_and_undefined_ones_read_back_as_nan(tmp_path: P
     assert json.loads(message.data, parse_constant=refuse) == {"shape_error": 0.5, "fitness": None}
     (metrics,) = read_recording(path).metrics
     assert metrics["shape_error"] == 0.5 and np.isnan(metrics["fitness"])
+
+
+def test_a_recording_still_being_written_is_on_disk_up_to_its_last_chunk(tmp_path: Path) -> None:
+    """What a run killed now would leave: every chunk the writer finished is in the file,
+    not in a buffer of the process."""
+    path = tmp_path / "live.mcap"
+    rng = np.random.default_rng(0)
+    with open_recorder(path, {"fish": 25}) as recorder:
+        # Before the first snapshot: the header and the scenario are on disk already.
+        started = read_recording(path)
+        assert started.scenario == {"fish": 25} and started.snapshots == []
+        for tick in range(60):  # random positions compress poorly: several 32-KiB chunks
+            snapshot = _snapshot(tick, list(range(25)))
+            noisy = Snapshot(
+                tick, float(tick), snapshot.ids, rng.random((25, 3)), rng.random((25, 3)),
+                snapshot.yaw, snapshot.neighbors_seen, snapshot.broadcasts,
+            )  # fmt: skip
+            recorder.snapshot(noisy.time, encode(noisy))
+            recorder.metrics(noisy.time, {"tick": tick})
+        # Read by another handle while the recorder is still open.
+        meanwhile = read_recording(path)
+    assert not meanwhile.complete
+    assert 0 < len(meanwhile.snapshots) < 60
+    assert [s.tick for s in meanwhile.snapshots] == list(range(len(meanwhile.snapshots)))
+    assert read_recording(path).complete and len(read_recording(path).snapshots) == 60
+
+
+def test_snapshots_read_back_in_tick_order_and_messages_are_numbered(tmp_path: Path) -> None:
+    from mcap.reader import make_reader
+
+    path = tmp_path / "r.mcap"
+    with open_recorder(path, {}) as recorder:
+        for tick in (2, 0, 1):  # as they may arrive
+            recorder.snapshot(float(tick), encode(_snapshot(tick, [0])))
+    assert [s.tick for s in read_recording(path).snapshots] == [0, 1, 2]
+    with path.open("rb") as stream:
+        numbers = [m.sequence for _, _, m in make_reader(stream).iter_messages()]
+    assert sorted(numbers) == [0, 1, 2]
+
+
+def test_a_file_holding_only_the_mcap_magic_is_an_empty_cut_recording(tmp_path: Path) -> None:
+    path = tmp_path / "started.mcap"
+    path.write_bytes(b"\x89MCAP0\r\n")  # what a run killed at its very start may leave
+    recording = read_recording(path)
+    assert not recording.complete and recording.snapshots == []
