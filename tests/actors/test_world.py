@@ -4,6 +4,7 @@ and the same trajectories as the batch engine."""
 
 from __future__ import annotations
 
+from collections.abc import Awaitable, Callable
 from typing import Any
 
 import numpy as np
@@ -437,41 +438,58 @@ def test_a_late_fish_joins_at_a_later_tick() -> None:
     assert counts[joined_tick:] == [4] * (9 - joined_tick)  # in the snapshot it joined at
 
 
+Ask = Callable[[str], None]
+
+
+async def _under_control(
+    scenario: Scenario, script: Callable[[Ask, Observer, World], Awaitable[None]]
+) -> tuple[list[tuple[str, int]], World]:
+    """A world and its fish on the in-memory Bus, ``script`` asking the world's control;
+    its answers (state, tick) and the world."""
+    bus = MemoryBus()
+    fish = tuple(range(scenario.fish))
+    world = World(WorldSettings(scenario, expected_fish=fish))
+    observer = Observer(scenario.keys)
+    answers = []
+
+    def ask(action: str) -> None:
+        reply = world.control(ControlRequest(action))
+        answers.append((reply.state, reply.tick))
+
+    async with trio.open_nursery() as nursery:
+        await nursery.start(observer.run, bus)
+        await nursery.start(
+            Fish(FishSettings(fish, scenario.fish_params(), scenario.keys)).run, bus
+        )
+        nursery.start_soon(world.run, bus)
+        await script(ask, observer, world)
+        nursery.cancel_scope.cancel()
+    return answers, world
+
+
+async def _until_state(world: World, state: str) -> None:
+    with trio.fail_after(10.0):
+        while world.state_name != state:
+            await trio.sleep(0.01)
+
+
 def test_control_pauses_resumes_and_stops_the_world() -> None:
-    scenario = Scenario(fish=2, duration=1000.0)
+    async def script(ask: Ask, observer: Observer, world: World) -> None:
+        await observer.wait_for_tick(2)
+        ask("pause")
+        await trio.sleep(100.0)  # paused: no tick goes by, however long
+        ask("status")
+        ask("resume")
+        await observer.wait_for_tick(5)
+        ask("stop")
+        await _until_state(world, "stopped")
+        ask("status")
 
-    async def main() -> list[tuple[str, int]]:
-        bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
-        observer = Observer(scenario.keys)
-        params = scenario.fish_params()
-        answers = []
-
-        def ask(action: str) -> None:
-            reply = world.control(ControlRequest(action))
-            answers.append((reply.state, reply.tick))
-
-        async with trio.open_nursery() as nursery:
-            await nursery.start(observer.run, bus)
-            await nursery.start(Fish(FishSettings((0, 1), params, scenario.keys)).run, bus)
-            nursery.start_soon(world.run, bus)
-            await observer.wait_for_tick(2)
-            ask("pause")
-            await trio.sleep(100.0)  # paused: no tick goes by, however long
-            ask("status")
-            ask("resume")
-            await observer.wait_for_tick(5)
-            ask("stop")
-            while world.state_name != "stopped":
-                await trio.sleep(0.01)
-            ask("status")
-            nursery.cancel_scope.cancel()
-        return answers
-
+    answers, _ = run_mock(lambda: _under_control(Scenario(fish=2, duration=1000.0), script))
     # Asked during tick 2, after its perceptions went out: tick 2 completes, then the world
     # holds after the snapshot of tick 3, for as long as it is paused; a stop takes effect at
     # the next snapshot.
-    assert run_mock(main) == [
+    assert answers == [
         ("paused", 2),
         ("paused", 3),
         ("running", 3),
@@ -535,75 +553,36 @@ def test_realtime_keeps_wall_clock_pace_and_a_silent_fish_keeps_its_last_command
 
 
 def test_pausing_twice_is_pausing_once_and_a_finished_run_only_reports() -> None:
-    scenario = Scenario(fish=1, duration=6.0)
+    async def script(ask: Ask, observer: Observer, world: World) -> None:
+        await observer.wait_for_tick(1)
+        ask("pause")
+        await trio.sleep(50.0)  # the world now waits to be resumed
+        ask("pause")  # while it waits: it must still hear the one resume
+        await trio.sleep(50.0)
+        ask("resume")
+        await observer.wait_for_tick(6)
+        await _until_state(world, "finished")
+        ask("pause")  # too late: the run is over
 
-    async def main() -> tuple[list[tuple[str, int]], str]:
-        bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0,)))
-        observer = Observer(scenario.keys)
-        answers = []
-
-        def ask(action: str) -> None:
-            reply = world.control(ControlRequest(action))
-            answers.append((reply.state, reply.tick))
-
-        async with trio.open_nursery() as nursery:
-            await nursery.start(observer.run, bus)
-            await nursery.start(
-                Fish(FishSettings((0,), scenario.fish_params(), scenario.keys)).run, bus
-            )
-            nursery.start_soon(world.run, bus)
-            await observer.wait_for_tick(1)
-            ask("pause")
-            await trio.sleep(50.0)  # the world now waits to be resumed
-            ask("pause")  # while it waits: it must still hear the one resume
-            await trio.sleep(50.0)
-            ask("resume")
-            await observer.wait_for_tick(6)
-            while world.state_name != "finished":
-                await trio.sleep(0.01)
-            ask("pause")  # too late: the run is over
-            nursery.cancel_scope.cancel()
-        return answers, world.state_name
-
-    answers, state = run_mock(main)
+    answers, world = run_mock(lambda: _under_control(Scenario(fish=1, duration=6.0), script))
     assert [a[0] for a in answers] == ["paused", "paused", "running", "finished"]
-    assert answers[-1][1] == 6 and state == "finished"
+    assert answers[-1][1] == 6 and world.state_name == "finished"
 
 
 def test_a_stop_reaches_a_paused_world_and_a_resume_does_not_undo_it() -> None:
-    scenario = Scenario(fish=1, duration=1000.0)
+    async def script(ask: Ask, observer: Observer, world: World) -> None:
+        await observer.wait_for_tick(1)
+        ask("pause")
+        await trio.sleep(50.0)  # the world waits to be resumed
+        ask("stop")
+        ask("resume")  # too late: the world is stopping
+        await _until_state(world, "stopped")
 
-    async def main() -> tuple[list[tuple[str, int]], str, int]:
-        bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0,)))
-        observer = Observer(scenario.keys)
-        answers = []
-
-        def ask(action: str) -> None:
-            reply = world.control(ControlRequest(action))
-            answers.append((reply.state, reply.tick))
-
-        async with trio.open_nursery() as nursery:
-            await nursery.start(observer.run, bus)
-            await nursery.start(
-                Fish(FishSettings((0,), scenario.fish_params(), scenario.keys)).run, bus
-            )
-            nursery.start_soon(world.run, bus)
-            await observer.wait_for_tick(1)
-            ask("pause")
-            await trio.sleep(50.0)  # the world waits to be resumed
-            ask("stop")
-            ask("resume")  # too late: the world is stopping
-            with trio.fail_after(10.0):
-                while world.state_name != "stopped":
-                    await trio.sleep(0.01)
-            nursery.cancel_scope.cancel()
-        return answers, world.state_name, world.tick
-
-    answers, state, tick = run_mock(main)
+    answers, world = run_mock(lambda: _under_control(Scenario(fish=1, duration=1000.0), script))
     assert [a[0] for a in answers] == ["paused", "stopping", "stopping"]
-    assert state == "stopped" and tick == 3  # the snapshot after the pause, and no more
+    assert (
+        world.state_name == "stopped" and world.tick == 3
+    )  # the snapshot after the pause, and no more
 
 
 def test_liveliness_tokens_no_fish_could_have_leave_the_world_running() -> None:
