@@ -223,6 +223,41 @@ def test_with_the_link_down_it_swims_on_then_stops_until_the_link_returns(
     ]
 
 
+def test_a_robot_stopped_by_an_operator_stays_stopped_through_a_lost_link(
+    hardware: Hardware,
+) -> None:
+    """Only an operator's resume ends a stop: not the link coming back, which ends a
+    stranding."""
+    link = [True]
+
+    async def main() -> list[str]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, link, command_timeout=10.0)
+        states = []
+        async with trio.open_nursery() as nursery:
+            await nursery.start(driver.run, local, remote)
+            local.put(KEYS.command(ROBOT), command([1.0, 0.0, 0.0, 0.0]))
+            await trio.sleep(0.01)
+            remote.put(KEYS.robot_order, encode(RobotOrder("stop")))
+            await trio.sleep(0.01)
+            states.append(driver.state)
+            link[0] = False
+            await trio.sleep(4.0)  # past the 3-s link timeout
+            states.append(driver.state)
+            link[0] = True
+            await trio.sleep(0.2)
+            states.append(driver.state)
+            local.put(KEYS.command(ROBOT), command([1.0, 0.0, 0.0, 0.0]))
+            await trio.sleep(0.01)
+            states.append(driver.state)
+            assert hardware.fins.frequencies == (0.0, 0.0, 0.0, 0.0)  # type: ignore[attr-defined]
+            nursery.cancel_scope.cancel()
+        assert driver.statistics().stranded_stops == 0
+        return states
+
+    assert run_mock(main) == ["stopped", "stopped", "stopped", "stopped"]
+
+
 def test_an_operators_stop_turns_fins_and_leds_off_until_resumed(
     hardware: Hardware, factory: object
 ) -> None:

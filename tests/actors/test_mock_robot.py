@@ -7,7 +7,13 @@ import numpy as np
 import pytest
 
 from fishswarm.actors.driver import SensorUnavailable
-from fishswarm.actors.mock_robot import STALE_AFTER, SnapshotDepth, WorldFeed, stale_after
+from fishswarm.actors.mock_robot import (
+    STALE_AFTER,
+    BodyFins,
+    SnapshotDepth,
+    WorldFeed,
+    stale_after,
+)
 from fishswarm.protocols.messages import Snapshot
 
 
@@ -68,3 +74,31 @@ def test_the_mock_robots_sensors_keep_snapshots_for_its_period() -> None:
     with open_mock_hardware(3, KeySpace(), control_period=1.0) as (hardware, _):
         assert isinstance(hardware.depth, SnapshotDepth)
         assert hardware.depth.feed.stale_after == pytest.approx(1.5)
+
+
+class RecordingFins:
+    """Fins that note what they were told."""
+
+    def __init__(self) -> None:
+        self.told: list[str] = []
+
+    def set_gains(self, gains: np.ndarray) -> None:
+        self.told.append(f"gains {np.asarray(gains).tolist()}")
+
+    def stop(self) -> None:
+        self.told.append("stop")
+
+    def close(self) -> None:
+        self.told.append("close")
+
+
+def test_a_stopped_mock_robot_tells_its_simulated_body_its_fins_are_off() -> None:
+    # The body answers the world with the gains it holds: a stop must zero them, or the
+    # simulated robot would swim on while its pins are still.
+    pins = RecordingFins()
+    fins = BodyFins(pins)
+    fins.set_gains(np.array([1.0, 0.0, 0.5, 0.0]))
+    assert fins.gains.tolist() == [1.0, 0.0, 0.5, 0.0]
+    fins.stop()
+    assert fins.gains.tolist() == [0.0, 0.0, 0.0, 0.0]
+    assert pins.told == ["gains [1.0, 0.0, 0.5, 0.0]", "stop"]
