@@ -22,6 +22,7 @@ import math
 import secrets
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -287,8 +288,10 @@ class Driver:
                     nursery.start_soon(self._obey, commands)
                     nursery.start_soon(self._take_orders, orders)
                     nursery.start_soon(self._pass_deliveries, deliveries, local)
-                    nursery.start_soon(self._pass_broadcasts, broadcasts, remote)
-                    nursery.start_soon(self._pass_abouts, abouts, remote)
+                    nursery.start_soon(
+                        partial(self._pass_out, counted="broadcasts"), broadcasts, remote
+                    )
+                    nursery.start_soon(self._pass_out, abouts, remote)
                     nursery.start_soon(self._show_worlds, worlds, local)
                     nursery.start_soon(self._guard)
                     nursery.start_soon(self._report, remote)
@@ -459,16 +462,14 @@ class Driver:
 
     # The link ---------------------------------------------------------------------------
 
-    async def _pass_broadcasts(self, broadcasts: Inbox[tuple[str, bytes]], remote: Bus) -> None:
-        """The fish's broadcasts onto the link, as they are."""
-        async for key, payload in broadcasts:
+    async def _pass_out(
+        self, messages: Inbox[tuple[str, bytes]], remote: Bus, *, counted: str | None = None
+    ) -> None:
+        """The fish's messages onto the link, as they are (counted as ``counted``)."""
+        async for key, payload in messages:
             remote.put(key, payload)
-            self._counts["broadcasts"] += 1
-
-    async def _pass_abouts(self, abouts: Inbox[tuple[str, bytes]], remote: Bus) -> None:
-        """The fish's word on what it runs onto the link, as it is."""
-        async for key, payload in abouts:
-            remote.put(key, payload)
+            if counted is not None:
+                self._counts[counted] += 1
 
     async def _show_worlds(self, worlds: Inbox[tuple[str, bool]], local: Bus) -> None:
         """Each world that is up on the link, shown to the fish by its liveliness token:

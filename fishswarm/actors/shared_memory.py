@@ -29,12 +29,13 @@ _PROCESSES = Path("/proc")
 _registered = False
 
 
-def _held_by_others(processes: Path) -> set[str]:
-    """The paths of the files every other process holds open (those we may look at)."""
-    me = str(os.getpid())
+def files_held_open(processes: Path = _PROCESSES, *, besides: int | None = None) -> set[str]:
+    """The paths of the files the processes (those we may look at) hold open, but for the
+    process ``besides`` (a process id; None: every process)."""
+    skipped = None if besides is None else str(besides)
     held: set[str] = set()
     for process in processes.iterdir():
-        if not process.name.isdigit() or process.name == me:
+        if not process.name.isdigit() or process.name == skipped:
             continue
         try:
             descriptors = list((process / "fd").iterdir())
@@ -78,7 +79,7 @@ def release_shared_memory(
         return []
     # The files are listed before the holders are: a file made after the listing is not
     # looked at, and one made before it is held open by its maker by the time we look.
-    held = _held_by_others(processes)
+    held = files_held_open(processes, besides=os.getpid())
     removed = []
     for path in candidates:
         if str(path) in held:

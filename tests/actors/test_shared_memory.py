@@ -13,7 +13,11 @@ from pathlib import Path
 import pytest
 
 from fishswarm.actors.session import free_loopback_endpoint
-from fishswarm.actors.shared_memory import SHARED_MEMORY_FOLDER, release_shared_memory
+from fishswarm.actors.shared_memory import (
+    SHARED_MEMORY_FOLDER,
+    files_held_open,
+    release_shared_memory,
+)
 
 
 def _hold(path: str, connection: Connection) -> None:
@@ -63,13 +67,7 @@ def test_without_a_proc_folder_nothing_is_released(tmp_path: Path) -> None:
 
 def _orphans() -> set[str]:
     """Zenoh's files in /dev/shm that no process holds open."""
-    held = set()
-    for process in Path("/proc").iterdir():
-        if process.name.isdigit():
-            try:
-                held |= {os.readlink(fd) for fd in (process / "fd").iterdir()}
-            except OSError:
-                continue
+    held = files_held_open()
     return {p.name for p in SHARED_MEMORY_FOLDER.glob("*.zenoh") if str(p) not in held}
 
 
