@@ -24,6 +24,7 @@ saw) starts the fish afresh: a robot's fish actor serves run after run.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import logging
 from collections.abc import Callable, Sequence
@@ -73,6 +74,9 @@ log = logging.getLogger(__name__)
 Rows = NDArray[np.intp]
 
 PERCEPTION, BATCH, DELIVERY, PULSE, WORLD = "perception", "batch", "delivery", "pulse", "world"
+
+ENDED_RUNS_KEPT = 16
+"""Ended runs a fish actor remembers, to refuse their late perceptions."""
 
 MAX_WAITING_DELIVERIES = 10_000
 """Most deliveries one fish keeps waiting for their perception."""
@@ -189,6 +193,8 @@ class Fish:
         self._memory = FishMemory.fresh(settings.params, count)
         self._run = np.full(count, -1, dtype=np.int64)
         self._latest_run = -1
+        self._ended_runs: collections.deque[int] = collections.deque(maxlen=ENDED_RUNS_KEPT)
+        """Runs whose world said they ended, latest last: their late perceptions are stale."""
         self._unannounced: list[tuple[Rows, int]] = []
         """Fish that started a run and have not yet said what they run."""
         self._last_tick = np.full(count, -1, dtype=np.int64)
@@ -344,11 +350,18 @@ class Fish:
         ours = self._run == pulse.run
         if pulse.state == "ended":
             self._watched[ours] = False
+            if pulse.run not in self._ended_runs:
+                self._ended_runs.append(pulse.run)
         else:
             self._last_seen[ours & self._watched & ~self._stopped] = trio.current_time()
 
     def _admit(self, key: str, pending: _Pending, run: int) -> None:
         rows = pending.rows
+        if run in self._ended_runs:
+            # A perception of a run that has ended, come late (two worlds overlapping, or a
+            # slow link): starting that run again would drop the current run's work.
+            self._intake.reject(key, "stale", f"run {run} has ended")
+            return
         fresh = rows[self._run[rows] != run]
         if fresh.size:
             self._start_run(fresh, run)
@@ -378,7 +391,6 @@ class Fish:
         dropped = [p for p in self._pending if np.isin(p.rows, rows).any()]
         for pending in dropped:
             self._busy[pending.rows] = False
-        self._busy[rows] = False
         self._pending = [p for p in self._pending if not np.isin(p.rows, rows).any()]
         for row in rows.tolist():
             self._mail[row] = []

@@ -18,6 +18,7 @@ from fishswarm.behaviors.core import Inbox as CoreInbox
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import (
+    FORMATION_SHAPES,
     Broadcast,
     Command,
     CommandBatch,
@@ -383,3 +384,164 @@ def test_deliveries_are_held_to_what_the_perceptions_announce() -> None:
     assert statistics.deliveries == 2 and statistics.deliveries_missed == 1
     assert statistics.perceptions == 4
     assert statistics.rejected == 3  # the flood's last, the stale delivery, tick 5
+
+
+def _batch(run: int, tick: int, ids: list[int], inbox: list[int]) -> bytes:
+    count = len(ids)
+    return encode(
+        PerceptionBatch(
+            tick, float(tick), np.array(ids), np.full(count, 0.5),
+            np.zeros(count, dtype=np.int64), np.zeros((0, 3)),
+            np.zeros(count, dtype=np.int64), np.zeros((0, 3)), np.array(inbox), run,
+        )
+    )  # fmt: skip
+
+
+def test_a_school_waits_for_the_delivery_of_any_fish_that_announced_one() -> None:
+    """Fish 1 waits for none, fish 2 for one: the batch is answered when fish 2's comes."""
+    params = Scenario(behavior=registered().name).fish_params()
+    settings = FishSettings((1, 2), params, KEYS, school="pair", inbox_timeout=3.0)
+
+    async def main() -> tuple[float, CommandBatch]:
+        bus = MemoryBus()
+        async with (
+            subscription(bus, KEYS.school_commands("pair")) as commands,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(Fish(settings).run, bus)
+            started = trio.current_time()
+            bus.put(KEYS.school_perceptions("pair"), _batch(4, 1, [1, 2], [0, 1]))
+            await trio.sleep(1.0)
+            signal = Delivery(2, 1, "signal", np.array([1]), np.array([0.2, 0.1, 0.0]))
+            bus.put(KEYS.inbox(2), encode(signal))
+            _, payload = await commands.receive()
+            nursery.cancel_scope.cancel()
+        return trio.current_time() - started, decode(payload, CommandBatch)
+
+    waited, answer = run_mock(main)
+    assert waited == 1.0  # not at once, and not at the 3-s timeout
+    assert answer.ids.tolist() == [1, 2]
+    assert answer.led.tolist() == [False, True]  # only fish 2 heard a signal
+
+
+def test_a_schools_watchdog_stops_its_fish_in_id_order_at_tick_zero() -> None:
+    """Fish given as (5, 2), silent after a perception whose delivery never comes: the stop
+    batch names them ascending, as a batch must, and repeats tick 0, not the −1 of no
+    answer yet."""
+    params = Scenario(behavior=registered().name).fish_params()
+    settings = FishSettings(
+        (5, 2), params, KEYS, school="pair", perception_timeout=1.0, inbox_timeout=4.0
+    )
+
+    async def main() -> tuple[float, CommandBatch, FishStatistics]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        async with (
+            subscription(bus, KEYS.school_commands("pair")) as commands,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(fish.run, bus)
+            bus.put(KEYS.school_perceptions("pair"), _batch(4, 0, [2, 5], [1, 1]))
+            _, payload = await commands.receive()
+            at = trio.current_time()
+            nursery.cancel_scope.cancel()
+        return at, decode(payload, CommandBatch), fish.statistics()
+
+    at, stop, statistics = run_mock(main)
+    assert at == 1.0
+    assert stop.tick == 0 and stop.ids.tolist() == [2, 5]
+    assert stop.fins.tolist() == [[0.0] * 4] * 2
+    assert statistics.watchdog_stops == 2
+
+
+def test_a_new_run_forgets_the_formation_an_operator_asked_for() -> None:
+    """Run 7 is told to take a pyramid; run 8 says nothing and takes the configured column.
+    Each formation fish's flag names the shape it holds."""
+    params = Scenario(behavior="formation", formation="column").fish_params()
+    settings = FishSettings((1,), params, KEYS)
+
+    async def main() -> list[int]:
+        bus = MemoryBus()
+        shapes: list[int] = []
+        async with (
+            subscription(bus, KEYS.outbox(1)) as outbox,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(Fish(settings).run, bus)
+            for run, formation in ((7, "column"), (7, "pyramid"), (8, None)):
+                tick = 0 if run == 8 else len(shapes)
+                bus.put(KEYS.perception(1), _perception(1, tick, run=run, formation=formation))
+                flag = decode((await outbox.receive())[1], Broadcast)
+                shapes.append(int(flag.values[0]))
+            nursery.cancel_scope.cancel()
+        return shapes
+
+    column, pyramid = FORMATION_SHAPES.index("column"), FORMATION_SHAPES.index("pyramid")
+    assert run_mock(main) == [column, pyramid, column]
+
+
+def test_a_late_perception_of_an_ended_run_does_not_start_it_again() -> None:
+    """Run 3 ends; run 4 begins and its tick 1 waits for a delivery when a late tick 5 of
+    run 3 comes: that is refused, and run 4 goes on as if it had not come."""
+    params = Scenario(behavior=registered().name).fish_params()
+    settings = FishSettings((1,), params, KEYS, inbox_timeout=3.0)
+
+    async def main() -> tuple[list[tuple[float, int]], FishStatistics]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        got: list[tuple[float, int]] = []
+        async with subscription(bus, KEYS.command(1)) as commands, trio.open_nursery() as nursery:
+            await nursery.start(fish.run, bus)
+            bus.put(KEYS.perception(1), _perception(1, 4, run=3))
+            got.append((trio.current_time(), decode((await commands.receive())[1], Command).tick))
+            bus.put(KEYS.world_pulse, encode(WorldPulse(3, 4, "ended")))
+            bus.put(KEYS.perception(1), _perception(1, 0, run=4))
+            got.append((trio.current_time(), decode((await commands.receive())[1], Command).tick))
+            bus.put(KEYS.perception(1), _perception(1, 1, run=4, inbox_count=1))
+            await trio.sleep(0.5)
+            bus.put(KEYS.perception(1), _perception(1, 5, run=3))
+            await trio.sleep(0.5)
+            signal = Delivery(1, 1, "signal", np.array([2]), np.array([0.2, 0.1, 0.0]))
+            bus.put(KEYS.inbox(1), encode(signal))
+            answer = decode((await commands.receive())[1], Command)
+            got.append((trio.current_time(), answer.tick))
+            assert answer.led  # it heard run 4's signal
+            nursery.cancel_scope.cancel()
+        return got, fish.statistics()
+
+    got, statistics = run_mock(main)
+    assert got == [(0.0, 4), (0.0, 0), (1.0, 1)]
+    assert statistics.rejected == 1 and statistics.runs == 1
+
+
+def test_a_run_after_run_zero_is_counted_as_a_new_run() -> None:
+    settings = FishSettings((1,), Scenario().fish_params(), KEYS)
+
+    async def main() -> FishStatistics:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        async with subscription(bus, KEYS.command(1)) as commands, trio.open_nursery() as nursery:
+            await nursery.start(fish.run, bus)
+            for run in (0, 9):
+                bus.put(KEYS.perception(1), _perception(1, 0, run=run))
+                await commands.receive()
+            nursery.cancel_scope.cancel()
+        return fish.statistics()
+
+    assert run_mock(main).runs == 1
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"fish_ids": ()}, "fish_ids must be distinct and not empty"),
+        ({"fish_ids": (1, 2, 1)}, "fish_ids must be distinct and not empty"),
+        ({"perception_timeout": 0.0}, "perception_timeout must be a positive"),
+        ({"inbox_timeout": 0.0}, "inbox_timeout must be a positive"),
+        ({"inbox_timeout": float("nan")}, "inbox_timeout must be a positive"),
+    ],
+)
+def test_bad_fish_settings_say_what_is_wrong(changes: dict[str, object], message: str) -> None:
+    fields: dict[str, object] = {"fish_ids": (1,), "params": Scenario().fish_params(), **changes}
+    with pytest.raises(ValueError, match=message):
+        FishSettings(**fields)  # type: ignore[arg-type]
