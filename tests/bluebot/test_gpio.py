@@ -101,3 +101,73 @@ def test_leds_follow_commands(factory: object) -> None:
     leds.set_lit(True)
     leds.close()
     assert not pin.state
+
+
+def test_a_fin_told_its_gains_again_and_again_keeps_its_beat(factory: object) -> None:
+    """Gains every 0.1 s, more often than the 0.5-s half period of a 1-Hz fin: each repeat
+    must not push the next switch away, or the fin would stall."""
+    fins = GpioFins(pin_factory=factory)
+    pin = factory.pin(Wiring().fin_pins[0][0])  # type: ignore[attr-defined]
+    try:
+        pin.clear_states()
+        for _ in range(12):
+            fins.set_gains(np.array([1e-9, 0.0, 0.0, 0.0]))  # the lowest gain: 1 Hz
+            time.sleep(0.1)
+    finally:
+        fins.close()
+    pin.assert_states_and_times(
+        [(0.0, False), (0.0, True), (0.5, False), (0.5, True), (0.2, False)]
+    )
+
+
+def test_a_held_up_fin_resumes_its_rhythm_instead_of_catching_up(factory: object) -> None:
+    """The fins' clock jumps 1 s ahead (the timing thread held up for six half periods of a
+    3-Hz fin): the fin switches once and goes on every 1/6 s, not six times at once."""
+    offset = [0.0]
+    fins = GpioFins(pin_factory=factory, clock=lambda: time.monotonic() + offset[0])
+    pin = factory.pin(Wiring().fin_pins[0][0])  # type: ignore[attr-defined]
+    try:
+        pin.clear_states()
+        fins.set_gains(np.array([1.0, 0.0, 0.0, 0.0]))  # 3 Hz: a switch every 1/6 s
+        time.sleep(0.1)
+        offset[0] = 1.0
+        time.sleep(0.3)
+    finally:
+        fins.close()
+    pin.assert_states_and_times(
+        [(0.0, False), (0.0, True), (0.167, False), (0.167, True), (0.067, False)]
+    )
+
+
+def test_the_two_sides_of_a_fins_h_bridge_are_never_on_together(factory: object) -> None:
+    """Every pin change of every fin, in the order made: a side switches on only after the
+    other side of its bridge is off (a short through the bridge otherwise)."""
+    changes: list[tuple[str, bool]] = []
+
+    class LoggedPin(gpiozero_mock.MockPin):  # type: ignore[misc,name-defined]
+        def _change_state(self, value: bool) -> bool:
+            changed = bool(super()._change_state(value))
+            if changed:
+                changes.append((self.info.name, value))
+            return changed
+
+    pairs = Wiring().fin_pins
+    for pair in pairs:
+        for n in pair:
+            factory.pin(n, pin_class=LoggedPin)  # type: ignore[attr-defined]
+    fins = GpioFins(pin_factory=factory)
+    try:
+        fins.set_gains(np.array([1.0, 1.0, 1.0, 1.0]))  # 3, 6, 10 and 10 Hz
+        time.sleep(0.5)
+        fins.set_gains(np.array([0.2, 0.5, 0.0, 0.7]))
+        time.sleep(0.3)
+    finally:
+        fins.close()
+    names = {n: factory.pin(n).info.name for pair in pairs for n in pair}  # type: ignore[attr-defined]
+    high: set[str] = set()
+    for name, value in changes:
+        (high.add if value else high.discard)(name)
+        for first, second in pairs:
+            assert not {names[first], names[second]} <= high, f"both sides on: {name}"
+    switched_on = sum(value for _, value in changes)
+    assert switched_on >= 4 + 5 + 8 + 8  # every fin beat: 0.5 s at 3, 6, 10 and 10 Hz
