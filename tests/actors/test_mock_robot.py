@@ -102,3 +102,34 @@ def test_a_stopped_mock_robot_tells_its_simulated_body_its_fins_are_off() -> Non
     fins.stop()
     assert fins.gains.tolist() == [0.0, 0.0, 0.0, 0.0]
     assert pins.told == ["gains [1.0, 0.0, 0.5, 0.0]", "stop"]
+
+
+def test_the_body_holds_gains_clipped_to_what_fins_can_do() -> None:
+    fins = BodyFins(RecordingFins())
+    fins.set_gains(np.array([1.5, -0.2, 0.5, 0.0]))
+    assert fins.gains.tolist() == [1.0, 0.0, 0.5, 0.0]
+
+
+def test_the_mock_camera_renders_once_per_snapshot_and_again_for_the_next() -> None:
+    """Both sides come from one rendering of a snapshot (the driver reads them one after
+    the other); the next snapshot, with the neighbour moved, gives new images."""
+    from fishswarm.actors.mock_robot import SnapshotCamera
+
+    def pair(tick: int, neighbour_x: float) -> Snapshot:
+        two = np.zeros(2)
+        return Snapshot(
+            tick, float(tick), np.array([3, 4]),
+            np.array([[0.9, 0.9, 0.5], [neighbour_x, 0.9, 0.5]]), np.zeros((2, 3)), two,
+            np.zeros(2, dtype=np.int64), np.zeros(2, dtype=np.int64), np.ones(2),
+        )  # fmt: skip
+
+    clock = Clock()
+    feed = WorldFeed(3, clock=clock)
+    camera = SnapshotCamera(feed)
+    feed.take(pair(0, 1.3))
+    first = camera.capture("right")
+    assert camera.capture("right") is first
+    feed.take(pair(1, 1.6))
+    moved = camera.capture("right")
+    assert moved is not first and not np.array_equal(moved, first)
+    assert camera.capture("right") is moved

@@ -1,0 +1,76 @@
+"""The base station's view of the fleet on the in-memory Bus with trio's MockClock: which
+robots are alive and what they last said, and which did not obey an operator's order."""
+
+from __future__ import annotations
+
+import numpy as np
+import trio
+
+from fishswarm.actors.bus import MemoryBus
+from fishswarm.actors.robot import FleetEntry, survey_fleet, unconfirmed
+from fishswarm.protocols.codec import encode
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.messages import RobotOrder, RobotStatus
+from tests.conftest import run_mock
+
+KEYS = KeySpace()
+
+
+def status(robot_id: int, state: str = "swimming") -> RobotStatus:
+    return RobotStatus(robot_id, "1.0", "dispersion", state, 0.3, np.zeros(4), True, None, 9.0)
+
+
+def test_a_survey_hears_statuses_and_tokens_and_a_token_gone_is_not_alive() -> None:
+    """Robot 1 holds its token and reports at 0.5 s; robot 2's token comes and goes during
+    the 2-s survey; robot 3 reports without a token; a robot token with no id is ignored."""
+
+    async def main() -> list[FleetEntry]:
+        bus = MemoryBus()
+        held = bus.declare_token(KEYS.alive("robot", 1))
+        odd = bus.declare_token(KEYS.alive("robot", "spare"))
+        async with trio.open_nursery() as nursery:
+
+            async def robots() -> None:
+                await trio.sleep(0.5)
+                bus.put(KEYS.robot_status(1), encode(status(1)))
+                bus.put(KEYS.robot_status(3), encode(status(3, "failsafe")))
+                bus.put(KEYS.robot_status(4), b"not a status")
+                coming = bus.declare_token(KEYS.alive("robot", 2))
+                await trio.sleep(0.5)
+                coming.undeclare()
+
+            nursery.start_soon(robots)
+            fleet = await survey_fleet(bus, KEYS, listen=2.0)
+        held.undeclare()
+        odd.undeclare()
+        return fleet
+
+    fleet = run_mock(main)
+    assert [(e.robot_id, e.alive, e.last_seen) for e in fleet] == [
+        (1, True, 1.5),
+        (3, False, 1.5),
+    ]
+    assert fleet[0].status == status(1) and fleet[1].status == status(3, "failsafe")
+
+
+def test_an_order_is_unconfirmed_for_robots_not_heard_from_or_not_obeying() -> None:
+    fleet = [
+        FleetEntry(1, status(1, "stopped"), True, 0.2),
+        FleetEntry(2, status(2, "swimming"), True, 0.2),
+        FleetEntry(3, None, True, None),  # alive, no status yet
+    ]
+    stop_some = RobotOrder("stop", np.array([1, 2, 3, 4]))
+    assert unconfirmed(fleet, stop_some) == {
+        2: "still swimming",
+        3: "not heard from",
+        4: "not heard from",
+    }
+    # An order to every robot is checked against those heard from.
+    assert unconfirmed(fleet, RobotOrder("stop", np.array([], dtype=np.int64))) == {
+        2: "still swimming",
+        3: "not heard from",
+    }
+    assert unconfirmed(fleet, RobotOrder("resume", np.array([], dtype=np.int64))) == {
+        1: "still stopped",
+        3: "not heard from",
+    }
