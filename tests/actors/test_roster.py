@@ -48,3 +48,41 @@ def test_a_fish_in_another_school_or_new_ids_renumber() -> None:
     roster.on_alive(keys.alive("fish", 5, None), True, now=2.0)
     grown = np.array([0, 1, 5])
     assert roster.schools(grown).number.tolist() == [0, 0, -1]
+
+
+def test_a_fish_that_moves_to_another_school_sends_on_its_new_key_only() -> None:
+    keys, roster = KeySpace(), _roster()
+    roster.on_alive(keys.alive("fish", 0, "a"), True, now=0.0)
+    roster.on_alive(keys.alive("fish", 1, "a"), True, now=0.0)
+    school_a, school_b = keys.school_commands("a"), keys.school_commands("b")
+    assert roster.all_on(school_a, np.array([0, 1]))
+    roster.on_alive(keys.alive("fish", 1, "b"), True, now=1.0)
+    assert not roster.all_on(school_a, np.array([0, 1]))
+    assert roster.all_on(school_a, np.array([0])) and roster.all_on(school_b, np.array([1]))
+
+
+def test_channels_are_counted_up_and_down_by_their_tokens() -> None:
+    keys, roster = KeySpace(), _roster()
+    roster.on_alive(keys.alive("channel", "c1"), True, now=0.0)
+    roster.on_alive(keys.alive("channel", "c2"), True, now=0.0)
+    roster.on_alive(keys.alive("channel", "c1"), False, now=1.0)
+    assert roster.channels == 1
+
+
+def test_a_fish_is_lost_once_a_tick_and_again_at_a_later_one() -> None:
+    keys, roster = KeySpace(), _roster()
+    roster.on_alive(keys.alive("fish", 4), True, now=0.0)
+    assert roster.mark_lost(4, 3, "silent") and not roster.mark_lost(4, 3, "silent")
+    assert roster.alive == set()
+    roster.on_alive(keys.alive("fish", 4), True, now=5.0)  # back, and lost again later
+    assert roster.mark_lost(4, 7, "silent")
+    assert [(f.fish_id, f.tick) for f in roster.lost] == [(4, 3), (4, 7)]
+
+
+def test_a_fish_is_ready_once_its_command_subscription_has_had_time_to_spread() -> None:
+    keys, roster = KeySpace(), _roster()
+    roster.on_alive(keys.alive("fish", 2), True, now=10.0)
+    roster.on_alive(keys.alive("fish", 3), True, now=10.5)
+    assert roster.ready(set(), now=10.4, admit_delay=0.5) == []
+    assert roster.ready(set(), now=11.0, admit_delay=0.5) == [2, 3]
+    assert roster.ready({2}, now=11.0, admit_delay=0.5) == [3]

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import trio
 
+from fishswarm import __version__
 from fishswarm.actors.bus import MemoryBus, open_token
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.fish import Fish, FishSettings
@@ -24,6 +25,7 @@ from fishswarm.protocols.messages import (
     CommandBatch,
     ControlRequest,
     Delivery,
+    FishAbout,
     FormationFlag,
     Perception,
     PerceptionBatch,
@@ -785,3 +787,104 @@ def test_the_worlds_statistics_say_where_its_ticks_went(monkeypatch: pytest.Monk
     # Five snapshots, a batch for each of the two schools at four ticks, the last pulse
     # (and any pulses the run lasted long enough for).
     assert statistics.messages_out >= 5 + 2 * 4 + 1
+
+
+async def _answer_after(
+    bus: MemoryBus, keys: Any, fish_id: int, delays: list[float], on_perception: Any = None
+) -> None:
+    """A hand-driven fish on its own keys: it answers its n-th perception after
+    ``delays[n]`` s with its fins off, and no more perceptions once the delays run out."""
+    async with subscription(bus, keys.perception(fish_id)) as perceptions:
+        bus.declare_token(keys.alive("fish", fish_id))
+        for delay in delays:
+            perception = decode((await perceptions.receive())[1], Perception)
+            if on_perception is not None:
+                await on_perception(perception.tick)
+            await trio.sleep(delay)
+            bus.put(keys.command(fish_id), encode(Command(fish_id, perception.tick, np.zeros(4))))
+        await trio.sleep_forever()
+
+
+def test_answer_times_are_taken_over_the_ticks_every_fish_answered() -> None:
+    """Fish 1 answers after 1, 2, 4 and 8 s, then not at all: the fifth tick is its timeout
+    (it is lost) and is left out. Median of (1, 2, 4, 8): 3 s; 90th percentile, between the
+    third and fourth values at 0.7 of the way: 4 + 0.7 × 4 = 6.8 s."""
+    scenario = Scenario(fish=2, duration=5.0, seed=3)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1), command_timeout=10.0))
+        async with trio.open_nursery() as nursery:
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            nursery.start_soon(_answer_after, bus, keys, 1, [1.0, 2.0, 4.0, 8.0])
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return world
+
+    world = run_mock(main)
+    statistics = world.statistics()
+    assert [(f.fish_id, f.tick) for f in world.lost] == [(1, 4)]
+    assert statistics.answer_time_median == pytest.approx(3.0)
+    assert statistics.answer_time_p90 == pytest.approx(6.8)
+
+
+def test_a_fish_that_comes_up_during_tick_zero_joins_at_tick_one() -> None:
+    scenario = Scenario(fish=1, duration=3.0, seed=3)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0))
+        async with trio.open_nursery() as nursery:
+
+            async def late_fish_comes_up(tick: int) -> None:
+                if tick == 0:
+                    fish = Fish(FishSettings((9,), scenario.fish_params(), keys))
+                    await nursery.start(fish.run, bus)
+
+            nursery.start_soon(_answer_after, bus, keys, 0, [0.5] * 3, late_fish_comes_up)
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return world
+
+    world = run_mock(main)
+    assert world.joined == [(9, 1)] and world.lost == []
+
+
+def test_a_fish_vouches_only_for_itself_or_its_school_on_its_own_about_key() -> None:
+    """In a secured run a forged word on fish 0's about key naming fish 0 and 4 must not let
+    fish 4 in (a fish on its own keys speaks for itself alone); a school's word on its first
+    fish's key speaks for the school."""
+    scenario = Scenario(fish=1, duration=4.0, seed=3)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(
+            WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0, vouched_only=True)
+        )
+        observer = Observer(keys)
+        params = scenario.fish_params()
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(Fish(FishSettings((0,), params, keys)).run, bus)
+            nursery.start_soon(world.run, bus)
+            await observer.wait_for_tick(0)
+            bus.declare_token(keys.alive("fish", 4))
+            forged = FishAbout(np.array([0, 4]), params.behavior.name, __version__, 0, "paper")
+            bus.put(keys.about(0), encode(forged))
+            school = FishAbout(np.array([5, 6]), params.behavior.name, __version__, 0, "paper")
+            bus.put(keys.about(5, "s"), encode(school))
+            await observer.wait_for_tick(4)
+            nursery.cancel_scope.cancel()
+        return world
+
+    world = run_mock(main)
+    assert world.vouched == {(0, None), (5, "s"), (6, "s")}
+    assert world.joined == [] and world.roster.alive == {0}
+
+
+def test_a_world_must_pulse() -> None:
+    with pytest.raises(ValueError, match="pulse_period must be positive"):
+        WorldSettings(Scenario(), pulse_period=0.0)
