@@ -126,7 +126,7 @@ class Channel:
         # Only broadcasts of the ticks about to be delivered are kept: anything else is
         # stale or forged, and would pile up.
         if not self._last_tick - 1 <= broadcast.tick <= self._last_tick + 2:
-            self._intake.reject(key, "stale", f"broadcast of tick {broadcast.tick}")
+            self._intake.refuse(key, "stale", f"broadcast of tick {broadcast.tick}")
             return None
         self._outbox[broadcast.tick].setdefault(broadcast.sender_id, []).append(broadcast)
         return broadcast

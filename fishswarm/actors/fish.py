@@ -323,7 +323,7 @@ class Fish:
         places = np.searchsorted(self._sorted_ids, batch.ids)
         places[places >= self._sorted_ids.size] = 0
         if self._sorted_ids.size == 0 or not np.array_equal(self._sorted_ids[places], batch.ids):
-            self._intake.reject(key, "misaddressed", f"fish {batch.ids.tolist()} not all ours")
+            self._intake.refuse(key, "misaddressed", f"fish {batch.ids.tolist()} not all ours")
             return
         pending = _Pending(
             self._order[places].astype(np.intp),
@@ -360,13 +360,13 @@ class Fish:
         if run in self._ended_runs:
             # A perception of a run that has ended, come late (two worlds overlapping, or a
             # slow link): starting that run again would drop the current run's work.
-            self._intake.reject(key, "stale", f"run {run} has ended")
+            self._intake.refuse(key, "stale", f"run {run} has ended")
             return
         fresh = rows[self._run[rows] != run]
         if fresh.size:
             self._start_run(fresh, run)
         if (self._last_tick[rows] >= pending.tick).any() or self._busy[rows].any():
-            self._intake.reject(key, "stale", f"tick {pending.tick} repeated or out of order")
+            self._intake.refuse(key, "stale", f"tick {pending.tick} repeated or out of order")
             return
         self._counts["perceptions"] += rows.size
         self._last_seen[rows] = trio.current_time()
@@ -430,12 +430,12 @@ class Fish:
             return
         last = int(self._last_tick[index])
         if delivery.tick <= last:
-            self._intake.reject(key, "stale", f"delivery for tick {delivery.tick} after {last}")
+            self._intake.refuse(key, "stale", f"delivery for tick {delivery.tick} after {last}")
             return
         # Deliveries wait for their perception; a fish that gets many more than any tick
         # could bring is being flooded: the excess is dropped, not kept.
         if len(self._mail[index]) >= MAX_WAITING_DELIVERIES:
-            self._intake.reject(key, "flood", f"more than {MAX_WAITING_DELIVERIES} waiting")
+            self._intake.refuse(key, "flood", f"more than {MAX_WAITING_DELIVERIES} waiting")
             return
         self._mail[index].append(delivery)
 

@@ -52,10 +52,15 @@ class Intake:
         """
         message = self.decode(key, payload, expected)
         if message is not None and getattr(message, field) != owner:
-            self.accepted -= 1
-            self.reject(key, "misaddressed", f"{field} {getattr(message, field)}, key of {owner}")
+            self.refuse(key, "misaddressed", f"{field} {getattr(message, field)}, key of {owner}")
             return None
         return message
+
+    def refuse(self, key: str, kind: str, reason: str) -> None:
+        """Reject a message that decoded (a valid message, but stale, misaddressed, one too
+        many): it no longer counts as accepted."""
+        self.accepted -= 1
+        self.reject(key, kind, reason)
 
     def reject(self, key: str, kind: str, reason: str) -> None:
         """Count a rejected message; log the first of each (sender key, kind), for up to

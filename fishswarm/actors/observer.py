@@ -219,8 +219,7 @@ class Observer:
         if snapshot is None:
             return
         if snapshot.tick <= self._last_tick:
-            self._intake.accepted -= 1
-            self._intake.reject(key, "stale", f"snapshot of tick {snapshot.tick} repeated")
+            self._intake.refuse(key, "stale", f"snapshot of tick {snapshot.tick} repeated")
             return
         measure = (snapshot.position, snapshot.neighbors_seen, snapshot.effort)
         if snapshot.ids.size >= OFFLOAD_FISH:

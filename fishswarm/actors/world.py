@@ -644,7 +644,7 @@ class World:
         if batch is None:
             return
         if not self.roster.all_on(key, batch.ids):
-            self.intake.reject(
+            self.intake.refuse(
                 key,
                 "misaddressed",
                 f"fish {ids_text(batch.ids.tolist())} are not all of this school",
@@ -663,7 +663,7 @@ class World:
             return
         rows = current.rows_awaited(ids) if tick == current.tick else None
         if rows is None:
-            self.intake.reject(key, "stale", f"commands for tick {tick} at {current.tick}")
+            self.intake.refuse(key, "stale", f"commands for tick {tick} at {current.tick}")
             return
         current.take(rows, fins, broadcasts)
 

@@ -51,6 +51,7 @@ def test_every_task_waiting_for_a_tick_wakes() -> None:
                 bus.put(KEYS.snapshot, _snapshot(tick))
             await trio.sleep(1.0)
             bus.put(KEYS.snapshot, _snapshot(1))  # stale: rejected
+            bus.put(KEYS.snapshot, _snapshot(3))  # the last tick again: rejected too
             await trio.sleep(1.0)
             nursery.cancel_scope.cancel()
         return woke, observer
@@ -59,7 +60,7 @@ def test_every_task_waiting_for_a_tick_wakes() -> None:
     assert sorted(woke) == [("first", 3.0), ("second", 3.0), ("third", 4.0)]
     assert [p.tick for p in observer.history] == [0, 1, 2, 3]
     assert observer.history[-1].metrics["pairwise_distance"] == 1.0
-    assert observer.statistics().rejected == 1 and observer.statistics().snapshots == 4
+    assert observer.statistics().rejected == 2 and observer.statistics().snapshots == 4
 
 
 def test_the_end_of_a_run_waits_for_snapshots_that_come_after_the_world_has_left() -> None:
@@ -78,8 +79,11 @@ def test_the_end_of_a_run_waits_for_snapshots_that_come_after_the_world_has_left
             await nursery.start(observer.run, bus)
             nursery.start_soon(wait_for_the_end)
             world = bus.declare_token(KEYS.alive("world", 0))
+            fish = bus.declare_token(KEYS.alive("fish", 0))
             bus.put(KEYS.snapshot, _snapshot(0))
-            await trio.sleep(1.0)
+            await trio.sleep(0.5)
+            fish.undeclare()  # a fish leaving is not the world's end
+            await trio.sleep(2.5)
             world.undeclare()
             await trio.sleep(0.5)
             bus.put(KEYS.snapshot, _snapshot(1))  # late, within the settle time
@@ -91,7 +95,7 @@ def test_the_end_of_a_run_waits_for_snapshots_that_come_after_the_world_has_left
 
     ended, ticks = run_mock(main)
     assert ticks == [0, 1, 2]
-    assert ended == 3.25  # quiet for 1 s after the last snapshot, at 2.25 s
+    assert ended == 5.25  # quiet for 1 s after the last snapshot, at 4.25 s
 
 
 def test_an_observer_hands_each_scene_to_a_view_and_records_it(tmp_path: Path) -> None:
