@@ -47,3 +47,16 @@ def test_a_fish_that_does_not_swim_forward_leaves_no_wake_and_depth_counts() -> 
     assert wake_shelter(_fish((1.0, 1.0, 0.5, 0.0, 0.1)), length=0.6, width=0.2).tolist() == [0]
     with pytest.raises(ValueError, match="positive length and width"):
         wake_shelter(swimming, length=0.0, width=0.2)
+
+
+def test_a_fish_at_rest_casts_no_wake() -> None:
+    # Fish 1 sits 0.2 m straight behind fish 0, which is not moving through the water.
+    resting = _fish((1.0, 1.0, 0.5, 0.0, 0.0), (0.8, 1.0, 0.5, 0.0, 0.1))
+    np.testing.assert_array_equal(wake_shelter(resting, length=0.6, width=0.2), [0.0, 0.0])
+
+
+def test_a_fish_abreast_of_another_is_not_in_its_wake() -> None:
+    # Fish 1 is level with fish 0, 0.1 m to its side: 0 m behind it, so outside the wake
+    # (were it inside, it would get 1 − 0.1/0.2 = 0.5). Fish 2 sits on fish 0 itself.
+    abreast = _fish((1.0, 1.0, 0.5, 0.0, 0.1), (1.0, 1.1, 0.5, 0.0, 0.1), (1.0, 1.0, 0.5, 0.0, 0.1))
+    np.testing.assert_array_equal(wake_shelter(abreast, length=0.6, width=0.2), [0.0, 0.0, 0.0])
