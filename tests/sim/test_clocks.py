@@ -46,6 +46,12 @@ def test_periods_are_clipped_to_half_and_one_and_a_half_periods() -> None:
     assert draw_period(1.0, 0.0, rng) == 1.0
 
 
+def test_a_clock_without_jitter_draws_nothing_from_its_stream() -> None:
+    rng, fresh = stream(0, Stream.JITTER, 0), stream(0, Stream.JITTER, 0)
+    assert [draw_period(0.5, 0.0, rng) for _ in range(3)] == [0.5, 0.5, 0.5]
+    assert rng.bit_generator.state == fresh.bit_generator.state
+
+
 def test_snapshots_win_ties_and_decisions_go_in_id_order() -> None:
     schedule = _clock(Scenario(time_mode="jitter"))
     for fish_id in (7, 2, 5):

@@ -92,11 +92,32 @@ def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
         ({"formation_heading_deg": math.nan}, "formation_heading_deg must be a finite angle"),
         ({"spacing": math.inf}, "spacing must be positive metres"),
         ({"tolerance": 0.0}, "tolerance must be positive metres"),
+        ({"caudal_cap": 1.5}, r"caudal_cap must be in \(0, 1\], got 1.5"),
+        ({"formation_lead": 60.0}, r"formation_lead must be a time in \[0, 60\) s, got 60.0"),
+        ({"switch_at": 15.5}, r"switch_at must be a time within the run, \[0, duration\] s"),
+        (
+            {"behavior": "orbit", "orbit_radius": 0.89},
+            r"orbit_radius \(0.89 m\) does not fit in the tank .*keep it below 0.89 m",
+        ),
     ],
 )
 def test_bad_settings_say_what_is_wrong(changes: dict[str, object], message: str) -> None:
     with pytest.raises(ConfigError, match=message):
         Scenario().replace(**changes)
+
+
+def test_settings_at_the_edge_of_their_range_are_allowed() -> None:
+    # The longest period, a run of one period, a full caudal fin, a switch at the very end.
+    assert Scenario(duration=60.0, control_period=60.0).ticks == 1
+    assert Scenario(duration=0.5, control_period=0.5).check_duration().ticks == 1
+    assert Scenario(caudal_cap=1.0).caudal_cap == 1.0
+    assert Scenario(duration=15.0, switch_at=15.0).switch_at == 15.0
+    assert Scenario(formation_lead=0.0).formation_lead == 0.0
+    # A period that divides the duration up to rounding (0.3 / 0.1 is 2.9999999999999996)
+    # gives whole periods; half a millisecond over ten periods does not.
+    assert Scenario(duration=0.3, control_period=0.1).check_duration().ticks == 3
+    with pytest.raises(ConfigError, match=r"duration \(10.0005 s\) .* e.g. 10 or 11 s"):
+        Scenario(duration=10.0005).check_duration()
 
 
 @pytest.mark.parametrize(
