@@ -55,6 +55,22 @@ def test_ideal_fish_settle_near_sigma_and_come_to_rest(behavior: str) -> None:
     assert speed[0, -1] < 0.1
 
 
+def test_spacing_is_averaged_over_the_fish_that_have_schoolmates_in_range() -> None:
+    # Fish 0 and 1 are 10 apart; fish 2 is 190 from the nearer of them, beyond the range of
+    # 100: it has no spacing and does not count, so the school's is 10 (not 20/3). A fish
+    # moves 5 in the second step: mean speed 5/3.
+    still = np.array([[0.0, 0.0], [10.0, 0.0], [200.0, 0.0]])
+    moved = still + np.array([[0.0, 0.0], [0.0, 0.0], [3.0, 4.0]])
+    tracks = np.stack([still, still, moved])[None]
+    spacing, speed = spacing_and_speed(tracks, arena=ARENA)
+    np.testing.assert_allclose(spacing, [[10.0, 10.0, 10.0]])
+    np.testing.assert_allclose(speed, [[0.0, 5 / 3]])
+    # Nobody in range of anybody: no spacing at all.
+    alone = np.array([[0.0, 0.0], [150.0, 0.0], [300.0, 0.0]])
+    spacing, _ = spacing_and_speed(np.stack([alone, alone])[None], arena=ARENA)
+    assert np.isnan(spacing).all()
+
+
 def test_models_in_a_batch_run_as_if_alone() -> None:
     rng = np.random.default_rng(1)
     weights = rng.normal(0, 1, (4, 21))

@@ -12,6 +12,7 @@ import pytest
 from fishswarm.learning.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from fishswarm.learning.coevolution import (
     FLAT_GENERATIONS,
+    TOURNAMENT_GENERATIONS,
     Coevolution,
     LearningSettings,
     fitness,
@@ -39,6 +40,16 @@ def test_fitness_on_a_hand_made_example() -> None:
     np.testing.assert_allclose(
         result.models_soft, [(0.6 + 0.1 + 0.9 + 0.9) / 4, (0.2 + 0.3 + 0.1 + 0.6) / 4]
     )
+
+
+def test_a_judgement_of_exactly_one_half_calls_no_fish_genuine() -> None:
+    # A classifier with all weights zero answers sigmoid(0) = 0.5 for every fish: it has
+    # called none genuine, so it fools no model and finds no ideal fish (sensitivity 0,
+    # specificity 1).
+    result = fitness(np.full((1, 3, 2), 0.5))
+    np.testing.assert_array_equal(result.models, [0.0, 0.0])
+    np.testing.assert_array_equal(result.classifiers, [0.5])
+    np.testing.assert_array_equal(result.models_soft, [0.5, 0.5])
 
 
 def test_bounded_radii_fold_back_into_range() -> None:
@@ -106,6 +117,9 @@ def test_bad_settings_are_explained() -> None:
         LearningSettings(behavior="schooling")
     with pytest.raises(ValueError, match=r"virulence must be in \(0, 1\], got 0"):
         LearningSettings(virulence=0.0)
+    for models, classifiers in ((1, 2), (2, 1)):
+        with pytest.raises(ValueError, match="models and classifiers need populations of at"):
+            LearningSettings(models=models, classifiers=classifiers)
     for weight in ("nan", "inf", "-1"):
         with pytest.raises(
             ValueError, match=f"soft_weight must be a finite number, 0 or more, got {float(weight)}"
@@ -176,14 +190,17 @@ def test_a_loaded_checkpoint_is_the_run_as_it_was_saved(tmp_path: Path) -> None:
 
 
 def _rewritten(path: Path, change: str) -> None:
-    """The checkpoint at ``path`` with its metadata changed: ``format`` or ``generation``."""
+    """The checkpoint at ``path`` with its metadata changed (``format`` or ``generation``)
+    or its classifiers' told scores one generation short (``told_classifiers``)."""
     with np.load(path, allow_pickle=False) as data:
         arrays = {name: data[name] for name in data.files}
     meta = json.loads(str(arrays["meta"]))
     if change == "format":
         meta["format"] = "somebody-elses-checkpoint/1"
-    else:
+    elif change == "generation":
         meta["generation"] += 1
+    else:
+        arrays[change] = arrays[change][:-1]
     arrays["meta"] = np.array(json.dumps(meta))
     np.savez(path, **arrays)
 
@@ -193,6 +210,7 @@ def _rewritten(path: Path, change: str) -> None:
     [
         ("format", "is not a fishswarm learning checkpoint"),
         ("generation", "the told scores do not cover every generation"),
+        ("told_classifiers", "the told scores do not cover every generation"),
     ],
 )
 def test_a_checkpoint_that_is_not_ours_or_does_not_add_up_is_refused(
@@ -266,6 +284,29 @@ def test_the_master_tournament_keeps_the_champion_that_fooled_most() -> None:
     np.testing.assert_array_equal(run.tournament_model(), rest)
     run.model_champions = [drift, rest]
     np.testing.assert_array_equal(run.tournament_model(), rest)
+
+    # The tournament takes the last TOURNAMENT_GENERATIONS champions exactly: the resting
+    # one is in when it is the oldest of them, out when one more generation has passed.
+    run.model_champions = [rest] + [drift] * (TOURNAMENT_GENERATIONS - 1)
+    run.classifier_champions = [judge] * TOURNAMENT_GENERATIONS
+    np.testing.assert_array_equal(run.tournament_model(), rest)
+    run.model_champions = [rest] + [drift] * TOURNAMENT_GENERATIONS
+    run.classifier_champions = [judge] * (TOURNAMENT_GENERATIONS + 1)
+    np.testing.assert_array_equal(run.tournament_model(), drift)
+
+
+def test_each_generations_champions_are_its_best_scoring_model_and_classifier() -> None:
+    run = _run(LearningSettings(models=6, classifiers=5, seed=3, hall_of_fame=2), 2)
+    # The last generation's population is at hand: its champions are its best rows (its
+    # scores differ: no tie to hide a worst-first pick).
+    assert np.ptp(run.told_models[-1]) > 0 and np.ptp(run.told_classifiers[-1]) > 0
+    np.testing.assert_array_equal(
+        run.model_champions[-1], run.population[np.argmax(run.told_models[-1])]
+    )
+    np.testing.assert_array_equal(
+        run.classifier_champions[-1],
+        run.classifier_population[np.argmax(run.told_classifiers[-1])],
+    )
 
 
 def test_models_start_again_after_ten_flat_generations_and_a_replay_does_too() -> None:

@@ -41,6 +41,21 @@ def test_speed_and_the_nearest_schoolmate_by_hand() -> None:
     )
 
 
+def test_a_turn_across_the_back_of_the_compass_is_the_short_way_round() -> None:
+    # Fish 0 swims 5 at heading 179°, then 5 at −179°: a turn of 2°, not 358°. Fish 1 stays.
+    def five_at(degrees: float) -> np.ndarray:
+        return np.array(
+            [[5 * math.cos(math.radians(degrees)), 5 * math.sin(math.radians(degrees))], [0.0, 0.0]]
+        )
+
+    start = np.array([[100.0, 100.0], [50.0, 50.0]])
+    middle = start + five_at(179.0)
+    end = middle + five_at(-179.0)
+    samples = samples_from(np.stack([start, middle, end])[None], ("angular-speed",), arena=Arena())
+    # No turn before the first step; then 2° over π (180°).
+    np.testing.assert_allclose(samples.fixed[:, :, 0], [[0.0, 2 / 180], [0.0, 0.0]], atol=1e-12)
+
+
 def test_the_nearest_distance_is_capped_at_the_communication_range() -> None:
     arena = Arena()
     far = _line_of_three() * 100.0
