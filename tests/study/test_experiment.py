@@ -92,6 +92,10 @@ def test_unknown_experiment_lists_the_known_ones() -> None:
             "blind_width",
         ),
         ('[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\nspeed = 3\n', "unknown"),
+        (
+            '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\nseeds = 0\n',
+            "experiment x: seeds must be at least 1",
+        ),
         ("[experiment\n", "not valid TOML"),
     ],
 )
@@ -299,6 +303,7 @@ def test_groups_compare_the_sweep_under_named_settings(tmp_path: Path) -> None:
     [
         ('"a" = 3', r"must name tables of scenario settings"),
         ('"a" = { flags = "maybe" }', r"group 'a': flags and rotate_effort must be true or false"),
+        ('"" = { flags = true }', "experiment bad: groups need distinct, non-empty names"),
     ],
 )
 def test_bad_groups_are_named(tmp_path: Path, groups: str, message: str) -> None:
