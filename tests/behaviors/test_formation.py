@@ -10,8 +10,10 @@ import pytest
 
 from fishswarm.behaviors.core import FishMemory, Inbox, Perception, decide, inbox_of, take_rows
 from fishswarm.behaviors.formation import (
+    SWAP_TIMEOUT,
     FormationMemory,
     FormationParams,
+    formation_params,
     fresh_formation_memory,
     lead_aim,
     steer_formation,
@@ -565,3 +567,66 @@ def test_a_seen_fish_where_a_flag_shows_its_sender_is_that_sender(
     _, real, holding = _with_senders(neighbors, mask, inbox, _heard_flags(inbox, params), params)
     assert real.tolist() == [[True, True, not merged]]
     assert holding.tolist() == [[merged, False, not merged]]
+
+
+def test_flags_naming_no_slot_or_one_past_the_map_claim_nothing() -> None:
+    """A column of 3 (slots 1.0, 0.7 and 0.4 m ahead of the fish, behind a leader flagged 1 m
+    ahead): flags, joined, for slot −1 and slot 40 (a larger map's, or forged) from fish
+    far to the side must neither claim a slot nor fail; the fish takes the nearest free
+    slot, 2, as with the leader's flag alone."""
+    params = FormationParams("column", count=3, spacing=0.3)
+    leader = (FLAG, FormationFlag(2, 0, True, 0, 0, 1).values(), np.array([1.0, 0.0, 0.0]))
+    odd = [
+        (FLAG, FormationFlag(2, -1, True, 1, 0, 1).values(), np.array([0.0, 3.0, 0.0])),
+        (FLAG, FormationFlag(2, 40, True, 1, 0, 1).values(), np.array([0.0, -3.0, 0.0])),
+    ]
+    seen = _perception((1.0, 0.0, 0.0), (0.0, 3.0, 0.0), (0.0, -3.0, 0.0))
+    alone, _ = steer_formation(
+        fresh_formation_memory(1), _perception((1.0, 0.0, 0.0)), inbox_of([[leader]]),
+        params=params,
+    )  # fmt: skip
+    memory, steering = steer_formation(
+        fresh_formation_memory(1), seen, inbox_of([[leader, *odd]]), params=params
+    )
+    assert alone.place.tolist() == memory.place.tolist() == [2]
+    np.testing.assert_allclose(steering.target, [[0.4, 0.0, 0.0]], atol=1e-12)
+
+
+def test_a_passer_just_beyond_a_spacing_takes_the_lead() -> None:
+    # 0.31 m ahead of the leader, a spacing (0.3 m) and a little: it leads now, and the old
+    # leader takes slot 1, 0.3 m behind it: 0.01 m ahead of itself.
+    params = FormationParams("column", count=3, spacing=0.3)
+    memory, steering = steer_formation(
+        _led(0), _perception((0.31, 0.0, 0.0)), Inbox.empty(1), params=params
+    )
+    assert memory.place.tolist() == [1]
+    np.testing.assert_allclose(steering.target, [[0.01, 0.0, 0.0]], atol=1e-12)
+
+
+def test_a_swap_not_done_in_exactly_its_timeout_is_given_up() -> None:
+    params = FormationParams("column", count=3, spacing=0.3, rotate_effort=True, effort_margin=40)
+    here = _tired(_perception((-0.3, 0.0, 0.0)), 100.0)
+    rested = inbox_of([[(FLAG, _flag(1, True, effort=10), np.array([-0.3, 0.0, 0.0]))]])
+    since = 100.0 - SWAP_TIMEOUT
+    moving = dataclasses.replace(_holding(1, swap_to=2, since=since), joined=np.array([False]))
+    memory, _ = steer_formation(moving, here, rested, params=params)
+    assert memory.swap_to.tolist() == [-1]
+
+
+def test_no_lead_without_time_between_the_decisions() -> None:
+    # The same place seen twice at one time: no velocity can be told, so the fish aims at
+    # the place itself (not at a place pushed to infinity by a division by zero).
+    target = np.array([[0.5, 0.1, 0.0]])
+    aim, _ = lead_aim(
+        target, heading=np.array([0.0]), previous=np.array([[0.6, 0.1, 0.0]]),
+        elapsed=np.array([0.0]), same_place=np.array([True]), lead=2.0,
+    )  # fmt: skip
+    np.testing.assert_array_equal(aim, target)
+
+
+def test_formation_settings_take_a_quarter_spacing_tolerance_and_refuse_a_zero_one() -> None:
+    params = formation_params({"formation": "column", "spacing": 0.4, "fish": 5})
+    assert params.tolerance == pytest.approx(0.1) and params.count == 5
+    assert formation_params({"tolerance": 0.05}).tolerance == 0.05
+    with pytest.raises(ValueError, match="spacing and tolerance must be positive"):
+        FormationParams("column", count=3, tolerance=0.0)
