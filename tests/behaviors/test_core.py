@@ -346,3 +346,48 @@ def test_a_fish_counts_the_effort_of_the_fins_it_commanded() -> None:
     spent = float(effort_rate(first.fins)[0]) * 0.5
     assert spent > 1 and memory.effort.tolist() == [pytest.approx(spent, rel=1e-15)]
     assert FormationFlag.from_values(second.outbox.values[0]).effort == round(spent)
+
+
+def test_a_second_pid_decision_at_the_same_time_counts_one_nominal_period() -> None:
+    """Elapsed 0 (a repeated time, a clock that stood still) is no period to integrate
+    over: the loops take the nominal 0.5 s, as at a first decision — the same fins as a
+    decision exactly one period later."""
+    params = fish_params(
+        {"behavior": "aggregation", "controller": "pid", "tank": TANK, "control_period": 0.5}
+    )
+    ahead = Perception(
+        np.array([2.0]), np.array([0.5]), np.array([[[1.0, 0.2, 0.1]]]), np.ones((1, 1), bool),
+        np.zeros((1, 0, 3)), np.zeros((1, 0), bool),
+    )  # fmt: skip
+    first, _ = decide(FishMemory.fresh(params, 1), ahead, Inbox.empty(1), params=params)
+    again, repeated = decide(first, ahead, Inbox.empty(1), params=params)
+    later = dataclasses.replace(ahead, time=np.array([2.5]))
+    _, on_time = decide(first, later, Inbox.empty(1), params=params)
+    assert np.isfinite(repeated.fins).all()
+    np.testing.assert_array_equal(repeated.fins, on_time.fins)
+    assert again.pid.integral[0, 0] == pytest.approx(first.pid.previous_error[0, 0] * 1.0)
+
+
+def test_a_fish_needs_a_positive_control_period() -> None:
+    with pytest.raises(ValueError, match="control_period must be positive"):
+        FishParams(behavior_named("orbit"), None, control_period=0.0)
+
+
+def test_inbox_of_is_as_wide_as_the_fish_that_heard_most() -> None:
+    heard = (1, np.array([4]), np.array([0.1, 0.2, 0.3]))
+    inbox = inbox_of([[], [heard, heard]])
+    assert inbox.mask.tolist() == [[False, False], [True, True]]
+
+
+def test_a_replica_moves_as_far_as_its_period_lets_it(tmp_path: Path) -> None:
+    # The replica of test_replica_motion_by_hand moves 9 units/s straight ahead: 0.0534 m in
+    # a 1-s period, half that in 0.5 s; the fish's control period comes from the scenario.
+    weights = np.zeros(21)
+    weights[18:21] = [50.0, 0.0, 50.0]
+    neighbors, mask = np.array([[[0.3, 0.1, 0.0]]]), np.ones((1, 1), bool)
+    half = replica_motion(neighbors, mask, weights=weights, period=0.5)
+    np.testing.assert_allclose(half, [[4.5 * STUDY_SCALE, 0.0]], atol=1e-15)
+    path = tmp_path / "replica.npz"
+    np.savez(path, weights=weights, settings=np.array('{"arena": {}}'))
+    settings = {"behavior": "replica", "model": str(path), "tank": TANK, "control_period": 0.5}
+    assert fish_params(settings).steering.period == 0.5
