@@ -84,3 +84,9 @@ def test_study_codes_homing_turns_a_target_dead_ahead_or_none_to_the_right_pecto
             right_when_ahead=right_when_ahead,
         )
         np.testing.assert_allclose(fins, [[0.0, 0.0, 0.85, 0.0], [0.0, 0.0, 0.0, 0.85]])
+
+
+@pytest.mark.parametrize("period", [0.0, np.array([0.5, 0.0])])
+def test_pid_refuses_a_period_that_is_no_time(period: float) -> None:
+    with pytest.raises(ValueError, match="period must be positive"):
+        pid(np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), state=PidState.zeros(2), period=period)

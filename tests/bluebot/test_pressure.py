@@ -251,3 +251,10 @@ def test_a_damaged_kept_surface_is_taken_anew(tmp_path: Path, content: str) -> N
     started = PressureDepth(surface_then(0.5), density=998.0, surface_file=kept, clock=lambda: 10.0)
     assert not started.resumed
     assert json.loads(kept.read_text()) == {"pressure": started.surface_pressure, "time": 10.0}
+
+
+def test_the_surface_needs_at_least_one_reading() -> None:
+    with pytest.raises(ValueError, match="surface_samples must be at least 1"):
+        PressureDepth(StepPressure([100_000.0]), surface_samples=0)
+    one = PressureDepth(StepPressure([100_000.0, 100_000.0 + RHO_G]), surface_samples=1)
+    assert one.surface_pressure == 100_000.0
