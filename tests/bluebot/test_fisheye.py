@@ -69,3 +69,9 @@ def test_the_cameras_look_sideways_ten_degrees_ahead_with_rows_pointing_down() -
 def test_a_calibration_that_never_reaches_the_lens_edge_is_refused() -> None:
     with pytest.raises(ValueError, match="half angle"):
         Fisheye(FisheyeCalibration(polynomial=(-550.0, 0.0, 0.0), half_angle_deg=100.0))
+
+
+@pytest.mark.parametrize(("width", "height"), [(0, 192), (256, 0), (-4, 192)])
+def test_an_image_with_no_pixels_is_refused(width: int, height: int) -> None:
+    with pytest.raises(ValueError, match="image size must be positive"):
+        Fisheye(width=width, height=height)

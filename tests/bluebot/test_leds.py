@@ -138,3 +138,48 @@ def test_a_frame_of_glare_or_noise_is_refused_quickly_not_paired() -> None:
         )
     with pytest.raises(ValueError, match="max_blobs must be at least 2"):
         LedVision(max_blobs=1)
+
+
+def test_rays_two_degrees_off_a_vertical_line_are_not_a_pair() -> None:
+    # The tolerance is 1.5° seen from the camera: 0.035 m aside at 1 m is 2.0°.
+    origin = np.zeros(3)
+    lower, upper = pair_at(np.array([1.0, 0.0, 0.0]))
+    for aside, pairs in ((0.035, 0), (0.02, 1)):
+        points = [lower, upper + np.array([0.0, aside, 0.0])]
+        rays, fluxes = rays_to(origin, points), lit(origin, points)
+        found = pair_leds(origin, rays, fluxes, depth=1.0, vision=VISION)
+        assert found.shape == (pairs, 3), aside
+
+
+@pytest.mark.parametrize(("ratio", "found"), [(2.0, 1), (1.25, 1), (1.15, 0), (3.6, 0)])
+def test_a_robot_straight_above_is_its_merged_pair_and_its_front_led(
+    ratio: float, found: int
+) -> None:
+    """Seen from 0.5 m straight below, a robot's two LEDs fall on one ray (one blob about
+    twice as bright as its front LED, one spacing aside): found where the merged blob is,
+    when the two blobs' brightness ratio lies in 1.2–3.5."""
+    origin = np.zeros(3)
+    upper = np.array([0.0, 0.0, -0.5])
+    front = upper + np.array([LED_SPACING, 0.0, 0.0])
+    rays = rays_to(origin, [upper, front])
+    single = VISION.flux_range / 0.5
+    got = pair_leds(origin, rays, np.array([ratio * single, single]), depth=1.0, vision=VISION)
+    assert got.shape == (found, 3)
+    if found:
+        # The range is one spacing over the angle between the rays: a little over 0.5 m.
+        angle = np.arctan(LED_SPACING / 0.5)
+        np.testing.assert_allclose(got[0], [0.0, 0.0, -LED_SPACING / angle], atol=1e-9)
+
+
+def test_an_image_with_one_spot_more_than_max_blobs_is_refused() -> None:
+    vision = LedVision(max_blobs=4)
+    dark = np.zeros((64, 64, 3), dtype=np.uint8)
+    spots = dark.copy()
+    for n in range(4):
+        spots[10 + 10 * n, 10, 2] = 200
+    small = Fisheye(width=64, height=64)
+    found = perceive_leds({"left": spots, "right": dark}, depth=0.5, fisheye=small, vision=vision)
+    assert found.shape[1] == 3
+    spots[50, 50, 2] = 200
+    with pytest.raises(FrameUnusable, match="has 5 lit spots, more than LEDs make"):
+        perceive_leds({"left": spots, "right": dark}, depth=0.5, fisheye=small, vision=vision)
