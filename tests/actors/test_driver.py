@@ -527,9 +527,16 @@ def test_a_failing_sensor_skips_its_periods_and_the_robot_senses_on(
     assert "sensing again after 1 periods" in messages[3]
 
 
-def test_a_defect_in_a_sensor_port_still_ends_the_run(factory: object) -> None:
+@pytest.mark.parametrize(
+    "defect",
+    [
+        TypeError("read_depth() got an unexpected argument"),
+        NotImplementedError("a port left unfinished"),  # a RuntimeError, yet a defect
+    ],
+)
+def test_a_defect_in_a_sensor_port_still_ends_the_run(factory: object, defect: Exception) -> None:
     # Not a sensor's failure but a programming error: it must not be skipped in silence.
-    depth = FlakyDepth({2: TypeError("read_depth() got an unexpected argument")})
+    depth = FlakyDepth({2: defect})
     hardware = Hardware(
         GpioFins(pin_factory=factory), GpioLeds(pin_factory=factory), SceneCamera(), depth
     )
@@ -540,7 +547,7 @@ def test_a_defect_in_a_sensor_port_still_ends_the_run(factory: object) -> None:
             await nursery.start(driver.run, MemoryBus(), MemoryBus())
             await trio.sleep(3.0)
 
-    with pytest.RaisesGroup(TypeError, flatten_subgroups=True, allow_unwrapped=True):
+    with pytest.RaisesGroup(type(defect), flatten_subgroups=True, allow_unwrapped=True):
         run_mock(main)
     hardware.close()
     assert depth.reads == 2
@@ -551,3 +558,31 @@ def test_settings_that_would_stop_the_fins_between_commands_are_refused() -> Non
         DriverSettings(1, "dispersion", control_period=1.0, command_timeout=0.5)
     with pytest.raises(ValueError, match="robot_id must be a fish id"):
         DriverSettings(-1, "dispersion")
+    with pytest.raises(ValueError, match="must exceed the control period"):
+        DriverSettings(1, "dispersion", control_period=1.0, command_timeout=1.0)
+    for name in ("control_period", "command_timeout", "link_timeout", "status_period"):
+        with pytest.raises(ValueError, match=f"{name} must be a positive number of seconds"):
+            DriverSettings(1, "dispersion", **{name: 0.0})  # type: ignore[arg-type]
+    assert DriverSettings(0, "dispersion").robot_id == 0  # fish ids start at 0
+
+
+def test_a_short_command_timeout_is_watched_closely(hardware: Hardware) -> None:
+    """The guard looks four times a timeout (at most every 0.1 s): with 0.15 s, the fins
+    stop within 0.0375 s of it, not at the next tenth of a second."""
+    settings = DriverSettings(
+        ROBOT, "dispersion", KEYS, control_period=0.1, command_timeout=0.15, link_timeout=3.0
+    )
+
+    async def main() -> float:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = Driver(settings, hardware, link_up=lambda: True, run_blocking=inline)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(driver.run, local, remote)
+            local.put(KEYS.command(ROBOT), command([1.0, 0.0, 0.0, 0.0]))
+            start = trio.current_time()
+            while driver.state != "failsafe":
+                await trio.sleep(0.001)
+            nursery.cancel_scope.cancel()
+        return trio.current_time() - start
+
+    assert 0.15 <= run_mock(main) <= 0.19

@@ -177,3 +177,11 @@ def test_no_fish_at_all_get_no_motion() -> None:
     assert lennard_jones(
         np.zeros((0, 4, 3)), np.zeros((0, 4), bool), target_distance=0.26
     ).shape == (0, 3)
+
+
+@pytest.mark.parametrize("distance", [0.0, -0.3, float("nan")])
+def test_a_target_distance_that_is_no_length_is_refused(distance: float) -> None:
+    from fishswarm.behaviors.lennard_jones import LennardJonesParams
+
+    with pytest.raises(ValueError, match="target_distance must be positive"):
+        LennardJonesParams(target_distance=distance)

@@ -132,3 +132,38 @@ def test_milling_fish_stay_around_the_centre_with_few_collisions() -> None:
     gaps = np.linalg.norm(position[45:, :, None] - position[45:, None], axis=-1)
     contacts = (np.triu(gaps < 0.05, k=1)).sum(axis=(1, 2))
     assert contacts.mean() < 1.0
+
+
+def test_a_fish_that_does_not_see_its_centre_swims_straight_on_at_its_depth() -> None:
+    # Whatever a padded centre row holds, unseen is straight ahead, level: (R, 0, 0).
+    centre = np.array([[0.3, -0.2, 0.4]])
+    target = orbit(centre, np.array([False]), radius=0.5)
+    np.testing.assert_array_equal(target, [[0.5, 0.0, 0.0]])
+
+
+def test_a_push_off_a_neighbour_longer_than_r_is_cut_to_r() -> None:
+    """The push off the close neighbour, found by bisection on its distance, is 1.05 R
+    long: milling adds it cut to exactly R (a little cut, not just a large one)."""
+    from fishswarm.behaviors.lennard_jones import lennard_jones
+    from fishswarm.behaviors.orbit import MILLING_SPACING
+
+    radius = 0.2
+    centre, seen, mask = np.array([[0.0, -0.5, 0.0]]), np.array([True]), np.array([[True]])
+
+    def push(gap: float) -> np.ndarray:
+        neighbour = np.array([[[0.0, gap, 0.0]]])
+        motion: np.ndarray = lennard_jones(neighbour, mask, target_distance=MILLING_SPACING)[0]
+        return motion
+
+    near, far = 1e-3, MILLING_SPACING  # the push shrinks as the neighbour moves off
+    for _ in range(200):
+        middle = (near + far) / 2
+        near, far = (
+            (middle, far) if np.linalg.norm(push(middle)) > 1.05 * radius else (near, middle)
+        )
+    pushed = push(near)
+    assert np.linalg.norm(pushed) == pytest.approx(1.05 * radius, rel=1e-6)
+    target = milling(centre, seen, np.array([[[0.0, near, 0.0]]]), mask, radius=radius)
+    added = target - orbit(centre, seen, radius=radius)
+    np.testing.assert_allclose(np.linalg.norm(added), radius, rtol=1e-12)
+    np.testing.assert_allclose(added[0], pushed * radius / np.linalg.norm(pushed), rtol=1e-12)

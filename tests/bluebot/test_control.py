@@ -90,3 +90,15 @@ def test_study_codes_homing_turns_a_target_dead_ahead_or_none_to_the_right_pecto
 def test_pid_refuses_a_period_that_is_no_time(period: float) -> None:
     with pytest.raises(ValueError, match="period must be positive"):
         pid(np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), state=PidState.zeros(2), period=period)
+
+
+def test_at_the_edges_of_its_bands_homing_keeps_the_dorsal_and_stops_the_caudal() -> None:
+    """Bands of 45° (for exact bearings): a target exactly 45° above leaves a dorsal fin
+    that was on, on (off only beyond the band); one exactly 45° aside is outside the caudal
+    band (it runs only within)."""
+    above = np.array([[1.0, 0.0, -1.0]])
+    _, dorsal = homing(above, dorsal_on=np.array([True]), pitch_band_deg=45.0)
+    assert dorsal.tolist() == [True]
+    aside = np.array([[1.0, 1.0, 0.0]])
+    fins, _ = homing(aside, dorsal_on=np.array([False]), heading_band_deg=45.0)
+    assert fins[0, 0] == 0.0 and fins[0, 2] == pytest.approx(0.85)
