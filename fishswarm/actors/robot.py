@@ -80,6 +80,16 @@ class RobotSettings:
                 f"{self.perception_timeout:g}"
             )
 
+    def fish_settings(self) -> FishSettings:
+        """What the robot's fish actor is told: its one fish, what it does, the swarm's keys,
+        and how long it swims on without a perception."""
+        return FishSettings(
+            (self.driver.robot_id,),
+            self.fish,
+            self.driver.keys,
+            perception_timeout=self.perception_timeout,
+        )
+
 
 class HardwareError(RuntimeError):
     """The robot's hardware could not be opened (a library missing, a device not answering)."""
@@ -160,14 +170,7 @@ async def run_robot(
             remote, local = ZenohBus(session), MemoryBus()
             if body is not None:
                 await nursery.start(body.run, remote)
-            fish = Fish(
-                FishSettings(
-                    (robot_id,),
-                    settings.fish,
-                    keys,
-                    perception_timeout=settings.perception_timeout,
-                )
-            )
+            fish = Fish(settings.fish_settings())
             await nursery.start(fish.run, local)
             driver = Driver(settings.driver, hardware, link_up=_link_probe(session))
             await nursery.start(driver.run, local, remote)

@@ -545,3 +545,33 @@ def test_bad_fish_settings_say_what_is_wrong(changes: dict[str, object], message
     fields: dict[str, object] = {"fish_ids": (1,), "params": Scenario().fish_params(), **changes}
     with pytest.raises(ValueError, match=message):
         FishSettings(**fields)  # type: ignore[arg-type]
+
+
+def test_each_fish_of_an_actor_is_watched_from_its_own_last_perception() -> None:
+    """Fish 1 perceives at 0 and 4 s, fish 2 at 3 s, each on its own keys: with a 5-s
+    timeout fish 2 is stopped at 8 s and fish 1 at 9 s (not both at the later time)."""
+    settings = FishSettings((1, 2), Scenario().fish_params(), KEYS, perception_timeout=5.0)
+
+    async def main() -> list[tuple[float, int]]:
+        bus = MemoryBus()
+        stops: list[tuple[float, int]] = []
+        async with (
+            subscription(bus, f"{KEYS.prefix}/fish/*/command") as commands,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(Fish(settings).run, bus)
+            bus.put(KEYS.perception(1), _perception(1, 0))
+            await commands.receive()
+            await trio.sleep(3.0)
+            bus.put(KEYS.perception(2), _perception(2, 0))
+            await commands.receive()
+            await trio.sleep(1.0)
+            bus.put(KEYS.perception(1), _perception(1, 1))
+            await commands.receive()
+            for _ in range(2):
+                _, payload = await commands.receive()
+                stops.append((trio.current_time(), decode(payload, Command).fish_id))
+            nursery.cancel_scope.cancel()
+        return stops
+
+    assert run_mock(main) == [(8.0, 2), (9.0, 1)]

@@ -1,5 +1,6 @@
-"""The base station's view of the fleet on the in-memory Bus with trio's MockClock: which
-robots are alive and what they last said, and which did not obey an operator's order."""
+"""Robot pieces that need no router: the base station's view of the fleet on the in-memory
+Bus with trio's MockClock (which robots are alive, what they last said, which did not obey an
+operator's order), and what a robot's fish actor is told."""
 
 from __future__ import annotations
 
@@ -7,10 +8,12 @@ import numpy as np
 import trio
 
 from fishswarm.actors.bus import MemoryBus
-from fishswarm.actors.robot import FleetEntry, survey_fleet, unconfirmed
+from fishswarm.actors.driver import DriverSettings
+from fishswarm.actors.robot import FleetEntry, RobotSettings, survey_fleet, unconfirmed
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import RobotOrder, RobotStatus
+from fishswarm.sim.scenario import Scenario
 from tests.conftest import run_mock
 
 KEYS = KeySpace()
@@ -74,3 +77,15 @@ def test_an_order_is_unconfirmed_for_robots_not_heard_from_or_not_obeying() -> N
         1: "still stopped",
         3: "not heard from",
     }
+
+
+def test_a_robots_fish_actor_serves_its_one_fish_with_the_robots_timeout() -> None:
+    keys = KeySpace("tank2")
+    params = Scenario(behavior="aggregation").fish_params()
+    robot = RobotSettings(
+        DriverSettings(7, "aggregation", keys), params, "tcp/127.0.0.1:7447",
+        perception_timeout=1.5,
+    )  # fmt: skip
+    fish = robot.fish_settings()
+    assert fish.fish_ids == (7,) and fish.params is params and fish.keys == keys
+    assert fish.perception_timeout == 1.5 and fish.school is None
