@@ -203,21 +203,24 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         result = _run_trio(lambda: launch_swarm(settings, on_progress=show, on_scene=on_scene))
         _report(result)
         if view is not None:
-            print("fishswarm run: the view stays up until Ctrl-C", file=sys.stderr)
+            # The run is over: its exit code stands, whenever the Ctrl-C comes (even on the
+            # heels of the announcement, as a script's would).
             with contextlib.suppress(KeyboardInterrupt):
-                wait_for_ctrl_c()
+                wait_for_ctrl_c("fishswarm run: the view stays up until Ctrl-C")
     return int(result.exit_code)
 
 
-def wait_for_ctrl_c() -> None:
+def wait_for_ctrl_c(announcement: str | None = None) -> None:
     """Sleep until Ctrl-C or SIGTERM (either a KeyboardInterrupt) while other threads
-    serve."""
+    serve; ``announcement`` goes to stderr once both are caught."""
 
     def interrupt(number: int, frame: object) -> None:
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, interrupt)
     try:
+        if announcement is not None:
+            print(announcement, file=sys.stderr)
         while True:
             # Plain sleeps: a KeyboardInterrupt inside threading.Event.wait can leave its
             # lock broken ("release unlocked lock").
