@@ -126,6 +126,33 @@ def test_the_live_view_shows_the_fish_moving_in_a_real_browser(tmp_path: Path) -
         run.wait(timeout=10)
 
 
+@pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
+def test_a_ctrl_c_at_once_after_the_run_keeps_the_runs_exit_code(
+    tmp_path: Path, signal_number: int
+) -> None:
+    # A script that stops the view as soon as it is told it may: the run's code, not 130.
+    process = subprocess.Popen(
+        [*FISHSWARM, "run", "--fish", "3", "--duration", "2", "--quiet", "--view",
+         "--web-port", str(free_port()), "--grpc-port", str(free_port()),
+         "--record", str(tmp_path / "r.mcap"), "--summary", str(tmp_path / "r.json"),
+         "--listen", f"tcp/127.0.0.1:{free_port()}"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert process.stderr is not None
+    try:
+        # Read here, not through a reader thread: the signal goes out within microseconds of
+        # the line, as a script's would (the race this test is for lay there).
+        for line in iter(process.stderr.readline, ""):
+            if "the view stays up until Ctrl-C" in line:
+                process.send_signal(signal_number)
+                break
+        assert process.wait(timeout=30) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+        process.communicate(timeout=30)
+
+
 def test_a_run_serves_its_own_view_and_keeps_it_up_after_the_run(tmp_path: Path) -> None:
     web, grpc = free_port(), free_port()
     process = subprocess.Popen(
