@@ -49,6 +49,17 @@ def _perception(fish_id: int, tick: int, **changes: object) -> bytes:
     return encode(PerceptionMessage(**fields))  # type: ignore[arg-type]
 
 
+def _batch(run: int, tick: int, ids: list[int], inbox: list[int]) -> bytes:
+    count = len(ids)
+    return encode(
+        PerceptionBatch(
+            tick, float(tick), np.array(ids), np.full(count, 0.5),
+            np.zeros(count, dtype=np.int64), np.zeros((0, 3)),
+            np.zeros(count, dtype=np.int64), np.zeros((0, 3)), np.array(inbox), run,
+        )
+    )  # fmt: skip
+
+
 def test_watchdog_is_armed_by_a_perception_stops_the_fins_and_takes_the_worlds_pulse() -> None:
     settings = FishSettings((3,), Scenario().fish_params(), KEYS, perception_timeout=5.0)
 
@@ -287,16 +298,6 @@ def test_a_new_run_starts_the_fish_afresh() -> None:
 def test_a_new_run_frees_every_fish_of_a_batch_it_drops() -> None:
     settings = FishSettings((1, 2), Scenario().fish_params(), KEYS, school="pair")
 
-    def batch(run: int, tick: int, ids: list[int], inbox: list[int]) -> bytes:
-        count = len(ids)
-        return encode(
-            PerceptionBatch(
-                tick, float(tick), np.array(ids), np.full(count, 0.5),
-                np.zeros(count, dtype=np.int64), np.zeros((0, 3)),
-                np.zeros(count, dtype=np.int64), np.zeros((0, 3)), np.array(inbox), run,
-            )
-        )  # fmt: skip
-
     async def main() -> tuple[list[list[int]], FishStatistics]:
         bus = MemoryBus()
         fish = Fish(settings)
@@ -307,11 +308,11 @@ def test_a_new_run_frees_every_fish_of_a_batch_it_drops() -> None:
         ):
             await nursery.start(fish.run, bus)
             # Run 5: both fish wait for a delivery that never comes...
-            bus.put(KEYS.school_perceptions("pair"), batch(5, 3, [1, 2], [1, 1]))
+            bus.put(KEYS.school_perceptions("pair"), _batch(5, 3, [1, 2], [1, 1]))
             await trio.sleep(1.0)
             # ... when run 6 starts with fish 1 alone, then fish 2 (jitter-style subsets).
-            bus.put(KEYS.school_perceptions("pair"), batch(6, 1, [1], [0]))
-            bus.put(KEYS.school_perceptions("pair"), batch(6, 1, [2], [0]))
+            bus.put(KEYS.school_perceptions("pair"), _batch(6, 1, [1], [0]))
+            bus.put(KEYS.school_perceptions("pair"), _batch(6, 1, [2], [0]))
             for _ in range(2):
                 with trio.fail_after(1.0):
                     answered.append(
@@ -384,17 +385,6 @@ def test_deliveries_are_held_to_what_the_perceptions_announce() -> None:
     assert statistics.deliveries == 2 and statistics.deliveries_missed == 1
     assert statistics.perceptions == 4
     assert statistics.rejected == 3  # the flood's last, the stale delivery, tick 5
-
-
-def _batch(run: int, tick: int, ids: list[int], inbox: list[int]) -> bytes:
-    count = len(ids)
-    return encode(
-        PerceptionBatch(
-            tick, float(tick), np.array(ids), np.full(count, 0.5),
-            np.zeros(count, dtype=np.int64), np.zeros((0, 3)),
-            np.zeros(count, dtype=np.int64), np.zeros((0, 3)), np.array(inbox), run,
-        )
-    )  # fmt: skip
 
 
 def test_a_school_waits_for_the_delivery_of_any_fish_that_announced_one() -> None:
