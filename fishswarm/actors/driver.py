@@ -53,6 +53,10 @@ FloatArray = NDArray[np.float64]
 Look = tuple[float, FloatArray]
 """What the sensors give in one period: depth, m, and (K, 3) body-frame neighbours, m."""
 
+LINK_TIMEOUT = 10.0
+"""How long a robot that has lost its link to the base station swims on its own perception
+before it stops its fins until the link returns, by default, s."""
+
 CPU_TEMPERATURE = Path("/sys/class/thermal/thermal_zone0/temp")
 """Where Linux on a Raspberry Pi reports the SoC's temperature, in m°C."""
 
@@ -113,7 +117,7 @@ class DriverSettings:
     keys: KeySpace = KeySpace()
     control_period: float = 1.0
     command_timeout: float = 2.5
-    link_timeout: float = 10.0
+    link_timeout: float = LINK_TIMEOUT
     status_period: float = 0.5
     leds: LedVision = field(default_factory=LedVision)
     fisheye: Fisheye = field(default_factory=Fisheye)

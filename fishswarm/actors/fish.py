@@ -75,6 +75,10 @@ Rows = NDArray[np.intp]
 
 PERCEPTION, BATCH, DELIVERY, PULSE, WORLD = "perception", "batch", "delivery", "pulse", "world"
 
+PERCEPTION_TIMEOUT = 5.0
+"""How long a fish swims on without a perception or a pulse of its world before its
+watchdog turns its fins off, by default, s."""
+
 ENDED_RUNS_KEPT = 16
 """Ended runs a fish actor remembers, to refuse their late perceptions."""
 
@@ -102,7 +106,7 @@ class FishSettings:
     fish_ids: tuple[int, ...]
     params: FishParams
     keys: KeySpace = KeySpace()
-    perception_timeout: float = 5.0
+    perception_timeout: float = PERCEPTION_TIMEOUT
     inbox_timeout: float = 5.0
     school: str | None = None
 

@@ -26,6 +26,7 @@ import trio
 
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.control import run_control
+from fishswarm.actors.fish import PERCEPTION_TIMEOUT
 from fishswarm.actors.observer import Observer, Progress
 from fishswarm.actors.security import secure_run
 from fishswarm.actors.session import SessionSettings, open_session
@@ -41,7 +42,7 @@ from fishswarm.actors.world import World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.protocols.jsontext import json_text
 from fishswarm.sim.decision_kernels import with_compiled_decisions
-from fishswarm.sim.scenario import START_TIMEOUT, Scenario
+from fishswarm.sim.scenario import COMMAND_TIMEOUT, START_TIMEOUT, Scenario
 from fishswarm.study.experiment import ORBIT_SUMMARIES
 from fishswarm.study.metrics import METRIC_NAMES, formation_summary
 from fishswarm.study.recording import open_recorder
@@ -90,8 +91,8 @@ class LaunchSettings:
     record: Path | None = None
     summary: Path | None = None
     start_timeout: float = START_TIMEOUT
-    command_timeout: float = 10.0
-    perception_timeout: float = 5.0
+    command_timeout: float = COMMAND_TIMEOUT
+    perception_timeout: float = PERCEPTION_TIMEOUT
     log_level: str = "WARNING"
     handle_signals: bool = False
     secure: Path | None = None

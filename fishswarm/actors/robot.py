@@ -37,6 +37,10 @@ from fishswarm.protocols.keys import KeySpace, fish_id_of
 from fishswarm.protocols.messages import RobotOrder, RobotStatus
 
 HARDWARE = ("bluebot", "mock")
+ROBOT_PERCEPTION_TIMEOUT = 3.0
+"""How long a robot's fish actor goes without a perception from its driver before its
+watchdog turns the fins off, by default, s (the driver perceives every period: seconds of
+silence are a frozen driver, not a slow one)."""
 ROBOT_LEASE = 1.0
 """The robot's Zenoh link lease, s: a link that carries nothing for this long is down."""
 
@@ -64,7 +68,7 @@ class RobotSettings:
     connect: str
     hardware: str = "bluebot"
     connect_timeout: float = -1.0
-    perception_timeout: float = 3.0
+    perception_timeout: float = ROBOT_PERCEPTION_TIMEOUT
     seed: int = 0
     zenoh_config: str | None = None
     session_extra: Mapping[str, Any] = dataclasses.field(default_factory=dict)

@@ -18,7 +18,7 @@ from typing import Any
 
 import trio
 
-from fishswarm.actors.fish import Fish, FishSettings, FishStatistics
+from fishswarm.actors.fish import PERCEPTION_TIMEOUT, Fish, FishSettings, FishStatistics
 from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.behaviors.core import FishParams
@@ -49,7 +49,7 @@ class WorkerSpec:
     params: FishParams
     swarm: str
     connect: str
-    perception_timeout: float = 5.0
+    perception_timeout: float = PERCEPTION_TIMEOUT
     log_level: str = "WARNING"
     schooled: bool = True
     session_extra: dict[str, Any] = field(default_factory=dict)

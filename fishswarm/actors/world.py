@@ -54,7 +54,7 @@ from fishswarm.protocols.messages import (
 )
 from fishswarm.sim.clocks import Event
 from fishswarm.sim.physics import WorldParams
-from fishswarm.sim.scenario import START_TIMEOUT, Scenario
+from fishswarm.sim.scenario import COMMAND_TIMEOUT, START_TIMEOUT, Scenario
 from fishswarm.sim.tick import WorldSim
 from fishswarm.study.progress import ids_text
 
@@ -116,7 +116,7 @@ class WorldSettings:
     scenario: Scenario
     expected_fish: tuple[int, ...] = ()
     start_timeout: float = START_TIMEOUT
-    command_timeout: float = 10.0
+    command_timeout: float = COMMAND_TIMEOUT
     channel_timeout: float = OUTBOX_TIMEOUT + 1.0
     admit_delay: float = 0.1
     pulse_period: float = 1.0

@@ -9,6 +9,9 @@ from pathlib import Path
 from typing import Any
 
 from fishswarm import __version__
+from fishswarm.actors.driver import LINK_TIMEOUT
+from fishswarm.actors.fish import PERCEPTION_TIMEOUT
+from fishswarm.actors.robot import ROBOT_PERCEPTION_TIMEOUT
 from fishswarm.behaviors.formation import DEFAULT_SPACING
 from fishswarm.behaviors.lennard_jones import AGGREGATION_DISTANCE
 from fishswarm.behaviors.registry import BEHAVIORS
@@ -350,7 +353,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--perception-timeout",
         type=seconds,
-        default=5.0,
+        default=PERCEPTION_TIMEOUT,
         help="each fish's safety watchdog: fins off after this long without a perception or "
         "a pulse of the world, s (default %(default)g); a run in which it fired ends 'degraded', "
         "exit 4",
@@ -386,7 +389,7 @@ def build_parser() -> argparse.ArgumentParser:
     fish.add_argument(
         "--perception-timeout",
         type=seconds,
-        default=5.0,
+        default=PERCEPTION_TIMEOUT,
         help="fins off after this long without a perception or a pulse of the world, s (default "
         "%(default)g)",
     )
@@ -433,7 +436,7 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument(
         "--link-timeout",
         type=seconds,
-        default=10.0,
+        default=LINK_TIMEOUT,
         help="with the link to the router lost, swim on the robot's own perception for this "
         "long, then stop the fins until it returns, s (default %(default)g)",
     )
@@ -447,7 +450,7 @@ def build_parser() -> argparse.ArgumentParser:
     robot.add_argument(
         "--perception-timeout",
         type=seconds,
-        default=3.0,
+        default=ROBOT_PERCEPTION_TIMEOUT,
         help="the fish actor's own watchdog: fins off after this long without a perception, "
         "s (default %(default)g)",
     )

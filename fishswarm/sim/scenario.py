@@ -76,6 +76,9 @@ MAX_TARGET_DISTANCE = 1000.0
 twelfth powers overflow)."""
 START_TIMEOUT = 60.0
 """How long a run's world waits for its fish to come up by default, s."""
+COMMAND_TIMEOUT = 10.0
+"""How long a run's world waits for a fish's command before it marks the fish lost, by
+default, s."""
 START_DELAY_PERIODS = 2
 """Control periods the study code's fish stood still at the start of a run (its fish moved
 only once their clock passed 1)."""
