@@ -431,6 +431,10 @@ class World:
             if not event.deciding:
                 continue
             await self._resume.wait()
+            if self._stop_requested:
+                # Stopped while paused: the run ends at the snapshot it was held at (sent
+                # before the pause), without asking the fish for one more tick.
+                return
             if realtime and trio.current_time() - tick_start > period:
                 tick_start = trio.current_time()  # after a pause: pace from now on
             inbox_counts = await self._inbox_counts(event)

@@ -30,6 +30,7 @@ from fishswarm.protocols.messages import (
     Perception,
     PerceptionBatch,
     Snapshot,
+    WorldPulse,
 )
 from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
@@ -582,9 +583,9 @@ def test_a_stop_reaches_a_paused_world_and_a_resume_does_not_undo_it() -> None:
 
     answers, world = run_mock(lambda: _under_control(Scenario(fish=1, duration=1000.0), script))
     assert [a[0] for a in answers] == ["paused", "stopping", "stopping"]
-    assert (
-        world.state_name == "stopped" and world.tick == 3
-    )  # the snapshot after the pause, and no more
+    # Held at the snapshot of tick 2 (asked during tick 1): the run ends there, the fish
+    # asked for no more.
+    assert world.state_name == "stopped" and world.tick == 2
 
 
 def test_liveliness_tokens_no_fish_could_have_leave_the_world_running() -> None:
@@ -888,3 +889,53 @@ def test_a_fish_vouches_only_for_itself_or_its_school_on_its_own_about_key() -> 
 def test_a_world_must_pulse() -> None:
     with pytest.raises(ValueError, match="pulse_period must be positive"):
         WorldSettings(Scenario(), pulse_period=0.0)
+
+
+def test_the_world_pulses_its_state_while_it_waits_and_says_when_the_run_ended() -> None:
+    """A fish that answers 2.4 s after each perception; paused at 3.5 s (during tick 1),
+    stopped at 7.5 s. Pulses every second say running, then paused — the tick under way is
+    answered, and the world holds at the snapshot of tick 2 — and the stop ends the run there
+    at once, without a perception more."""
+    scenario = Scenario(fish=1, duration=1000.0, seed=3)
+    keys = scenario.keys
+
+    async def main() -> tuple[list[tuple[float, str, int]], World]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0))
+        heard: list[tuple[float, str, int]] = []
+
+        def pulse(key: str, payload: bytes) -> None:
+            message = decode(payload, WorldPulse)
+            assert message.run == world.run_id
+            heard.append((trio.current_time(), message.state, message.tick))
+
+        bus.subscribe(keys.world_pulse, pulse)
+        bus.subscribe(
+            keys.perception(0),
+            lambda key, payload: heard.append((trio.current_time(), "perception", -1)),
+        )
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(_answer_after, bus, keys, 0, [2.4] * 10)
+            nursery.start_soon(world.run, bus)
+            await trio.sleep(3.5)
+            world.control(ControlRequest("pause"))
+            await trio.sleep(4.0)
+            world.control(ControlRequest("stop"))
+            await _until_state(world, "stopped")
+            nursery.cancel_scope.cancel()
+        return heard, world
+
+    heard, world = run_mock(main)
+    assert heard == [
+        (0.0, "perception", -1),
+        (1.0, "running", 0),
+        (2.0, "running", 0),
+        (2.4, "perception", -1),
+        (3.0, "running", 1),
+        (4.0, "paused", 1),  # tick 1 answered at 4.8: held at the snapshot of tick 2
+        (5.0, "paused", 2),
+        (6.0, "paused", 2),
+        (7.0, "paused", 2),
+        (7.5, "ended", 2),
+    ]
+    assert world.tick == 2
