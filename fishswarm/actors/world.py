@@ -207,6 +207,8 @@ class World:
         self._report: ChannelReport | None = None
         self._resume = trio.Event()
         self._resume.set()
+        self._waiting_for_fish = trio.CancelScope()
+        """Cancelled by a stop: a world still waiting for its fish stops waiting."""
         self._stop_requested = False
         self._messages_out = 0
         self._current = TickCommands()
@@ -284,12 +286,14 @@ class World:
                 task_status.started()
                 await self._wait_for_fish()
                 started = time.perf_counter()
-                self.state_name = "running"
+                if self.state_name == "waiting":  # a pause or a stop asked meanwhile stands
+                    self.state_name = "running"
                 try:
-                    async with trio.open_nursery() as nursery:
-                        nursery.start_soon(self._pulse, bus)
-                        await self._loop(bus)
-                        nursery.cancel_scope.cancel()
+                    if not self._stop_requested:
+                        async with trio.open_nursery() as nursery:
+                            nursery.start_soon(self._pulse, bus)
+                            await self._loop(bus)
+                            nursery.cancel_scope.cancel()
                     # The fish stop watching for this run's perceptions: none will come.
                     self._put(
                         bus, keys.world_pulse, encode(WorldPulse(self.run_id, self.tick, "ended"))
@@ -351,6 +355,7 @@ class World:
         elif action == "stop":
             self._stop_requested = True
             self._resume.set()
+            self._waiting_for_fish.cancel()
             self.state_name = "stopping"
         return ControlReply(self.state_name, self.tick, self.time, len(self.roster.alive), refused)
 
@@ -392,9 +397,11 @@ class World:
 
     async def _wait_for_fish(self) -> None:
         expected = set(self.settings.expected_fish)
-        with trio.move_on_after(self.settings.start_timeout):
+        with trio.move_on_after(self.settings.start_timeout), self._waiting_for_fish:
             while not expected <= self._admissible():
                 self._handle(await self._events.receive())
+        if self._stop_requested:
+            return
         missing = sorted(expected - self._admissible())
         if missing:
             raise StartTimeout(

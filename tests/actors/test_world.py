@@ -939,3 +939,61 @@ def test_the_world_pulses_its_state_while_it_waits_and_says_when_the_run_ended()
         (7.5, "ended", 2),
     ]
     assert world.tick == 2
+
+
+def test_a_world_told_to_stop_while_it_waits_for_its_fish_stops_waiting() -> None:
+    scenario = Scenario(fish=2, duration=10.0)
+
+    async def main() -> tuple[World, float, str]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1), start_timeout=60.0))
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(world.run, bus)
+            await trio.sleep(5.0)  # no fish come
+            reply = world.control(ControlRequest("stop"))
+            await _until_state(world, "stopped")
+            nursery.cancel_scope.cancel()
+        return world, trio.current_time(), reply.state
+
+    world, ended_at, replied = run_mock(main)
+    assert replied == "stopping" and ended_at < 5.1  # not the 60-s start timeout's error
+    assert world.tick == 0 and world.statistics().ticks == 0
+
+
+def test_a_pause_asked_while_the_world_waits_for_its_fish_holds_its_first_tick() -> None:
+    """Paused before its fish come up, the world says so (status and pulses) and sends no
+    perception until resumed."""
+    scenario = Scenario(fish=1, duration=3.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[list[str], list[tuple[float, str]], World]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0))
+        heard: list[tuple[float, str]] = []
+        bus.subscribe(
+            keys.world_pulse,
+            lambda key, payload: heard.append(
+                (trio.current_time(), decode(payload, WorldPulse).state)
+            ),
+        )
+        bus.subscribe(
+            keys.perception(0),
+            lambda key, payload: heard.append((trio.current_time(), "perception")),
+        )
+        states = []
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(world.run, bus)
+            states.append(world.control(ControlRequest("pause")).state)
+            await trio.sleep(0.5)
+            nursery.start_soon(_answer_after, bus, keys, 0, [0.0] * 3)
+            await trio.sleep(2.2)
+            states.append(world.control(ControlRequest("status")).state)
+            states.append(world.control(ControlRequest("resume")).state)
+            await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return states, heard, world
+
+    states, heard, world = run_mock(main)
+    assert states == ["paused", "paused", "running"]
+    assert heard[:3] == [(1.5, "paused"), (2.5, "paused"), (2.7, "perception")]
+    assert world.tick == 3
