@@ -90,6 +90,7 @@ class Channel:
             while True:
                 snapshot = await self._next_snapshot()
                 if snapshot.tick == 0:
+                    self._start_run()
                     continue
                 if int(snapshot.broadcasts.sum()) == 0:
                     self._settle(snapshot.tick - 1, {})  # nothing announced: nothing to wait for
@@ -175,12 +176,7 @@ class Channel:
         announced, are counted as rejected."""
         for old in sorted(t for t in self._outbox if t < sent_tick):
             # Its snapshot never came (lost), or came before the broadcast did.
-            for fish, broadcasts in self._outbox.pop(old).items():
-                for _ in broadcasts:
-                    self._intake.reject(
-                        self.keys.outbox(fish), "unannounced",
-                        f"a broadcast of tick {old}, whose snapshot had gone by",
-                    )  # fmt: skip
+            self._let_go(old, f"a broadcast of tick {old}, whose snapshot had gone by")
         got = self._outbox.pop(sent_tick, {})
         chosen = [b for fish in sorted(wanted) for b in got.get(fish, [])[: wanted[fish]]]
         for fish, broadcasts in got.items():
@@ -220,6 +216,21 @@ class Channel:
         bus.put(
             self.keys.channel_report, encode(ChannelReport(snapshot.tick, snapshot.ids, counts))
         )
+
+    def _start_run(self) -> None:
+        """A run starts (its first snapshot): the medium starts afresh, so that a channel
+        that serves run after run gives each the losses its seed gives a run alone; what
+        an earlier run left in the outbox is counted and let go."""
+        self._rngs.clear()
+        # A new run's first broadcasts are of ticks 0 to 2: anything later is the last run's.
+        for old in [tick for tick in self._outbox if tick > 2]:
+            self._let_go(old, f"a broadcast of tick {old}, of a run that has ended")
+
+    def _let_go(self, tick: int, reason: str) -> None:
+        """Count every broadcast of ``tick`` in the outbox as unannounced, and drop them."""
+        for fish, broadcasts in self._outbox.pop(tick, {}).items():
+            for _ in broadcasts:
+                self._intake.reject(self.keys.outbox(fish), "unannounced", reason)
 
     def _rng(self, fish_id: int) -> np.random.Generator:
         if fish_id not in self._rngs:

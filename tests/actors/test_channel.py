@@ -202,3 +202,43 @@ def test_broadcasts_of_a_tick_whose_snapshot_was_missed_are_counted_when_a_later
     )  # fmt: skip
     assert deliveries == [] and reports == []  # a tick that announces nothing is not reported
     assert channel.statistics().rejected == 1
+
+
+def test_a_channel_serving_run_after_run_gives_each_the_losses_of_a_run_alone() -> None:
+    """Two runs of the same seed through one channel (as with `fishswarm channel` left up
+    while `fishswarm world` runs again): fish 0 broadcasts at every tick, half of all
+    receptions are lost, and the second run loses the same ones as the first. A broadcast
+    of the first run for a tick it never reached is counted and let go when the second
+    starts."""
+    lossy = Scenario(fish=3, channel_loss=0.5, seed=4)
+
+    async def one_run(bus: MemoryBus, reports: Inbox[tuple[str, bytes]]) -> list[list[int]]:
+        counts = []
+        bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0]))
+        for tick in range(1, 9):
+            bus.put(KEYS.outbox(0), broadcast(0, tick - 1, tick))
+            bus.put(KEYS.snapshot, snapshot(tick, [1, 0, 0]))
+            report = decode((await reports.receive())[1], ChannelReport)
+            counts.append(report.inbox_counts.tolist())
+        return counts
+
+    async def main() -> tuple[list[list[int]], list[list[int]], Channel]:
+        bus = MemoryBus()
+        channel = Channel(lossy)
+        async with (
+            subscription(bus, KEYS.channel_report) as reports,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(channel.run, bus)
+            first = await one_run(bus, reports)
+            bus.put(KEYS.outbox(0), broadcast(0, 9, 99))  # for a tick the run never reached
+            await trio.sleep(0.01)
+            second = await one_run(bus, reports)
+            nursery.cancel_scope.cancel()
+        return first, second, channel
+
+    first, second, channel = run_mock(main)
+    assert first == second
+    heard = sum(c[1] + c[2] for c in first)
+    assert 4 <= heard <= 12  # of 16 receptions, about half lost (the seed's draw)
+    assert channel.statistics().rejected == 1
