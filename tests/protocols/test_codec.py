@@ -462,6 +462,16 @@ def _perception(**overrides: object) -> Perception:
     return Perception(**fields)  # type: ignore[arg-type]
 
 
+def _robot_status(**overrides: object) -> RobotStatus:
+    fields: dict[str, object] = {
+        "robot_id": 1, "version": "0.4.0", "behavior": "dispersion", "state": "swimming",
+        "depth": 0.2, "fin_frequencies": np.zeros(4), "link": True, "cpu_temperature": 50.0,
+        "uptime": 3.0,
+    }  # fmt: skip
+    fields.update(overrides)
+    return RobotStatus(**fields)  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize(
     ("build", "reason"),
     [
@@ -500,6 +510,45 @@ def _perception(**overrides: object) -> Perception:
         (lambda: RunSettings({"tank": [0.0] * 65}), "tank must have at most 64 values"),
         (lambda: RunSettings({"flow": {"x": 1.0}}), "flow must be plain data, got dict"),
         (lambda: RunSettings({f"s{n}": 0 for n in range(201)}), "at most 200 settings"),
+        (lambda: _perception(heading=-7.0), "heading must be in"),
+        (lambda: _perception(inbox_count=MAX_ROWS + 1), "inbox_count must be in"),
+        (lambda: _perception(formation="blob"), "formation must be one of"),
+        (lambda: Command(0, 1, np.array([0.5, -0.1, 0.0, 0.0])), "fins must be gains in"),
+        (
+            lambda: PerceptionBatch(
+                **_perception_batch_fields(inbox_counts=np.array([0, MAX_ROWS + 1]))  # type: ignore[arg-type]
+            ),
+            "inbox_counts must be in",
+        ),
+        (
+            lambda: PerceptionBatch(
+                **_perception_batch_fields(heading=np.array([0.0, -7.0]))  # type: ignore[arg-type]
+            ),
+            "heading must be in",
+        ),
+        (
+            lambda: CommandBatch(
+                **_command_batch_fields(broadcasts=np.array([0, MAX_ROWS + 1]))  # type: ignore[arg-type]
+            ),
+            "broadcasts must be in",
+        ),
+        (lambda: FormationFlag(0, 0, 1, 0, 0, 0), "joined must be a bool, got int"),  # type: ignore[arg-type]
+        (
+            lambda: FormationFlag.from_values(np.array([1, 0, 1, 0, 0])),
+            "a formation flag has 6 to 8 numbers, got 5",
+        ),
+        (lambda: ControlRequest("formation"), "only one, names a formation"),
+        (lambda: ControlRequest("formation", "blob"), "formation must be one of"),
+        (lambda: ControlReply("running", 0, 0.0, MAX_ROWS + 1), "live_fish must be in"),
+        (
+            lambda: _robot_status(fin_frequencies=np.array([2.0, -0.5, 0.0, 0.0])),
+            "fin_frequencies must not be negative",
+        ),
+        (lambda: _robot_status(cpu_temperature=250.0), "cpu_temperature must be in"),
+        (lambda: _robot_status(cpu_temperature=-150.0), "cpu_temperature must be in"),
+        (lambda: _robot_status(link=1), "link must be a bool, got int"),
+        (lambda: _robot_status(uptime=-1.0), "uptime must be in"),
+        (lambda: RunSettings({"offset": -(2**62) - 1}), "offset must be in"),
     ],
 )
 def test_each_field_check_refuses_what_it_is_there_for(
@@ -538,3 +587,26 @@ def test_a_formation_flag_round_trips_through_a_broadcast() -> None:
     assert FormationFlag.from_values(older).swap == -1
     with pytest.raises(ValueError, match="swap must be in"):
         FormationFlag(1, 0, True, 0, 0, 9, swap=-2)
+
+
+def test_messages_that_differ_only_in_an_array_are_not_equal() -> None:
+    near = _perception(neighbors=np.array([[0.1, 0.2, 0.3]]))
+    assert near == _perception(neighbors=np.array([[0.1, 0.2, 0.3]]))
+    assert near != _perception(neighbors=np.array([[0.1, 0.2, 0.4]]))
+    assert Command(1, 2, np.array([1.0, 0.0, 0.0, 0.0])) != Command(1, 2, np.zeros(4))
+
+
+def test_a_flag_of_seven_numbers_carries_its_effort_and_asks_for_no_swap() -> None:
+    flag = FormationFlag.from_values(np.array([1, 2, 1, 1, 0, 3, 412]))
+    assert flag == FormationFlag(1, 2, True, 1, 0, 3, effort=412, swap=-1)
+
+
+def test_a_fish_that_has_not_tired_yet_has_effort_zero() -> None:
+    snapshot = _snapshot(effort=np.array([0.0, 2.5]))
+    assert snapshot.effort is not None
+    assert snapshot.effort.tolist() == [0.0, 2.5]
+
+
+def test_settings_may_be_negative_integers_down_to_minus_two_to_the_62() -> None:
+    settings = RunSettings({"offset": -3, "floor": -(2**62)})
+    assert decode(encode(settings), RunSettings).scenario == {"offset": -3, "floor": -(2**62)}
