@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from fishswarm.protocols.keys import KeySpace, Member
+from fishswarm.protocols.keys import MAX_FISH_ID, KeySpace, Member, fish_id_of
 
 
 def test_keys_live_under_the_swarm() -> None:
@@ -41,3 +41,53 @@ def test_parse_alive_tells_own_keys_from_a_school() -> None:
 def test_bad_swarm_name_is_explained() -> None:
     with pytest.raises(ValueError, match="letters, digits"):
         KeySpace("my swarm/x")
+
+
+def test_names_may_have_64_characters_and_no_more() -> None:
+    assert KeySpace("s" * 64).prefix == "fishswarm/" + "s" * 64
+    with pytest.raises(ValueError, match="1 to 64 letters"):
+        KeySpace("s" * 65)
+
+
+def test_a_fish_id_in_a_key_is_all_digits_and_at_most_18_of_them() -> None:
+    assert fish_id_of("0") == 0
+    assert fish_id_of("9" * 18) == MAX_FISH_ID
+    assert fish_id_of("1" * 19) is None
+    assert fish_id_of("12abc") is None
+    assert fish_id_of("") is None
+
+
+def test_every_name_that_goes_into_a_key_is_checked() -> None:
+    keys = KeySpace()
+    with pytest.raises(ValueError, match="role name"):
+        keys.alive("fish/x", 3)
+    with pytest.raises(ValueError, match="school name"):
+        keys.school_perceptions("w/0")
+    with pytest.raises(ValueError, match="school name"):
+        keys.school_commands("w/0")
+    with pytest.raises(ValueError, match="school name"):
+        keys.about(3, "w/0")
+    with pytest.raises(ValueError, match="kind name"):
+        keys.every_school("**")
+
+
+def test_wildcards_match_every_member_and_every_school() -> None:
+    keys = KeySpace("t")
+    assert keys.about(3) == "fishswarm/t/fish/3/about"
+    assert keys.about(3, "w0") == "fishswarm/t/school/w0/about"
+    assert keys.abouts() == ("fishswarm/t/fish/*/about", "fishswarm/t/school/*/about")
+    # ** so that a fish's token naming its school (one chunk more) matches too.
+    assert keys.alive_all("fish") == "fishswarm/t/alive/fish/**"
+    assert keys.alive_all() == "fishswarm/t/alive/*/**"
+    assert keys.fish_outboxes() == "fishswarm/t/fish/*/outbox"
+    assert keys.fish_inboxes() == "fishswarm/t/fish/*/inbox"
+    assert keys.robot_statuses() == "fishswarm/t/robot/*/status"
+
+
+def test_school_of_key_names_the_school_of_school_keys_only() -> None:
+    keys = KeySpace("t")
+    assert keys.school_of_key(keys.school_commands("w0")) == "w0"
+    assert keys.school_of_key(keys.about(3, "w1")) == "w1"
+    assert keys.school_of_key(keys.command(3)) is None
+    assert keys.school_of_key("fishswarm/t/school/w0/commands/more") is None
+    assert keys.school_of_key("fishswarm/other/school/w0/commands") is None

@@ -1,0 +1,57 @@
+"""The field checks every message runs: their limits, and arrays that cannot change."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fishswarm.protocols.checks import MAX_ROWS, MAX_TEXT, check_float, check_text
+from fishswarm.protocols.messages import CommandBatch, ControlReply, Perception, PerceptionBatch
+
+
+def test_a_number_field_refuses_a_bool() -> None:
+    check_float("time", 1)
+    with pytest.raises(TypeError, match="time must be a number, got bool"):
+        check_float("time", True)
+
+
+def test_text_may_have_max_text_characters_and_no_more() -> None:
+    check_text("state", "s" * MAX_TEXT)
+    with pytest.raises(ValueError, match=f"state must have 1 to {MAX_TEXT} characters, got 65"):
+        check_text("state", "s" * (MAX_TEXT + 1))
+    assert ControlReply("running", 0, 0.0, 0, refused="r" * MAX_TEXT).refused == "r" * MAX_TEXT
+
+
+def test_an_array_may_have_max_rows_rows_and_no_more() -> None:
+    rows = np.zeros((MAX_ROWS, 3))
+    perception = Perception(0, 0, 0.0, 0.0, rows, np.zeros((0, 3)))
+    assert perception.neighbors.shape == (MAX_ROWS, 3)
+    with pytest.raises(ValueError, match=f"more than the limit {MAX_ROWS}"):
+        Perception(0, 0, 0.0, 0.0, np.zeros((MAX_ROWS + 1, 3)), np.zeros((0, 3)))
+
+
+def test_a_message_keeps_its_arrays_whatever_the_caller_does_with_its_own() -> None:
+    neighbors = np.array([[1.0, 2.0, 3.0]])
+    perception = Perception(0, 0, 0.0, 0.0, neighbors, np.zeros((0, 3)))
+    neighbors[0, 0] = 9.0
+    assert perception.neighbors.tolist() == [[1.0, 2.0, 3.0]]
+    with pytest.raises(ValueError, match="read-only"):
+        perception.neighbors[0, 0] = 9.0
+
+
+def test_an_empty_array_of_numbers_may_stand_for_no_booleans() -> None:
+    # An empty list has no dtype to tell a boolean array from another (np.asarray: float64).
+    empty = np.zeros(0, np.int64)
+    batch = CommandBatch(1, empty, np.zeros((0, 4)), np.array([]), empty)
+    assert batch.led.dtype == np.bool_
+    assert batch.led.shape == (0,)
+    with pytest.raises(TypeError, match="led must be a boolean array"):
+        CommandBatch(1, np.array([0]), np.zeros((1, 4)), np.array([1.0]), np.array([0]))
+
+
+def test_counts_that_add_up_to_fewer_rows_than_there_are_are_refused() -> None:
+    with pytest.raises(ValueError, match="add up to 1, but neighbors has 2 rows"):
+        PerceptionBatch(
+            1, 1.0, np.array([0, 1]), np.array([0.5, 0.5]), np.array([1, 0]), np.zeros((2, 3)),
+            np.array([0, 0]), np.zeros((0, 3)), np.array([0, 0]),
+        )  # fmt: skip
