@@ -207,3 +207,60 @@ def test_every_batch_carries_exactly_its_fishs_rows(
         np.testing.assert_array_equal(neighbors, np.array(rows[fish_id]).reshape(-1, 3))
         assert seen_landmarks.shape == (fish_id % 2, 3)
         assert depth == fish_id / 10
+
+
+def test_time_run_heading_formation_and_inbox_counts_reach_fish_alone_and_in_schools() -> None:
+    keys = KeySpace()
+    ids = np.array([2, 5, 8])
+    nothing = _perceived([[], [], []], width=1)
+    messages = perception_messages(
+        keys,
+        ids=ids,
+        schools=Schools.of(ids, {2: "s", 5: None, 8: "s"}),
+        depth=np.array([0.1, 0.2, 0.3]),
+        perceived=nothing,
+        landmarks=nothing,
+        inbox_counts=np.array([1, 2, 3]),
+        tick=4,
+        time=1.25,
+        run=3,
+        heading=np.array([0.1, -0.2, 3.0]),
+        formation="pyramid",
+    )
+    (_, alone), (_, batch) = messages
+    assert isinstance(alone, Perception) and isinstance(batch, PerceptionBatch)
+    assert (alone.fish_id, alone.tick, alone.time, alone.run) == (5, 4, 1.25, 3)
+    assert (alone.heading, alone.formation, alone.inbox_count) == (-0.2, "pyramid", 2)
+    assert (batch.tick, batch.time, batch.run, batch.formation) == (4, 1.25, 3, "pyramid")
+    assert batch.heading is not None and batch.heading.tolist() == [0.1, 3.0]
+    assert batch.inbox_counts.tolist() == [1, 3]
+
+
+def _school_of_three(landmark_rows: int, row_limit: int) -> list[list[int]]:
+    """The fish of each batch of a school of three fish that see no neighbours and
+    ``landmark_rows`` landmarks each."""
+    ids = np.arange(3)
+    batches = perception_messages(
+        KeySpace(),
+        ids=ids,
+        schools=Schools.of(ids, dict.fromkeys(range(3), "s")),
+        depth=np.zeros(3),
+        perceived=_perceived([[], [], []], width=1),
+        landmarks=_perceived([[[1.0, 0.0, 0.0]] * landmark_rows] * 3, width=2),
+        inbox_counts=np.zeros(3, dtype=np.int64),
+        tick=1,
+        time=1.0,
+        row_limit=row_limit,
+    )
+    return [m.ids.tolist() for _, m in batches if isinstance(m, PerceptionBatch)]
+
+
+def test_landmark_rows_count_toward_a_batchs_limit() -> None:
+    # Two landmarks each, at most 4 rows: two fish (4 rows), then the third.
+    assert _school_of_three(landmark_rows=2, row_limit=4) == [[0, 1], [2]]
+    assert _school_of_three(landmark_rows=2, row_limit=6) == [[0, 1, 2]]
+
+
+def test_a_batch_carries_at_most_row_limit_fish_even_when_they_see_nothing() -> None:
+    assert _school_of_three(landmark_rows=0, row_limit=2) == [[0, 1], [2]]
+    assert _school_of_three(landmark_rows=0, row_limit=1) == [[0], [1], [2]]
