@@ -141,3 +141,16 @@ def test_camera_vision_is_scored_against_the_noise_free_model_when_noise_is_set(
     world.sense()
     exact = perceive(world.state.position, world.state.yaw, vision=Vision())
     assert world.sight.visible == int(exact.mask.sum())
+
+
+def test_the_world_adds_up_its_sight_scores_over_every_look() -> None:
+    scenario = Scenario(fish=6, vision_model="camera", spawn_region="tank", seed=3)
+    world = WorldSim(WorldParams.of(scenario))
+    world.join(list(range(6)))
+    world.sense()
+    once = world.sight
+    world.sense()  # nobody moved: the same fish are there to be seen
+    truth = perceive(world.state.position, world.state.yaw, vision=Vision())
+    assert once.visible == int(truth.mask.sum()) > 0
+    assert world.sight.visible == 2 * once.visible
+    assert world.sight.found >= once.found > 0

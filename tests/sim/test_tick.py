@@ -69,3 +69,35 @@ def test_the_study_codes_start_delay_holds_every_fish_for_two_periods() -> None:
     # Without the switch the fish move from the first period.
     free = simulate_batch(Scenario(fish=6, duration=6))
     assert np.abs(free.position[1] - free.position[0]).max() > 1e-3
+
+
+def test_in_jitter_mode_a_fish_decides_on_its_own_clock_from_when_it_joins() -> None:
+    # No jitter, a period of 0.5 s: fish 0 decides at 0 and every 0.5 s; fish 1, joining at
+    # the 0.5-s snapshot, first decides then too. Effort is rate × time: 3 beats/s × 0.5 s.
+    scenario = Scenario(fish=2, duration=2.0, time_mode="jitter", jitter=0.0, control_period=0.5)
+    world = WorldSim(WorldParams.of(scenario))
+    world.join([0])
+    first = world.next_event()
+    assert (first.time, first.snapshot, world.now) == (0.0, 0, 0.0)
+    due, rows = world.due()
+    assert due.tolist() == [0] and rows.tolist() == [0]
+    world.hold(due, np.array([[1.0, 0.0, 0.0, 0.0]]))
+    snapshot = world.next_event()
+    assert (snapshot.time, snapshot.snapshot, snapshot.deciding) == (0.5, 1, False)
+    assert world.now == 0.5
+    np.testing.assert_allclose(world.effort, [1.5])
+    world.join([1])
+    deciding = world.next_event()
+    assert (deciding.time, deciding.deciding, world.now) == (0.5, True, 0.5)
+    assert world.due()[0].tolist() == [0, 1]
+    np.testing.assert_allclose(world.effort, [1.5, 0.0])  # no time passed
+
+
+def test_a_fish_that_joins_below_others_gets_its_own_row_of_fins() -> None:
+    world = WorldSim(WorldParams.of(Scenario(fish=3)))
+    world.join([2])
+    world.hold(np.array([2]), np.array([[0.5, 0.0, 1.0, 0.0]]))
+    world.join([0, 2])  # 2 is in already: it is not added twice
+    assert world.ids.tolist() == [0, 2]
+    np.testing.assert_array_equal(world.fins, [[0.0, 0.0, 0.0, 0.0], [0.5, 0.0, 1.0, 0.0]])
+    assert world.state.position.shape == (2, 3)
