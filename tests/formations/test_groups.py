@@ -172,3 +172,27 @@ def test_the_edges_of_a_completed_star_join_its_centre_to_its_arms() -> None:
     assert fit.joined(TOLERANCE).all()
     edges = shape_edges(fit, TOLERANCE, position=school, spacing=L)
     assert edges.tolist() == [[0, 1], [0, 2], [0, 3]]
+
+
+def test_a_mirror_image_is_not_the_shape_it_mirrors() -> None:
+    # Four points along x, y and z at 1, 2 and 3 m from a corner: a shape with a handedness.
+    # Turned and moved it fits exactly; mirrored (x → −x) no turn and no order of its points
+    # brings it back, since fish in a tank cannot swap left for right.
+    chiral = np.array([[0.0, 0, 0], [1.0, 0, 0], [0.0, 2, 0], [0.0, 0, 3]])
+    turned = chiral @ _turn(0.7, 0.4).T + [1.0, -2.0, 0.5]
+    rms, largest = group_errors(turned[None], chiral)
+    assert rms[0] < 1e-12 and largest[0] < 1e-12
+    mirrored = chiral * [-1.0, 1.0, 1.0]
+    rms, largest = group_errors(mirrored[None], chiral)
+    assert rms[0] > 0.1 and largest[0] > 0.2
+
+
+def test_a_fish_without_a_group_has_no_fit_and_no_members() -> None:
+    others = np.array([[[L, 0.0, 0.0]]])  # one neighbour: a triangle needs two
+    fit = completion(
+        np.zeros((1, 1, 3)), others, np.ones((1, 1), dtype=np.bool_), "triangle", spacing=L,
+        tolerance=TOLERANCE,
+    )  # fmt: skip
+    assert np.isinf(fit.largest[0, 0]) and np.isinf(fit.rms[0, 0])
+    assert fit.members.tolist() == [[[-1, -1]]]
+    assert not fit.joined(TOLERANCE)[0, 0]

@@ -120,3 +120,12 @@ def test_ties_between_mirror_images_go_to_the_first_fish() -> None:
     assert (np.delete(turned, 1, axis=0)[:, 0] < -0.1).all()
     # The same points in another order: the other mirror image comes first and leads.
     assert _lead_and_turn(kite[[0, 2, 1, 3, 4]])[0] == 1
+
+
+def test_a_point_on_an_edge_of_the_hull_cannot_lead() -> None:
+    from fishswarm.formations.lattice import _hull
+
+    # A unit square's corners, the middle of its right edge, and its centre: only the
+    # corners stand ahead of all the others in some direction.
+    points = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [1.0, 0.5], [0.5, 0.5]])
+    assert _hull(points).tolist() == [0, 1, 2, 3]

@@ -8,11 +8,18 @@ import math
 import numpy as np
 import pytest
 
-from fishswarm.formations.local import LOCAL_SHAPES, local_spots, nearest_neighbors
+from fishswarm.formations.local import (
+    LOCAL_SHAPES,
+    local_spots,
+    nearest_neighbors,
+    triangle_spots,
+    trigonal_planar_spots,
+)
 from fishswarm.formations.maps import target_map
 from fishswarm.formations.rules import (
     STAY,
     choose_spot,
+    formation_axes,
     leader_and_rank,
     nearest_only,
     place_map,
@@ -191,3 +198,89 @@ def test_a_rival_exactly_as_far_from_a_spot_as_the_fish_does_not_take_it() -> No
     assert choose_spot(spots, valid, neighbors, mask, tolerance=0.075).tolist() == [0]
     neighbors[0, 0, 0] = 0.59  # nearer than the fish: the spot is the rival's
     assert choose_spot(spots, valid, neighbors, mask, tolerance=0.075).tolist() == [STAY]
+
+
+def test_the_formation_frame_is_level_whatever_the_orientations_pitch() -> None:
+    # Heading forward and 45° down: the frame keeps x forward, y right, z down; straight
+    # down has no horizontal part, and the frame falls back to the body's axes.
+    axes = formation_axes(np.array([[1.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, -2.0, 0.5]]))
+    np.testing.assert_allclose(axes[0], np.eye(3))
+    np.testing.assert_allclose(axes[1], np.eye(3))
+    np.testing.assert_allclose(axes[2], [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-15)
+
+
+def test_spots_are_tried_in_the_order_of_the_preference_when_one_is_given() -> None:
+    spots = np.array([[[0.3, 0.0, 0.0], [0.6, 0.0, 0.0]]])
+    valid = np.ones((1, 2), dtype=np.bool_)
+    nobody, none = np.zeros((1, 0, 3)), np.zeros((1, 0), dtype=np.bool_)
+    assert choose_spot(spots, valid, nobody, none, tolerance=0.05).tolist() == [0]
+    preferred = choose_spot(
+        spots, valid, nobody, none, tolerance=0.05, preference=np.array([[1.0, 0.0]])
+    )
+    assert preferred.tolist() == [1]
+
+
+def test_a_neighbour_on_a_spot_of_its_own_seeks_no_share_of_the_free_ones() -> None:
+    # Spots at 1 m and 1.5 m ahead; a neighbour sits on the second, 0.5 m from the first.
+    # It is nearer to the one free spot than the fish, but it holds a spot already: when the
+    # free spots are shared out, the fish is the only seeker and takes the first.
+    neighbors, mask = _one((1.5, 0.0, 0.0))
+    spots = np.array([[[1.0, 0.0, 0.0], [1.5, 0.0, 0.0]]])
+    valid = np.ones((1, 2), dtype=np.bool_)
+    assert choose_spot(spots, valid, neighbors, mask, tolerance=0.1).tolist() == [0]
+
+
+def test_nearest_neighbours_are_zero_where_a_fish_sees_too_few() -> None:
+    # The second row is not real (masked), whatever numbers it holds.
+    neighbors = np.array([[[0.4, 0.1, 0.0], [0.2, 5.0, 7.0]]])
+    near, real = nearest_neighbors(neighbors, np.array([[True, False]]), 2)
+    assert near.tolist() == [[[0.4, 0.1, 0.0], [0.0, 0.0, 0.0]]]
+    assert real.tolist() == [[True, False]]
+
+
+def test_a_triangles_apexes_are_measured_across_the_water_level() -> None:
+    # Neighbours L apart across, the second 0.2 m deeper: the apexes stand H ahead and
+    # behind their midpoint, at their mean depth (the depth difference does not count).
+    first, second = np.array([[0.5, -L / 2, 0.0]]), np.array([[0.5, L / 2, 0.2]])
+    spots = triangle_spots(first, second, spacing=L)
+    np.testing.assert_allclose(spots[0], [[0.5 - H, 0.0, 0.1], [0.5 + H, 0.0, 0.1]])
+    # One straight above the other: no horizontal direction of their own; across is +y.
+    above = triangle_spots(np.array([[0.5, 0.0, 0.0]]), np.array([[0.5, 0.0, 0.2]]), spacing=L)
+    np.testing.assert_allclose(above[0], [[0.5, L, 0.1], [0.5, -L, 0.1]])
+
+
+def _star_with_arms_apart(
+    degrees: float, depths: tuple[float, float, float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Trigonal-planar spots of a centre at (0.5, 0) and two arms ``degrees`` apart,
+    symmetric about −x (the outer spot then lies along +x from the centre)."""
+    half = math.radians(degrees) / 2
+    centre = np.array([[0.5, 0.0, depths[0]]])
+    left = np.array([[0.5 - L * math.cos(half), -L * math.sin(half), depths[1]]])
+    right = np.array([[0.5 - L * math.cos(half), L * math.sin(half), depths[2]]])
+    return trigonal_planar_spots(left, centre, right, spacing=L)
+
+
+def test_a_star_gets_an_outer_spot_only_when_its_arms_are_more_than_90_degrees_apart() -> None:
+    spots, applies = _star_with_arms_apart(100.0, (0.1, 0.1, 0.4))
+    assert applies.tolist() == [[True, False]]
+    # Opposite the arms' bisector, L from the centre, at the three fish's mean depth.
+    np.testing.assert_allclose(spots[0, 0], [0.5 + L, 0.0, 0.2], atol=1e-12)
+    _, applies = _star_with_arms_apart(80.0, (0.0, 0.0, 0.0))
+    assert applies.tolist() == [[False, True]]
+
+
+def test_the_spots_of_the_two_nearest_come_before_nearer_spots_of_other_pairs() -> None:
+    # Nearest 0.2 m ahead and 0.21 m behind (0.41 m apart): their apexes are 0.143 m to
+    # either side. The nearest and a third fish a spacing from it give an apex 0.126 m away,
+    # nearer, but of a later pair: the fish takes an apex of its two nearest.
+    spacing = 0.25
+    neighbors, mask = _one((0.2, 0.0, 0.0), (-0.21, 0.0, 0.0), (0.2, 0.25, 0.0))
+    spots, valid, preference = local_spots("triangle", neighbors, mask, spacing=spacing)
+    distance = np.linalg.norm(spots[0], axis=1)
+    assert valid[0, :4].all() and distance[2] < distance[0] == distance[1]
+    choice = choose_spot(
+        spots, valid, neighbors, mask, tolerance=spacing / 4, preference=preference
+    )
+    assert choice.tolist() == [0]
+    np.testing.assert_allclose(spots[0, 0], [-0.005, -math.sqrt(spacing**2 - 0.205**2), 0.0])

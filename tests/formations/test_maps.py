@@ -88,3 +88,14 @@ def test_bad_maps_are_explained() -> None:
     assert target_map("column", 10_000, spacing=0.3).shape == (10_000, 3)  # the largest
     with pytest.raises(ValueError, match="positive length"):
         target_map("pyramid", 5, spacing=-1.0)
+
+
+def test_a_phalanx_fills_its_square_from_the_top_row_left_first() -> None:
+    from fishswarm.formations.maps import phalanx
+
+    # Four fish: a 2 × 2 wall, all corners equally far from the middle; the upper row
+    # (z up is −z) first, left (−y) before right in each row.
+    slots = phalanx(4, spacing=1.0)
+    assert slots.tolist() == [
+        [0.0, -0.5, -0.5], [0.0, 0.5, -0.5], [0.0, -0.5, 0.5], [0.0, 0.5, 0.5],
+    ]  # fmt: skip
