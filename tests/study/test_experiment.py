@@ -370,3 +370,34 @@ def test_the_experiment_command_writes_what_finished_when_a_run_fails(
     assert "a run failed (RuntimeError: run with seed 1 ended degraded) after 1 of 8 runs" in said
     summary = json.loads((out / "summary.json").read_text())
     assert (summary["complete"], summary["runs_done"], summary["runs_total"]) == (False, 1, 8)
+
+
+def test_a_sweep_reports_each_run_as_it_finishes_with_how_many_are_done() -> None:
+    from fishswarm.study.sweep import sweep_experiment
+
+    experiment = find("blindspot").with_changes(seeds=1, duration=1.0)
+    total = len(experiment.runs())
+    reports: list[tuple[int, int, float, int]] = []
+    outcomes = sweep_experiment(
+        experiment,
+        jobs=1,
+        on_run=lambda done, runs, o: reports.append((done, runs, o.value, o.seed)),
+    )
+    assert reports == [
+        (done, total, value, seed) for done, (_, value, seed) in enumerate(experiment.runs(), 1)
+    ]
+    assert all(outcome.wall_time > 0.0 for outcome in outcomes)
+
+
+def test_the_batch_engine_gives_a_runs_times_positions_sightings_and_effort() -> None:
+    from fishswarm.sim.engine import simulate_batch
+    from fishswarm.study.sweep import simulate_on_batch_engine
+
+    scenario = Scenario(fish=3, duration=2.0)
+    t, position, seen, effort = simulate_on_batch_engine(scenario)
+    trajectory = simulate_batch(scenario)
+    np.testing.assert_array_equal(t, trajectory.t)
+    np.testing.assert_array_equal(position, trajectory.position)
+    np.testing.assert_array_equal(seen, trajectory.neighbors_seen)
+    np.testing.assert_array_equal(effort, trajectory.effort)
+    assert t.tolist() == [0.0, 1.0, 2.0] and (effort[-1] > 0.0).all()  # the fins beat

@@ -227,3 +227,48 @@ def test_the_drawn_tank_is_turned_not_mirrored() -> None:
     # A fish heading +y (turned right from +x) is drawn turned right from +x as well.
     turned = Scene(0.0, np.array([0]), fish[None], np.array([[0.0, 1.0, 0.0]]), ("fish",))
     assert np.cross(forward, turned.upright(tank).heading[0])[2] < 0  # clockwise from above
+
+
+def test_a_scene_is_drawn_in_the_stages_own_tank_fish_slots_and_sides_alike() -> None:
+    # A 3 × 2 × 1-m tank (not the study's, not square): 0.25 m from the y = 0 wall is
+    # 1.75 m from the far one, 0.2 m deep is 0.8 m above the floor.
+    scene = Scene(
+        0.3, np.array([0]), np.array([[0.5, 0.25, 0.2]]), np.array([[1.0, 0.0, 0.0]]),
+        ("joined",), slots=np.array([[1.0, 0.5, 0.4]]),
+        edges=np.array([[[0.5, 0.25, 0.2], [1.0, 0.5, 0.4]]]),
+    )  # fmt: skip
+    data = json.loads(scene_message(scene, Stage((3.0, 2.0, 1.0))))
+    entities = {e["id"]: e for e in data["entities"]}
+    assert entities["fish"]["timestamp"] == {"sec": 0, "nsec": 300_000_000}
+    (arrow,) = entities["fish"]["arrows"]
+    assert arrow["pose"]["position"] == {"x": 0.5, "y": 1.75, "z": 0.8}
+    (sphere,) = entities["target"]["spheres"]
+    assert sphere["pose"]["position"] == {"x": 1.0, "y": 1.5, "z": 0.6}
+    assert sphere["size"] == pytest.approx({axis: 0.5 * BODY_LENGTH for axis in "xyz"})
+    (sides,) = entities["shapes"]["lines"]
+    assert sides["points"] == [{"x": 0.5, "y": 1.75, "z": 0.8}, {"x": 1.0, "y": 1.5, "z": 0.6}]
+    assert sides["color"] == arrow["color"]  # the sides of completed shapes: joined's colour
+    walls = entities["tank"]["lines"][0]["points"]
+    assert {axis: max(p[axis] for p in walls) for axis in "xyz"} == {"x": 3.0, "y": 2.0, "z": 1.0}
+
+
+def test_each_role_has_its_own_colour() -> None:
+    roles = ("fish", "joined", "seeking", "leader")
+    scene = Scene(0.0, np.arange(4), np.zeros((4, 3)), np.tile([1.0, 0.0, 0.0], (4, 1)), roles)
+    colours = scene.colours()
+    assert colours.dtype == np.uint8
+    assert colours.tolist() == [[31, 119, 180], [44, 160, 44], [255, 127, 14], [148, 103, 189]]
+
+
+def test_an_empty_school_in_a_formation_run_has_no_roles_and_no_target() -> None:
+    slots = target_map("pyramid", 3, spacing=0.3)
+    scene = scene_of(_snapshot(np.zeros((0, 3)), []), FormationTarget(slots, 0.3, 0.1))
+    assert scene.roles == () and scene.slots is None and scene.edges is None
+    assert json.loads(scene_message(scene))["entities"][0]["arrows"] == []
+
+
+def test_a_scenes_stamp_is_its_time_to_the_nearest_nanosecond() -> None:
+    # 1.000000007 s is a hair below 1 000 000 007 ns as a float: rounded, not cut off.
+    scene = Scene(1.000000007, np.array([0]), np.zeros((1, 3)), np.array([[1.0, 0, 0]]), ("fish",))
+    stamp = json.loads(scene_message(scene))["entities"][0]["timestamp"]
+    assert stamp == {"sec": 1, "nsec": 7}
