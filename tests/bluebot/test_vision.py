@@ -203,3 +203,28 @@ def test_manhattan_links_on_drawn_cases() -> None:
     # Links are symmetric: fish 3 does not see fish 0 either.
     assert 0 not in seen_manhattan.index[3].tolist()
     assert 0 in seen_straight.index[3].tolist()
+
+
+def test_vision_parameters_must_be_finite() -> None:
+    for name in ("visual_range", "blind_width", "sphere_radius", "noise"):
+        with pytest.raises(ValueError, match=f"vision {name} must be a finite non-negative"):
+            Vision(**{name: math.inf})  # type: ignore[arg-type]
+
+
+def test_noise_with_too_few_generators_is_refused() -> None:
+    positions = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    with pytest.raises(ValueError, match="one random generator per fish"):
+        perceive(positions, np.zeros(2), vision=Vision(noise=0.1), rngs=[np.random.default_rng(0)])
+
+
+def test_a_landmark_out_of_sight_has_no_index_and_no_position() -> None:
+    # Two landmarks ahead of a fish facing +x: 1 m (seen) and 4 m (beyond the 3-m range).
+    result = perceive_landmarks(
+        np.array([[0.5, 1.0, 0.5]]),
+        np.zeros(1),
+        np.array([[1.5, 1.0, 0.5], [4.5, 1.0, 0.5]]),
+        vision=Vision(visual_range=3.0),
+    )
+    assert result.mask.tolist() == [[True, False]]
+    assert result.index.tolist() == [[0, -1]]
+    assert result.neighbors.tolist() == [[[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]]
