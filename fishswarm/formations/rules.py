@@ -46,7 +46,8 @@ def leader_and_rank(
     """Where each fish's leader is (B, 3, the fish itself at the origin if it leads) and the
     fish's own rank (B,) among itself and the neighbours it sees (0: it leads).
 
-    Ties go to the neighbour first in the list; a fish ranks behind neighbours level with it.
+    Ties go to the neighbour first in the list; a fish ranks behind neighbours level with it,
+    and so takes the first of them for its leader (leading itself only when it ranks 0).
     """
     axes = formation_axes(orientation)
     ahead = np.einsum("bkd,bd->bk", neighbors, axes[:, 0])
@@ -56,7 +57,7 @@ def leader_and_rank(
         return np.zeros((count, 3)), np.zeros(count, dtype=np.int64)
     best = np.argmax(ahead, axis=1)
     best_value = ahead[np.arange(count), best]
-    leads = best_value <= 0.0
+    leads = best_value < 0.0
     leader = np.where(leads[:, None], 0.0, neighbors[np.arange(count), best])
     rank: IntArray = (ahead >= 0.0).sum(axis=1).astype(np.int64)
     return leader, rank

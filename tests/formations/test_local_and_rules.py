@@ -174,11 +174,14 @@ def test_a_fish_ahead_of_all_it_sees_leads_from_where_it_is() -> None:
     assert leader.tolist() == [[0.0, 0.0, 0.0]] and rank.tolist() == [0]
 
 
-def test_a_fish_level_with_a_neighbour_ranks_behind_it() -> None:
+def test_a_fish_level_with_a_neighbour_ranks_behind_it_and_hangs_its_map_from_it() -> None:
     # Orientation +x; a neighbour abreast, 0.3 m to the right, is as far along as the fish.
+    # Ranked behind it, the fish must not anchor the map at itself too: its slot 1 would
+    # then lie behind itself wherever it swims, a place it could never reach.
     neighbors, mask = _one((0.0, 0.3, 0.0), (-0.4, 0.0, 0.0))
-    _, rank = leader_and_rank(neighbors, mask, np.array([[1.0, 0.0, 0.0]]))
+    leader, rank = leader_and_rank(neighbors, mask, np.array([[1.0, 0.0, 0.0]]))
     assert rank.tolist() == [1]
+    assert leader.tolist() == [[0.0, 0.3, 0.0]]
 
 
 def test_the_conflict_rule_compares_with_the_nearest_after_those_skipped() -> None:
