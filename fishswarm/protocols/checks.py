@@ -66,7 +66,8 @@ def check_array(
     array = value if isinstance(value, np.ndarray) else np.asarray(value)
     if array.dtype.kind not in "biuf":
         raise TypeError(f"{name} must be a numeric array, got dtype {array.dtype}")
-    if dtype is np.int64 and array.dtype.kind == "f":
+    # An empty list has no dtype to tell (np.asarray makes it float64): empty is empty.
+    if dtype is np.int64 and array.dtype.kind == "f" and array.size:
         raise TypeError(f"{name} must be an integer array, got dtype {array.dtype}")
     if (dtype is np.bool_) != (array.dtype.kind == "b") and array.size:
         kind = "a boolean" if dtype is np.bool_ else "a numeric"

@@ -39,14 +39,18 @@ def test_a_message_keeps_its_arrays_whatever_the_caller_does_with_its_own() -> N
         perception.neighbors[0, 0] = 9.0
 
 
-def test_an_empty_array_of_numbers_may_stand_for_no_booleans() -> None:
-    # An empty list has no dtype to tell a boolean array from another (np.asarray: float64).
-    empty = np.zeros(0, np.int64)
-    batch = CommandBatch(1, empty, np.zeros((0, 4)), np.array([]), empty)
-    assert batch.led.dtype == np.bool_
-    assert batch.led.shape == (0,)
+def test_an_empty_list_may_stand_for_no_booleans_and_no_integers() -> None:
+    # An empty list has no dtype to tell a boolean or integer array from another
+    # (np.asarray makes it float64): empty is empty, whatever its dtype.
+    batch = CommandBatch(1, [], np.zeros((0, 4)), [], [])  # type: ignore[arg-type]
+    assert [str(a.dtype) for a in (batch.ids, batch.led, batch.broadcasts)] == [
+        "int64", "bool", "int64",
+    ]  # fmt: skip
+    assert batch.led.shape == batch.ids.shape == (0,)
     with pytest.raises(TypeError, match="led must be a boolean array"):
         CommandBatch(1, np.array([0]), np.zeros((1, 4)), np.array([1.0]), np.array([0]))
+    with pytest.raises(TypeError, match="ids must be an integer array"):
+        CommandBatch(1, np.array([0.0]), np.zeros((1, 4)), np.array([True]), np.array([0]))
 
 
 def test_counts_that_add_up_to_fewer_rows_than_there_are_are_refused() -> None:
