@@ -156,6 +156,7 @@ async def launch_swarm(
             observer = Observer.of(
                 scenario, recorder=recorder, on_progress=on_progress, on_scene=on_scene
             )
+            observer.world_run = world.run_id
             try:
                 async with trio.open_nursery() as nursery:
                     bus = ZenohBus(session)

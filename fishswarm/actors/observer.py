@@ -113,6 +113,9 @@ class Observer:
         self._tick_reached = trio.Event()
         self._world_left = trio.Event()
         self._sim_time = 0.0
+        self.world_run: int | None = None
+        """Take only the snapshots of this run of the world (None: any): an observer that
+        records one world's run must not record another's, on the same swarm."""
 
     @classmethod
     def of(
@@ -217,6 +220,11 @@ class Observer:
     async def _on_snapshot(self, key: str, payload: bytes) -> None:
         snapshot = self._intake.decode(key, payload, Snapshot)
         if snapshot is None:
+            return
+        if self.world_run is not None and snapshot.run != self.world_run:
+            self._intake.refuse(
+                key, "foreign", f"snapshot of run {snapshot.run}, not {self.world_run}"
+            )
             return
         if snapshot.tick <= self._last_tick:
             self._intake.refuse(key, "stale", f"snapshot of tick {snapshot.tick} repeated")

@@ -402,6 +402,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
             observer = Observer.of(
                 scenario, recorder=recorder, on_progress=show, observer_id="world-cli"
             )
+            observer.world_run = actor.run_id  # its world's run only, not another's on the router
             async with trio.open_nursery() as nursery:
                 bus = ZenohBus(session)
                 await nursery.start(observer.run, bus)

@@ -406,6 +406,7 @@ class Snapshot(Message):
             measured).
         formation: the shape formation fish are told to take at this tick, after a switch
             (None: as configured, or not a formation run).
+        run: the world's run id, as its perceptions carry it (0: not told).
     """
 
     type_name: ClassVar[str] = "snapshot"
@@ -419,10 +420,12 @@ class Snapshot(Message):
     broadcasts: IntArray
     effort: FloatArray | None = None
     formation: str | None = None
+    run: int = 0
 
     def __post_init__(self) -> None:
         _check_formation(self.formation)
         check_int("tick", self.tick)
+        check_int("run", self.run)
         check_float("time", self.time, low=0.0)
         check_array(self, "ids", np.int64, None)
         count = self.ids.shape[0]

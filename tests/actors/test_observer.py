@@ -173,3 +173,34 @@ def test_a_formation_is_measured_against_the_shape_each_snapshot_names() -> None
     assert before["shape_error"] > 0.05 and before["joined_fraction"] < 1.0
     for metrics in after:
         assert metrics["shape_error"] < 1e-9 and metrics["joined_fraction"] == 1.0
+
+
+def test_an_observer_of_one_run_takes_only_that_runs_snapshots() -> None:
+    """A world's own observer (it records the run) on a router where another world of the
+    swarm is still at its end: the other's snapshots are refused, counted, not recorded."""
+
+    def of_run(tick: int, run: int) -> bytes:
+        two = np.zeros(2)
+        return encode(
+            Snapshot(
+                tick, float(tick), np.arange(2), np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5]]),
+                np.zeros((2, 3)), two, np.zeros(2, dtype=np.int64), np.zeros(2, dtype=np.int64),
+                run=run,
+            )
+        )  # fmt: skip
+
+    async def main() -> Observer:
+        bus = MemoryBus()
+        observer = Observer(KEYS)
+        observer.world_run = 7
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            for tick, run in ((5, 3), (6, 3), (0, 7), (1, 7)):
+                bus.put(KEYS.snapshot, of_run(tick, run))
+            await trio.sleep(1.0)
+            nursery.cancel_scope.cancel()
+        return observer
+
+    observer = run_mock(main)
+    assert [p.tick for p in observer.history] == [0, 1]
+    assert observer.statistics().snapshots == 2 and observer.statistics().rejected == 2

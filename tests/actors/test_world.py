@@ -4,6 +4,7 @@ and the same trajectories as the batch engine."""
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Awaitable, Callable
 from typing import Any
 
@@ -16,7 +17,7 @@ from fishswarm.actors.bus import MemoryBus, open_token
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.observer import Observer
-from fishswarm.actors.world import World, WorldSettings
+from fishswarm.actors.world import StartTimeout, World, WorldSettings
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.messages import (
     FORMATION_SHAPES,
@@ -117,6 +118,7 @@ def test_the_actors_give_the_batch_engines_trajectory(changes: dict[str, object]
     ]
     if switched is not None:
         assert snapshots[-1].formation == switched
+    assert {s.run for s in snapshots} == {world.run_id}  # as its perceptions carry it
 
 
 def test_schools_whose_perceptions_come_in_parts_decide_as_with_one_batch(
@@ -997,3 +999,54 @@ def test_a_pause_asked_while_the_world_waits_for_its_fish_holds_its_first_tick()
     assert states == ["paused", "paused", "running"]
     assert heard[:3] == [(1.5, "paused"), (2.5, "paused"), (2.7, "perception")]
     assert world.tick == 3
+
+
+def test_a_world_waits_for_another_world_of_its_swarm_to_end(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Fish serve one world at a time (two would take turns starting them afresh): a world
+    that finds another of its swarm up waits, says so once, and runs when that one leaves;
+    one that waits in vain for all of its start timeout says what to do."""
+    scenario = Scenario(fish=1, duration=2.0)
+    keys = scenario.keys
+
+    async def main(leaves_at: float | None) -> tuple[World, list[float], str]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
+        perceived: list[float] = []
+        bus.subscribe(
+            keys.perception(0), lambda key, payload: perceived.append(trio.current_time())
+        )
+        other = bus.declare_token(keys.alive("world", 12345))
+        refused = ""
+        async with trio.open_nursery() as nursery:
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            if leaves_at is not None:
+
+                async def other_world_ends() -> None:
+                    await trio.sleep(leaves_at)
+                    other.undeclare()
+
+                nursery.start_soon(other_world_ends)
+            try:
+                await world.run(bus)
+            except StartTimeout as error:
+                refused = f"{trio.current_time():g} s: {error}"
+            nursery.cancel_scope.cancel()
+        return world, perceived, refused
+
+    with caplog.at_level(logging.WARNING, logger="fishswarm.actors.world"):
+        world, perceived, refused = run_mock(lambda: main(leaves_at=7.0))
+    assert world.state_name == "finished" and world.tick == 2 and refused == ""
+    assert perceived[0] == pytest.approx(7.0 + world.settings.admit_delay)
+    warnings = [r.getMessage() for r in caplog.records if "another world" in r.getMessage()]
+    assert warnings == [
+        "another world runs swarm 'default' on this router: waiting for its run to end "
+        "(fish serve one world at a time)"
+    ]
+    _, perceived, refused = run_mock(lambda: main(leaves_at=None))
+    assert perceived == []
+    assert refused == (
+        "20 s: another world ran swarm 'default' on this router for all of 20 s: stop it, or "
+        "give this run another swarm name (--swarm)"
+    )

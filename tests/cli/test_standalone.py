@@ -211,3 +211,36 @@ def test_sigterm_stops_each_actor_as_ctrl_c_does_and_keeps_the_worlds_recording(
             assert process.returncode == 130, (process.args, errors)
     recording = read_recording(record)
     assert recording.complete and len(recording.snapshots) >= 5
+
+
+def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_own_run(
+    tmp_path: Path,
+) -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    first_record, second_record = tmp_path / "first.mcap", tmp_path / "second.mcap"
+
+    def world(*args: str) -> list[str]:
+        return ["world", "--connect", endpoint, "--fish", "2", *args]
+
+    with started_commands() as start:
+        start("router", "--listen", endpoint)
+        wait_for_port(port)
+        start("fish", "--id", "0", "--id", "1", "--school", "pair", "--connect", endpoint)
+        # The first world in real time, 4 s: the second comes while it runs.
+        first = start(
+            *world("--time", "realtime", "--duration", "4", "--record", str(first_record))
+        )
+        Lines(first).wait_for(r"tick 0/4")
+        second = subprocess.run(
+            [*FISHSWARM, *world("--quiet", "--duration", "3", "--record", str(second_record))],
+            capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+        first.wait(timeout=30)
+    assert second.returncode == 0, second.stderr
+    assert "another world runs swarm 'default' on this router: waiting" in second.stderr
+    own = read_recording(second_record)
+    assert [s.tick for s in own.snapshots] == [0, 1, 2, 3]
+    assert len({s.run for s in own.snapshots}) == 1
+    theirs = read_recording(first_record)
+    assert {s.run for s in theirs.snapshots}.isdisjoint({s.run for s in own.snapshots})
