@@ -398,13 +398,16 @@ class World:
         return {i for i in self.roster.alive if (i, self.roster.school_of.get(i)) in self.vouched}
 
     def _other_world(self, key: str, alive: bool) -> bool:
-        """Whether a liveliness token is another world's (noted in ``other_worlds``)."""
+        """Whether a liveliness token is a world's: this one's, or another's (noted in
+        ``other_worlds``, and said once while this one waits to start)."""
         try:
             member = self.keys.parse_alive(key)
         except ValueError:
             return False
-        if member.role != "world" or member.member_id == str(self.run_id):
-            return member.role == "world"
+        if member.role != "world":
+            return False
+        if member.member_id == str(self.run_id):
+            return True
         if alive and key not in self.other_worlds and self.state_name == "waiting":
             log.warning(
                 "another world runs swarm %r on this router: waiting for its run to end "
