@@ -57,6 +57,8 @@ class Roster:
         self.school_of: dict[int, str | None] = {}
         self.command_key: dict[int, str] = {}
         self.channels = 0
+        self.worlds: set[str] = set()
+        """Liveliness tokens of the worlds of the swarm up now (a world's own among them)."""
         self.lost: list[LostFish] = []
         self.joined: list[tuple[int, int]] = []
         self._subscribe = subscribe_commands
@@ -74,6 +76,9 @@ class Roster:
             return None
         if member.role == "channel":
             self.channels += 1 if alive else -1
+            return None
+        if member.role == "world":
+            (self.worlds.add if alive else self.worlds.discard)(key)
             return None
         fish_id = fish_id_of(member.member_id)
         if member.role != "fish" or fish_id is None:

@@ -209,8 +209,8 @@ class World:
         self._resume.set()
         self._waiting_for_fish = trio.CancelScope()
         """Cancelled by a stop: a world still waiting for its fish stops waiting."""
-        self.other_worlds: set[str] = set()
-        """Liveliness tokens of other worlds of this swarm (on the same router) up now."""
+        self._token = self.keys.alive("world", self.run_id)
+        """This world's liveliness token: it names the run."""
         self._stop_requested = False
         self._messages_out = 0
         self._current = TickCommands()
@@ -283,7 +283,7 @@ class World:
                 ),
                 open_subscriber(bus, keys.abouts()[0], lambda k, p: events.push(("about", k, p))),
                 open_subscriber(bus, keys.abouts()[1], lambda k, p: events.push(("about", k, p))),
-                open_token(bus, keys.alive("world", self.run_id)),
+                open_token(bus, self._token),
             ):
                 task_status.started()
                 await self._wait_for_fish()
@@ -397,33 +397,26 @@ class World:
             return self.roster.alive
         return {i for i in self.roster.alive if (i, self.roster.school_of.get(i)) in self.vouched}
 
-    def _other_world(self, key: str, alive: bool) -> bool:
-        """Whether a liveliness token is a world's: this one's, or another's (noted in
-        ``other_worlds``, and said once while this one waits to start)."""
-        try:
-            member = self.keys.parse_alive(key)
-        except ValueError:
-            return False
-        if member.role != "world":
-            return False
-        if member.member_id == str(self.run_id):
-            return True
-        if alive and key not in self.other_worlds and self.state_name == "waiting":
-            log.warning(
-                "another world runs swarm %r on this router: waiting for its run to end "
-                "(fish serve one world at a time)",
-                self.keys.swarm,
-            )
-        (self.other_worlds.add if alive else self.other_worlds.discard)(key)
-        return True
+    @property
+    def other_worlds(self) -> set[str]:
+        """Liveliness tokens of the other worlds of this swarm up now (on the same router)."""
+        return self.roster.worlds - {self._token}
 
     async def _wait_for_fish(self) -> None:
         """Wait until the expected fish are up and no other world of the swarm runs (fish
         serve one run at a time: two worlds would take turns starting them afresh)."""
         expected = set(self.settings.expected_fish)
+        said = False
         with trio.move_on_after(self.settings.start_timeout), self._waiting_for_fish:
             while True:
                 self._drain()  # all that is in (a token of another world too), first
+                if self.other_worlds and not said:
+                    log.warning(
+                        "another world runs swarm %r on this router: waiting for its run to "
+                        "end (fish serve one world at a time)",
+                        self.keys.swarm,
+                    )
+                    said = True
                 if expected <= self._admissible() and not self.other_worlds:
                     break
                 self._handle(await self._events.receive())
@@ -611,8 +604,6 @@ class World:
         kind, key, payload = event
         if kind == "alive":
             assert isinstance(payload, bool)
-            if self._other_world(key, payload):
-                return
             if self.settings.vouched_only and self._held_back(key, payload):
                 return
             left = self.roster.on_alive(key, payload, trio.current_time())
