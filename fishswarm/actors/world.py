@@ -207,8 +207,9 @@ class World:
         self._report: ChannelReport | None = None
         self._resume = trio.Event()
         self._resume.set()
-        self._waiting_for_fish = trio.CancelScope()
-        """Cancelled by a stop: a world still waiting for its fish stops waiting."""
+        self._waiting = trio.CancelScope()
+        """What the world waits for now (its fish, the channel's report, a tick's commands):
+        a stop cancels it, so that no wait holds a stop up (see :meth:`_stoppable`)."""
         self._token = self.keys.alive("world", self.run_id)
         """This world's liveliness token: it names the run."""
         self._stop_requested = False
@@ -357,7 +358,7 @@ class World:
         elif action == "stop":
             self._stop_requested = True
             self._resume.set()
-            self._waiting_for_fish.cancel()
+            self._waiting.cancel()
             self.state_name = "stopping"
         return ControlReply(self.state_name, self.tick, self.time, len(self.roster.alive), refused)
 
@@ -407,7 +408,7 @@ class World:
         serve one run at a time: two worlds would take turns starting them afresh)."""
         expected = set(self.settings.expected_fish)
         said = False
-        with trio.move_on_after(self.settings.start_timeout), self._waiting_for_fish:
+        with trio.move_on_after(self.settings.start_timeout), self._stoppable():
             while True:
                 self._drain()  # all that is in (a token of another world too), first
                 if self.other_worlds and not said:
@@ -470,7 +471,10 @@ class World:
                 return
             if realtime and trio.current_time() - tick_start > period:
                 tick_start = trio.current_time()  # after a pause: pace from now on
-            inbox_counts = await self._inbox_counts(event)
+            with self._stoppable():
+                inbox_counts = await self._inbox_counts(event)
+            if self._stop_requested:
+                return
             sending = time.perf_counter()
             # Fish lost while the world waited for the channel decide no more.
             due_ids, rows = self.sim.due()
@@ -498,12 +502,26 @@ class World:
             if deferred is not None:
                 snapshot = self._snapshot(event.time, perceived.counts, deferred)
                 self._put(bus, self.keys.snapshot, encode(snapshot))
-            if realtime:
-                tick_start += period
-                await self._collect_until(tick_start)
-            else:
-                await self._collect()
+            with self._stoppable():
+                if realtime:
+                    tick_start += period
+                    await self._collect_until(tick_start)
+                else:
+                    await self._collect()
+            if self._stop_requested:
+                # Stopped while the fish decide: the run ends at the snapshot last sent,
+                # without waiting for a slow or silent fish (up to the command timeout), and
+                # the fish yet to answer are not lost for it.
+                return
             self._hold()
+
+    def _stoppable(self) -> trio.CancelScope:
+        """A scope for one of the world's waits, cancelled by a stop (at once if one was
+        asked already)."""
+        self._waiting = scope = trio.CancelScope()
+        if self._stop_requested:
+            scope.cancel()
+        return scope
 
     def _snapshot(self, time: float, seen: IntArray, broadcasts: IntArray) -> Snapshot:
         """The swarm as it is now: this tick's snapshot."""

@@ -492,14 +492,14 @@ def test_control_pauses_resumes_and_stops_the_world() -> None:
 
     answers, _ = run_mock(lambda: _under_control(Scenario(fish=2, duration=1000.0), script))
     # Asked during tick 2, after its perceptions went out: tick 2 completes, then the world
-    # holds after the snapshot of tick 3, for as long as it is paused; a stop takes effect at
-    # the next snapshot.
+    # holds after the snapshot of tick 3, for as long as it is paused. Asked during tick 5,
+    # a stop ends the run at once, at the snapshot of tick 5.
     assert answers == [
         ("paused", 2),
         ("paused", 3),
         ("running", 3),
         ("stopping", 5),
-        ("stopped", 6),
+        ("stopped", 5),
     ]
 
 
@@ -1050,3 +1050,81 @@ def test_a_world_waits_for_another_world_of_its_swarm_to_end(
         "20 s: another world ran swarm 'default' on this router for all of 20 s: stop it, or "
         "give this run another swarm name (--swarm)"
     )
+
+
+def test_a_stop_while_a_fish_is_slow_to_answer_ends_the_run_at_once() -> None:
+    """Fish 1 takes 8 s over tick 1 (the command timeout is 10 s): a stop asked 2 s into
+    that wait ends the run then, at the snapshot of tick 1, and fish 1 is not lost for it.
+    Its fish hear the run end in the same instant (a robot would stop swimming)."""
+    scenario = Scenario(fish=2, duration=100.0, seed=3)
+    keys = scenario.keys
+
+    async def main() -> tuple[World, float, float, list[tuple[float, str]]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0))
+        pulses: list[tuple[float, str]] = []
+        bus.subscribe(
+            keys.world_pulse,
+            lambda key, payload: pulses.append(
+                (trio.current_time(), decode(payload, WorldPulse).state)
+            ),
+        )
+        asked = trio.Event()
+
+        async def on_perception(tick: int) -> None:
+            if tick == 1:
+                asked.set()
+
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(_answer_after, bus, keys, 0, [0.0] * 10)
+            nursery.start_soon(_answer_after, bus, keys, 1, [0.0, 8.0, 0.0], on_perception)
+            nursery.start_soon(world.run, bus)
+            await asked.wait()
+            await trio.sleep(2.0)
+            stopped_at = trio.current_time()
+            world.control(ControlRequest("stop"))
+            await _until_state(world, "stopped")
+            ended_at = trio.current_time()
+            nursery.cancel_scope.cancel()
+        return world, stopped_at, ended_at, pulses
+
+    world, stopped_at, ended_at, pulses = run_mock(main)
+    assert ended_at - stopped_at < 0.02  # not the 6 s left of fish 1's answer
+    assert world.tick == 1 and world.lost == []
+    assert pulses[-1][1] == "ended" and pulses[-1][0] - stopped_at < 0.02
+    assert world.statistics().answer_time_median == 0.0  # only tick 0 was answered
+
+
+def test_a_stop_while_the_world_waits_for_the_channel_ends_the_run_at_once() -> None:
+    """Broadcasting fish and a channel whose token is up but which never reports: from
+    tick 1 the world waits ``channel_timeout`` (100 s here) for each report. A stop asked
+    5 s into the first wait ends the run then, before the fish are asked for tick 1."""
+    behavior = registered().name
+    scenario = Scenario(fish=2, duration=100.0, seed=2, behavior=behavior)
+    keys = scenario.keys
+
+    async def main() -> tuple[World, float, list[int]]:
+        bus = MemoryBus()
+        world = World(
+            WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0, channel_timeout=100.0)
+        )
+        params = scenario.fish_params()
+        async with (
+            subscription(bus, keys.perception(0)) as perceptions,
+            open_token(bus, keys.alive("channel", "mute")),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(world.run, bus)
+            for fish_id in range(2):
+                await nursery.start(Fish(FishSettings((fish_id,), params, keys)).run, bus)
+            await trio.sleep(5.0)
+            world.control(ControlRequest("stop"))
+            await _until_state(world, "stopped")
+            ended_at = trio.current_time()
+            ticks = [decode(p, Perception).tick for _, p in perceptions.drain()]
+            nursery.cancel_scope.cancel()
+        return world, ended_at, ticks
+
+    world, ended_at, ticks = run_mock(main)
+    assert ended_at < 5.02  # not the 95 s left of the channel timeout
+    assert world.tick == 1 and ticks == [0]  # no perception of tick 1 went out
