@@ -1,6 +1,7 @@
 """The BlueBot's depth sensor: an MS5803 pressure sensor on I²C, read as depth (SPEC §6).
 
-The sensor holds six factory calibration words in its PROM and converts pressure (D1) and
+The sensor holds six factory calibration words in its PROM, guarded by a 4-bit CRC
+(:func:`prom_crc`), and converts pressure (D1) and
 temperature (D2) to raw 24-bit numbers on command. :func:`compensate` turns raw numbers and
 calibration into pressure and temperature with the datasheet's integer arithmetic (first
 order, and optionally its second-order correction below 20 °C); :class:`Ms5803` runs the
@@ -25,8 +26,12 @@ from fishswarm.bluebot.parameters import GRAVITY, BlueBot, Wiring
 log = logging.getLogger(__name__)
 
 RESET = 0x1E
-PROM_READ = 0xA2
-"""Address of calibration word C1; C2…C6 follow two bytes apart."""
+PROM_READ = 0xA0
+"""Address of PROM word 0 (factory data); words 1–6 (C1…C6) follow two bytes apart, and word
+7 keeps the serial code with the CRC in its low four bits."""
+PROM_WORDS = 8
+PROM_ATTEMPTS = 3
+"""How often the PROM is read before a CRC mismatch is taken for a fault, not for noise."""
 CONVERT_PRESSURE = 0x40
 CONVERT_TEMPERATURE = 0x50
 """Conversion commands at the lowest oversampling (256), which takes at most 0.6 ms."""
@@ -52,6 +57,30 @@ MODELS = {"01BA": Scaling(16, 7, 15, 8), "02BA": Scaling(17, 6, 16, 7)}
 
 class SensorError(RuntimeError):
     """The pressure sensor answered with something impossible (a bad bus or wiring)."""
+
+
+def prom_crc(words: Sequence[int]) -> int:
+    """The 4-bit CRC of the sensor's eight PROM words, as TE's application note AN520
+    computes it: the sixteen bytes, high byte first, divided by x⁴ + x + 1, with word 7's
+    low byte (where the CRC itself is kept) taken as zero.
+
+    Args:
+        words: the PROM words 0–7, each 0…65535.
+    """
+    if len(words) != PROM_WORDS or not all(0 <= word <= 0xFFFF for word in words):
+        raise ValueError(f"the PROM has {PROM_WORDS} 16-bit words, got {list(words)}")
+    remainder = 0
+    for index, word in enumerate(words):
+        if index == PROM_WORDS - 1:
+            word &= 0xFF00
+        for byte in (word >> 8, word & 0xFF):
+            remainder ^= byte
+            for _ in range(8):
+                carry = remainder & 0x8000
+                remainder = (remainder << 1) & 0xFFFF
+                if carry:
+                    remainder ^= 0x3000
+    return remainder >> 12
 
 
 @dataclass(frozen=True)
@@ -170,14 +199,37 @@ class Ms5803:
         self._model = model
         self._second_order = second_order
         self._sleep = sleep
-        self._bus.write_byte(address, RESET)
-        self._sleep(0.003)  # the PROM reloads after a reset (2.8 ms)
-        self.calibration = tuple(self._read_word(PROM_READ + 2 * n) for n in range(6))
-        if all(word in (0, 0xFFFF) for word in self.calibration):
-            raise SensorError(
-                f"no MS5803 answers at I2C address {address:#04x}: calibration words "
-                f"{self.calibration} (check the wiring and `i2cdetect -y 1`)"
+        words = self._read_prom()
+        self.calibration = words[1:7]
+        """C1…C6, as :func:`compensate` takes them."""
+
+    def _read_prom(self) -> tuple[int, ...]:
+        """The PROM's eight words, once their CRC holds (read again after a mismatch: a
+        disturbed transfer on a long I²C cable is more likely than a damaged chip)."""
+        for attempt in range(1, PROM_ATTEMPTS + 1):
+            self._bus.write_byte(self._address, RESET)
+            self._sleep(0.003)  # the PROM reloads after a reset (2.8 ms)
+            words = tuple(self._read_word(PROM_READ + 2 * n) for n in range(PROM_WORDS))
+            if all(word in (0, 0xFFFF) for word in words[1:7]):
+                raise SensorError(
+                    f"no MS5803 answers at I2C address {self._address:#04x}: calibration "
+                    f"words {words[1:7]} (check the wiring and `i2cdetect -y 1`)"
+                )
+            kept, computed = words[-1] & 0xF, prom_crc(words)
+            if kept == computed:
+                return words
+            log.warning(
+                "depth sensor: PROM read %d of %d fails its CRC (kept %#x, computed %#x)",
+                attempt,
+                PROM_ATTEMPTS,
+                kept,
+                computed,
             )
+        raise SensorError(
+            f"the MS5803 at I2C address {self._address:#04x} gave calibration words that "
+            f"fail their CRC in {PROM_ATTEMPTS} reads (last: {words}): check the I2C wiring "
+            "and pull-ups, and replace the sensor if it persists"
+        )
 
     def _read_word(self, register: int) -> int:
         high, low = self._bus.read_i2c_block_data(self._address, register, 2)

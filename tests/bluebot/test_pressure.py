@@ -21,11 +21,14 @@ from fishswarm.bluebot.pressure import (
     SensorError,
     compensate,
     depth_of,
+    prom_crc,
 )
 
 # The worked example of TE's 2-bar sensors' datasheets (MS5803-02BA, MS5607-02BA03 p. 8).
 EXAMPLE_CALIBRATION = (46372, 43981, 29059, 27842, 31553, 28165)
 EXAMPLE_D1, EXAMPLE_D2 = 6465444, 8077636
+# As a chip would hold it: factory word 0, C1…C6, serial code 0x123 and the CRC 0x2.
+EXAMPLE_PROM = (0x0064, *EXAMPLE_CALIBRATION, 0x1232)
 
 
 def test_the_datasheets_worked_example() -> None:
@@ -107,8 +110,8 @@ class SimulatedChip:
     """An MS5803 as its I²C bus sees it: PROM words, conversions on command, the ADC read
     back once a conversion has finished."""
 
-    def __init__(self, calibration: tuple[int, ...], d1: int, d2: int, address: int = 0x77):
-        self.prom = {0xA2 + 2 * n: word for n, word in enumerate(calibration)}
+    def __init__(self, prom: tuple[int, ...], d1: int, d2: int, address: int = 0x77):
+        self.prom = {0xA0 + 2 * n: word for n, word in enumerate(prom)}
         self.raw = {CONVERT_PRESSURE: d1, CONVERT_TEMPERATURE: d2}
         self.address = address
         self.adc = 0
@@ -135,7 +138,7 @@ class SimulatedChip:
 
 
 def test_the_driver_reads_the_chip_in_the_datasheets_order() -> None:
-    chip = SimulatedChip(EXAMPLE_CALIBRATION, EXAMPLE_D1, EXAMPLE_D2)
+    chip = SimulatedChip(EXAMPLE_PROM, EXAMPLE_D1, EXAMPLE_D2)
     waits: list[float] = []
     sensor = Ms5803(chip, model="02BA", sleep=waits.append)
     assert sensor.calibration == EXAMPLE_CALIBRATION
@@ -147,18 +150,74 @@ def test_the_driver_reads_the_chip_in_the_datasheets_order() -> None:
 
 
 def test_a_missing_sensor_is_named() -> None:
-    chip = SimulatedChip(EXAMPLE_CALIBRATION, EXAMPLE_D1, EXAMPLE_D2, address=0x76)
+    chip = SimulatedChip(EXAMPLE_PROM, EXAMPLE_D1, EXAMPLE_D2, address=0x76)
     with pytest.raises(SensorError, match="no MS5803 answers at I2C address 0x77"):
         Ms5803(chip, sleep=lambda _: None)  # the chip answers at 0x76, we ask 0x77
 
 
 @pytest.mark.parametrize("empty", [CONVERT_PRESSURE, CONVERT_TEMPERATURE])
 def test_an_empty_conversion_is_a_sensor_error_not_a_reading(empty: int) -> None:
-    chip = SimulatedChip(EXAMPLE_CALIBRATION, EXAMPLE_D1, EXAMPLE_D2)
+    chip = SimulatedChip(EXAMPLE_PROM, EXAMPLE_D1, EXAMPLE_D2)
     chip.raw[empty] = 0  # read before the conversion finished
     sensor = Ms5803(chip, model="02BA", sleep=lambda _: None)
     with pytest.raises(SensorError, match="empty conversion"):
         sensor.read()
+
+
+def test_the_prom_crc_of_te_application_note_an520() -> None:
+    # AN520's own check of its CRC code: these eight words give 0xB.
+    words = (0x3132, 0x3334, 0x3536, 0x3738, 0x3940, 0x4142, 0x4344, 0x4500)
+    assert prom_crc(words) == 0xB
+    assert prom_crc(EXAMPLE_PROM) == EXAMPLE_PROM[7] & 0xF
+    with pytest.raises(ValueError, match="8 16-bit words"):
+        prom_crc(words[:7])
+    with pytest.raises(ValueError, match="8 16-bit words"):
+        prom_crc((*words[:7], 0x10000))
+
+
+@given(st.integers(0, 8 * 16 - 9))
+def test_the_crc_catches_any_one_flipped_bit_and_ignores_its_own_nibble(bit: int) -> None:
+    # x⁴ + x + 1 has more than one term, so no single flipped bit divides by it: every
+    # one-bit error among the 120 bits it covers (not word 7's low byte) changes the CRC.
+    word, place = divmod(bit, 16)
+    if word == 7:
+        place += 8  # word 7's high byte: its low byte holds the CRC
+    flipped = list(EXAMPLE_PROM)
+    flipped[word] ^= 1 << place
+    assert prom_crc(flipped) != prom_crc(EXAMPLE_PROM)
+    assert prom_crc((*EXAMPLE_PROM[:7], EXAMPLE_PROM[7] ^ (bit & 0xFF))) == prom_crc(EXAMPLE_PROM)
+
+
+class DisturbedChip(SimulatedChip):
+    """A chip whose first ``disturbed`` PROM reads come back with one bit of C3 flipped (a
+    transfer disturbed on the cable)."""
+
+    def __init__(self, disturbed: int) -> None:
+        super().__init__(EXAMPLE_PROM, EXAMPLE_D1, EXAMPLE_D2)
+        self.disturbed = disturbed
+
+    def read_i2c_block_data(self, i2c_addr: int, register: int, length: int) -> list[int]:
+        data = super().read_i2c_block_data(i2c_addr, register, length)
+        if register == 0xA6 and self.commands.count(RESET) <= self.disturbed:
+            data[1] ^= 0x10
+        return data
+
+
+def test_a_prom_read_that_fails_its_crc_is_read_again(caplog: pytest.LogCaptureFixture) -> None:
+    chip = DisturbedChip(disturbed=2)
+    with caplog.at_level("WARNING"):
+        sensor = Ms5803(chip, model="02BA", sleep=lambda _: None)
+    assert sensor.calibration == EXAMPLE_CALIBRATION  # the third read, undisturbed
+    assert chip.commands == [RESET] * 3
+    assert "PROM read 1 of 3 fails its CRC" in caplog.text
+    assert "PROM read 2 of 3 fails its CRC" in caplog.text
+    assert sensor.read() == Reading(110002.0, 20.0)
+
+
+def test_a_prom_that_always_fails_its_crc_is_a_sensor_error() -> None:
+    chip = DisturbedChip(disturbed=3)
+    with pytest.raises(SensorError, match=r"fail their CRC in 3 reads.*check the I2C wiring"):
+        Ms5803(chip, model="02BA", sleep=lambda _: None)
 
 
 class StepPressure:
