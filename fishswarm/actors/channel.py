@@ -5,12 +5,18 @@ tick k), the channel waits for exactly those outbox messages, works out the rece
 the positions of tick k+1, publishes the deliveries for tick k+1, and then a report telling
 the world how many deliveries each fish gets, so that each fish can wait for all of them:
 deterministic, and nothing lost.
+
+A channel run apart from its world (``fishswarm channel``) asks each run's world for its
+scenario when the run starts and takes the world's range, loss and seed: a channel started
+with other settings would otherwise deliver what no batch run of the world's scenario
+delivers.
 """
 
 from __future__ import annotations
 
 import logging
 from collections import defaultdict, deque
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +29,7 @@ from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import fish_id_of
 from fishswarm.protocols.messages import Broadcast, ChannelReport, Delivery, Snapshot
 from fishswarm.sim.medium import receptions
-from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.sim.streams import Stream, stream
 
 log = logging.getLogger(__name__)
@@ -54,10 +60,21 @@ class Channel:
     Args:
         scenario: range, loss and seed of the medium.
         outbox_timeout: longest wait for the broadcasts a snapshot announces, s.
+        ask_world: for a channel apart from its world, how to ask the world of a run that
+            starts for its scenario (None if no world answers; it may raise
+            :class:`ConfigError`); the medium then takes the world's range, loss and seed.
+            None (the default): ``scenario`` is the world's, as in ``fishswarm run``.
     """
 
-    def __init__(self, scenario: Scenario, *, outbox_timeout: float = OUTBOX_TIMEOUT) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        *,
+        outbox_timeout: float = OUTBOX_TIMEOUT,
+        ask_world: Callable[[], Awaitable[Scenario | None]] | None = None,
+    ) -> None:
         self.scenario = scenario
+        self._ask_world = ask_world
         self.keys = scenario.keys
         self.outbox_timeout = outbox_timeout
         self._intake = Intake("channel")
@@ -91,6 +108,8 @@ class Channel:
                 snapshot = await self._next_snapshot()
                 if snapshot.tick == 0:
                     self._start_run()
+                    if self._ask_world is not None:
+                        await self._take_the_worlds_medium(self._ask_world)
                     continue
                 if int(snapshot.broadcasts.sum()) == 0:
                     self._settle(snapshot.tick - 1, {})  # nothing announced: nothing to wait for
@@ -225,6 +244,44 @@ class Channel:
         # A new run's first broadcasts are of ticks 0 to 2: anything later is the last run's.
         for old in [tick for tick in self._outbox if tick > 2]:
             self._let_go(old, f"a broadcast of tick {old}, of a run that has ended")
+
+    async def _take_the_worlds_medium(
+        self, ask_world: Callable[[], Awaitable[Scenario | None]]
+    ) -> None:
+        """Take range, loss and seed from the world of the run that starts (before its first
+        broadcasts are delivered, at the snapshot of tick 1); keep the channel's own, and
+        say so, if the world does not tell them."""
+        mine = self.scenario
+        try:
+            world = await ask_world()
+        except ConfigError as error:
+            log.warning("channel: %s; the medium keeps its own settings", error)
+            return
+        if world is None:
+            log.warning(
+                "channel: no world told its run's settings: the medium keeps its own "
+                "(range %g m, loss %g, seed %d)",
+                mine.channel_range,
+                mine.channel_loss,
+                mine.seed,
+            )
+            return
+        medium = (world.channel_range, world.channel_loss, world.seed)
+        if medium != (mine.channel_range, mine.channel_loss, mine.seed):
+            log.warning(
+                "channel: the run's world has range %g m, loss %g, seed %d: the medium "
+                "takes them (it had %g m, %g, %d)",
+                *medium,
+                mine.channel_range,
+                mine.channel_loss,
+                mine.seed,
+            )
+            self.scenario = mine.replace(
+                channel_range=world.channel_range,
+                channel_loss=world.channel_loss,
+                seed=world.seed,
+            )
+            self._rngs.clear()
 
     def _let_go(self, tick: int, reason: str) -> None:
         """Count every broadcast of ``tick`` in the outbox as unannounced, and drop them."""

@@ -506,7 +506,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="run the channel actor alone",
         description="Run the simulated broadcast medium: it delivers the fish's broadcasts "
         "(formation flags) to the fish in range, situated and with the scenario's seeded "
-        "loss, and tells the world how many each fish gets.",
+        "loss, and tells the world how many each fish gets. At the start of each run it "
+        "asks that run's world for its settings and takes the world's channel range, loss "
+        "and seed; its own (--seed, --config) serve only if no world answers.",
     )
     _add_connect(channel)
     _add_scenario_flags(channel, ["seed", "swarm"])

@@ -15,7 +15,7 @@ from typing import Any
 import trio
 
 from fishswarm.actors.channel import Channel
-from fishswarm.actors.control import run_control
+from fishswarm.actors.control import ask_scenario, run_control
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.launcher import (
     EXIT_WORKER_DIED,
@@ -421,12 +421,21 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
     return 0
 
 
+WORLD_ANSWER_TIMEOUT = 2.0
+"""How long a standalone channel waits for a run's world to tell its settings, s (well within
+the world's wait for the channel's first report)."""
+
+
 def channel(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm channel``: the channel alone."""
 
     async def main() -> None:
         async with open_session(client_settings(args, "channel")) as session:
-            await Channel(scenario).run(ZenohBus(session))
+
+            async def ask_world() -> Scenario | None:
+                return await ask_scenario(session, scenario.keys, timeout=WORLD_ANSWER_TIMEOUT)
+
+            await Channel(scenario, ask_world=ask_world).run(ZenohBus(session))
 
     _run_trio(main)
     return 0

@@ -15,7 +15,7 @@ from fishswarm.actors.channel import Channel
 from fishswarm.actors.inbox import Inbox
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.messages import Broadcast, ChannelReport, Delivery, Snapshot
-from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.scenario import ConfigError, Scenario
 from tests.conftest import run_mock, subscription
 
 SCENARIO = Scenario(fish=3)
@@ -204,23 +204,72 @@ def test_broadcasts_of_a_tick_whose_snapshot_was_missed_are_counted_when_a_later
     assert channel.statistics().rejected == 1
 
 
+LOSSY = Scenario(fish=3, channel_loss=0.5, seed=4)
+
+
+async def _one_run(bus: MemoryBus, reports: Inbox[tuple[str, bytes]]) -> list[list[int]]:
+    """A run of 8 ticks in which fish 0 broadcasts at every tick: each tick's inbox counts."""
+    counts = []
+    bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0]))
+    for tick in range(1, 9):
+        bus.put(KEYS.outbox(0), broadcast(0, tick - 1, tick))
+        bus.put(KEYS.snapshot, snapshot(tick, [1, 0, 0]))
+        report = decode((await reports.receive())[1], ChannelReport)
+        counts.append(report.inbox_counts.tolist())
+    return counts
+
+
+async def _runs(channel: Channel, runs: int) -> list[list[list[int]]]:
+    bus = MemoryBus()
+    async with (
+        subscription(bus, KEYS.channel_report) as reports,
+        trio.open_nursery() as nursery,
+    ):
+        await nursery.start(channel.run, bus)
+        counts = [await _one_run(bus, reports) for _ in range(runs)]
+        nursery.cancel_scope.cancel()
+    return counts
+
+
+def test_a_channel_apart_from_its_world_takes_each_runs_medium_from_the_world(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Started with no loss, a channel whose world runs with loss 0.5 and seed 4 loses what
+    a channel started with the world's settings loses; when the next world does not answer
+    (or answers nonsense) it says so and keeps what it has; the next world's no-loss medium
+    hears every reception."""
+    answers: list[Scenario | ConfigError | None] = [
+        LOSSY,
+        None,
+        ConfigError("the world's answer is no run settings"),
+        Scenario(fish=3, seed=4),
+    ]
+
+    async def ask_world() -> Scenario | None:
+        answer = answers.pop(0)
+        if isinstance(answer, ConfigError):
+            raise answer
+        return answer
+
+    reference = run_mock(lambda: _runs(Channel(LOSSY), 1))[0]
+    with caplog.at_level(logging.WARNING):
+        apart = run_mock(lambda: _runs(Channel(Scenario(fish=3), ask_world=ask_world), 4))
+    assert sum(c[1] + c[2] for c in reference) < 16  # the seed loses some of 16
+    assert apart[0] == apart[1] == apart[2] == reference
+    assert apart[3] == [[0, 1, 1]] * 8
+    assert answers == []
+    assert "loss 0.5, seed 4: the medium takes them (it had 3 m, 0, 0)" in caplog.text
+    assert "no world told its run's settings: the medium keeps its own" in caplog.text
+    assert "no run settings; the medium keeps its own settings" in caplog.text
+
+
 def test_a_channel_serving_run_after_run_gives_each_the_losses_of_a_run_alone() -> None:
     """Two runs of the same seed through one channel (as with `fishswarm channel` left up
     while `fishswarm world` runs again): fish 0 broadcasts at every tick, half of all
     receptions are lost, and the second run loses the same ones as the first. A broadcast
     of the first run for a tick it never reached is counted and let go when the second
     starts."""
-    lossy = Scenario(fish=3, channel_loss=0.5, seed=4)
-
-    async def one_run(bus: MemoryBus, reports: Inbox[tuple[str, bytes]]) -> list[list[int]]:
-        counts = []
-        bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0]))
-        for tick in range(1, 9):
-            bus.put(KEYS.outbox(0), broadcast(0, tick - 1, tick))
-            bus.put(KEYS.snapshot, snapshot(tick, [1, 0, 0]))
-            report = decode((await reports.receive())[1], ChannelReport)
-            counts.append(report.inbox_counts.tolist())
-        return counts
+    lossy = LOSSY
 
     async def main() -> tuple[list[list[int]], list[list[int]], Channel]:
         bus = MemoryBus()
@@ -230,10 +279,10 @@ def test_a_channel_serving_run_after_run_gives_each_the_losses_of_a_run_alone() 
             trio.open_nursery() as nursery,
         ):
             await nursery.start(channel.run, bus)
-            first = await one_run(bus, reports)
+            first = await _one_run(bus, reports)
             bus.put(KEYS.outbox(0), broadcast(0, 9, 99))  # for a tick the run never reached
             await trio.sleep(0.01)
-            second = await one_run(bus, reports)
+            second = await _one_run(bus, reports)
             nursery.cancel_scope.cancel()
         return first, second, channel
 

@@ -244,3 +244,51 @@ def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_ow
     assert len({s.run for s in own.snapshots}) == 1
     theirs = read_recording(first_record)
     assert {s.run for s in theirs.snapshots}.isdisjoint({s.run for s in own.snapshots})
+
+
+def test_a_standalone_channel_takes_each_runs_loss_and_seed_from_its_world(
+    tmp_path: Path,
+) -> None:
+    """README's multi-machine recipe with a channel started on other settings (no loss,
+    seed 9) than the world's (loss 0.5, seed 3): the channel takes the world's, so the run
+    is the batch engine's run of the world's scenario, bit for bit. With the channel's own
+    settings the fish would hear other flags (up to 0.37 m apart by the end)."""
+    import numpy as np
+
+    from fishswarm.sim.engine import simulate_batch
+    from fishswarm.sim.scenario import Scenario
+
+    world_config = tmp_path / "world.toml"
+    world_config.write_text(
+        '[scenario]\nfish = 6\nbehavior = "formation"\nduration = 20\nseed = 3\n'
+        "channel_loss = 0.5\n"
+    )
+    channel_config = tmp_path / "channel.toml"
+    channel_config.write_text("[scenario]\nchannel_loss = 0.0\nseed = 9\n")
+    record = tmp_path / "world.mcap"
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    with started_commands() as start:
+        start("router", "--listen", endpoint)
+        wait_for_port(port)
+        channel = start("channel", "--connect", endpoint, "--config", str(channel_config))
+        start("fish", "--connect", endpoint, "--config", str(world_config), "--school", "all",
+              *[part for fish in range(6) for part in ("--id", str(fish))])  # fmt: skip
+        world = subprocess.run(
+            [*FISHSWARM, "world", "--connect", endpoint, "--config", str(world_config),
+             "--start-timeout", "60", "--quiet", "--record", str(record)],
+            capture_output=True, text=True, timeout=180, check=False,
+        )  # fmt: skip
+        assert world.returncode == 0, world.stderr
+        statistics = json.loads(world.stderr.strip().splitlines()[-1])
+        assert statistics["ticks"] == 20 and statistics["lost_fish"] == 0
+        assert statistics["rejected"] == {} and statistics["mismatched_fish"] == 0
+        channel.send_signal(signal.SIGINT)
+        _, channel_errors = channel.communicate(timeout=30)
+    assert "the medium takes them (it had 3 m, 0, 9)" in channel_errors
+    reference = simulate_batch(
+        Scenario(fish=6, behavior="formation", duration=20.0, seed=3, channel_loss=0.5)
+    )
+    recorded = read_recording(record).arrays()
+    np.testing.assert_array_equal(recorded["pos"], reference.position)
+    np.testing.assert_array_equal(recorded["yaw"], reference.yaw)
