@@ -82,6 +82,10 @@ class Observer:
         stage: the tank and landmark, drawn in the recorded scenes (optional).
         on_scene: called after every snapshot with what the swarm looks like and the
             snapshot's metrics (e.g. a live view).
+        on_new_run: called with its run id when the snapshots of a later run begin (a world
+            run again on the swarm while the observer stays), before the first of them is
+            measured or drawn. The observer then starts afresh: its ticks, its orbit counts
+            and its wait for the world's end are the new run's.
     """
 
     def __init__(
@@ -95,8 +99,10 @@ class Observer:
         orbit: OrbitTarget | None = None,
         stage: Stage | None = None,
         on_scene: Callable[[Scene, dict[str, float]], None] | None = None,
+        on_new_run: Callable[[int], None] | None = None,
     ) -> None:
         self.keys = keys
+        self.on_new_run = on_new_run
         self.stage = stage
         self.on_scene = on_scene
         self.recorder = recorder
@@ -116,6 +122,10 @@ class Observer:
         self.world_run: int | None = None
         """Take only the snapshots of this run of the world (None: any): an observer that
         records one world's run must not record another's, on the same swarm."""
+        self.current_run: int | None = None
+        """The run of the snapshots taken so far (None before the first)."""
+        self._later_runs = 0
+        """How many runs' snapshots have begun after the first's."""
 
     @classmethod
     def of(
@@ -191,9 +201,11 @@ class Observer:
 
         The world's snapshots travel apart from its liveliness token, and the last of them
         may arrive just after the token is gone (seen under load): once the world has left,
-        this waits until no snapshot has come for ``settle`` seconds."""
+        this waits until no snapshot has come for ``settle`` seconds, or until the snapshots
+        of a later run begin (which ends the run waited for, too)."""
+        later_runs = self._later_runs
         await self._world_left.wait()
-        while True:
+        while self._later_runs == later_runs:
             arrived = self._tick_reached
             with trio.move_on_after(settle) as quiet:
                 await arrived.wait()
@@ -214,8 +226,25 @@ class Observer:
         self.events.append(event)
         if self.recorder is not None:
             self.recorder.event(self._sim_time, event)
-        if member.role == "world" and not alive:
+        # The world of the run being watched has left (a world token names its run): not
+        # that of an earlier run, whose leaving may come after the next run's first snapshot.
+        watched = self.current_run in (None, _run_of(member.member_id))
+        if member.role == "world" and not alive and watched:
             self._world_left.set()
+
+    def _start_run(self, run: int) -> None:
+        """The snapshots of ``run`` begin: a later run starts afresh (and is announced)."""
+        later = self.current_run is not None
+        self.current_run = run
+        if not later:
+            return
+        self._later_runs += 1
+        self._last_tick = -1
+        self._world_left.set()  # the earlier run is over (worlds take turns): wake its waiters
+        self._world_left = trio.Event()
+        self._orbit_tracker = None if self.orbit is None else OrbitTracker(self.orbit)
+        if self.on_new_run is not None:
+            self.on_new_run(run)
 
     async def _on_snapshot(self, key: str, payload: bytes) -> None:
         snapshot = self._intake.decode(key, payload, Snapshot)
@@ -226,6 +255,8 @@ class Observer:
                 key, "foreign", f"snapshot of run {snapshot.run}, not {self.world_run}"
             )
             return
+        if snapshot.run != self.current_run:
+            self._start_run(snapshot.run)
         if snapshot.tick <= self._last_tick:
             self._intake.refuse(key, "stale", f"snapshot of tick {snapshot.tick} repeated")
             return
@@ -270,3 +301,11 @@ class Observer:
         self._tick_reached = trio.Event()
         if self.on_progress is not None:
             self.on_progress(progress)
+
+
+def _run_of(member_id: str) -> int | None:
+    """The run a world's liveliness token names (None for a token that names none)."""
+    try:
+        return int(member_id)
+    except ValueError:
+        return None

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from pathlib import Path
 
@@ -81,24 +82,62 @@ def _replay(path: Path, settings: ViewSettings) -> None:
         wait_for_ctrl_c()
 
 
+class _Runs:
+    """The runs a live view follows, one recording each: the first from the start, each
+    later one from its first snapshot on (the observer's ``on_new_run``)."""
+
+    def __init__(self, view: LiveView, swarm: str) -> None:
+        self.view = view
+        self.swarm = swarm
+        self.count = 1
+        self.scenes: dict[int, int] = {}
+        """Snapshots shown of each run that has given way to a later one."""
+        self._begun = trio.Event()
+        self._send, self.begun_runs = trio.open_memory_channel[int](math.inf)
+
+    def begin(self, run: int) -> None:
+        """A later run's snapshots begin: draw them into a recording of their own."""
+        self.scenes[self.count] = self.view.scenes
+        self.count += 1
+        self.view.start_run(f"swarm {self.swarm}, run {self.count}")
+        print(
+            f"fishswarm view: run {self.count} of swarm {self.swarm!r} begins: shown as a "
+            "new recording (the earlier runs stay listed on the page)",
+            file=sys.stderr,
+        )
+        self._send.send_nowait(run)
+        self._begun.set()
+        self._begun = trio.Event()
+
+    async def wait_for_run(self, after: int) -> None:
+        """Wait until a run later than the ``after``-th has begun."""
+        while self.count <= after:
+            await self._begun.wait()
+
+
 def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
     keys = KeySpace(args.swarm)
 
     async def main() -> None:
-        with open_live_view(settings, name=f"swarm {args.swarm}") as view:
+        with open_live_view(settings, name=f"swarm {args.swarm}, run 1") as view:
             # The study's tank until the world says which (a world may be slow to answer, or
             # be gone before it can: the view shows what it sees meanwhile).
             view.show_stage(Stage(Tank().size))
+            runs = _Runs(view, args.swarm)
             async with (
                 open_session(client_settings(args, observer_subject(args.name))) as session,
                 trio.open_nursery() as nursery,
             ):
-                observer = Observer(keys, on_scene=view.show, observer_id="view")
+                observer = Observer(
+                    keys, on_scene=view.show, observer_id="view", on_new_run=runs.begin
+                )
                 await nursery.start(observer.run, ZenohBus(session))
                 _announce(view, f"following swarm {args.swarm!r} on {args.connect}")
 
-                async def learn_the_run() -> None:
+                async def learn_the_run(run: int | None) -> None:
                     ran = await _wait_for_world(session, keys, args.connect)
+                    if run is not None and observer.current_run != run:
+                        return  # a later run began meanwhile: it learns its own
                     observer.measure_as(ran)
                     view.show_stage(stage_of(ran))
                     print(
@@ -107,14 +146,23 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
                         file=sys.stderr,
                     )
 
-                nursery.start_soon(learn_the_run)
-                await observer.wait_for_world_end()
-                print(
-                    f"fishswarm view: the run has ended ({view.scenes} snapshots shown); "
-                    "the view stays up until Ctrl-C",
-                    file=sys.stderr,
-                )
-                await trio.sleep_forever()
+                async def learn_each_run() -> None:
+                    await learn_the_run(None)
+                    async for run in runs.begun_runs:
+                        await learn_the_run(run)
+
+                nursery.start_soon(learn_each_run)
+                watched = 1
+                while True:
+                    await observer.wait_for_world_end()
+                    shown = runs.scenes.get(watched, view.scenes)
+                    print(
+                        f"fishswarm view: the run has ended ({shown} snapshots shown); the "
+                        "view stays up until Ctrl-C, and shows the swarm's next run",
+                        file=sys.stderr,
+                    )
+                    await runs.wait_for_run(after=watched)
+                    watched = runs.count
 
     _run_trio(main)
 

@@ -34,6 +34,8 @@ if TYPE_CHECKING:
 
 TIMELINE = "time"
 """The timeline of the view: simulated time, s."""
+APPLICATION = "fishswarm"
+"""The application the view's recordings belong to (the page groups them under it)."""
 
 
 def _rerun() -> Any:
@@ -95,17 +97,46 @@ class LiveView:
     """
 
     def __init__(self, recording: rerun.RecordingStream, settings: ViewSettings) -> None:
+        self._served = recording
+        """The recording whose gRPC server the page streams from (it lives as long as the
+        view)."""
         self._recording = recording
+        """The recording drawn into now: the served one, or a later run's."""
         self._rr = _rerun()
         self.settings = settings
         self.scenes = 0
         self._metrics: set[str] = set()
+        self._stage = Stage(Tank().size)
         self._tank: tuple[float, float, float] = Tank().size
         """The tank's size, m: what is drawn is drawn upright in it (:func:`upright`)."""
 
+    def start_run(self, name: str) -> None:
+        """Draw what follows into a recording of its own, called ``name``, on the same page:
+        the page lists every run apart (the earlier ones stay, to scrub through) and turns
+        to the newest. The stage is drawn again until :meth:`show_stage` says otherwise."""
+        rr = self._rr
+        recording = rr.RecordingStream(application_id=APPLICATION, recording_id=name)
+        try:
+            recording.connect_grpc(self.settings.local_stream_url, default_blueprint=_blueprint(rr))
+        except Exception as error:  # rerun's errors are plain RuntimeErrors
+            raise ViewError(f"cannot add the run to the view: {error}") from None
+        recording.send_recording_name(name)
+        self._recording.flush()
+        self._recording = recording
+        self.scenes = 0
+        self._metrics = set()
+        self.show_stage(self._stage)
+
+    def flush(self) -> None:
+        """Send all that is drawn to the page's stream."""
+        self._recording.flush()
+        if self._served is not self._recording:
+            self._served.flush()
+
     def show_stage(self, stage: Stage) -> None:
-        """Draw the tank's walls and the landmark (they stay for the whole view)."""
+        """Draw the tank's walls and the landmark (they stay for the whole run)."""
         rr, log = self._rr, self._recording.log
+        self._stage = stage
         self._tank = stage.tank
         log("tank", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         log(
@@ -185,7 +216,7 @@ def open_live_view(settings: ViewSettings, *, name: str = "fishswarm") -> Iterat
     rr = _rerun()
     for port, what in ((settings.web_port, "page"), (settings.grpc_port, "data stream")):
         _check_free(port, what)
-    recording = rr.RecordingStream(application_id="fishswarm", recording_id=name)
+    recording = rr.RecordingStream(application_id=APPLICATION, recording_id=name)
     try:
         recording.serve_grpc(
             grpc_port=settings.grpc_port,
@@ -199,7 +230,9 @@ def open_live_view(settings: ViewSettings, *, name: str = "fishswarm") -> Iterat
         )
     except Exception as error:  # rerun's errors are plain RuntimeErrors
         raise ViewError(f"cannot serve the view: {error}") from None
+    recording.send_recording_name(name)
+    view = LiveView(recording, settings)
     try:
-        yield LiveView(recording, settings)
+        yield view
     finally:
-        recording.flush()
+        view.flush()

@@ -53,6 +53,11 @@ class ViewSettings:
         return f"rerun+http://{self.host}:{self.grpc_port}/proxy"
 
     @property
+    def local_stream_url(self) -> str:
+        """Where this machine sends more to the stream (a later run's recording)."""
+        return f"rerun+http://127.0.0.1:{self.grpc_port}/proxy"
+
+    @property
     def page_url(self) -> str:
         """The page to open in a browser."""
         return f"http://{self.host}:{self.web_port}/?url={quote(self.stream_url, safe='')}"

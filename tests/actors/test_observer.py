@@ -175,19 +175,21 @@ def test_a_formation_is_measured_against_the_shape_each_snapshot_names() -> None
         assert metrics["shape_error"] < 1e-9 and metrics["joined_fraction"] == 1.0
 
 
+def of_run(tick: int, run: int) -> bytes:
+    """A snapshot of two fish 1 m apart at ``tick`` of ``run``."""
+    two = np.zeros(2)
+    return encode(
+        Snapshot(
+            tick, float(tick), np.arange(2), np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5]]),
+            np.zeros((2, 3)), two, np.zeros(2, dtype=np.int64), np.zeros(2, dtype=np.int64),
+            run=run,
+        )
+    )  # fmt: skip
+
+
 def test_an_observer_of_one_run_takes_only_that_runs_snapshots() -> None:
     """A world's own observer (it records the run) on a router where another world of the
     swarm is still at its end: the other's snapshots are refused, counted, not recorded."""
-
-    def of_run(tick: int, run: int) -> bytes:
-        two = np.zeros(2)
-        return encode(
-            Snapshot(
-                tick, float(tick), np.arange(2), np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5]]),
-                np.zeros((2, 3)), two, np.zeros(2, dtype=np.int64), np.zeros(2, dtype=np.int64),
-                run=run,
-            )
-        )  # fmt: skip
 
     async def main() -> Observer:
         bus = MemoryBus()
@@ -204,3 +206,50 @@ def test_an_observer_of_one_run_takes_only_that_runs_snapshots() -> None:
     observer = run_mock(main)
     assert [p.tick for p in observer.history] == [0, 1]
     assert observer.statistics().snapshots == 2 and observer.statistics().rejected == 2
+
+
+def test_an_observer_that_stays_follows_the_next_run_from_its_first_snapshot() -> None:
+    """Run 3 ends at tick 5; run 7's first snapshot comes before run 3's world token is
+    gone (the two travel apart). Run 7 starts afresh at tick 0 (not refused as stale), is
+    announced once, and ends the wait for run 3's end; run 3's token leaving afterwards
+    does not end run 7, whose end comes 1 s after its own world left."""
+
+    async def main() -> tuple[Observer, list[tuple[float, int]], list[tuple[float, str]]]:
+        bus = MemoryBus()
+        announced: list[tuple[float, int]] = []
+        observer = Observer(
+            KEYS, on_new_run=lambda run: announced.append((trio.current_time(), run))
+        )
+        ended: list[tuple[float, str]] = []
+
+        async def wait_for_the_end(name: str) -> None:
+            await observer.wait_for_world_end(settle=1.0)
+            ended.append((trio.current_time(), name))
+
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            first = bus.declare_token(KEYS.alive("world", 3))
+            for tick in range(6):
+                bus.put(KEYS.snapshot, of_run(tick, 3))
+            await trio.sleep(1.0)
+            nursery.start_soon(wait_for_the_end, "run 3")
+            await trio.sleep(1.0)
+            second = bus.declare_token(KEYS.alive("world", 7))
+            bus.put(KEYS.snapshot, of_run(0, 7))  # at 2 s
+            await trio.sleep(0.5)
+            nursery.start_soon(wait_for_the_end, "run 7")
+            first.undeclare()  # at 2.5 s: run 3's world, gone late
+            for tick in (1, 2):
+                await trio.sleep(1.0)
+                bus.put(KEYS.snapshot, of_run(tick, 7))
+            await trio.sleep(1.0)
+            second.undeclare()  # at 5.5 s
+            await trio.sleep(3.0)
+            nursery.cancel_scope.cancel()
+        return observer, announced, ended
+
+    observer, announced, ended = run_mock(main)
+    assert [p.tick for p in observer.history] == [0, 1, 2, 3, 4, 5, 0, 1, 2]
+    assert observer.statistics().rejected == 0
+    assert announced == [(2.0, 7)] and observer.current_run == 7
+    assert ended == [(2.0, "run 3"), (6.5, "run 7")]

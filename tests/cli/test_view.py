@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from tests.cli.browser import browser_missing, fish_pixels, open_page, screenshot, wait_for_fish
-from tests.conftest import Lines, free_port, wait_for_port
+from tests.conftest import Lines, end_processes, free_port, wait_for_port
 
 pytestmark = pytest.mark.integration
 
@@ -124,6 +124,56 @@ def test_the_live_view_shows_the_fish_moving_in_a_real_browser(tmp_path: Path) -
         _stop(process, lines)
         run.kill()
         run.wait(timeout=10)
+
+
+@pytest.mark.skipif(browser_missing() is not None, reason=str(browser_missing()))
+def test_a_view_left_up_follows_the_swarms_next_run_in_a_real_browser(tmp_path: Path) -> None:
+    """README's standing swarm (router and fish stay up, worlds come and go) watched by one
+    view: the first run (30 s, done in a moment) ends; the second, in real time, is shown
+    as a new recording from its tick 0, and its fish move on the page. (An observer that
+    took the second run for the first would refuse its snapshots until tick 31.)"""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    processes: list[subprocess.Popen[str]] = []
+
+    def start(*args: str) -> subprocess.Popen[str]:
+        process = subprocess.Popen(
+            [*FISHSWARM, *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True
+        )
+        processes.append(process)
+        return process
+
+    process, lines = _view("--connect", endpoint)
+    try:
+        start("router", "--listen", endpoint)
+        wait_for_port(port)
+        lines.wait_for(r"following swarm 'default' on tcp/127\.0\.0\.1:\d+$")
+        page_url = lines.wait_for(r"^open (\S+) in a browser")[1]
+        start("fish", "--connect", endpoint, "--school", "all",
+              *[part for fish in range(10) for part in ("--id", str(fish))])  # fmt: skip
+        first = subprocess.run(
+            [*FISHSWARM, "world", "--connect", endpoint, "--fish", "10", "--duration", "30",
+             "--start-timeout", "60", "--quiet"],
+            capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+        assert first.returncode == 0, first.stderr
+        lines.wait_for(r"the run has ended \(31 snapshots shown\)")
+        start("world", "--connect", endpoint, "--fish", "10", "--duration", "120", "--time",
+              "realtime", "--start-timeout", "60", "--quiet")  # fmt: skip
+        lines.wait_for(r"run 2 of swarm 'default' begins: shown as a new recording")
+        lines.wait_for(r"the world runs 10 fish, dispersion, 120 s")
+        with open_page(page_url) as page:
+            wait_for_fish(page, tmp_path / "loading.png")
+            before = fish_pixels(screenshot(page, tmp_path / "before.png"))
+            time.sleep(5.0)  # five ticks of the second run, in real time
+            after = fish_pixels(screenshot(page, tmp_path / "after.png"))
+        assert before.sum() > 500 and after.sum() > 500
+        moved = np.logical_xor(before, after).sum()
+        assert moved > 0.2 * min(before.sum(), after.sum()), (moved, before.sum(), after.sum())
+        _close(process, lines)
+    finally:
+        _stop(process, lines)
+        end_processes(processes)
 
 
 @pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
