@@ -1128,3 +1128,36 @@ def test_a_stop_while_the_world_waits_for_the_channel_ends_the_run_at_once() -> 
     world, ended_at, ticks = run_mock(main)
     assert ended_at < 5.02  # not the 95 s left of the channel timeout
     assert world.tick == 1 and ticks == [0]  # no perception of tick 1 went out
+
+
+def test_a_stop_in_realtime_ends_the_run_without_waiting_out_the_period() -> None:
+    """In realtime mode the world takes commands until the tick's wall-clock end: with a
+    10-s period, a stop asked 1 s into tick 1 ends the run then, not 9 s later, and the
+    command that did not come by then is not counted late."""
+    scenario = Scenario(fish=1, duration=100.0, control_period=10.0, time_mode="realtime")
+    keys = scenario.keys
+
+    async def main() -> tuple[World, float, float]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0))
+        asked = trio.Event()
+
+        async def on_perception(tick: int) -> None:
+            if tick == 1:
+                asked.set()
+
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(_answer_after, bus, keys, 0, [0.0, 5.0], on_perception)
+            nursery.start_soon(world.run, bus)
+            await asked.wait()
+            await trio.sleep(1.0)
+            stopped_at = trio.current_time()
+            world.control(ControlRequest("stop"))
+            await _until_state(world, "stopped")
+            ended_at = trio.current_time()
+            nursery.cancel_scope.cancel()
+        return world, stopped_at, ended_at
+
+    world, stopped_at, ended_at = run_mock(main)
+    assert ended_at - stopped_at < 0.02
+    assert world.tick == 1 and world.late_commands == 0
