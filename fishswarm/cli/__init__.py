@@ -26,6 +26,7 @@ HANDLERS = {
     "router": ("swarm", "router"),
     "secure": ("swarm", "secure"),
     "formation": ("swarm", "formation"),
+    "control": ("swarm", "control"),
     "export": ("swarm", "export"),
     "learn": ("learn", "learn_command"),
     "experiment": ("study", "experiment"),

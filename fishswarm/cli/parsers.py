@@ -576,6 +576,26 @@ def build_parser() -> argparse.ArgumentParser:
         "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
     )
 
+    control = commands.add_parser(
+        "control",
+        help="a running world's status, or pause, resume or stop its run",
+        description="Ask the world of a running swarm for its status, or to pause, resume "
+        "or stop its run, from any machine that reaches the router (in a secured swarm, with "
+        "the admin certificate). A pause holds the run at its next snapshot until resumed; "
+        "a stop ends it at once, at the last snapshot sent, and the world exits as at the run's "
+        "end. Prints the world's reply: its state, tick, time and fish. (Robots have their "
+        "own: fishswarm robots --stop.)",
+    )
+    control.add_argument(
+        "action",
+        choices=("status", "pause", "resume", "stop"),
+        help="what to ask the world",
+    )
+    _add_connect(control)
+    control.add_argument(
+        "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
+    )
+
     router = commands.add_parser(
         "router",
         help="run a Zenoh router (e.g. on the base station)",

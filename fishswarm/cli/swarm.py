@@ -506,14 +506,21 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
     return 0
 
 
-def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
-    """``fishswarm formation SHAPE``: switch a running school's formation."""
+CONTROL_TIMEOUT = 5.0
+"""How long an operator's command waits for the world's answer, s."""
+
+
+def _ask_world(args: argparse.Namespace, request: ControlRequest) -> ControlReply:
+    """The answer of the world of ``--swarm`` to an operator's control request.
+
+    Raises:
+        UserError: no world answered, or its answer is not a control reply.
+    """
     keys = KeySpace(args.swarm)
-    request = encode(ControlRequest("formation", formation=args.shape))
 
     async def main() -> list[bytes]:
         async with open_session(client_settings(args, "admin")) as session:
-            return await query(session, keys.control, request, timeout=5.0)
+            return await query(session, keys.control, encode(request), timeout=CONTROL_TIMEOUT)
 
     replies = _run_trio(main)
     if not replies:
@@ -521,15 +528,30 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
             f"no world of swarm {args.swarm!r} answered on {args.connect}: is a run going?"
         )
     try:
-        reply = decode(replies[0], ControlReply)
+        return decode(replies[0], ControlReply)
     except MessageError as error:
         raise UserError(f"the world's answer is not a control reply: {error}") from None
+
+
+def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm formation SHAPE``: switch a running school's formation."""
+    reply = _ask_world(args, ControlRequest("formation", formation=args.shape))
     if reply.refused is not None:
         raise UserError(f"the world did not switch to {args.shape}: {reply.refused}")
     print(
         f"formation {args.shape} from tick {reply.tick + 1} (world {reply.state}, "
         f"{reply.live_fish} fish)",
         file=sys.stderr,
+    )
+    return 0
+
+
+def control(args: argparse.Namespace, scenario: Scenario | None) -> int:
+    """``fishswarm control ACTION``: a running world's status, or pause, resume or stop."""
+    reply = _ask_world(args, ControlRequest(args.action))
+    print(
+        f"swarm {args.swarm!r}: {reply.state} at tick {reply.tick} (t = {reply.time:g} s), "
+        f"{reply.live_fish} fish"
     )
     return 0
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -597,6 +598,58 @@ def test_a_formation_run_reports_its_shape_and_flags(tmp_path: Path) -> None:
     # Every fish flags at every decision (2 Hz for 5 s); each flag reaches the 5 others.
     assert data["counts"]["broadcasts"] == 6 * 10
     assert data["counts"]["deliveries"] >= 5 * 6 * 9
+
+
+def test_an_operator_pauses_resumes_and_stops_a_run_from_another_process(tmp_path: Path) -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    summary = tmp_path / "s.json"
+    run = subprocess.Popen(
+        [*FISHSWARM, "run", "--fish", "3", "--duration", "100000", "--period", "0.25",
+         "--time", "realtime", "--listen", endpoint, "--quiet", "--record",
+         str(tmp_path / "r.mcap"), "--summary", str(summary)],
+        stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    said = re.compile(r"^swarm 'default': (\w+) at tick (\d+) \(t = [\d.]+ s\), (\d+) fish$")
+
+    def ask(action: str) -> tuple[str, int, int]:
+        done = _run("control", action, "--connect", endpoint, timeout=30)
+        assert done.returncode == 0, done.stderr
+        match = said.match(done.stdout.strip())
+        assert match is not None, done.stdout
+        return match[1], int(match[2]), int(match[3])
+
+    try:
+        wait_for_port(port)
+        deadline = time.monotonic() + 30
+        while True:  # until the world answers, its three fish up and a tick gone by
+            status = _run("control", "status", "--connect", endpoint, timeout=30)
+            if status.returncode == 0 and re.search(
+                r"running at tick [1-9]\d*.*3 fish", status.stdout
+            ):
+                break
+            assert time.monotonic() < deadline, status.stderr
+            time.sleep(0.2)
+        assert ask("pause")[0] == "paused"
+        time.sleep(1.0)  # four periods, held
+        held = ask("status")
+        time.sleep(1.0)
+        assert ask("status") == held and held[0] == "paused"
+        state, tick, fish = ask("resume")
+        assert (state, tick, fish) == ("running", held[1], 3)
+        time.sleep(1.0)
+        state, stopped_at, _ = ask("stop")
+        assert state == "stopping" and stopped_at > held[1]
+        _, errors = run.communicate(timeout=30)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.communicate(timeout=10)
+    assert run.returncode == 0, errors
+    data = json.loads(summary.read_text())
+    assert data["status"] == "stopped" and data["counts"]["ticks"] == stopped_at
+    gone = _run("control", "status", "--connect", endpoint, "--connect-timeout", "2")
+    assert gone.returncode == 1 and "error:" in gone.stderr
 
 
 def test_an_operator_switches_a_running_schools_formation(tmp_path: Path) -> None:
