@@ -297,12 +297,13 @@ class World:
                             nursery.start_soon(self._pulse, bus)
                             await self._loop(bus)
                             nursery.cancel_scope.cancel()
-                    # The fish stop watching for this run's perceptions: none will come.
+                finally:
+                    self.wall_time = time.perf_counter() - started
+                    # The fish stop watching for this run's perceptions: none will come, at
+                    # its end as when the world is interrupted (Ctrl-C) or fails.
                     self._put(
                         bus, keys.world_pulse, encode(WorldPulse(self.run_id, self.tick, "ended"))
                     )
-                finally:
-                    self.wall_time = time.perf_counter() - started
         finally:
             self.roster.close()
         self.state_name = "stopped" if self._stop_requested else "finished"

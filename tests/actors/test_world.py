@@ -1161,3 +1161,35 @@ def test_a_stop_in_realtime_ends_the_run_without_waiting_out_the_period() -> Non
     world, stopped_at, ended_at = run_mock(main)
     assert ended_at - stopped_at < 0.02
     assert world.tick == 1 and world.late_commands == 0
+
+
+def test_an_interrupted_world_tells_its_fish_the_run_has_ended() -> None:
+    """A world cancelled in mid-run (Ctrl-C on ``fishswarm world``) still says its run has
+    ended: its fish stop watching for perceptions instead of counting their silence as a
+    fault (their watchdog would turn the fins off 5 s later and count it)."""
+    scenario = Scenario(fish=2, duration=100.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[list[str], int]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0))
+        observer = Observer(keys)
+        fish = Fish(FishSettings((0, 1), scenario.fish_params(), keys))
+        heard: list[str] = []
+        bus.subscribe(
+            keys.world_pulse, lambda key, payload: heard.append(decode(payload, WorldPulse).state)
+        )
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(fish.run, bus)
+            async with trio.open_nursery() as world_nursery:
+                world_nursery.start_soon(world.run, bus)
+                await observer.wait_for_tick(3)
+                world_nursery.cancel_scope.cancel()
+            await trio.sleep(20.0)  # four watchdog periods
+            nursery.cancel_scope.cancel()
+        return heard, fish.statistics().watchdog_stops
+
+    heard, stops = run_mock(main)
+    assert stops == 0
+    assert heard == ["ended"]  # the ticks took no simulated time: no pulse before
