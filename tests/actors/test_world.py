@@ -962,6 +962,24 @@ def test_a_world_told_to_stop_while_it_waits_for_its_fish_stops_waiting() -> Non
     assert world.tick == 0 and world.statistics().ticks == 0
 
 
+def test_a_world_told_to_stop_before_its_run_does_not_wait_for_its_fish() -> None:
+    """A stop asked before the world starts waiting (a control served before the run) ends
+    the run as soon as it starts: the wait for its fish is cancelled at once."""
+    scenario = Scenario(fish=2, duration=10.0)
+
+    async def main() -> tuple[World, float, str]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1), start_timeout=60.0))
+        reply = world.control(ControlRequest("stop"))
+        await world.run(bus)  # no fish come
+        return world, trio.current_time(), reply.state
+
+    world, ended_at, replied = run_mock(main)
+    assert replied == "stopping" and world.state_name == "stopped"
+    assert ended_at < 0.1  # not the 60-s start timeout's error
+    assert world.tick == 0 and world.statistics().ticks == 0
+
+
 def test_a_pause_asked_while_the_world_waits_for_its_fish_holds_its_first_tick() -> None:
     """Paused before its fish come up, the world says so (status and pulses) and sends no
     perception until resumed."""
