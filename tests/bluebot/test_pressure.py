@@ -155,6 +155,24 @@ def test_a_missing_sensor_is_named() -> None:
         Ms5803(chip, sleep=lambda _: None)  # the chip answers at 0x76, we ask 0x77
 
 
+def test_a_bus_held_low_is_no_sensor_though_its_zeros_pass_the_crc() -> None:
+    # SDA stuck low reads every PROM word as 0, and 0 is the CRC of eight zero words.
+    chip = SimulatedChip((0,) * 8, EXAMPLE_D1, EXAMPLE_D2)
+    assert prom_crc((0,) * 8) == 0
+    with pytest.raises(SensorError, match="no MS5803 answers at I2C address 0x77"):
+        Ms5803(chip, sleep=lambda _: None)
+
+
+@pytest.mark.parametrize("word", [0x0000, 0xFFFF])
+def test_a_calibration_word_of_all_zeros_or_ones_is_still_a_calibration(word: int) -> None:
+    # Only a PROM whose six calibration words are all 0 or all 1 bits is taken for no chip.
+    prom = [*EXAMPLE_PROM]
+    prom[4] = word
+    prom[7] = (prom[7] & 0xFFF0) | prom_crc(prom)
+    sensor = Ms5803(SimulatedChip(tuple(prom), EXAMPLE_D1, EXAMPLE_D2), sleep=lambda _: None)
+    assert sensor.calibration == tuple(prom[1:7])
+
+
 @pytest.mark.parametrize("empty", [CONVERT_PRESSURE, CONVERT_TEMPERATURE])
 def test_an_empty_conversion_is_a_sensor_error_not_a_reading(empty: int) -> None:
     chip = SimulatedChip(EXAMPLE_PROM, EXAMPLE_D1, EXAMPLE_D2)
@@ -173,6 +191,12 @@ def test_the_prom_crc_of_te_application_note_an520() -> None:
         prom_crc(words[:7])
     with pytest.raises(ValueError, match="8 16-bit words"):
         prom_crc((*words[:7], 0x10000))
+
+
+def test_the_prom_crc_takes_any_16_bit_word_and_only_those() -> None:
+    assert prom_crc((0x0000, 0xFFFF, 0x0000, 0xFFFF, 0x0000, 0xFFFF, 0x0000, 0xFF00)) == 0xC
+    with pytest.raises(ValueError, match="8 16-bit words"):
+        prom_crc((-1, *EXAMPLE_PROM[1:]))
 
 
 @given(st.integers(0, 8 * 16 - 9))
