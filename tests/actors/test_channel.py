@@ -263,6 +263,21 @@ def test_a_channel_apart_from_its_world_takes_each_runs_medium_from_the_world(
     assert "no run settings; the medium keeps its own settings" in caplog.text
 
 
+def test_a_channel_apart_from_its_world_takes_the_worlds_range_alone(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Started on a range of 3 m, a channel whose world differs only in its range, 0.15 m,
+    takes it: fish 0's broadcasts reach fish 1 (0.1 m away), not fish 2 (0.2 m away)."""
+
+    async def ask_world() -> Scenario | None:
+        return Scenario(fish=3, channel_range=0.15)
+
+    with caplog.at_level(logging.WARNING):
+        counts = run_mock(lambda: _runs(Channel(Scenario(fish=3), ask_world=ask_world), 1))
+    assert counts == [[[0, 1, 0]] * 8]
+    assert "range 0.15 m, loss 0, seed 0: the medium takes them (it had 3 m, 0, 0)" in caplog.text
+
+
 def test_a_channel_serving_run_after_run_gives_each_the_losses_of_a_run_alone() -> None:
     """Two runs of the same seed through one channel (as with `fishswarm channel` left up
     while `fishswarm world` runs again): fish 0 broadcasts at every tick, half of all
