@@ -305,6 +305,43 @@ def test_a_subject_may_not_put_on_the_keys_it_only_subscribes_to(secure_dir: Pat
     assert heard == sorted((key, subject) for subject, key in genuine)
 
 
+def test_the_channel_may_ask_the_world_for_its_run_and_a_robot_may_not(
+    secure_dir: Path,
+) -> None:
+    """A standalone channel takes each run's range, loss and seed from the world's answer on
+    ``world/scenario``: its certificate may query there (a robot's may not)."""
+    from fishswarm.actors.control import ask_scenario, run_control
+    from fishswarm.actors.world import World, WorldSettings
+    from fishswarm.sim.scenario import Scenario
+
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    scenario = Scenario(fish=2, channel_loss=0.5, seed=3)
+
+    async def main() -> tuple[Scenario | None, Scenario | None]:
+        async with (
+            open_session(_settings(secure_dir, "router", endpoint, router=True)),
+            open_session(_settings(secure_dir, "world", endpoint)) as world_session,
+            open_session(_settings(secure_dir, "observer-lab", endpoint)) as observer_session,
+            open_session(_settings(secure_dir, "channel", endpoint)) as channel_session,
+            open_session(_settings(secure_dir, "robot-1", endpoint)) as robot_session,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(run_control, world_session, World(WorldSettings(scenario)))
+            # Wait until the routes are up: the observer, allowed too, hears the answer.
+            with trio.fail_after(10):
+                while await ask_scenario(observer_session, KEYS, timeout=0.5) is None:
+                    pass
+            channel_told = await ask_scenario(channel_session, KEYS, timeout=2.0)
+            robot_told = await ask_scenario(robot_session, KEYS, timeout=2.0)
+            nursery.cancel_scope.cancel()
+        return channel_told, robot_told
+
+    channel_told, robot_told = run_trio(main)
+    assert channel_told is not None
+    assert (channel_told.channel_loss, channel_told.seed) == (0.5, 3)
+    assert robot_told is None
+
+
 def test_the_access_control_names_every_subject_once() -> None:
     access = access_control(["router", "world", "observer", "robot-3"], KEYS)
     assert [subject["id"] for subject in access["subjects"]] == ["world", "observer", "robot-3"]
