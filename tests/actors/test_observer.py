@@ -253,3 +253,29 @@ def test_an_observer_that_stays_follows_the_next_run_from_its_first_snapshot() -
     assert observer.statistics().rejected == 0
     assert announced == [(2.0, 7)] and observer.current_run == 7
     assert ended == [(2.0, "run 3"), (6.5, "run 7")]
+
+
+def test_a_world_that_leaves_before_any_snapshot_ends_the_wait_for_its_run() -> None:
+    """A world that never started its run (its fish did not come up) leaves before the
+    observer has seen a snapshot: the wait for the world's end ends 1 s later all the same."""
+
+    async def main() -> list[float]:
+        bus = MemoryBus()
+        observer = Observer(KEYS)
+        ended: list[float] = []
+
+        async def wait_for_the_end() -> None:
+            await observer.wait_for_world_end(settle=1.0)
+            ended.append(trio.current_time())
+
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            nursery.start_soon(wait_for_the_end)
+            world = bus.declare_token(KEYS.alive("world", 3))
+            await trio.sleep(2.0)
+            world.undeclare()
+            await trio.sleep(3.0)
+            nursery.cancel_scope.cancel()
+        return ended
+
+    assert run_mock(main) == [3.0]
