@@ -279,3 +279,39 @@ def test_a_world_that_leaves_before_any_snapshot_ends_the_wait_for_its_run() -> 
         return ended
 
     assert run_mock(main) == [3.0]
+
+
+def test_a_world_token_that_names_no_run_neither_ends_the_run_nor_stops_the_observer() -> None:
+    """Liveliness is not access-controlled: a token ``alive/world/intruder`` may come and go
+    while run 3 is watched. The observer notes it and goes on; run 3's end is its own."""
+
+    async def main() -> tuple[Observer, list[float]]:
+        bus = MemoryBus()
+        observer = Observer(KEYS)
+        ended: list[float] = []
+
+        async def wait_for_the_end() -> None:
+            await observer.wait_for_world_end(settle=1.0)
+            ended.append(trio.current_time())
+
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            world = bus.declare_token(KEYS.alive("world", 3))
+            bus.put(KEYS.snapshot, of_run(0, 3))
+            await trio.sleep(0.5)
+            nursery.start_soon(wait_for_the_end)
+            bus.declare_token(KEYS.alive("world", "intruder")).undeclare()  # at 0.5 s
+            await trio.sleep(0.5)
+            bus.put(KEYS.snapshot, of_run(1, 3))
+            await trio.sleep(1.0)
+            world.undeclare()  # at 2 s
+            await trio.sleep(3.0)
+            nursery.cancel_scope.cancel()
+        return observer, ended
+
+    observer, ended = run_mock(main)
+    assert ended == [3.0]
+    assert [p.tick for p in observer.history] == [0, 1]
+    assert [(e["event"], e["id"]) for e in observer.events if e["role"] == "world"] == [
+        ("joined", "3"), ("joined", "intruder"), ("left", "intruder"), ("left", "3"),
+    ]  # fmt: skip
