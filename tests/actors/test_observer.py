@@ -315,3 +315,39 @@ def test_a_world_token_that_names_no_run_neither_ends_the_run_nor_stops_the_obse
     assert [(e["event"], e["id"]) for e in observer.events if e["role"] == "world"] == [
         ("joined", "3"), ("joined", "intruder"), ("left", "intruder"), ("left", "3"),
     ]  # fmt: skip
+
+
+def test_a_later_run_counts_its_revolutions_from_its_own_first_snapshot() -> None:
+    """Two fish circling a post at (1, 0.5) m: run 3 turns them a quarter of a revolution;
+    run 7 begins where run 3 ended, and its revolutions start from 0 there."""
+    from fishswarm.study.metrics import OrbitTarget
+
+    start = np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5]])
+    quarter = np.array([[1.0, 1.0, 0.5], [1.0, 0.0, 0.5]])  # clockwise, seen with y up
+
+    def at(tick: int, run: int, position: np.ndarray) -> bytes:
+        zeros = np.zeros(2, dtype=np.int64)
+        return encode(
+            Snapshot(
+                tick, float(tick), np.arange(2), position, np.zeros((2, 3)), np.zeros(2),
+                zeros, zeros, run=run,
+            )
+        )  # fmt: skip
+
+    async def main() -> Observer:
+        bus = MemoryBus()
+        observer = Observer(KEYS, orbit=OrbitTarget(np.array([1.0, 0.5, 0.5]), 0.5))
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            bus.put(KEYS.snapshot, at(0, 3, start))
+            bus.put(KEYS.snapshot, at(1, 3, quarter))
+            bus.put(KEYS.snapshot, at(0, 7, quarter))
+            bus.put(KEYS.snapshot, at(1, 7, quarter))
+            await trio.sleep(0.5)
+            nursery.cancel_scope.cancel()
+        return observer
+
+    observer = run_mock(main)
+    assert [p.tick for p in observer.history] == [0, 1, 0, 1]
+    assert [p.metrics["revolutions"] for p in observer.history] == [0.0, 0.25, 0.0, 0.0]
+    assert [p.metrics["radius"] for p in observer.history] == [0.5] * 4
