@@ -176,6 +176,48 @@ def test_a_view_left_up_follows_the_swarms_next_run_in_a_real_browser(tmp_path: 
         end_processes(processes)
 
 
+def test_a_view_left_up_tells_the_end_of_each_run_it_follows() -> None:
+    """Two runs one after the other on a standing swarm, watched by one view (no browser):
+    it says once when each ends, with the snapshots it showed of that run."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    processes: list[subprocess.Popen[str]] = []
+    process, lines = _view("--connect", endpoint)
+    try:
+        processes.append(
+            subprocess.Popen(
+                [*FISHSWARM, "router", "--listen", endpoint],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True,
+            )
+        )  # fmt: skip
+        wait_for_port(port)
+        lines.wait_for(r"following swarm 'default' on tcp/127\.0\.0\.1:\d+$")
+        processes.append(
+            subprocess.Popen(
+                [*FISHSWARM, "fish", "--connect", endpoint, "--school", "all", "--id", "0",
+                 "--id", "1", "--id", "2"],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True,
+            )
+        )  # fmt: skip
+        for duration, shown in ((8, 9), (5, 6)):
+            world = subprocess.run(
+                [*FISHSWARM, "world", "--connect", endpoint, "--fish", "3", "--duration",
+                 str(duration), "--start-timeout", "60", "--quiet"],
+                capture_output=True, text=True, timeout=120, check=False,
+            )  # fmt: skip
+            assert world.returncode == 0, world.stderr
+            lines.wait_for(rf"the run has ended \({shown} snapshots shown\)")
+        time.sleep(2.5)  # past the view's 1-s settle: an end said once is not said again
+        _close(process, lines)
+        ends = [line for line in lines.seen if "the run has ended" in line]
+        assert [re.findall(r"\((\d+) snapshots shown\)", line) for line in ends] == [
+            ["9"], ["6"],
+        ]  # fmt: skip
+    finally:
+        _stop(process, lines)
+        end_processes(processes)
+
+
 @pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
 def test_a_ctrl_c_at_once_after_the_run_keeps_the_runs_exit_code(
     tmp_path: Path, signal_number: int
