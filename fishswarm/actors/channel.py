@@ -74,6 +74,8 @@ class Channel:
         ask_world: Callable[[], Awaitable[Scenario | None]] | None = None,
     ) -> None:
         self.scenario = scenario
+        """The medium's settings now (a standalone channel's: its last run's world's)."""
+        self._own = scenario
         self._ask_world = ask_world
         self.keys = scenario.keys
         self.outbox_timeout = outbox_timeout
@@ -249,37 +251,31 @@ class Channel:
         self, ask_world: Callable[[], Awaitable[Scenario | None]]
     ) -> None:
         """Take range, loss and seed from the world of the run that starts (before its first
-        broadcasts are delivered, at the snapshot of tick 1); keep the channel's own, and
-        say so, if the world does not tell them."""
-        mine = self.scenario
+        broadcasts are delivered, at the snapshot of tick 1); the channel's own settings, said
+        in a warning, if the world does not tell them."""
+        own = self._own
         try:
             world = await ask_world()
         except ConfigError as error:
-            log.warning("channel: %s; the medium keeps its own settings", error)
-            return
+            world = None
+            log.warning("channel: %s", error)
         if world is None:
             log.warning(
-                "channel: no world told its run's settings: the medium keeps its own "
-                "(range %g m, loss %g, seed %d)",
-                mine.channel_range,
-                mine.channel_loss,
-                mine.seed,
+                "channel: the run's world did not tell its settings: the medium takes the "
+                "channel's own (range %g m, loss %g, seed %d)",
+                own.channel_range,
+                own.channel_loss,
+                own.seed,
             )
-            return
-        medium = (world.channel_range, world.channel_loss, world.seed)
+        chosen = own if world is None else world
+        medium = (chosen.channel_range, chosen.channel_loss, chosen.seed)
+        log.info("channel: a run starts: range %g m, loss %g, seed %d", *medium)
+        mine = self.scenario
         if medium != (mine.channel_range, mine.channel_loss, mine.seed):
-            log.warning(
-                "channel: the run's world has range %g m, loss %g, seed %d: the medium "
-                "takes them (it had %g m, %g, %d)",
-                *medium,
-                mine.channel_range,
-                mine.channel_loss,
-                mine.seed,
-            )
             self.scenario = mine.replace(
-                channel_range=world.channel_range,
-                channel_loss=world.channel_loss,
-                seed=world.seed,
+                channel_range=chosen.channel_range,
+                channel_loss=chosen.channel_loss,
+                seed=chosen.seed,
             )
             self._rngs.clear()
 

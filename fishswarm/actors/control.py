@@ -36,11 +36,19 @@ async def run_control(
 
         async def tell_the_scenario() -> None:
             async for request in asked:
-                reply(request, settings)
+                if world.queued:
+                    request.drop()  # the world that runs now answers
+                else:
+                    reply(request, settings)
 
         nursery.start_soon(tell_the_scenario)
         task_status.started()
         async for request in queries:
+            if world.queued:
+                # An operator's pause or stop is for the world that runs now: a world that
+                # waits its turn answers nothing (Ctrl-C where it was started ends it).
+                request.drop()
+                continue
             payload = b"" if request.payload is None else request.payload.to_bytes()
             answer = world.control_payload(str(request.key_expr), payload)
             if answer is None:

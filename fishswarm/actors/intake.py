@@ -62,6 +62,11 @@ class Intake:
         self.accepted -= 1
         self.reject(key, kind, reason)
 
+    def disregard(self) -> None:
+        """Let go a message that decoded but is not this actor's to take (another run's
+        traffic on a key it shares): neither accepted nor rejected, and not logged."""
+        self.accepted -= 1
+
     def reject(self, key: str, kind: str, reason: str) -> None:
         """Count a rejected message; log the first of each (sender key, kind), for up to
         :data:`LOGGED_SENDERS` of them."""
@@ -70,16 +75,23 @@ class Intake:
             return
         if len(self._logged) < LOGGED_SENDERS:
             self._logged.add((key, kind))
-            log.warning("%s rejected a %s message on %s: %s", self.actor, kind, key, reason)
+            log.warning(
+                "%s rejected %s %s message on %s: %s", self.actor, _article(kind), kind, key, reason
+            )
         elif kind not in self._silenced:
             self._silenced.add(kind)
             log.warning(
-                "%s rejected a %s message on %s: %s; %s senders have been named, further %s "
+                "%s rejected %s %s message on %s: %s; %s senders have been named, further %s "
                 "rejections are counted, not logged",
-                self.actor, kind, key, reason, LOGGED_SENDERS, kind,
+                self.actor, _article(kind), kind, key, reason, LOGGED_SENDERS, kind,
             )  # fmt: skip
 
     @property
     def rejected_total(self) -> int:
         """How many messages were rejected, of any kind."""
         return sum(self.rejected.values())
+
+
+def _article(word: str) -> str:
+    """``a`` or ``an`` before ``word`` (the kinds of rejection are plain English words)."""
+    return "an" if word[:1] in "aeiou" else "a"

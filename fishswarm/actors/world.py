@@ -213,6 +213,8 @@ class World:
         self._token = self.keys.alive("world", self.run_id)
         """This world's liveliness token: it names the run."""
         self._stop_requested = False
+        self._took_turn = False
+        """Whether the world has found no other world of its swarm up and started."""
         self._messages_out = 0
         self._current = TickCommands()
         self.mismatched: set[int] = set()
@@ -299,6 +301,13 @@ class World:
                             nursery.cancel_scope.cancel()
                 finally:
                     self.wall_time = time.perf_counter() - started
+                    if self.mismatched:
+                        # The warnings above named the first fish of each difference only.
+                        log.warning(
+                            "%d fish ran with other settings than this world's: %s",
+                            len(self.mismatched),
+                            ids_text(sorted(self.mismatched)),
+                        )
                     # The fish stop watching for this run's perceptions: none will come, at
                     # its end as when the world is interrupted (Ctrl-C) or fails.
                     self._put(
@@ -404,6 +413,13 @@ class World:
         """Liveliness tokens of the other worlds of this swarm up now (on the same router)."""
         return self.roster.worlds - {self._token}
 
+    @property
+    def queued(self) -> bool:
+        """Whether this world waits for another world of its swarm to end before it starts:
+        it then answers no queries (an operator's and a view's are that world's) and takes
+        no commands (its fish answer that world)."""
+        return not self._took_turn and bool(self.other_worlds)
+
     async def _wait_for_fish(self) -> None:
         """Wait until the expected fish are up and no other world of the swarm runs (fish
         serve one run at a time: two worlds would take turns starting them afresh)."""
@@ -420,6 +436,7 @@ class World:
                     )
                     said = True
                 if expected <= self._admissible() and not self.other_worlds:
+                    self._took_turn = True
                     break
                 self._handle(await self._events.receive())
         if self._stop_requested:
@@ -467,8 +484,14 @@ class World:
                 continue
             await self._resume.wait()
             if self._stop_requested:
-                # Stopped while paused: the run ends at the snapshot it was held at (sent
-                # before the pause), without asking the fish for one more tick.
+                # Stopped while paused (or in the moment the wait yields): the run ends at
+                # this snapshot, without asking the fish for one more tick.
+                if deferred is not None:
+                    self._put(
+                        bus,
+                        self.keys.snapshot,
+                        encode(self._snapshot(event.time, perceived.counts, deferred)),
+                    )
                 return
             if realtime and trio.current_time() - tick_start > period:
                 tick_start = trio.current_time()  # after a pause: pace from now on
@@ -630,6 +653,8 @@ class World:
                 self._lose(left, "left (liveliness token gone)")
             return
         assert isinstance(payload, bytes)
+        if kind in ("command", "batch") and self.queued:
+            return  # another world's run, answered by its fish: not this world's to count
         if kind == "report":
             report = self.intake.decode(key, payload, ChannelReport)
             if report is not None:

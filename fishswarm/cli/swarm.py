@@ -435,7 +435,13 @@ def channel(args: argparse.Namespace, scenario: Scenario) -> int:
             async def ask_world() -> Scenario | None:
                 return await ask_scenario(session, scenario.keys, timeout=WORLD_ANSWER_TIMEOUT)
 
-            await Channel(scenario, ask_world=ask_world).run(ZenohBus(session))
+            async with trio.open_nursery() as nursery:
+                await nursery.start(Channel(scenario, ask_world=ask_world).run, ZenohBus(session))
+                print(
+                    f"channel up on {args.connect} for swarm {scenario.swarm!r}: it takes each "
+                    "run's range, loss and seed from the run's world",
+                    file=sys.stderr,
+                )
 
     _run_trio(main)
     return 0

@@ -186,9 +186,10 @@ def test_stale_and_far_future_broadcasts_are_rejected_near_ones_kept(
         (6, 0, 5), (6, 2, 5),
     ]  # fmt: skip
     assert channel.statistics().rejected == 3
-    pattern = re.compile(r"rejected a (\w+) message on \S+: [^0-9]*tick (\d+)")
+    pattern = re.compile(r"rejected an? (\w+) message on \S+: [^0-9]*tick (\d+)")
     rejections = sorted(pattern.findall(record.getMessage())[0] for record in caplog.records)
     assert rejections == [("stale", "1"), ("stale", "6"), ("unannounced", "2")]
+    assert any("rejected an unannounced message" in r.getMessage() for r in caplog.records)
 
 
 def test_broadcasts_of_a_tick_whose_snapshot_was_missed_are_counted_when_a_later_one_comes() -> (
@@ -236,8 +237,8 @@ def test_a_channel_apart_from_its_world_takes_each_runs_medium_from_the_world(
 ) -> None:
     """Started with no loss, a channel whose world runs with loss 0.5 and seed 4 loses what
     a channel started with the world's settings loses; when the next world does not answer
-    (or answers nonsense) it says so and keeps what it has; the next world's no-loss medium
-    hears every reception."""
+    (or answers nonsense) it says so and takes its own settings (no loss: every reception
+    heard); the next world's no-loss medium hears every reception too."""
     answers: list[Scenario | ConfigError | None] = [
         LOSSY,
         None,
@@ -252,15 +253,26 @@ def test_a_channel_apart_from_its_world_takes_each_runs_medium_from_the_world(
         return answer
 
     reference = run_mock(lambda: _runs(Channel(LOSSY), 1))[0]
-    with caplog.at_level(logging.WARNING):
+    with caplog.at_level(logging.INFO, "fishswarm.actors.channel"):
         apart = run_mock(lambda: _runs(Channel(Scenario(fish=3), ask_world=ask_world), 4))
     assert sum(c[1] + c[2] for c in reference) < 16  # the seed loses some of 16
-    assert apart[0] == apart[1] == apart[2] == reference
-    assert apart[3] == [[0, 1, 1]] * 8
+    assert apart[0] == reference
+    assert apart[1] == apart[2] == apart[3] == [[0, 1, 1]] * 8
     assert answers == []
-    assert "loss 0.5, seed 4: the medium takes them (it had 3 m, 0, 0)" in caplog.text
-    assert "no world told its run's settings: the medium keeps its own" in caplog.text
-    assert "no run settings; the medium keeps its own settings" in caplog.text
+    said = [r.getMessage() for r in caplog.records]
+    own = (
+        "channel: the run's world did not tell its settings: the medium takes the channel's "
+        "own (range 3 m, loss 0, seed 0)"
+    )
+    assert said == [
+        "channel: a run starts: range 3 m, loss 0.5, seed 4",
+        own,
+        "channel: a run starts: range 3 m, loss 0, seed 0",
+        "channel: the world's answer is no run settings",
+        own,
+        "channel: a run starts: range 3 m, loss 0, seed 0",
+        "channel: a run starts: range 3 m, loss 0, seed 4",
+    ]
 
 
 def test_a_channel_apart_from_its_world_takes_the_worlds_range_alone(
@@ -272,10 +284,10 @@ def test_a_channel_apart_from_its_world_takes_the_worlds_range_alone(
     async def ask_world() -> Scenario | None:
         return Scenario(fish=3, channel_range=0.15)
 
-    with caplog.at_level(logging.WARNING):
+    with caplog.at_level(logging.INFO, "fishswarm.actors.channel"):
         counts = run_mock(lambda: _runs(Channel(Scenario(fish=3), ask_world=ask_world), 1))
     assert counts == [[[0, 1, 0]] * 8]
-    assert "range 0.15 m, loss 0, seed 0: the medium takes them (it had 3 m, 0, 0)" in caplog.text
+    assert "channel: a run starts: range 0.15 m, loss 0, seed 0" in caplog.text
 
 
 def test_a_channel_serving_run_after_run_gives_each_the_losses_of_a_run_alone() -> None:

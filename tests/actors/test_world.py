@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Awaitable, Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import pytest
@@ -676,6 +676,10 @@ def test_fish_that_run_another_behaviour_are_named_once_and_counted(
         "run 'aggregation', but this world's scenario says 'dispersion' "
         "(started with other settings?)"
     )
+    # At the end, every fish that differed, by id.
+    assert caplog.records[-1].getMessage() == (
+        "4 fish ran with other settings than this world's: 0, 1, 2, 3"
+    )
 
 
 def test_fish_started_with_other_study_code_rules_are_named(
@@ -1211,3 +1215,48 @@ def test_an_interrupted_world_tells_its_fish_the_run_has_ended() -> None:
     heard, stops = run_mock(main)
     assert stops == 0
     assert heard == ["ended"]  # the ticks took no simulated time: no pulse before
+
+
+def test_a_stop_just_before_the_fish_are_asked_sends_the_ticks_snapshot() -> None:
+    """The world sends a tick's snapshot after its perceptions (so that it is built while
+    the fish decide). A stop that comes in the instant the world yields before asking ends
+    the run at that tick: its snapshot goes out all the same, and the run's last pulse and
+    last snapshot name the same tick."""
+    scenario = Scenario(fish=2, duration=100.0)
+    keys = scenario.keys
+
+    class StopWhileYielding:
+        """The world's resume event, never cleared, whose wait lets a stop in at tick 3 (as
+        a control request handled in that instant would)."""
+
+        def __init__(self, world: World) -> None:
+            self.world = world
+
+        def is_set(self) -> bool:
+            return True
+
+        def set(self) -> None:
+            pass
+
+        async def wait(self) -> None:
+            if self.world.tick == 3 and self.world.state_name == "running":
+                self.world.control(ControlRequest("stop"))
+            await trio.lowlevel.checkpoint()
+
+    async def main() -> tuple[World, Observer]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0))
+        world._resume = cast(trio.Event, StopWhileYielding(world))
+        observer = Observer(keys)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(Fish(FishSettings((0, 1), scenario.fish_params(), keys)).run, bus)
+            nursery.start_soon(world.run, bus)
+            await _until_state(world, "stopped")
+            await trio.sleep(1.0)
+            nursery.cancel_scope.cancel()
+        return world, observer
+
+    world, observer = run_mock(main)
+    assert world.tick == 3
+    assert [p.tick for p in observer.history] == [0, 1, 2, 3]

@@ -227,18 +227,27 @@ def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_ow
         start("router", "--listen", endpoint)
         wait_for_port(port)
         start("fish", "--id", "0", "--id", "1", "--school", "pair", "--connect", endpoint)
-        # The first world in real time, 4 s: the second comes while it runs.
+        # The first world in real time, 30 s: the second comes while it runs.
         first = start(
-            *world("--time", "realtime", "--duration", "4", "--record", str(first_record))
+            *world("--time", "realtime", "--duration", "30", "--record", str(first_record))
         )
-        Lines(first).wait_for(r"tick 0/4")
-        second = subprocess.run(
-            [*FISHSWARM, *world("--quiet", "--duration", "3", "--record", str(second_record))],
-            capture_output=True, text=True, timeout=120, check=False,
-        )  # fmt: skip
-        first.wait(timeout=30)
-    assert second.returncode == 0, second.stderr
-    assert "another world runs swarm 'default' on this router: waiting" in second.stderr
+        Lines(first).wait_for(r"tick +0/30")
+        second = start(*world("--quiet", "--duration", "3", "--record", str(second_record)))
+        said = Lines(second)
+        said.wait_for("another world runs swarm 'default' on this router: waiting")
+        # An operator's requests reach the world that runs, not the one waiting its turn.
+        for action, state in (("status", "running"), ("status", "running"), ("stop", "stopping")):
+            asked = subprocess.run(
+                [*FISHSWARM, "control", action, "--connect", endpoint],
+                capture_output=True, text=True, timeout=60, check=False,
+            )  # fmt: skip
+            assert asked.returncode == 0, asked.stderr
+            assert asked.stdout.startswith(f"swarm 'default': {state} at tick "), asked.stdout
+        assert first.wait(timeout=30) == 0
+        statistics = json.loads(said.wait_for(r"^\{.*\}$")[0])
+        assert second.wait(timeout=30) == 0
+    # The second counted none of the first run's commands as its own stale ones.
+    assert statistics["ticks"] == 3 and statistics["rejected"] == {}
     own = read_recording(second_record)
     assert [s.tick for s in own.snapshots] == [0, 1, 2, 3]
     assert len({s.run for s in own.snapshots}) == 1
@@ -271,7 +280,11 @@ def test_a_standalone_channel_takes_each_runs_loss_and_seed_from_its_world(
     with started_commands() as start:
         start("router", "--listen", endpoint)
         wait_for_port(port)
-        channel = start("channel", "--connect", endpoint, "--config", str(channel_config))
+        channel = start(
+            "--log-level", "INFO", "channel", "--connect", endpoint, "--config", str(channel_config)
+        )
+        channel_lines = Lines(channel)
+        channel_lines.wait_for(r"^channel up on tcp/127\.0\.0\.1:\d+ for swarm 'default'")
         start("fish", "--connect", endpoint, "--config", str(world_config), "--school", "all",
               *[part for fish in range(6) for part in ("--id", str(fish))])  # fmt: skip
         world = subprocess.run(
@@ -283,9 +296,7 @@ def test_a_standalone_channel_takes_each_runs_loss_and_seed_from_its_world(
         statistics = json.loads(world.stderr.strip().splitlines()[-1])
         assert statistics["ticks"] == 20 and statistics["lost_fish"] == 0
         assert statistics["rejected"] == {} and statistics["mismatched_fish"] == 0
-        channel.send_signal(signal.SIGINT)
-        _, channel_errors = channel.communicate(timeout=30)
-    assert "the medium takes them (it had 3 m, 0, 9)" in channel_errors
+        channel_lines.wait_for("channel: a run starts: range 3 m, loss 0.5, seed 3$", timeout=10)
     reference = simulate_batch(
         Scenario(fish=6, behavior="formation", duration=20.0, seed=3, channel_loss=0.5)
     )
