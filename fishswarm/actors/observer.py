@@ -7,6 +7,7 @@ disturbing the run: an observer only listens.
 from __future__ import annotations
 
 import logging
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -36,6 +37,9 @@ log = logging.getLogger(__name__)
 
 WORLD_END_SETTLE = 1.0
 """How long an observer goes on listening for snapshots after the world has left, s."""
+
+ENDED_RUNS_KEPT = 16
+"""How many runs that have given way an observer remembers, to refuse their late snapshots."""
 
 RECORDED_SCENE_FISH = 1000
 """Recordings carry the scene of swarms up to this size; beyond, its JSON (about 270 bytes
@@ -85,7 +89,9 @@ class Observer:
         on_new_run: called with its run id when the snapshots of a later run begin (a world
             run again on the swarm while the observer stays), before the first of them is
             measured or drawn. The observer then starts afresh: its ticks, its orbit counts
-            and its wait for the world's end are the new run's.
+            and its wait for the world's end are the new run's, and the earlier run's
+            snapshots, should any come late, are refused as stale. Without it (None) the
+            observer watches the first run it sees, and lets later runs' snapshots go.
     """
 
     def __init__(
@@ -126,6 +132,8 @@ class Observer:
         """The run of the snapshots taken so far (None before the first)."""
         self._later_runs = 0
         """How many runs' snapshots have begun after the first's."""
+        self._ended_runs: deque[int] = deque(maxlen=ENDED_RUNS_KEPT)
+        """Runs that have given way to a later one, latest last."""
 
     @classmethod
     def of(
@@ -234,10 +242,11 @@ class Observer:
 
     def _start_run(self, run: int) -> None:
         """The snapshots of ``run`` begin: a later run starts afresh (and is announced)."""
-        later = self.current_run is not None
+        earlier = self.current_run
         self.current_run = run
-        if not later:
+        if earlier is None:
             return
+        self._ended_runs.append(earlier)
         self._later_runs += 1
         self._last_tick = -1
         self._world_left.set()  # the earlier run is over (worlds take turns): wake its waiters
@@ -256,6 +265,14 @@ class Observer:
             )
             return
         if snapshot.run != self.current_run:
+            if snapshot.run in self._ended_runs:
+                self._intake.refuse(
+                    key, "stale", f"snapshot of run {snapshot.run}, which has given way"
+                )
+                return
+            if self.current_run is not None and self.on_new_run is None:
+                self._intake.disregard()  # a later run: this observer watches its first only
+                return
             self._start_run(snapshot.run)
         if snapshot.tick <= self._last_tick:
             self._intake.refuse(key, "stale", f"snapshot of tick {snapshot.tick} repeated")

@@ -93,19 +93,15 @@ class _Runs:
         self.scenes: dict[int, int] = {}
         """Snapshots shown of each run that has given way to a later one."""
         self._begun = trio.Event()
-        self._send, self.begun_runs = trio.open_memory_channel[int](math.inf)
+        self._send, self.begun = trio.open_memory_channel[int](math.inf)
+        """The number of each later run, as it begins."""
 
     def begin(self, run: int) -> None:
         """A later run's snapshots begin: draw them into a recording of their own."""
         self.scenes[self.count] = self.view.scenes
         self.count += 1
         self.view.start_run(f"swarm {self.swarm}, run {self.count}")
-        print(
-            f"fishswarm view: run {self.count} of swarm {self.swarm!r} begins: shown as a "
-            "new recording (the earlier runs stay listed on the page)",
-            file=sys.stderr,
-        )
-        self._send.send_nowait(run)
+        self._send.send_nowait(self.count)
         self._begun.set()
         self._begun = trio.Event()
 
@@ -117,6 +113,9 @@ class _Runs:
 
 def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
     keys = KeySpace(args.swarm)
+
+    def say(what: str) -> None:
+        print(f"fishswarm view: {what}", file=sys.stderr)
 
     async def main() -> None:
         with open_live_view(settings, name=f"swarm {args.swarm}, run 1") as view:
@@ -134,42 +133,60 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
                 await nursery.start(observer.run, ZenohBus(session))
                 _announce(view, f"following swarm {args.swarm!r} on {args.connect}")
 
-                async def learn_the_run(run: int | None) -> None:
-                    ran = await _wait_for_world(session, keys, args.connect)
-                    if run is not None and observer.current_run != run:
+                async def learn_the_run(number: int) -> None:
+                    """Ask the world what its run is, until it answers or the run ends (a
+                    short run in lockstep may end before the view asks)."""
+                    ran = None
+                    async with trio.open_nursery() as asking:
+
+                        async def until_the_run_ends() -> None:
+                            await observer.wait_for_world_end(settle=0.0)
+                            asking.cancel_scope.cancel()
+
+                        asking.start_soon(until_the_run_ends)
+                        ran = await _wait_for_world(
+                            session, keys, args.connect, say_waiting=number == 1
+                        )
+                        asking.cancel_scope.cancel()
+                    if runs.count != number:
                         return  # a later run began meanwhile: it learns its own
+                    if ran is None:
+                        say(f"run {number} ended before its world told its settings")
+                        return
                     observer.measure_as(ran)
                     view.show_stage(stage_of(ran))
-                    print(
-                        f"fishswarm view: the world runs {ran.fish} fish, {ran.behavior}, "
-                        f"{ran.duration:g} s",
-                        file=sys.stderr,
-                    )
+                    say(f"the world runs {ran.fish} fish, {ran.behavior}, {ran.duration:g} s")
 
                 async def learn_each_run() -> None:
-                    await learn_the_run(None)
-                    async for run in runs.begun_runs:
-                        await learn_the_run(run)
+                    await learn_the_run(1)
+                    async for number in runs.begun:
+                        await learn_the_run(number)
 
                 nursery.start_soon(learn_each_run)
                 watched = 1
                 while True:
                     await observer.wait_for_world_end()
                     shown = runs.scenes.get(watched, view.scenes)
-                    print(
-                        f"fishswarm view: the run has ended ({shown} snapshots shown); the "
-                        "view stays up until Ctrl-C, and shows the swarm's next run",
-                        file=sys.stderr,
+                    say(
+                        f"the run has ended ({shown} snapshots shown); the view stays up until "
+                        "Ctrl-C, and shows the swarm's next run"
                     )
                     await runs.wait_for_run(after=watched)
                     watched = runs.count
+                    say(
+                        f"run {watched} of swarm {args.swarm!r} begins: shown as a new "
+                        "recording (the earlier runs stay listed on the page)"
+                    )
 
     _run_trio(main)
 
 
-async def _wait_for_world(session: zenoh.Session, keys: KeySpace, endpoint: str) -> Scenario:
-    """The scenario of the swarm's world, asking until a world answers."""
-    waiting = False
+async def _wait_for_world(
+    session: zenoh.Session, keys: KeySpace, endpoint: str, *, say_waiting: bool
+) -> Scenario:
+    """The scenario of the swarm's world, asking until a world answers (saying once that it
+    waits, if ``say_waiting``)."""
+    waiting = not say_waiting
     while True:
         ran = await ask_scenario(session, keys, timeout=ASK_TIMEOUT)
         if ran is not None:

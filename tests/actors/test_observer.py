@@ -336,7 +336,9 @@ def test_a_later_run_counts_its_revolutions_from_its_own_first_snapshot() -> Non
 
     async def main() -> Observer:
         bus = MemoryBus()
-        observer = Observer(KEYS, orbit=OrbitTarget(np.array([1.0, 0.5, 0.5]), 0.5))
+        observer = Observer(
+            KEYS, orbit=OrbitTarget(np.array([1.0, 0.5, 0.5]), 0.5), on_new_run=lambda run: None
+        )
         async with trio.open_nursery() as nursery:
             await nursery.start(observer.run, bus)
             bus.put(KEYS.snapshot, at(0, 3, start))
@@ -351,3 +353,60 @@ def test_a_later_run_counts_its_revolutions_from_its_own_first_snapshot() -> Non
     assert [p.tick for p in observer.history] == [0, 1, 0, 1]
     assert [p.metrics["revolutions"] for p in observer.history] == [0.0, 0.25, 0.0, 0.0]
     assert [p.metrics["radius"] for p in observer.history] == [0.5] * 4
+
+
+def test_a_late_snapshot_of_a_run_that_gave_way_is_refused_as_stale() -> None:
+    """Run 3's tick 5 comes after run 7 has begun (the two travel apart): it is refused, and
+    run 7 goes on; the view was told of one new run only."""
+
+    async def main() -> tuple[Observer, list[int]]:
+        bus = MemoryBus()
+        announced: list[int] = []
+        observer = Observer(KEYS, on_new_run=announced.append)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            for tick, run in ((0, 3), (1, 3), (0, 7), (2, 3), (1, 7)):
+                bus.put(KEYS.snapshot, of_run(tick, run))
+            await trio.sleep(0.5)
+            nursery.cancel_scope.cancel()
+        return observer, announced
+
+    observer, announced = run_mock(main)
+    assert announced == [7] and observer.current_run == 7
+    assert [p.tick for p in observer.history] == [0, 1, 0, 1]
+    assert observer.statistics().rejected == 1
+
+
+def test_an_observer_that_does_not_follow_runs_lets_a_later_runs_snapshots_go() -> None:
+    """Without ``on_new_run`` (``fishswarm observe``, which ends with its run) the snapshots
+    of the next run on the swarm are neither taken nor counted as bad, and its world's end
+    is that of the first run: its own world leaving, 1 s quiet after."""
+
+    async def main() -> tuple[Observer, float]:
+        bus = MemoryBus()
+        observer = Observer(KEYS)
+        ended: list[float] = []
+
+        async def wait_for_the_end() -> None:
+            await observer.wait_for_world_end(settle=1.0)
+            ended.append(trio.current_time())
+
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            nursery.start_soon(wait_for_the_end)
+            first = bus.declare_token(KEYS.alive("world", 3))
+            for tick in range(3):
+                bus.put(KEYS.snapshot, of_run(tick, 3))
+            await trio.sleep(1.0)
+            first.undeclare()
+            for tick in range(3):  # the next world's, while the first's end settles
+                await trio.sleep(0.25)
+                bus.put(KEYS.snapshot, of_run(tick, 7))
+            await trio.sleep(3.0)
+            nursery.cancel_scope.cancel()
+        return observer, ended[0]
+
+    observer, ended = run_mock(main)
+    assert [p.tick for p in observer.history] == [0, 1, 2] and observer.current_run == 3
+    assert observer.statistics().rejected == 0 and observer.statistics().snapshots == 3
+    assert ended == 2.0

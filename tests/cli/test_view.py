@@ -213,6 +213,19 @@ def test_a_view_left_up_tells_the_end_of_each_run_it_follows() -> None:
         assert [re.findall(r"\((\d+) snapshots shown\)", line) for line in ends] == [
             ["9"], ["6"],
         ]  # fmt: skip
+        # In the order they happen: run 1 ends, then run 2 begins (and ends).
+        order = [line for line in lines.seen if "the run has ended" in line or "begins" in line]
+        assert [line.split(":")[1].split("(")[0].strip() for line in order] == [
+            "the run has ended",
+            "run 2 of swarm 'default' begins",
+            "the run has ended",
+        ]
+        # Run 2 took 5 ticks in lockstep: a few ms, maybe over before the view asked its world.
+        assert any(
+            "the world runs 3 fish, dispersion, 5 s" in line or "run 2 ended before" in line
+            for line in lines.seen
+        )
+        assert not any("waiting for the world" in line for line in lines.seen[3:]), lines.seen
     finally:
         _stop(process, lines)
         end_processes(processes)
