@@ -8,6 +8,7 @@ session has explicit endpoints and multicast scouting off.
 from __future__ import annotations
 
 import json
+import re
 import socket
 from collections.abc import AsyncIterator, Sequence
 from contextlib import asynccontextmanager
@@ -153,10 +154,16 @@ async def open_session(settings: SessionSettings) -> AsyncIterator[zenoh.Session
         where = ", ".join([*settings.listen, *settings.connect]) or "(no endpoint)"
         raise ConnectError(
             f"cannot open a {settings.mode} session on {where}: "
-            f"{_open_failure_hint(settings, str(error))} ({error})"
+            f"{_open_failure_hint(settings, str(error))} ({_without_source(str(error))})"
         ) from None
     try:
         yield session
     finally:
         with trio.CancelScope(shield=True):
             await trio.to_thread.run_sync(session.close)
+
+
+def _without_source(reason: str) -> str:
+    """Zenoh's reason without the place in Zenoh's Rust source it was raised at (``… at
+    /root/.cargo/…/orchestrator.rs:388.``), which says nothing to the user."""
+    return re.sub(r"\.? at /\S+\.rs:\d+\.?$", "", reason.strip())

@@ -621,10 +621,15 @@ class World:
         return values_at(report.ids, report.inbox_counts, self.sim.ids)
 
     async def _collect_until(self, deadline: float) -> None:
-        """Realtime mode: take commands until the tick's wall-clock end."""
+        """Realtime mode: take commands until the tick's wall-clock end (noting how long the
+        fish took, when every one answered by then)."""
+        asked = trio.current_time()
         with trio.move_on_at(deadline):
             while True:
+                waiting = self._current.left
                 self._handle(await self._events.receive())
+                if waiting and not self._current.left:
+                    self._answer_times.append(trio.current_time() - asked)
         self.late_commands += self._current.left
 
     async def _collect(self) -> None:

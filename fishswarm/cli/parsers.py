@@ -542,7 +542,8 @@ def build_parser() -> argparse.ArgumentParser:
         "the tank, the landmark, every fish as an arrow along its body (coloured by role in a "
         "formation: leader, in its place, seeking; a global map's fitted target as grey dots, "
         "a local shape's completed sides as green lines), and the "
-        "metrics over time. With a RECORDING (an MCAP file of 'run --record'), replay it; "
+        "metrics over time. With a RECORDING (an MCAP file of 'run', 'world' or 'observe' "
+        "--record), replay it; "
         "otherwise attach to the running swarm at --connect as a read-only observer (with "
         "--secure, with an observer's certificate) and follow it live. Needs no internet: "
         "the viewer comes inside the rerun SDK (pip install 'fishswarm[view]'). Runs until "
@@ -581,10 +582,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="a running world's status, or pause, resume or stop its run",
         description="Ask the world of a running swarm for its status, or to pause, resume "
         "or stop its run, from any machine that reaches the router (in a secured swarm, with "
-        "the admin certificate). A pause holds the run at its next snapshot until resumed; "
-        "a stop ends it at once, at the last snapshot sent, and the world exits as at the run's "
-        "end. Prints the world's reply: its state, tick, time and fish. (Robots have their "
-        "own: fishswarm robots --stop.)",
+        "the admin certificate). A pause holds the run at its next snapshot until resumed (the "
+        "reply names the tick under way); a stop ends it at once, at the last snapshot sent, "
+        "and the world exits as at the run's end. A world waiting its turn behind another "
+        "of the swarm answers nothing until its turn. Prints the world's reply: its state, "
+        "tick, time and fish. (Robots have their own: fishswarm robots --stop.)",
     )
     control.add_argument(
         "action",

@@ -233,8 +233,9 @@ def view_settings(args: argparse.Namespace) -> ViewSettings:
     """Where ``--host``, ``--web-port`` and ``--grpc-port`` say to serve a live view."""
     try:
         return ViewSettings(host=args.host, web_port=args.web_port, grpc_port=args.grpc_port)
-    except ValueError as error:
-        raise ConfigError(str(error)) from None
+    except ValueError as error:  # in the command line's words: --web-port, not web_port
+        message = str(error).replace("web_port", "--web-port").replace("grpc_port", "--grpc-port")
+        raise ConfigError(message) from None
 
 
 def _report(result: RunResult) -> None:
@@ -414,10 +415,20 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                 nursery.cancel_scope.cancel()
 
     prepare_file(args.record, "--record", example="runs/world.mcap")
-    _run_trio(main)
-    if args.record is not None:
-        print(f"recording: {args.record}", file=sys.stderr)
-    print(json.dumps(dataclasses.asdict(actor.statistics())), file=sys.stderr)
+    try:
+        _run_trio(main)
+    finally:  # an interrupted run's recording is kept too (read_recording marks it cut short)
+        if args.record is not None and args.record.exists():
+            print(f"recording: {args.record}", file=sys.stderr)
+    statistics = actor.statistics()
+    print(
+        f"status: {actor.state_name} at tick {statistics.ticks} "
+        f"({statistics.ticks * scenario.control_period:g} s simulated, "
+        f"{actor.wall_time:.1f} s wall time); {statistics.lost_fish} fish lost, "
+        f"{statistics.rejected_total} messages rejected",
+        file=sys.stderr,
+    )
+    print(json.dumps(dataclasses.asdict(statistics)), file=sys.stderr)
     return 0
 
 

@@ -1260,3 +1260,23 @@ def test_a_stop_just_before_the_fish_are_asked_sends_the_ticks_snapshot() -> Non
     world, observer = run_mock(main)
     assert world.tick == 3
     assert [p.tick for p in observer.history] == [0, 1, 2, 3]
+
+
+def test_realtime_answer_times_are_taken_over_the_ticks_every_fish_answered_in_time() -> None:
+    """Realtime, 1-s periods: the fish answers after 0.2, 0.4, 0.6 and 0.8 s, then too late
+    (1.5 s). The median of the four in time is 0.5 s; the late one is not an answer time."""
+    scenario = Scenario(fish=1, duration=5.0, control_period=1.0, time_mode="realtime")
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0))
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(_answer_after, bus, scenario.keys, 0, [0.2, 0.4, 0.6, 0.8, 1.5])
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return world
+
+    world = run_mock(main)
+    statistics = world.statistics()
+    assert statistics.answer_time_median == pytest.approx(0.5)
+    assert statistics.late_commands == 1

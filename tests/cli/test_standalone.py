@@ -81,6 +81,10 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
             assert world.returncode == 0, world.stderr
             statistics = json.loads(world.stderr.strip().splitlines()[-1])
             assert statistics["ticks"] == int(duration)
+            assert f"status: finished at tick {duration} ({duration} s simulated, " in (
+                world.stderr
+            )
+            assert " wall time); 0 fish lost, 0 messages rejected" in world.stderr
             assert statistics["lost_fish"] == 0
             assert statistics["rejected"] == {}
         _, observer_errors = observer.communicate(timeout=30)
@@ -202,6 +206,7 @@ def test_sigterm_stops_each_actor_as_ctrl_c_does_and_keeps_the_worlds_recording(
         time.sleep(1.5)  # about seven ticks of 0.2 s in real time
         world.send_signal(signal.SIGTERM)
         assert world.wait(timeout=15) == 130, lines.seen
+        lines.wait_for(rf"^recording: {re.escape(str(record))}$", timeout=5)
         lines.close()
         assert world.stdout is not None
         world.stdout.close()
@@ -231,7 +236,8 @@ def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_ow
         first = start(
             *world("--time", "realtime", "--duration", "30", "--record", str(first_record))
         )
-        Lines(first).wait_for(r"tick +0/30")
+        first_lines = Lines(first)
+        first_lines.wait_for(r"tick +0/30")
         second = start(*world("--quiet", "--duration", "3", "--record", str(second_record)))
         said = Lines(second)
         said.wait_for("another world runs swarm 'default' on this router: waiting")
@@ -244,6 +250,7 @@ def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_ow
             assert asked.returncode == 0, asked.stderr
             assert asked.stdout.startswith(f"swarm 'default': {state} at tick "), asked.stdout
         assert first.wait(timeout=30) == 0
+        first_lines.wait_for(r"^status: stopped at tick \d+ ")
         statistics = json.loads(said.wait_for(r"^\{.*\}$")[0])
         assert second.wait(timeout=30) == 0
     # The second counted none of the first run's commands as its own stale ones.

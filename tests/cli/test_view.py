@@ -48,7 +48,8 @@ def _stop(process: subprocess.Popen[str], lines: Lines) -> None:
 @pytest.mark.parametrize(
     ("args", "code", "message"),
     [
-        (["--web-port", "0"], 2, "web_port must be a port number 1–65535, got 0"),
+        (["--web-port", "0"], 2, "--web-port must be a port number 1–65535, got 0"),
+        (["--grpc-port", "99999"], 2, "--grpc-port must be a port number 1–65535, got 99999"),
         (["--web-port", "9300", "--grpc-port", "9300"], 2, "need two ports, got 9300"),
         (["missing.mcap"], 1, "cannot open recording missing.mcap"),
     ],
