@@ -356,10 +356,17 @@ class World:
         elif request.action == "formation" and self.scenario.behavior != "formation":
             refused = f"the fish run {self.scenario.behavior}, not a formation"
             action = "status"
+        if action in ("pause", "resume") and self._stop_requested:
+            action = "status"  # a stopping run stays stopping
         if action == "pause":
             if self._resume.is_set():  # pausing twice is pausing once
                 self._resume = trio.Event()
-            self.state_name = "paused"
+            # Before the run starts, its first tick is held already; once it runs, the tick
+            # under way is answered first, and the run is paused at the next snapshot.
+            if self.state_name == "running":
+                self.state_name = "pausing"
+            elif self.state_name == "waiting":
+                self.state_name = "paused"
         elif action == "resume" and not self._resume.is_set():
             self._resume.set()
             self.state_name = "running"
@@ -482,6 +489,8 @@ class World:
                     return
             if not event.deciding:
                 continue
+            if not self._resume.is_set():
+                self.state_name = "paused"  # held here, at this snapshot, until resumed
             await self._resume.wait()
             if self._stop_requested:
                 # Stopped while paused (or in the moment the wait yields): the run ends at

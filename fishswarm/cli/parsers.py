@@ -583,7 +583,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Ask the world of a running swarm for its status, or to pause, resume "
         "or stop its run, from any machine that reaches the router (in a secured swarm, with "
         "the admin certificate). A pause holds the run at its next snapshot until resumed (the "
-        "reply names the tick under way); a stop ends it at once, at the last snapshot sent, "
+        "reply says 'pausing' until the tick under way is answered, then 'paused'); a stop "
+        "ends it at once, at the last snapshot sent, "
         "and the world exits as at the run's end. A world waiting its turn behind another "
         "of the swarm answers nothing until its turn. Prints the world's reply: its state, "
         "tick, time and fish. (Robots have their own: fishswarm robots --stop.)",

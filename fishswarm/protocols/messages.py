@@ -36,7 +36,7 @@ SCHEMA_VERSION = 1
 FIN_NAMES = ("caudal", "dorsal", "pectoral_left", "pectoral_right")
 """Order of the fin gains in :attr:`Command.fins` and everywhere else."""
 
-WORLD_STATES = ("waiting", "running", "paused", "stopping", "finished", "stopped")
+WORLD_STATES = ("waiting", "running", "pausing", "paused", "stopping", "finished", "stopped")
 """What a world is doing, as its control queryable answers."""
 CONTROL_ACTIONS = ("status", "pause", "resume", "stop", "formation")
 

@@ -491,11 +491,11 @@ def test_control_pauses_resumes_and_stops_the_world() -> None:
         ask("status")
 
     answers, _ = run_mock(lambda: _under_control(Scenario(fish=2, duration=1000.0), script))
-    # Asked during tick 2, after its perceptions went out: tick 2 completes, then the world
-    # holds after the snapshot of tick 3, for as long as it is paused. Asked during tick 5,
-    # a stop ends the run at once, at the snapshot of tick 5.
+    # Asked during tick 2, after its perceptions went out: the world is pausing, tick 2
+    # completes, then the world holds after the snapshot of tick 3, for as long as it is
+    # paused. Asked during tick 5, a stop ends the run at once, at the snapshot of tick 5.
     assert answers == [
-        ("paused", 2),
+        ("pausing", 2),
         ("paused", 3),
         ("running", 3),
         ("stopping", 5),
@@ -570,7 +570,7 @@ def test_pausing_twice_is_pausing_once_and_a_finished_run_only_reports() -> None
         ask("pause")  # too late: the run is over
 
     answers, world = run_mock(lambda: _under_control(Scenario(fish=1, duration=6.0), script))
-    assert [a[0] for a in answers] == ["paused", "paused", "running", "finished"]
+    assert [a[0] for a in answers] == ["pausing", "paused", "running", "finished"]
     assert answers[-1][1] == 6 and world.state_name == "finished"
 
 
@@ -584,7 +584,7 @@ def test_a_stop_reaches_a_paused_world_and_a_resume_does_not_undo_it() -> None:
         await _until_state(world, "stopped")
 
     answers, world = run_mock(lambda: _under_control(Scenario(fish=1, duration=1000.0), script))
-    assert [a[0] for a in answers] == ["paused", "stopping", "stopping"]
+    assert [a[0] for a in answers] == ["pausing", "stopping", "stopping"]
     # Held at the snapshot of tick 2 (asked during tick 1): the run ends there, the fish
     # asked for no more.
     assert world.state_name == "stopped" and world.tick == 2
@@ -938,7 +938,7 @@ def test_the_world_pulses_its_state_while_it_waits_and_says_when_the_run_ended()
         (2.0, "running", 0),
         (2.4, "perception", -1),
         (3.0, "running", 1),
-        (4.0, "paused", 1),  # tick 1 answered at 4.8: held at the snapshot of tick 2
+        (4.0, "running", 1),  # pausing: tick 1 answered at 4.8, held at the snapshot of tick 2
         (5.0, "paused", 2),
         (6.0, "paused", 2),
         (7.0, "paused", 2),
