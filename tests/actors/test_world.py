@@ -1280,3 +1280,49 @@ def test_realtime_answer_times_are_taken_over_the_ticks_every_fish_answered_in_t
     statistics = world.statistics()
     assert statistics.answer_time_median == pytest.approx(0.5)
     assert statistics.late_commands == 1
+
+
+def test_a_world_waiting_its_turn_takes_none_of_the_running_worlds_commands() -> None:
+    """A world alone, waiting for its fish, is not queued; behind another world of its swarm
+    it is, and the commands and school batches of that world's run are not its own to count
+    (nothing is rejected); once it has taken its turn, a later world that comes up to wait
+    behind it does not queue it again."""
+    scenario = Scenario(fish=2, duration=2.0, control_period=1.0, time_mode="realtime")
+    keys = scenario.keys
+    params = scenario.fish_params()
+    batch = CommandBatch(
+        5, np.array([1]), np.zeros((1, 4)), np.zeros(1, dtype=bool), np.zeros(1, dtype=np.int64)
+    )
+
+    async def main() -> tuple[World, list[bool]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0))
+        queued = []
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(world.run, bus)
+            await trio.sleep(1.0)  # no fish yet, no other world
+            queued.append(world.queued)
+            other = bus.declare_token(keys.alive("world", 12345))
+            await nursery.start(Fish(FishSettings((0,), params, keys)).run, bus)
+            await nursery.start(Fish(FishSettings((1,), params, keys, school="t")).run, bus)
+            await trio.sleep(1.0)
+            queued.append(world.queued)
+            # The other world's run, answered by the fish: a command and a batch of its tick 5.
+            bus.put(keys.command(0), encode(Command(0, 5, np.zeros(4))))
+            bus.put(keys.school_commands("t"), encode(batch))
+            await trio.sleep(1.0)
+            queued.append(world.queued)
+            other.undeclare()
+            await _until_state(world, "running")
+            later = bus.declare_token(keys.alive("world", 54321))
+            await trio.sleep(0.1)
+            queued.append(world.queued)
+            await _until_state(world, "finished")
+            later.undeclare()
+            nursery.cancel_scope.cancel()
+        return world, queued
+
+    world, queued = run_mock(main)
+    assert queued == [False, True, True, False]
+    assert world.tick == 2 and world.lost == []
+    assert world.statistics().rejected == {}
