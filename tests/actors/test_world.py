@@ -1326,3 +1326,39 @@ def test_a_world_waiting_its_turn_takes_none_of_the_running_worlds_commands() ->
     assert queued == [False, True, True, False]
     assert world.tick == 2 and world.lost == []
     assert world.statistics().rejected == {}
+
+
+def test_realtime_answer_times_run_until_the_last_fish_of_the_tick_answered() -> None:
+    """Realtime, 1-s periods, two fish: fish 0 answers after 0.2 s (and repeats itself at
+    0.8 s), fish 1 after 0.6 s. Each tick's answer time is 0.6 s: neither the first answer
+    nor a message after the last one makes one."""
+    scenario = Scenario(fish=2, duration=4.0, control_period=1.0, time_mode="realtime")
+    keys = scenario.keys
+
+    async def fish_zero(bus: MemoryBus) -> None:
+        async with subscription(bus, keys.perception(0)) as perceptions:
+            bus.declare_token(keys.alive("fish", 0))
+            while True:
+                perception = decode((await perceptions.receive())[1], Perception)
+                command = encode(Command(0, perception.tick, np.zeros(4)))
+                await trio.sleep(0.2)
+                bus.put(keys.command(0), command)
+                await trio.sleep(0.6)
+                bus.put(keys.command(0), command)  # again: stale, and no answer time
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0))
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(fish_zero, bus)
+            nursery.start_soon(_answer_after, bus, keys, 1, [0.6] * 4)
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return world
+
+    world = run_mock(main)
+    statistics = world.statistics()
+    assert statistics.late_commands == 0 and world.lost == []
+    assert statistics.rejected == {"stale": 4}
+    assert statistics.answer_time_median == pytest.approx(0.6)
+    assert statistics.answer_time_p90 == pytest.approx(0.6)
