@@ -138,6 +138,55 @@ def test_world_answers_control_queries_over_zenoh(endpoint: str) -> None:
     assert malformed == 1
 
 
+def test_a_world_waiting_its_turn_answers_no_query_until_its_turn(endpoint: str) -> None:
+    """A world waiting for its fish answers the scenario and control queries; behind another
+    world of its swarm it answers neither (they are the running world's: its settings, its
+    pause or stop); when that world has left, it answers again."""
+    scenario = Scenario(fish=2, duration=100_000.0)
+    keys = scenario.keys
+    status = encode(ControlRequest("status"))
+
+    async def main() -> list[tuple[bool, list[str]]]:
+        router = SessionSettings(mode="router", listen=[endpoint])
+        client = SessionSettings(mode="client", connect=[endpoint])
+        world = World(WorldSettings(scenario, expected_fish=(0, 1), start_timeout=60.0))
+        answered: list[tuple[bool, list[str]]] = []
+        async with (
+            open_session(router) as hub,
+            open_session(client) as other,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(run_control, hub, world)
+            nursery.start_soon(world.run, ZenohBus(hub))
+
+            async def until(queued: bool) -> None:
+                with trio.fail_after(10):
+                    while world.queued != queued:
+                        await trio.sleep(0.01)
+
+            async def ask() -> None:
+                told = await ask_scenario(other, keys, timeout=1.0)
+                replies = await query(other, keys.control, status, timeout=1.0)
+                answered.append(
+                    (told is not None, [decode(r, ControlReply).state for r in replies])
+                )
+
+            with trio.fail_after(10):
+                while await ask_scenario(other, keys, timeout=1.0) is None:
+                    pass  # until the queryable is known to the asker's router
+            await ask()
+            running = ZenohBus(other).declare_token(keys.alive("world", 12345))
+            await until(queued=True)
+            await ask()
+            running.undeclare()
+            await until(queued=False)
+            await ask()
+            nursery.cancel_scope.cancel()
+        return answered
+
+    assert run_trio(main) == [(True, ["waiting"]), (False, []), (True, ["waiting"])]
+
+
 def test_a_view_learns_the_runs_settings_from_the_worlds_scenario_queryable(
     endpoint: str,
 ) -> None:
