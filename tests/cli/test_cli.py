@@ -654,6 +654,24 @@ def test_an_operator_pauses_resumes_and_stops_a_run_from_another_process(tmp_pat
     assert gone.returncode == 1 and "error:" in gone.stderr
 
 
+def test_control_with_no_world_running_says_no_world_answered() -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    router = subprocess.Popen([*FISHSWARM, "router", "--listen", endpoint],
+                              stderr=subprocess.DEVNULL)  # fmt: skip
+    try:
+        wait_for_port(port)
+        asked = _run("control", "pause", "--connect", endpoint, "--swarm", "tank2", timeout=60)
+    finally:
+        router.terminate()
+        router.wait(timeout=30)
+    assert asked.returncode == 1 and asked.stdout == ""
+    assert asked.stderr == (
+        f"fishswarm control: error: no world of swarm 'tank2' answered on {endpoint}: is a "
+        "run going?\n"
+    )
+
+
 def test_an_operator_switches_a_running_schools_formation(tmp_path: Path) -> None:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
