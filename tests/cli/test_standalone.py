@@ -155,6 +155,13 @@ def test_a_secured_swarm_runs_and_is_watched_as_a_plain_one(tmp_path: Path) -> N
         )  # fmt: skip
         processes.append(world)
         view_lines.wait_for(r"the world runs 2 fish, dispersion, 5 s")
+        # An operator asks with the admin certificate: the world waits for its fish.
+        status = subprocess.run(
+            [*FISHSWARM, "control", "status", "--connect", endpoint, "--secure", str(secure)],
+            capture_output=True, text=True, timeout=60, check=False,
+        )  # fmt: skip
+        assert status.returncode == 0, status.stderr
+        assert status.stdout.startswith("swarm 'default': waiting at tick 0 "), status.stdout
         start("fish", "--id", "0", "--connect", endpoint)
         start("fish", "--id", "1", "--connect", endpoint)
         start("channel", "--connect", endpoint)
