@@ -232,6 +232,29 @@ def test_a_view_left_up_tells_the_end_of_each_run_it_follows() -> None:
         end_processes(processes)
 
 
+def test_a_view_with_no_world_to_follow_says_once_that_it_waits_for_one() -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    router = subprocess.Popen(
+        [*FISHSWARM, "router", "--listen", endpoint],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True,
+    )  # fmt: skip
+    process, lines = _view("--connect", endpoint, "--swarm", "tank2")
+    try:
+        wait_for_port(port)
+        lines.wait_for(r"following swarm 'tank2' on tcp/127\.0\.0\.1:\d+$")
+        lines.wait_for(
+            rf"^fishswarm view: waiting for the world of swarm 'tank2' on {endpoint} "
+            r"\(is a run going\?\)$"
+        )
+        time.sleep(5.0)  # more than two more unanswered asks
+        _close(process, lines)
+        assert sum("waiting for the world" in line for line in lines.seen) == 1, lines.seen
+    finally:
+        _stop(process, lines)
+        end_processes([router])
+
+
 @pytest.mark.parametrize("signal_number", [signal.SIGINT, signal.SIGTERM])
 def test_a_ctrl_c_at_once_after_the_run_keeps_the_runs_exit_code(
     tmp_path: Path, signal_number: int
