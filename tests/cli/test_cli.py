@@ -433,6 +433,15 @@ def test_a_run_that_cannot_open_its_router_keeps_the_last_runs_files(tmp_path: P
     assert summary.read_text() == '{"status": "finished"}'
 
 
+def test_a_world_that_cannot_reach_its_router_names_no_recording(tmp_path: Path) -> None:
+    record = tmp_path / "world.mcap"
+    result = _run("world", "--connect", f"tcp/127.0.0.1:{free_port()}", "--connect-timeout",
+                  "0.5", "--record", str(record), timeout=30)  # fmt: skip
+    assert result.returncode == 1
+    assert "is a fishswarm run or router listening there" in result.stderr
+    assert not record.exists() and "recording:" not in result.stderr, result.stderr
+
+
 def test_fish_alone_without_router_fails_clearly() -> None:
     result = _run(
         "fish",
