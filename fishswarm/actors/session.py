@@ -166,4 +166,4 @@ async def open_session(settings: SessionSettings) -> AsyncIterator[zenoh.Session
 def _without_source(reason: str) -> str:
     """Zenoh's reason without the place in Zenoh's Rust source it was raised at (``… at
     /root/.cargo/…/orchestrator.rs:388.``), which says nothing to the user."""
-    return re.sub(r"\.? at /\S+\.rs:\d+\.?$", "", reason.strip())
+    return re.sub(r"\s+at /\S+?\.rs:\d+\.?", "", reason).strip()
