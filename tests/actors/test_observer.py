@@ -175,6 +175,12 @@ def test_a_formation_is_measured_against_the_shape_each_snapshot_names() -> None
         assert metrics["shape_error"] < 1e-9 and metrics["joined_fraction"] == 1.0
 
 
+async def _note_the_end(observer: Observer, ended: list[float]) -> None:
+    """Wait for the world's end (1 s quiet after it left) and note when it came."""
+    await observer.wait_for_world_end(settle=1.0)
+    ended.append(trio.current_time())
+
+
 def of_run(tick: int, run: int) -> bytes:
     """A snapshot of two fish 1 m apart at ``tick`` of ``run``."""
     two = np.zeros(2)
@@ -264,13 +270,9 @@ def test_a_world_that_leaves_before_any_snapshot_ends_the_wait_for_its_run() -> 
         observer = Observer(KEYS)
         ended: list[float] = []
 
-        async def wait_for_the_end() -> None:
-            await observer.wait_for_world_end(settle=1.0)
-            ended.append(trio.current_time())
-
         async with trio.open_nursery() as nursery:
             await nursery.start(observer.run, bus)
-            nursery.start_soon(wait_for_the_end)
+            nursery.start_soon(_note_the_end, observer, ended)
             world = bus.declare_token(KEYS.alive("world", 3))
             await trio.sleep(2.0)
             world.undeclare()
@@ -290,16 +292,12 @@ def test_a_world_token_that_names_no_run_neither_ends_the_run_nor_stops_the_obse
         observer = Observer(KEYS)
         ended: list[float] = []
 
-        async def wait_for_the_end() -> None:
-            await observer.wait_for_world_end(settle=1.0)
-            ended.append(trio.current_time())
-
         async with trio.open_nursery() as nursery:
             await nursery.start(observer.run, bus)
             world = bus.declare_token(KEYS.alive("world", 3))
             bus.put(KEYS.snapshot, of_run(0, 3))
             await trio.sleep(0.5)
-            nursery.start_soon(wait_for_the_end)
+            nursery.start_soon(_note_the_end, observer, ended)
             bus.declare_token(KEYS.alive("world", "intruder")).undeclare()  # at 0.5 s
             await trio.sleep(0.5)
             bus.put(KEYS.snapshot, of_run(1, 3))
@@ -387,13 +385,9 @@ def test_an_observer_that_does_not_follow_runs_lets_a_later_runs_snapshots_go() 
         observer = Observer(KEYS)
         ended: list[float] = []
 
-        async def wait_for_the_end() -> None:
-            await observer.wait_for_world_end(settle=1.0)
-            ended.append(trio.current_time())
-
         async with trio.open_nursery() as nursery:
             await nursery.start(observer.run, bus)
-            nursery.start_soon(wait_for_the_end)
+            nursery.start_soon(_note_the_end, observer, ended)
             first = bus.declare_token(KEYS.alive("world", 3))
             for tick in range(3):
                 bus.put(KEYS.snapshot, of_run(tick, 3))

@@ -1074,6 +1074,14 @@ def test_a_world_waits_for_another_world_of_its_swarm_to_end(
     )
 
 
+async def _stop(world: World) -> tuple[float, float]:
+    """Ask ``world`` to stop: when it was asked, and when it had stopped."""
+    asked = trio.current_time()
+    world.control(ControlRequest("stop"))
+    await _until_state(world, "stopped")
+    return asked, trio.current_time()
+
+
 def test_a_stop_while_a_fish_is_slow_to_answer_ends_the_run_at_once() -> None:
     """Fish 1 takes 8 s over tick 1 (the command timeout is 10 s): a stop asked 2 s into
     that wait ends the run then, at the snapshot of tick 1, and fish 1 is not lost for it.
@@ -1103,10 +1111,7 @@ def test_a_stop_while_a_fish_is_slow_to_answer_ends_the_run_at_once() -> None:
             nursery.start_soon(world.run, bus)
             await asked.wait()
             await trio.sleep(2.0)
-            stopped_at = trio.current_time()
-            world.control(ControlRequest("stop"))
-            await _until_state(world, "stopped")
-            ended_at = trio.current_time()
+            stopped_at, ended_at = await _stop(world)
             nursery.cancel_scope.cancel()
         return world, stopped_at, ended_at, pulses
 
@@ -1173,10 +1178,7 @@ def test_a_stop_in_realtime_ends_the_run_without_waiting_out_the_period() -> Non
             nursery.start_soon(world.run, bus)
             await asked.wait()
             await trio.sleep(1.0)
-            stopped_at = trio.current_time()
-            world.control(ControlRequest("stop"))
-            await _until_state(world, "stopped")
-            ended_at = trio.current_time()
+            stopped_at, ended_at = await _stop(world)
             nursery.cancel_scope.cancel()
         return world, stopped_at, ended_at
 

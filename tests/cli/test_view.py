@@ -39,6 +39,19 @@ def _close(process: subprocess.Popen[str], lines: Lines) -> None:
     lines.wait_for("fishswarm view: closed", timeout=10)
 
 
+def _assert_fish_move(page_url: str, tmp_path: Path) -> None:
+    """The page shows ten fish of a few hundred pixels each, and 5 s later (five ticks in
+    real time) not in the same places."""
+    with open_page(page_url) as page:
+        wait_for_fish(page, tmp_path / "loading.png")
+        before = fish_pixels(screenshot(page, tmp_path / "before.png"))
+        time.sleep(5.0)
+        after = fish_pixels(screenshot(page, tmp_path / "after.png"))
+    assert before.sum() > 500 and after.sum() > 500
+    moved = np.logical_xor(before, after).sum()
+    assert moved > 0.2 * min(before.sum(), after.sum()), (moved, before.sum(), after.sum())
+
+
 def _stop(process: subprocess.Popen[str], lines: Lines) -> None:
     process.kill()
     process.wait(timeout=10)
@@ -111,15 +124,7 @@ def test_the_live_view_shows_the_fish_moving_in_a_real_browser(tmp_path: Path) -
         lines.wait_for(r"following swarm 'default' on tcp/127\.0\.0\.1:\d+$")
         page_url = lines.wait_for(r"^open (\S+) in a browser")[1]
         lines.wait_for(r"the world runs 10 fish, formation, 120 s")
-        with open_page(page_url) as page:
-            wait_for_fish(page, tmp_path / "loading.png")
-            before = fish_pixels(screenshot(page, tmp_path / "before.png"))
-            time.sleep(5.0)  # five ticks of the run, in real time
-            after = fish_pixels(screenshot(page, tmp_path / "after.png"))
-        # Ten fish of a few hundred pixels each, in both pictures, and not in the same places.
-        assert before.sum() > 500 and after.sum() > 500
-        moved = np.logical_xor(before, after).sum()
-        assert moved > 0.2 * min(before.sum(), after.sum()), (moved, before.sum(), after.sum())
+        _assert_fish_move(page_url, tmp_path)
         _close(process, lines)
     finally:
         _stop(process, lines)
@@ -163,14 +168,7 @@ def test_a_view_left_up_follows_the_swarms_next_run_in_a_real_browser(tmp_path: 
               "realtime", "--start-timeout", "60", "--quiet")  # fmt: skip
         lines.wait_for(r"run 2 of swarm 'default' begins: shown as a new recording")
         lines.wait_for(r"the world runs 10 fish, dispersion, 120 s")
-        with open_page(page_url) as page:
-            wait_for_fish(page, tmp_path / "loading.png")
-            before = fish_pixels(screenshot(page, tmp_path / "before.png"))
-            time.sleep(5.0)  # five ticks of the second run, in real time
-            after = fish_pixels(screenshot(page, tmp_path / "after.png"))
-        assert before.sum() > 500 and after.sum() > 500
-        moved = np.logical_xor(before, after).sum()
-        assert moved > 0.2 * min(before.sum(), after.sum()), (moved, before.sum(), after.sum())
+        _assert_fish_move(page_url, tmp_path)
         _close(process, lines)
     finally:
         _stop(process, lines)
