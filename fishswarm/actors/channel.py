@@ -268,16 +268,16 @@ class Channel:
                 own.seed,
             )
         chosen = own if world is None else world
-        medium = (chosen.channel_range, chosen.channel_loss, chosen.seed)
-        log.info("channel: a run starts: range %g m, loss %g, seed %d", *medium)
-        mine = self.scenario
-        if medium != (mine.channel_range, mine.channel_loss, mine.seed):
-            self.scenario = mine.replace(
-                channel_range=chosen.channel_range,
-                channel_loss=chosen.channel_loss,
-                seed=chosen.seed,
-            )
-            self._rngs.clear()
+        log.info(
+            "channel: a run starts: range %g m, loss %g, seed %d",
+            chosen.channel_range,
+            chosen.channel_loss,
+            chosen.seed,
+        )
+        # The rngs were let go at the run's first snapshot: the next draws use this seed.
+        self.scenario = self.scenario.replace(
+            channel_range=chosen.channel_range, channel_loss=chosen.channel_loss, seed=chosen.seed
+        )
 
     def _let_go(self, tick: int, reason: str) -> None:
         """Count every broadcast of ``tick`` in the outbox as unannounced, and drop them."""

@@ -483,8 +483,7 @@ class World:
                     # before the fins are held (0.15 ms off the fish's wait at 1 000 fish).
                     deferred = broadcasts
                 else:
-                    snapshot = self._snapshot(event.time, perceived.counts, broadcasts)
-                    self._put(bus, self.keys.snapshot, encode(snapshot))
+                    self._send_snapshot(bus, event.time, perceived.counts, broadcasts)
                 if event.last or self._stop_requested:
                     return
             if not event.deciding:
@@ -496,11 +495,7 @@ class World:
                 # Stopped while paused (or in the moment the wait yields): the run ends at
                 # this snapshot, without asking the fish for one more tick.
                 if deferred is not None:
-                    self._put(
-                        bus,
-                        self.keys.snapshot,
-                        encode(self._snapshot(event.time, perceived.counts, deferred)),
-                    )
+                    self._send_snapshot(bus, event.time, perceived.counts, deferred)
                 return
             if realtime and trio.current_time() - tick_start > period:
                 tick_start = trio.current_time()  # after a pause: pace from now on
@@ -533,8 +528,7 @@ class World:
                 self._put(bus, key, encode(message))
             self._phase_times["perceptions"].append(time.perf_counter() - sending)
             if deferred is not None:
-                snapshot = self._snapshot(event.time, perceived.counts, deferred)
-                self._put(bus, self.keys.snapshot, encode(snapshot))
+                self._send_snapshot(bus, event.time, perceived.counts, deferred)
             with self._stoppable():
                 if realtime:
                     tick_start += period
@@ -556,11 +550,11 @@ class World:
             scope.cancel()
         return scope
 
-    def _snapshot(self, time: float, seen: IntArray, broadcasts: IntArray) -> Snapshot:
-        """The swarm as it is now: this tick's snapshot."""
+    def _send_snapshot(self, bus: Bus, time: float, seen: IntArray, broadcasts: IntArray) -> None:
+        """Send the swarm as it is now: this tick's snapshot."""
         state = self.sim.state
         forming = self.scenario.behavior == "formation"
-        return Snapshot(
+        snapshot = Snapshot(
             self.tick,
             time,
             self.sim.ids,
@@ -573,6 +567,7 @@ class World:
             self._told(time) if forming else None,
             self.run_id,
         )
+        self._put(bus, self.keys.snapshot, encode(snapshot))
 
     def _told(self, time: float) -> str | None:
         """The formation the fish are told to take at ``time``: an operator's switch, else

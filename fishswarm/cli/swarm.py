@@ -423,7 +423,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
     statistics = actor.statistics()
     print(
         f"status: {actor.state_name} at tick {statistics.ticks} "
-        f"({statistics.ticks * scenario.control_period:g} s simulated, "
+        f"({actor.time:g} s simulated, "
         f"{actor.wall_time:.1f} s wall time); {statistics.lost_fish} fish lost, "
         f"{statistics.rejected_total} messages rejected",
         file=sys.stderr,

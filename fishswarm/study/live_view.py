@@ -107,8 +107,7 @@ class LiveView:
         self.scenes = 0
         self._metrics: set[str] = set()
         self._stage = Stage(Tank().size)
-        self._tank: tuple[float, float, float] = Tank().size
-        """The tank's size, m: what is drawn is drawn upright in it (:func:`upright`)."""
+        """The tank and landmark: what is drawn is drawn upright in the tank (:func:`upright`)."""
 
     def start_run(self, name: str) -> None:
         """Draw what follows into a recording of its own, called ``name``, on the same page:
@@ -137,7 +136,6 @@ class LiveView:
         """Draw the tank's walls and the landmark (they stay for the whole run)."""
         rr, log = self._rr, self._recording.log
         self._stage = stage
-        self._tank = stage.tank
         log("tank", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         log(
             "tank/walls",
@@ -147,7 +145,7 @@ class LiveView:
         if stage.landmark is not None:
             log(
                 "tank/landmark",
-                rr.Points3D([upright(stage.landmark, self._tank)], colors=LANDMARK_RGB, radii=0.02),
+                rr.Points3D([upright(stage.landmark, stage.tank)], colors=LANDMARK_RGB, radii=0.02),
                 static=True,
             )
 
@@ -158,7 +156,7 @@ class LiveView:
         rr, log = self._rr, self._recording.log
         self._recording.set_time(TIMELINE, duration=scene.time)
         colours = scene.colours()
-        scene = scene.upright(self._tank)
+        scene = scene.upright(self._stage.tank)
         log(
             "tank/fish",
             rr.Points3D(scene.position, colors=colours, radii=0.25 * BODY_LENGTH),
