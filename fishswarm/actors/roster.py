@@ -59,6 +59,9 @@ class Roster:
         self.channels = 0
         self.worlds: set[str] = set()
         """Liveliness tokens of the worlds of the swarm up now (a world's own among them)."""
+        self.queue: dict[str, tuple[int, int]] = {}
+        """Places of the worlds of the swarm waiting for their turn, by their token (a
+        world's own among them): see :meth:`KeySpace.queue_place`."""
         self.lost: list[LostFish] = []
         self.joined: list[tuple[int, int]] = []
         self._subscribe = subscribe_commands
@@ -79,6 +82,13 @@ class Roster:
             return None
         if member.role == "world":
             (self.worlds.add if alive else self.worlds.discard)(key)
+            return None
+        if member.role == "queue":
+            place = self.keys.place_of(member.member_id)
+            if alive and place is not None:
+                self.queue[key] = place
+            else:
+                self.queue.pop(key, None)
             return None
         fish_id = fish_id_of(member.member_id)
         if member.role != "fish" or fish_id is None:

@@ -24,6 +24,7 @@ import logging
 import secrets
 import time
 from collections.abc import Callable
+from contextlib import AsyncExitStack
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -32,7 +33,13 @@ import trio
 from numpy.typing import ArrayLike, NDArray
 
 from fishswarm import __version__
-from fishswarm.actors.bus import Bus, Declared, open_alive_events, open_subscriber, open_token
+from fishswarm.actors.bus import (
+    Bus,
+    Declared,
+    open_alive_events,
+    open_subscriber,
+    open_token,
+)
 from fishswarm.actors.channel import OUTBOX_TIMEOUT
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
@@ -105,6 +112,8 @@ class WorldSettings:
         admit_delay: a fish that comes up is admitted at the first event at least this long
             after the world subscribed to its commands, s (the subscription must reach the
             router first when the world runs as a client).
+        turn_delay: a world takes its turn no sooner than this after it came up, s: the
+            places of the worlds of its swarm up before it reach it first.
         pulse_period: how often the world says it is alive while a run goes on, s (fish
             take the pulse as a sign of life, so a slow world does not trip their watchdog).
         vouched_only: admit only fish vouched for on their own about keys (their own, or
@@ -119,6 +128,7 @@ class WorldSettings:
     command_timeout: float = COMMAND_TIMEOUT
     channel_timeout: float = OUTBOX_TIMEOUT + 1.0
     admit_delay: float = 0.1
+    turn_delay: float = 0.1
     pulse_period: float = 1.0
     vouched_only: bool = False
 
@@ -211,10 +221,14 @@ class World:
         """What the world waits for now (its fish, the channel's report, a tick's commands):
         a stop cancels it, so that no wait holds a stop up (see :meth:`_stoppable`)."""
         self._token = self.keys.alive("world", self.run_id)
-        """This world's liveliness token: it names the run."""
+        """This world's liveliness token, up from when it takes its turn: it names the run."""
+        self.place = (time.time_ns() // 1000, self.run_id)
+        """Where this world stands in its swarm's queue: when it arrived (µs since the epoch,
+        its own clock), its run: worlds of a swarm take their turns in this order."""
+        self._turn = "queued"
+        """``queued`` (its place token up: worlds ahead may run first), ``taken`` (its token
+        up, waiting for its fish) or ``started``."""
         self._stop_requested = False
-        self._took_turn = False
-        """Whether the world has found no other world of its swarm up and started."""
         self._messages_out = 0
         self._current = TickCommands()
         self.mismatched: set[int] = set()
@@ -286,10 +300,16 @@ class World:
                 ),
                 open_subscriber(bus, keys.abouts()[0], lambda k, p: events.push(("about", k, p))),
                 open_subscriber(bus, keys.abouts()[1], lambda k, p: events.push(("about", k, p))),
-                open_token(bus, self._token),
+                AsyncExitStack() as holding,
             ):
-                task_status.started()
-                await self._wait_for_fish()
+                deadline = trio.current_time() + self.settings.start_timeout
+                async with open_token(bus, keys.queue_place(*self.place)):
+                    task_status.started()
+                    await self._wait_for_turn(deadline)
+                    if not self._stop_requested:
+                        await holding.enter_async_context(open_token(bus, self._token))
+                        self._turn = "taken"
+                await self._wait_for_fish(deadline)
                 started = time.perf_counter()
                 if self.state_name == "waiting":  # a pause or a stop asked meanwhile stands
                     self.state_name = "running"
@@ -416,44 +436,96 @@ class World:
         return {i for i in self.roster.alive if (i, self.roster.school_of.get(i)) in self.vouched}
 
     @property
-    def other_worlds(self) -> set[str]:
-        """Liveliness tokens of the other worlds of this swarm up now (on the same router)."""
-        return self.roster.worlds - {self._token}
+    def ahead(self) -> list[str]:
+        """The liveliness tokens of the worlds of this swarm this one waits for, in order.
+
+        A queued world waits for every world that has taken its turn and for those whose
+        place comes before its own. A world that has taken its turn waits only for one that
+        took it in the same instant (neither saw the other's place first): the lower run id
+        goes first. A started world waits for none.
+        """
+        if self._turn == "started":
+            return []
+        worlds = sorted(self.roster.worlds - {self._token})
+        if self._turn == "taken":
+            return [w for w in worlds if self._run_id_of(w) < self.run_id]
+        before = [
+            key
+            for key, place in sorted(self.roster.queue.items(), key=lambda item: item[1])
+            if place < self.place
+        ]
+        return worlds + before
+
+    def _run_id_of(self, token: str) -> int:
+        run = self.keys.parse_alive(token).member_id
+        return int(run) if run.isascii() and run.isdigit() else -1  # naming none: first
 
     @property
     def queued(self) -> bool:
-        """Whether this world waits for another world of its swarm to end before it starts:
-        it then answers no queries (an operator's and a view's are that world's) and takes
-        no commands (its fish answer that world)."""
-        return not self._took_turn and bool(self.other_worlds)
+        """Whether this world waits for other worlds of its swarm before it starts: it then
+        answers no queries (an operator's and a view's are another world's) and takes no
+        commands (its fish answer another world)."""
+        return bool(self.ahead)
 
-    async def _wait_for_fish(self) -> None:
-        """Wait until the expected fish are up and no other world of the swarm runs (fish
-        serve one run at a time: two worlds would take turns starting them afresh)."""
-        expected = set(self.settings.expected_fish)
+    async def _wait_for_turn(self, deadline: float) -> None:
+        """Wait until no world of the swarm runs or waits ahead of this one (fish serve one
+        run at a time: two worlds would take turns starting them afresh), and at least
+        ``turn_delay`` since this world came up (so that the places of those up before it
+        have reached it)."""
+        settled = trio.current_time() + self.settings.turn_delay
         said = False
-        with trio.move_on_after(self.settings.start_timeout), self._stoppable():
+        with trio.move_on_at(deadline), self._stoppable():
             while True:
                 self._drain()  # all that is in (a token of another world too), first
-                if self.other_worlds and not said:
-                    log.warning(
-                        "another world runs swarm %r on this router: waiting for its run to "
-                        "end (fish serve one world at a time)",
-                        self.keys.swarm,
-                    )
+                if self.ahead and not said:
+                    log.warning("%s: waiting for its run to end (fish serve one world at a "
+                                "time)", self._who_is_ahead())  # fmt: skip
                     said = True
-                if expected <= self._admissible() and not self.other_worlds:
-                    self._took_turn = True
+                if not self.ahead:
+                    if trio.current_time() >= settled:
+                        return
+                    with trio.move_on_at(settled):  # woken by a place that came meanwhile
+                        self._handle(await self._events.receive())
+                else:
+                    self._handle(await self._events.receive())
+        if not self._stop_requested:
+            self._ahead_for_too_long()
+
+    def _who_is_ahead(self) -> str:
+        if self.roster.worlds - {self._token}:
+            return f"another world runs swarm {self.keys.swarm!r} on this router"
+        return f"another world of swarm {self.keys.swarm!r} came up first on this router"
+
+    def _ahead_for_too_long(self) -> None:
+        waited = f"{self.settings.start_timeout:g} s"
+        if self.roster.worlds - {self._token}:
+            which = (
+                f"another world ran swarm {self.keys.swarm!r} on this router for all of {waited}"
+            )
+        else:
+            which = (
+                f"another world of swarm {self.keys.swarm!r}, up before this one, still waited "
+                f"for its turn after {waited}"
+            )
+        raise StartTimeout(f"{which}: stop it, or give this run another swarm name (--swarm)")
+
+    async def _wait_for_fish(self, deadline: float) -> None:
+        """Wait until the expected fish are up (and a world that took its turn in the same
+        instant as this one has run)."""
+        if self._stop_requested:
+            return
+        expected = set(self.settings.expected_fish)
+        with trio.move_on_at(deadline), self._stoppable():
+            while True:
+                self._drain()
+                if expected <= self._admissible() and not self.ahead:
+                    self._turn = "started"
                     break
                 self._handle(await self._events.receive())
         if self._stop_requested:
             return
-        if self.other_worlds:
-            raise StartTimeout(
-                f"another world ran swarm {self.keys.swarm!r} on this router for all of "
-                f"{self.settings.start_timeout:g} s: stop it, or give this run another "
-                "swarm name (--swarm)"
-            )
+        if self.ahead:
+            self._ahead_for_too_long()
         missing = sorted(expected - self._admissible())
         if missing:
             raise StartTimeout(

@@ -408,7 +408,20 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                 bus = ZenohBus(session)
                 await nursery.start(observer.run, bus)
                 await nursery.start(run_control, session, actor)
-                await actor.run(bus)
+                ended = trio.Event()
+
+                async def run_world(*, task_status: trio.TaskStatus[None]) -> None:
+                    await actor.run(bus, task_status=task_status)
+                    ended.set()
+
+                await nursery.start(run_world)
+                print(
+                    f"world up on {args.connect} for swarm {scenario.swarm!r}: the run starts "
+                    f"when its {scenario.fish} fish are up, after any world of the swarm that "
+                    "runs or came up first",
+                    file=sys.stderr,
+                )
+                await ended.wait()
                 # Its own last snapshot comes back through the session: record it too.
                 with trio.move_on_after(WORLD_END_SETTLE):
                     await observer.wait_for_tick(actor.tick)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 ROOT = "fishswarm"
 _NAME = re.compile(r"[A-Za-z0-9_\-]{1,64}")
 _FISH_ID = re.compile(r"[0-9]{1,18}")
+_PLACE = re.compile(r"([0-9]{1,20})-([0-9]{1,20})")
 MAX_FISH_ID = 10**18 - 1
 """The largest fish id a key may name (ids fit in every message's integer fields)."""
 
@@ -40,7 +41,8 @@ class Member:
     """A member of the swarm as its liveliness token names it.
 
     Attributes:
-        role: fish, world, channel or observer.
+        role: fish, world, channel or observer; or ``queue`` for a world waiting for its
+            turn (see :meth:`KeySpace.queue_place`).
         member_id: its id within the role.
         school: the school whose keys serve it (fish only), or None for its own keys.
     """
@@ -155,6 +157,20 @@ class KeySpace:
         check_name("role", role)
         token = f"{self.prefix}/alive/{role}/{member_id}"
         return token if school is None else f"{token}/{check_name('school', school)}"
+
+    def queue_place(self, arrived: int, run_id: int) -> str:
+        """Liveliness token of a world waiting for its turn: ``alive/queue/<arrived>-<run>``.
+
+        Worlds of a swarm run one at a time, in the order of their places: when they
+        arrived (µs since the epoch, on the world's own clock), ties broken by run id.
+        """
+        return self.alive("queue", f"{arrived}-{run_id}")
+
+    @staticmethod
+    def place_of(member_id: str) -> tuple[int, int] | None:
+        """The place (arrival µs, run id) a queue token's id names, or None if it names none."""
+        match = _PLACE.fullmatch(member_id)
+        return None if match is None else (int(match[1]), int(match[2]))
 
     def alive_all(self, role: str = "*") -> str:
         """Key expression matching the liveliness tokens of every member of ``role``."""

@@ -297,7 +297,7 @@ def test_the_world_waits_for_a_slow_fish_at_every_tick() -> None:
 
     async def main() -> list[float]:
         bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0))
+        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0, turn_delay=0.0))
         started = trio.current_time()
         snapshot_times: list[float] = []
         bus.subscribe(keys.snapshot, lambda k, p: snapshot_times.append(trio.current_time()))
@@ -907,7 +907,7 @@ def test_the_world_pulses_its_state_while_it_waits_and_says_when_the_run_ended()
 
     async def main() -> tuple[list[tuple[float, str, int]], World]:
         bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0))
+        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0, turn_delay=0.0))
         heard: list[tuple[float, str, int]] = []
 
         def pulse(key: str, payload: bytes) -> None:
@@ -1072,6 +1072,135 @@ def test_a_world_waits_for_another_world_of_its_swarm_to_end(
         "20 s: another world ran swarm 'default' on this router for all of 20 s: stop it, or "
         "give this run another swarm name (--swarm)"
     )
+
+
+def test_two_worlds_that_come_up_together_run_one_after_the_other_first_come_first() -> None:
+    """Two worlds of one swarm up at the same instant, both waiting for the same fish: the
+    one whose place in the queue comes first runs, the other waits behind it and runs
+    after (before, each waited for the other until both timed out)."""
+    scenario = Scenario(fish=1, duration=2.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[list[World], list[tuple[int, int]]]:
+        bus = MemoryBus()
+        worlds = [
+            World(WorldSettings(scenario, expected_fish=(0,), start_timeout=30.0)) for _ in range(2)
+        ]
+        perceptions: list[tuple[int, int]] = []  # (run, tick) in the order the fish got them
+        bus.subscribe(
+            keys.perception(0),
+            lambda key, payload: perceptions.append(
+                (decode(payload, Perception).run, decode(payload, Perception).tick)
+            ),
+        )
+        async with trio.open_nursery() as nursery:
+            for world in worlds:
+                nursery.start_soon(world.run, bus)
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            for world in worlds:
+                await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return worlds, perceptions
+
+    worlds, perceptions = run_mock(main)
+    first, second = sorted(worlds, key=lambda world: world.place)
+    assert [world.tick for world in worlds] == [2, 2]
+    # Ticks 0 and 1 perceived: the snapshot of tick 2 ends a run of 2 s.
+    assert perceptions == [(first.run_id, 0), (first.run_id, 1), (second.run_id, 0),
+                           (second.run_id, 1)]  # fmt: skip
+
+
+@pytest.mark.parametrize("earlier", [True, False])
+def test_a_world_waits_behind_a_world_that_came_up_before_it_and_only_such_a_one(
+    earlier: bool, caplog: pytest.LogCaptureFixture
+) -> None:
+    """A place in the swarm's queue taken before this world's holds it until that world
+    goes (here at 5 s); one taken after does not (the world starts after its turn delay and
+    its fish's admission)."""
+    scenario = Scenario(fish=1, duration=1.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[World, list[float], list[bool]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
+        arrived, _ = world.place
+        other = bus.declare_token(keys.queue_place(arrived - 1 if earlier else arrived + 1, 7))
+        perceived: list[float] = []
+        bus.subscribe(keys.perception(0), lambda k, p: perceived.append(trio.current_time()))
+        queued = []
+        async with trio.open_nursery() as nursery:
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            nursery.start_soon(world.run, bus)
+            await trio.sleep(1.0)
+            queued.append(world.queued)
+            await trio.sleep(4.0)
+            other.undeclare()
+            await _until_state(world, "finished")
+            queued.append(world.queued)
+            nursery.cancel_scope.cancel()
+        return world, perceived, queued
+
+    with caplog.at_level(logging.WARNING, logger="fishswarm.actors.world"):
+        world, perceived, queued = run_mock(main)
+    delays = world.settings.admit_delay
+    said = [r.getMessage() for r in caplog.records if "another world" in r.getMessage()]
+    if earlier:
+        assert perceived[0] == pytest.approx(5.0 + delays) and queued == [True, False]
+        assert said == [
+            "another world of swarm 'default' came up first on this router: waiting for its "
+            "run to end (fish serve one world at a time)"
+        ]
+    else:
+        assert perceived[0] == pytest.approx(world.settings.turn_delay + delays)
+        assert queued == [False, False] and said == []
+
+
+def test_a_world_behind_one_that_never_takes_its_turn_says_so_at_its_start_timeout() -> None:
+    scenario = Scenario(fish=1, duration=1.0)
+    keys = scenario.keys
+
+    async def main() -> str:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
+        bus.declare_token(keys.queue_place(world.place[0] - 1, 7))
+        try:
+            await world.run(bus)
+        except StartTimeout as error:
+            return f"{trio.current_time():g} s: {error}"
+        return "no timeout"
+
+    assert run_mock(main) == (
+        "20 s: another world of swarm 'default', up before this one, still waited for its "
+        "turn after 20 s: stop it, or give this run another swarm name (--swarm)"
+    )
+
+
+def test_of_two_worlds_that_took_their_turn_at_once_the_lower_run_goes_first() -> None:
+    """Two worlds that each took their turn before the other's place reached it (a race
+    shorter than the turn delay): the world whose run id is lower runs first; a later run
+    id does not hold this world up."""
+    scenario = Scenario(fish=1, duration=1.0)
+    keys = scenario.keys
+
+    async def main(offset: int) -> tuple[World, list[bool]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,)))
+        queued = []
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(world.run, bus)
+            await trio.sleep(1.0)  # its turn taken, no fish yet
+            other = bus.declare_token(keys.alive("world", world.run_id + offset))
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            await trio.sleep(1.0)
+            queued.append(world.queued)
+            queued.append(world.state_name == "waiting")
+            other.undeclare()
+            await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return world, queued
+
+    assert run_mock(lambda: main(-1))[1] == [True, True]
+    assert run_mock(lambda: main(+1))[1] == [False, False]
 
 
 async def _stop(world: World) -> tuple[float, float]:
@@ -1286,9 +1415,9 @@ def test_realtime_answer_times_are_taken_over_the_ticks_every_fish_answered_in_t
 
 def test_a_world_waiting_its_turn_takes_none_of_the_running_worlds_commands() -> None:
     """A world alone, waiting for its fish, is not queued; behind another world of its swarm
-    it is, and the commands and school batches of that world's run are not its own to count
-    (nothing is rejected); once it has taken its turn, a later world that comes up to wait
-    behind it does not queue it again."""
+    (here one that took its turn in the same instant, with a lower run id) it is, and the
+    commands and school batches of that world's run are not its own to count (nothing is
+    rejected); once it has started, a later world that comes up does not queue it again."""
     scenario = Scenario(fish=2, duration=2.0, control_period=1.0, time_mode="realtime")
     keys = scenario.keys
     params = scenario.fish_params()

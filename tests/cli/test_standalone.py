@@ -269,6 +269,34 @@ def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_ow
     assert {s.run for s in theirs.snapshots}.isdisjoint({s.run for s in own.snapshots})
 
 
+def test_two_worlds_started_together_before_their_fish_both_run_one_after_the_other(
+    tmp_path: Path,
+) -> None:
+    """Two worlds of a swarm, both up and waiting when the fish come: one runs, then the
+    other (they used to wait for each other until both start timeouts ran out)."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    records = [tmp_path / "a.mcap", tmp_path / "b.mcap"]
+    with started_commands() as start:
+        start("router", "--listen", endpoint)
+        wait_for_port(port)
+        worlds = [
+            start("world", "--connect", endpoint, "--fish", "2", "--duration", "3", "--quiet",
+                  "--start-timeout", "40", "--record", str(record))  # fmt: skip
+            for record in records
+        ]
+        lines = [Lines(world) for world in worlds]
+        for said in lines:
+            said.wait_for("world up on ", timeout=60)
+        start("fish", "--id", "0", "--id", "1", "--connect", endpoint)
+        for world, said in zip(worlds, lines, strict=True):
+            assert world.wait(timeout=60) == 0, said.seen
+    runs = [read_recording(record) for record in records]
+    assert [[s.tick for s in run.snapshots] for run in runs] == [[0, 1, 2, 3]] * 2
+    assert all(run.complete for run in runs)
+    assert len({s.run for run in runs for s in run.snapshots}) == 2
+
+
 def test_a_standalone_channel_takes_each_runs_loss_and_seed_from_its_world(
     tmp_path: Path,
 ) -> None:

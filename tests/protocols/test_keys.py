@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from fishswarm.protocols.keys import MAX_FISH_ID, KeySpace, Member, fish_id_of
 
@@ -91,3 +93,19 @@ def test_school_of_key_names_the_school_of_school_keys_only() -> None:
     assert keys.school_of_key(keys.command(3)) is None
     assert keys.school_of_key("fishswarm/t/school/w0/commands/more") is None
     assert keys.school_of_key("fishswarm/other/school/w0/commands") is None
+
+
+@given(
+    arrived=st.integers(min_value=0, max_value=2**63),
+    run=st.integers(min_value=0, max_value=2**62 - 1),
+)
+def test_a_worlds_place_in_the_queue_round_trips_through_its_token(arrived: int, run: int) -> None:
+    keys = KeySpace("tank")
+    member = keys.parse_alive(keys.queue_place(arrived, run))
+    assert member == Member("queue", f"{arrived}-{run}")
+    assert keys.place_of(member.member_id) == (arrived, run)
+
+
+@pytest.mark.parametrize("member_id", ["12", "12-", "-3", "1-2-3", "a-1", "1-b", "١-2", "1-2 "])
+def test_a_token_id_that_names_no_place_is_none(member_id: str) -> None:
+    assert KeySpace("tank").place_of(member_id) is None
