@@ -375,6 +375,32 @@ def test_a_late_snapshot_of_a_run_that_gave_way_is_refused_as_stale() -> None:
     assert observer.statistics().rejected == 1
 
 
+def test_an_observer_remembers_the_last_16_runs_that_gave_way_and_no_more() -> None:
+    """Runs 1 to 18 one after the other, then late snapshots of runs 2 and 1: run 2 is among
+    the last 16 that gave way (2 to 17), so its snapshot is refused as stale; run 1 is
+    forgotten, so its snapshot is taken as a run that begins."""
+    from fishswarm.actors.observer import ENDED_RUNS_KEPT
+
+    async def main() -> tuple[Observer, list[int]]:
+        bus = MemoryBus()
+        announced: list[int] = []
+        observer = Observer(KEYS, on_new_run=announced.append)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            for run in range(1, 19):
+                bus.put(KEYS.snapshot, of_run(0, run))
+            bus.put(KEYS.snapshot, of_run(1, 2))
+            bus.put(KEYS.snapshot, of_run(1, 1))
+            await trio.sleep(0.5)
+            nursery.cancel_scope.cancel()
+        return observer, announced
+
+    observer, announced = run_mock(main)
+    assert ENDED_RUNS_KEPT == 16
+    assert announced == [*range(2, 19), 1] and observer.current_run == 1
+    assert observer.statistics().rejected == 1
+
+
 def test_an_observer_that_does_not_follow_runs_lets_a_later_runs_snapshots_go() -> None:
     """Without ``on_new_run`` (``fishswarm observe``, which ends with its run) the snapshots
     of the next run on the swarm are neither taken nor counted as bad, and its world's end

@@ -81,13 +81,16 @@ def screenshot(page: Any, path: Path) -> NDArray[np.uint8]:
 
 
 def fish_pixels(image: NDArray[np.uint8]) -> NDArray[np.bool_]:
-    """Where the tank panel (the left three fifths, below the top bar) shows fish: strongly
-    coloured pixels; the tank's walls, the floor's grid and the background are grey."""
+    """Where the tank panel (the left three fifths, below the top bar, right of where the
+    viewer's list of sources stands) shows fish: strongly coloured pixels; the tank's walls,
+    the floor's grid and the background are grey. The list is left out: the viewer's
+    welcome page, shown while it loads, marks its selected entry in blue there (seen as
+    fish before the recording came, once, on a loaded machine)."""
     rgb = image.astype(np.int16)
     vivid = (rgb.max(axis=2) - rgb.min(axis=2)) > 80
     panel = np.zeros_like(vivid)
     height, width = vivid.shape
-    panel[int(0.08 * height) : int(0.95 * height), : int(0.58 * width)] = True
+    panel[int(0.08 * height) : int(0.95 * height), int(0.16 * width) : int(0.58 * width)] = True
     found: NDArray[np.bool_] = vivid & panel
     return found
 

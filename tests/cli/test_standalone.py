@@ -277,20 +277,34 @@ def test_two_worlds_started_together_before_their_fish_both_run_one_after_the_ot
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     records = [tmp_path / "a.mcap", tmp_path / "b.mcap"]
+    timing = [("--duration", "3"), ("--duration", "1.5", "--period", "0.5")]
     with started_commands() as start:
         start("router", "--listen", endpoint)
         wait_for_port(port)
         worlds = [
-            start("world", "--connect", endpoint, "--fish", "2", "--duration", "3", "--quiet",
-                  "--start-timeout", "40", "--record", str(record))  # fmt: skip
-            for record in records
+            start(
+                "world",
+                "--connect",
+                endpoint,
+                "--fish",
+                "2",
+                *run_timing,
+                "--quiet",
+                "--start-timeout",
+                "40",
+                "--record",
+                str(record),
+            )
+            for record, run_timing in zip(records, timing, strict=True)
         ]
         lines = [Lines(world) for world in worlds]
         for said in lines:
             said.wait_for("world up on ", timeout=60)
         start("fish", "--id", "0", "--id", "1", "--connect", endpoint)
-        for world, said in zip(worlds, lines, strict=True):
+        for world, said, simulated in zip(worlds, lines, ("3", "1.5"), strict=True):
             assert world.wait(timeout=60) == 0, said.seen
+            said.wait_for(rf"^status: finished at tick 3 \({re.escape(simulated)} s simulated, "
+                          r"\d+\.\d s wall time\); 0 fish lost, 0 messages rejected$")  # fmt: skip
     runs = [read_recording(record) for record in records]
     assert [[s.tick for s in run.snapshots] for run in runs] == [[0, 1, 2, 3]] * 2
     assert all(run.complete for run in runs)
