@@ -33,13 +33,7 @@ import trio
 from numpy.typing import ArrayLike, NDArray
 
 from fishswarm import __version__
-from fishswarm.actors.bus import (
-    Bus,
-    Declared,
-    open_alive_events,
-    open_subscriber,
-    open_token,
-)
+from fishswarm.actors.bus import Bus, Declared, open_alive_events, open_subscriber, open_token
 from fishswarm.actors.channel import OUTBOX_TIMEOUT
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
@@ -488,7 +482,7 @@ class World:
                         self._handle(await self._events.receive())
                 else:
                     self._handle(await self._events.receive())
-        if not self._stop_requested:
+        if self.ahead and not self._stop_requested:
             self._ahead_for_too_long()
 
     def _who_is_ahead(self) -> str:
