@@ -1175,6 +1175,20 @@ def test_a_world_behind_one_that_never_takes_its_turn_says_so_at_its_start_timeo
     )
 
 
+def test_a_start_timeout_shorter_than_the_turn_delay_names_the_missing_fish_not_a_world() -> None:
+    scenario = Scenario(fish=1, duration=1.0)
+
+    async def main() -> str:
+        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=0.05))
+        try:
+            await world.run(MemoryBus())
+        except StartTimeout as error:
+            return f"{trio.current_time():g} s: {error}"
+        return "no timeout"
+
+    assert run_mock(main) == "0.05 s: 1 of 1 fish did not come up within 0.05 s (missing ids: 0)"
+
+
 def test_of_two_worlds_that_took_their_turn_at_once_the_lower_run_goes_first() -> None:
     """Two worlds that each took their turn before the other's place reached it (a race
     shorter than the turn delay): the world whose run id is lower runs first; a later run
