@@ -353,9 +353,9 @@ def test_a_later_run_counts_its_revolutions_from_its_own_first_snapshot() -> Non
     assert [p.metrics["radius"] for p in observer.history] == [0.5] * 4
 
 
-def test_a_late_snapshot_of_a_run_that_gave_way_is_refused_as_stale() -> None:
-    """Run 3's tick 5 comes after run 7 has begun (the two travel apart): it is refused, and
-    run 7 goes on; the view was told of one new run only."""
+def _following_runs(snapshots: list[tuple[int, int]]) -> tuple[Observer, list[int]]:
+    """An observer that follows runs, given snapshots (tick, run) in this order: the
+    observer, and the runs it announced as beginning."""
 
     async def main() -> tuple[Observer, list[int]]:
         bus = MemoryBus()
@@ -363,13 +363,20 @@ def test_a_late_snapshot_of_a_run_that_gave_way_is_refused_as_stale() -> None:
         observer = Observer(KEYS, on_new_run=announced.append)
         async with trio.open_nursery() as nursery:
             await nursery.start(observer.run, bus)
-            for tick, run in ((0, 3), (1, 3), (0, 7), (2, 3), (1, 7)):
+            for tick, run in snapshots:
                 bus.put(KEYS.snapshot, of_run(tick, run))
             await trio.sleep(0.5)
             nursery.cancel_scope.cancel()
         return observer, announced
 
-    observer, announced = run_mock(main)
+    return run_mock(main)
+
+
+def test_a_late_snapshot_of_a_run_that_gave_way_is_refused_as_stale() -> None:
+    """Run 3's tick 5 comes after run 7 has begun (the two travel apart): it is refused, and
+    run 7 goes on; the view was told of one new run only."""
+
+    observer, announced = _following_runs([(0, 3), (1, 3), (0, 7), (2, 3), (1, 7)])
     assert announced == [7] and observer.current_run == 7
     assert [p.tick for p in observer.history] == [0, 1, 0, 1]
     assert observer.statistics().rejected == 1
@@ -381,21 +388,7 @@ def test_an_observer_remembers_the_last_16_runs_that_gave_way_and_no_more() -> N
     forgotten, so its snapshot is taken as a run that begins."""
     from fishswarm.actors.observer import ENDED_RUNS_KEPT
 
-    async def main() -> tuple[Observer, list[int]]:
-        bus = MemoryBus()
-        announced: list[int] = []
-        observer = Observer(KEYS, on_new_run=announced.append)
-        async with trio.open_nursery() as nursery:
-            await nursery.start(observer.run, bus)
-            for run in range(1, 19):
-                bus.put(KEYS.snapshot, of_run(0, run))
-            bus.put(KEYS.snapshot, of_run(1, 2))
-            bus.put(KEYS.snapshot, of_run(1, 1))
-            await trio.sleep(0.5)
-            nursery.cancel_scope.cancel()
-        return observer, announced
-
-    observer, announced = run_mock(main)
+    observer, announced = _following_runs([*((0, run) for run in range(1, 19)), (1, 2), (1, 1)])
     assert ENDED_RUNS_KEPT == 16
     assert announced == [*range(2, 19), 1] and observer.current_run == 1
     assert observer.statistics().rejected == 1
