@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import re
 import socket
+import threading
 from collections.abc import AsyncIterator, Sequence
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
@@ -149,7 +150,7 @@ async def open_session(settings: SessionSettings) -> AsyncIterator[zenoh.Session
     """
     config = settings.to_config()
     try:
-        session = await trio.to_thread.run_sync(zenoh.open, config)
+        session = await _open_abandonably(config)
     except zenoh.ZError as error:
         where = ", ".join([*settings.listen, *settings.connect]) or "(no endpoint)"
         raise ConnectError(
@@ -161,6 +162,34 @@ async def open_session(settings: SessionSettings) -> AsyncIterator[zenoh.Session
     finally:
         with trio.CancelScope(shield=True):
             await trio.to_thread.run_sync(session.close)
+
+
+async def _open_abandonably(config: zenoh.Config) -> zenoh.Session:
+    """``zenoh.open`` in a worker thread that a cancellation (Ctrl-C, SIGTERM) does not wait
+    for: a client waiting for its router waits up to its connect timeout, forever for a
+    robot's service. A session that opens after all is closed, by the thread or (if it
+    opened in the instant of the cancellation) here."""
+    lock = threading.Lock()
+    abandoned = False
+    opened: list[zenoh.Session] = []
+
+    def open_unless_abandoned() -> zenoh.Session:
+        session = zenoh.open(config)
+        with lock:
+            if abandoned:
+                session.close()
+            else:
+                opened.append(session)
+        return session
+
+    try:
+        return await trio.to_thread.run_sync(open_unless_abandoned, abandon_on_cancel=True)
+    except trio.Cancelled:
+        with lock:
+            abandoned = True
+        for session in opened:  # opened, but its result came too late to be taken
+            session.close()
+        raise
 
 
 def _without_source(reason: str) -> str:

@@ -819,3 +819,42 @@ def test_the_speed_animate_advises_is_one_it_then_accepts() -> None:
     assert _rounded_up(15 / (MAX_FRAMES * 0.04)) == 0.0188
     assert MAX_FRAMES >= 15 / (0.0188 * 0.04)
     assert _rounded_up(0.002) == 0.002  # on the grid already: not a step up
+
+
+@pytest.mark.parametrize(
+    "command",
+    [["robots"], ["robot", "--id", "0", "--hardware", "mock"], ["observe"]],
+    ids=["robots", "robot", "observe"],
+)
+def test_a_command_waiting_for_its_router_forever_ends_at_once_on_sigterm(
+    command: list[str],
+) -> None:
+    """A robot's service waits for its router forever (--connect-timeout -1); systemd's stop
+    (SIGTERM) or Ctrl-C must not wait for a router that may never come: exit 130 at once
+    (it used to ignore both until killed)."""
+    port = free_port()  # nothing listens there
+    with subprocess.Popen(
+        [*FISHSWARM, *command, "--connect", f"tcp/127.0.0.1:{port}", "--connect-timeout", "-1"],
+        stderr=subprocess.PIPE,
+        text=True,
+    ) as process:
+        try:
+            # Its worker thread (named after the function it runs) is in zenoh.open.
+            threads = Path(f"/proc/{process.pid}/task")
+            deadline = time.monotonic() + 60
+            while not any(
+                (task / "comm").read_text().startswith("open_unless")
+                for task in threads.iterdir()
+                if (task / "comm").exists()
+            ):
+                assert time.monotonic() < deadline, "it never began to open its session"
+                time.sleep(0.1)
+            time.sleep(0.5)
+            process.send_signal(signal.SIGTERM)
+            code = process.wait(timeout=10)  # it used to wait until killed
+        finally:
+            if process.poll() is None:
+                process.kill()
+        assert process.stderr is not None
+        errors = process.stderr.read()
+    assert code == 130 and errors.rstrip().endswith("fishswarm: interrupted"), errors
