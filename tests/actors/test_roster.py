@@ -86,3 +86,18 @@ def test_a_fish_is_ready_once_its_command_subscription_has_had_time_to_spread() 
     assert roster.ready(set(), now=10.4, admit_delay=0.5) == []
     assert roster.ready(set(), now=11.0, admit_delay=0.5) == [2, 3]
     assert roster.ready({2}, now=11.0, admit_delay=0.5) == [3]
+
+
+def test_the_roster_keeps_the_places_queue_tokens_name_until_they_go() -> None:
+    """A world's place token adds its place (arrival µs, run id), under its token, and takes
+    it away when it goes; a queue token that names no place adds none (nor does one that
+    goes without having come)."""
+    keys, roster = KeySpace(), _roster()
+    place = keys.queue_place(1_700_000_000_000_000, 42)
+    roster.on_alive(place, True, now=0.0)
+    roster.on_alive(keys.alive("queue", "soon"), True, now=0.0)
+    roster.on_alive(keys.alive("queue", "12-x"), True, now=0.0)
+    assert roster.queue == {place: (1_700_000_000_000_000, 42)}
+    roster.on_alive(keys.queue_place(5, 6), False, now=1.0)
+    roster.on_alive(place, False, now=1.0)
+    assert roster.queue == {} and roster.worlds == set() and roster.alive == set()

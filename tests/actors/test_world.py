@@ -5,6 +5,7 @@ and the same trajectories as the batch engine."""
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Awaitable, Callable
 from typing import Any, cast
 
@@ -1215,6 +1216,281 @@ def test_of_two_worlds_that_took_their_turn_at_once_the_lower_run_goes_first() -
 
     assert run_mock(lambda: main(-1))[1] == [True, True]
     assert run_mock(lambda: main(+1))[1] == [False, False]
+
+
+def _watch_turns(bus: MemoryBus, keys: Any) -> list[tuple[float, str, bool]]:
+    """The comings and goings of the swarm's places and world tokens, with their times."""
+    seen: list[tuple[float, str, bool]] = []
+
+    def note(key: str, alive: bool) -> None:
+        if keys.parse_alive(key).role in ("queue", "world"):
+            seen.append((trio.current_time(), key, alive))
+
+    bus.watch_alive(keys.alive_all(), note)
+    return seen
+
+
+def test_a_world_shows_its_place_until_its_turn_then_its_token_until_its_run_ends() -> None:
+    """Alone, its fish up, default settings: the world shows its place as it comes up (the
+    µs it was made at, since the epoch, and its run); 0.1 s later (its turn delay) it shows
+    its world token and only then drops its place, so that one of the two is always up for
+    a world that comes up meanwhile; its token goes when its run has ended."""
+    scenario = Scenario(fish=1, duration=1.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[World, tuple[int, int], list[tuple[float, str, bool]]]:
+        bus = MemoryBus()
+        before = time.time_ns() // 1000
+        world = World(WorldSettings(scenario, expected_fish=(0,)))
+        made = (before, time.time_ns() // 1000)
+        seen = _watch_turns(bus, keys)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            await world.run(bus)
+            ended = trio.current_time()
+            nursery.cancel_scope.cancel()
+        seen.append((ended, "run ended", True))
+        return world, made, seen
+
+    world, (before, after), seen = run_mock(main)
+    arrived, run = world.place
+    assert before <= arrived <= after and run == world.run_id
+    place, token = keys.queue_place(arrived, run), keys.alive("world", world.run_id)
+    assert world.settings.turn_delay == 0.1 and world.state_name == "finished"
+    assert seen[:3] == [(0.0, place, True), (pytest.approx(0.1), token, True),
+                        (pytest.approx(0.1), place, False)]  # fmt: skip
+    (gone_at, gone, up), (ended_at, _, _) = seen[3:]
+    assert (gone, up) == (token, False) and gone_at == ended_at
+
+
+def test_a_world_stopped_while_it_waits_its_turn_drops_its_place_and_never_shows_a_token() -> None:
+    """Behind an earlier place, a world told to stop (at 3 s) drops its place then and ends
+    stopped, without ever showing its world token: it took no turn (other worlds would wait
+    for that token, and fish greet it)."""
+    scenario = Scenario(fish=1, duration=1.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[World, list[tuple[float, str, bool]]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
+        earlier = bus.declare_token(keys.queue_place(world.place[0] - 1, 7))
+        seen = _watch_turns(bus, keys)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            nursery.start_soon(world.run, bus)
+            await trio.sleep(3.0)
+            await _stop(world)
+            earlier.undeclare()
+            nursery.cancel_scope.cancel()
+        return world, seen
+
+    world, seen = run_mock(main)
+    place, earlier = keys.queue_place(*world.place), keys.queue_place(world.place[0] - 1, 7)
+    assert [(at, key, up) for at, key, up in seen if key != earlier] == [
+        (0.0, place, True),
+        (3.0, place, False),
+    ]
+    assert world.state_name == "stopped" and world.tick == 0
+
+
+def test_a_world_waiting_its_turn_says_so_once_whatever_it_hears_meanwhile(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Behind a running world, the world hears its fish come up (1 s) and a later world's
+    place come (2 s) and go (3 s) while it waits: it says that it waits once, not at each
+    of them; it runs when the other world has gone (4 s)."""
+    scenario = Scenario(fish=1, duration=1.0)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
+        running = bus.declare_token(keys.alive("world", 12345))
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(world.run, bus)
+            await trio.sleep(1.0)
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            await trio.sleep(1.0)
+            later = bus.declare_token(keys.queue_place(world.place[0] + 1, 7))
+            await trio.sleep(1.0)
+            later.undeclare()
+            await trio.sleep(1.0)
+            running.undeclare()
+            await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level(logging.WARNING, logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    assert world.tick == 1
+    assert [r.getMessage() for r in caplog.records if "another world" in r.getMessage()] == [
+        "another world runs swarm 'default' on this router: waiting for its run to end "
+        "(fish serve one world at a time)"
+    ]
+
+
+def test_a_worlds_start_timeout_runs_from_when_it_came_up_its_wait_for_its_turn_included() -> None:
+    """A 20-s start timeout: behind another world for 15 s, then no fish come: the world
+    gives up at 20 s (not 20 s after its turn), for its missing fish."""
+    scenario = Scenario(fish=1, duration=1.0)
+    keys = scenario.keys
+
+    async def main() -> str:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
+        running = bus.declare_token(keys.alive("world", 12345))
+        async with trio.open_nursery() as nursery:
+
+            async def other_world_ends() -> None:
+                await trio.sleep(15.0)
+                running.undeclare()
+
+            nursery.start_soon(other_world_ends)
+            try:
+                await world.run(bus)
+            except StartTimeout as error:
+                return f"{trio.current_time():g} s: {error}"
+        return "no timeout"
+
+    assert run_mock(main) == "20 s: 1 of 1 fish did not come up within 20 s (missing ids: 0)"
+
+
+def test_a_world_held_by_a_lower_run_that_never_starts_gives_up_at_its_start_timeout() -> None:
+    """The world took its turn (no fish yet); a world that took its own in the same instant,
+    with a lower run id, goes first, but never starts: at its start timeout (20 s) the
+    world says so, its fish up all along, and it has sent them nothing (it does not run
+    alongside that world)."""
+    scenario = Scenario(fish=1, duration=1.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[str, list[float]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
+        perceived: list[float] = []
+        bus.subscribe(keys.perception(0), lambda k, p: perceived.append(trio.current_time()))
+        async with trio.open_nursery() as nursery:
+
+            async def first_run_and_fish() -> None:
+                await trio.sleep(1.0)  # the world's turn taken
+                bus.declare_token(keys.alive("world", world.run_id - 1))
+                await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+
+            nursery.start_soon(first_run_and_fish)
+            try:
+                await world.run(bus)
+                refused = "no timeout"
+            except StartTimeout as error:
+                refused = f"{trio.current_time():g} s: {error}"
+            nursery.cancel_scope.cancel()
+        return refused, perceived
+
+    assert run_mock(main) == (
+        "20 s: another world ran swarm 'default' on this router for all of 20 s: stop it, or "
+        "give this run another swarm name (--swarm)",
+        [],
+    )
+
+
+def test_a_world_token_that_names_no_run_goes_before_a_world_that_took_its_turn() -> None:
+    """A world token whose id is no run id (not a fishswarm world's, or a garbled one) counts
+    as a world that took its turn first: a world that took its own is held while it is up
+    (from 1 s to 3 s, its fish up at 2 s), and runs when it has gone."""
+    scenario = Scenario(fish=1, duration=1.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[World, list[bool], list[float]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
+        perceived: list[float] = []
+        bus.subscribe(keys.perception(0), lambda k, p: perceived.append(trio.current_time()))
+        queued = []
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(world.run, bus)
+            await trio.sleep(1.0)
+            stray = bus.declare_token(keys.alive("world", "stray"))
+            await trio.sleep(1.0)
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            await trio.sleep(1.0)
+            queued.append(world.queued)
+            stray.undeclare()
+            await _until_state(world, "finished")
+            queued.append(world.queued)
+            nursery.cancel_scope.cancel()
+        return world, queued, perceived
+
+    world, queued, perceived = run_mock(main)
+    assert queued == [True, False] and world.tick == 1
+    assert perceived[0] == pytest.approx(3.0 + world.settings.admit_delay)
+
+
+def test_a_queued_world_lists_the_worlds_that_run_then_the_earlier_places_earliest_first() -> None:
+    """What a queued world waits for, in order: the worlds that took their turn, then the
+    places before its own from the earliest, whatever order they came in; neither its own
+    place nor a later one."""
+    scenario = Scenario(fish=1, duration=1.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[World, list[str]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
+        arrived, run = world.place
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(world.run, bus)
+            await trio.sleep(0.01)
+            for token in (
+                keys.queue_place(arrived, run + 1),
+                keys.queue_place(arrived - 1, 9),
+                keys.queue_place(arrived - 2, 5),
+                keys.queue_place(arrived, run - 1),
+                keys.alive("world", 12345),
+            ):
+                bus.declare_token(token)
+            await trio.sleep(1.0)
+            ahead = world.ahead
+            nursery.cancel_scope.cancel()
+        return world, ahead
+
+    world, ahead = run_mock(main)
+    arrived, run = world.place
+    assert ahead == [
+        keys.alive("world", 12345),
+        keys.queue_place(arrived - 2, 5),
+        keys.queue_place(arrived - 1, 9),
+        keys.queue_place(arrived, run - 1),
+    ]
+
+
+def test_a_world_whose_turn_comes_first_takes_in_all_that_came_with_it() -> None:
+    """Behind a running world: in the instant that world goes (5 s), the place of a world up
+    before this one reaches it too (it came late): the world waits behind that place as
+    well, and runs only when it has gone (8 s), not when the running world went."""
+    scenario = Scenario(fish=1, duration=1.0)
+    keys = scenario.keys
+
+    async def main() -> tuple[World, list[float], list[bool]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
+        perceived: list[float] = []
+        bus.subscribe(keys.perception(0), lambda k, p: perceived.append(trio.current_time()))
+        running = bus.declare_token(keys.alive("world", 12345))
+        queued = []
+        async with trio.open_nursery() as nursery:
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            nursery.start_soon(world.run, bus)
+            await trio.sleep(5.0)
+            running.undeclare()
+            earlier = bus.declare_token(keys.queue_place(world.place[0] - 1, 7))
+            await trio.sleep(1.0)
+            queued.append(world.queued)
+            await trio.sleep(2.0)
+            earlier.undeclare()
+            await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return world, perceived, queued
+
+    world, perceived, queued = run_mock(main)
+    assert queued == [True] and world.tick == 1
+    assert perceived[0] == pytest.approx(8.0 + world.settings.admit_delay)
 
 
 async def _stop(world: World) -> tuple[float, float]:
