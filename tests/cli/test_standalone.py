@@ -299,7 +299,9 @@ def test_two_worlds_started_together_before_their_fish_both_run_one_after_the_ot
         ]
         lines = [Lines(world) for world in worlds]
         for said in lines:
-            said.wait_for("world up on ", timeout=60)
+            said.wait_for(rf"^world up on {re.escape(endpoint)} for swarm 'default': the run "
+                          r"starts when its 2 fish are up, after any world of the swarm that runs "
+                          r"or came up first$", timeout=60)  # fmt: skip
         start("fish", "--id", "0", "--id", "1", "--connect", endpoint)
         for world, said, simulated in zip(worlds, lines, ("3", "1.5"), strict=True):
             assert world.wait(timeout=60) == 0, said.seen
