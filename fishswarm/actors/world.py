@@ -297,6 +297,7 @@ class World:
                 AsyncExitStack() as holding,
             ):
                 deadline = trio.current_time() + self.settings.start_timeout
+                self.place = (time.time_ns() // 1000, self.run_id)  # it comes up now
                 async with open_token(bus, keys.queue_place(*self.place)):
                     task_status.started()
                     await self._wait_for_turn(deadline)
@@ -466,24 +467,38 @@ class World:
         run at a time: two worlds would take turns starting them afresh), and at least
         ``turn_delay`` since this world came up (so that the places of those up before it
         have reached it)."""
-        settled = trio.current_time() + self.settings.turn_delay
         said = False
+
+        def nobody_ahead() -> bool:
+            nonlocal said
+            if self.ahead and not said:
+                log.warning("%s: waiting for its run to end (fish serve one world at a "
+                            "time)", self._who_is_ahead())  # fmt: skip
+                said = True
+            return not self.ahead
+
+        await self._wait_until(
+            nobody_ahead, not_before=trio.current_time() + self.settings.turn_delay,
+            deadline=deadline,
+        )  # fmt: skip
+        if self.ahead and not self._stop_requested:
+            self._ahead_for_too_long()
+
+    async def _wait_until(
+        self, ready: Callable[[], bool], *, not_before: float, deadline: float
+    ) -> None:
+        """Take in events until ``ready()`` holds and ``not_before`` has passed, the
+        deadline passes, or a stop is asked for."""
         with trio.move_on_at(deadline), self._stoppable():
             while True:
                 self._drain()  # all that is in (a token of another world too), first
-                if self.ahead and not said:
-                    log.warning("%s: waiting for its run to end (fish serve one world at a "
-                                "time)", self._who_is_ahead())  # fmt: skip
-                    said = True
-                if not self.ahead:
-                    if trio.current_time() >= settled:
-                        return
-                    with trio.move_on_at(settled):  # woken by a place that came meanwhile
-                        self._handle(await self._events.receive())
-                else:
+                if not ready():
                     self._handle(await self._events.receive())
-        if self.ahead and not self._stop_requested:
-            self._ahead_for_too_long()
+                elif trio.current_time() >= not_before:
+                    return
+                else:
+                    with trio.move_on_at(not_before):  # woken by what comes meanwhile
+                        self._handle(await self._events.receive())
 
     def _who_is_ahead(self) -> str:
         if self.roster.worlds - {self._token}:
@@ -505,20 +520,20 @@ class World:
 
     async def _wait_for_fish(self, deadline: float) -> None:
         """Wait until the expected fish are up (and a world that took its turn in the same
-        instant as this one has run)."""
+        instant, with a lower run, has run)."""
         if self._stop_requested:
             return
         expected = set(self.settings.expected_fish)
-        with trio.move_on_at(deadline), self._stoppable():
-            while True:
-                self._drain()
-                if expected <= self._admissible() and not self.ahead:
-                    self._turn = "started"
-                    break
-                self._handle(await self._events.receive())
+
+        def ready() -> bool:
+            return expected <= self._admissible() and not self.ahead
+
+        await self._wait_until(ready, not_before=trio.current_time(), deadline=deadline)
         if self._stop_requested:
             return
-        if self.ahead:
+        if ready():
+            self._turn = "started"
+        elif self.ahead:
             self._ahead_for_too_long()
         missing = sorted(expected - self._admissible())
         if missing:
