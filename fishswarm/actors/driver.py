@@ -207,6 +207,8 @@ class Driver:
         self._link_up = link_up
         self.link = True
         self._run_id = secrets.randbits(62)
+        self._formation: str | None = None
+        """The shape an operator's order told the fish to take (None: as configured)."""
         self._intake = Intake(f"driver {settings.robot_id}")
         self._failing: int | None = None
         """Periods without a reading since the last one (None: the last period had one)."""
@@ -254,6 +256,7 @@ class Driver:
             perceptions=self._counts["perceptions"],
             commands=self._counts["commands"],
             failsafe_stops=self._counts["failsafe_stops"],
+            formation=self._formation,
         )
 
     async def run(
@@ -373,6 +376,7 @@ class Driver:
             landmarks=np.zeros((0, 3)),
             inbox_count=self._unannounced,
             run=self._run_id,
+            formation=self._formation,
         )
         self._unannounced = 0
         self._tick += 1
@@ -455,7 +459,9 @@ class Driver:
             if order is None or not order.addresses(self.settings.robot_id):
                 continue
             self._counts["orders"] += 1
-            if order.action == "stop":
+            if order.action == "formation":
+                self._take_formation(order.formation)
+            elif order.action == "stop":
                 self._stop("stopped")
                 self.hardware.leds.set_lit(False)
                 log.warning("robot %d: stopped by an operator", self.settings.robot_id)
@@ -463,6 +469,17 @@ class Driver:
                 self.state = "waiting"
                 log.warning("robot %d: resumed by an operator", self.settings.robot_id)
             self._wake()
+
+    def _take_formation(self, shape: str | None) -> None:
+        """An operator's formation order: the fish's perceptions name the shape from now on
+        (a fish that runs another behaviour has none to take: the order is let go)."""
+        robot_id, behavior = self.settings.robot_id, self.settings.behavior
+        if behavior != "formation":
+            log.warning("robot %d: let a formation order go: its fish run %s, not a "
+                        "formation", robot_id, behavior)  # fmt: skip
+        elif shape != self._formation:
+            self._formation = shape
+            log.warning("robot %d: formation %s, by an operator's order", robot_id, shape)
 
     # The link ---------------------------------------------------------------------------
 

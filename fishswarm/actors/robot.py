@@ -238,16 +238,20 @@ async def survey_fleet(bus: Bus, keys: KeySpace, *, listen: float) -> list[Fleet
     ]
 
 
-def order_fleet(bus: Bus, keys: KeySpace, action: str, robot_ids: list[int]) -> RobotOrder:
-    """Send an operator's order to the robots ``robot_ids`` (empty: all); the order sent."""
-    order = RobotOrder(action, np.array(sorted(set(robot_ids)), dtype=np.int64))
+def order_fleet(
+    bus: Bus, keys: KeySpace, action: str, robot_ids: list[int], formation: str | None = None
+) -> RobotOrder:
+    """Send an operator's order to the robots ``robot_ids`` (empty: all); the order sent
+    (``formation``: the shape of a formation order)."""
+    order = RobotOrder(action, np.array(sorted(set(robot_ids)), dtype=np.int64), formation)
     bus.put(keys.robot_order, encode(order))
     return order
 
 
 def unconfirmed(fleet: list[FleetEntry], order: RobotOrder) -> dict[int, str]:
     """The robots an order was for that do not report obeying it, each with why: a stop is
-    obeyed by a robot that says it is ``stopped``, a resume by one that no longer does.
+    obeyed by a robot that says it is ``stopped``, a resume by one that no longer does, a
+    formation order by one that names its shape.
 
     An order is one message: a robot whose link was down when it went out never hears it,
     and a robot that restarts comes back unstopped, so the operator must know. An order to
@@ -261,6 +265,12 @@ def unconfirmed(fleet: list[FleetEntry], order: RobotOrder) -> dict[int, str]:
         entry = heard.get(robot_id)
         if entry is None or entry.status is None:
             missing[robot_id] = "not heard from"
+            continue
+        if order.action == "formation":
+            if entry.status.behavior != "formation":
+                missing[robot_id] = f"its fish run {entry.status.behavior}, not a formation"
+            elif entry.status.formation != order.formation:
+                missing[robot_id] = f"its fish take {entry.status.formation or 'their own'}"
             continue
         stopped = entry.status.state == "stopped"
         if stopped != (order.action == "stop"):

@@ -569,12 +569,21 @@ def build_parser() -> argparse.ArgumentParser:
         "formation",
         help="switch a running school to another formation",
         description="Ask the world of a running swarm to tell its formation fish to take "
-        "another shape from the next tick on; the school re-forms. Prints the world's reply.",
+        "another shape from the next tick on, and order the swarm's robots (which have no "
+        "world to tell them) to do the same; the school re-forms. Prints the world's reply "
+        "and which robots confirmed (exit 1 if one did not: send it again). In a secured "
+        "swarm this takes the admin certificate.",
     )
     formation.add_argument("shape", choices=FORMATION_SHAPES, help="the new formation")
     _add_connect(formation)
     formation.add_argument(
         "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
+    )
+    formation.add_argument(
+        "--listen",
+        type=seconds,
+        default=1.5,
+        help="how long to listen for the robots' confirmations, s (default %(default)g)",
     )
 
     control = commands.add_parser(

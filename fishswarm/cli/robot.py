@@ -101,11 +101,18 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
             file=sys.stderr,
         )
         return 1
+    return say_unconfirmed(fleet, sent)
+
+
+def say_unconfirmed(fleet: list[FleetEntry], sent: RobotOrder) -> int:
+    """Name each robot of ``fleet`` that does not report obeying ``sent``, and why; the
+    exit code (1 if any)."""
     missing = unconfirmed(fleet, sent)
+    restarted = "unstopped" if sent.action == "stop" else "as configured"
     for robot_id, why in missing.items():
         print(
             f"robot {robot_id} did not confirm the {sent.action} ({why}): a robot whose "
-            f"link is down never hears it, and one that restarts comes back unstopped; "
+            f"link is down never hears it, and one that restarts comes back {restarted}; "
             "send it again",
             file=sys.stderr,
         )
@@ -120,6 +127,7 @@ def _as_dict(entry: FleetEntry) -> dict[str, object]:
         "last_seen": entry.last_seen,
         "version": status.version if status else None,
         "behavior": status.behavior if status else None,
+        "formation": status.formation if status else None,
         "state": status.state if status else None,
         "depth": status.depth if status else None,
         "link": status.link if status else None,

@@ -52,12 +52,12 @@ from fishswarm.cli.common import (
 )
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import KeySpace
-from fishswarm.protocols.messages import ControlReply, ControlRequest
+from fishswarm.protocols.messages import ControlReply, ControlRequest, RobotOrder
 from fishswarm.sim.decision_kernels import prepare, with_compiled_decisions
 from fishswarm.sim.physics import WorldParams, spawn_spacing
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.live_view import open_live_view
-from fishswarm.study.progress import ProgressLine, bar
+from fishswarm.study.progress import ProgressLine, bar, ids_text
 from fishswarm.study.recording import (
     RecordingError,
     export_csv,
@@ -552,11 +552,22 @@ def _ask_world(args: argparse.Namespace, request: ControlRequest) -> ControlRepl
         async with open_session(client_settings(args, "admin")) as session:
             return await query(session, keys.control, encode(request), timeout=CONTROL_TIMEOUT)
 
-    replies = _run_trio(main)
-    if not replies:
+    reply = _control_reply(_run_trio(main))
+    if reply is None:
         raise UserError(
             f"no world of swarm {args.swarm!r} answered on {args.connect}: is a run going?"
         )
+    return reply
+
+
+def _control_reply(replies: list[bytes]) -> ControlReply | None:
+    """The world's reply among ``replies`` (None: no world answered).
+
+    Raises:
+        UserError: its answer is not a control reply.
+    """
+    if not replies:
+        return None
     try:
         return decode(replies[0], ControlReply)
     except MessageError as error:
@@ -564,16 +575,48 @@ def _ask_world(args: argparse.Namespace, request: ControlRequest) -> ControlRepl
 
 
 def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
-    """``fishswarm formation SHAPE``: switch a running school's formation."""
-    reply = _ask_world(args, ControlRequest("formation", formation=args.shape))
-    if reply.refused is not None:
+    """``fishswarm formation SHAPE``: switch a running school's formation, in the world and
+    on the robots (which have no world to tell them)."""
+    from fishswarm.actors.robot import FleetEntry, order_fleet, survey_fleet
+    from fishswarm.cli.robot import say_unconfirmed
+
+    keys = KeySpace(args.swarm)
+    request = encode(ControlRequest("formation", formation=args.shape))
+
+    async def main() -> tuple[ControlReply | None, RobotOrder | None, list[FleetEntry]]:
+        async with open_session(client_settings(args, "admin")) as session:
+            replies = await query(session, keys.control, request, timeout=CONTROL_TIMEOUT)
+            reply = _control_reply(replies)
+            if reply is not None and reply.refused is not None:
+                return reply, None, []
+            bus = ZenohBus(session)
+            order = order_fleet(bus, keys, "formation", [], formation=args.shape)
+            return reply, order, await survey_fleet(bus, keys, listen=args.listen)
+
+    reply, order, fleet = _run_trio(main)
+    if reply is not None and reply.refused is not None:
         raise UserError(f"the world did not switch to {args.shape}: {reply.refused}")
-    print(
-        f"formation {args.shape} from tick {reply.tick + 1} (world {reply.state}, "
-        f"{reply.live_fish} fish)",
-        file=sys.stderr,
+    robots = [entry for entry in fleet if entry.status is not None]
+    if reply is None and not robots:
+        raise UserError(
+            f"no world of swarm {args.swarm!r} answered on {args.connect}, and no robot was "
+            "heard from: is a run going?"
+        )
+    if reply is not None:
+        print(
+            f"formation {args.shape} from tick {reply.tick + 1} (world {reply.state}, "
+            f"{reply.live_fish} fish)",
+            file=sys.stderr,
+        )
+    if not robots or order is None:
+        return 0
+    code = say_unconfirmed(robots, order)
+    confirmed = sorted(
+        entry.robot_id for entry in robots if entry.status and entry.status.formation == args.shape
     )
-    return 0
+    if confirmed:
+        print(f"formation {args.shape} on robots {ids_text(confirmed)}", file=sys.stderr)
+    return code
 
 
 def control(args: argparse.Namespace, scenario: Scenario | None) -> int:

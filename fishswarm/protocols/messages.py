@@ -645,7 +645,7 @@ ROBOT_STATES = ("swimming", "waiting", "failsafe", "stranded", "stopped")
 """What a robot's driver is doing: swimming (commands arrive), waiting (no perception yet),
 failsafe (no command for too long: fins off), stranded (link to the base station lost for
 too long: fins off until it returns), stopped (an operator's order: fins off until resumed)."""
-ROBOT_ORDERS = ("stop", "resume")
+ROBOT_ORDERS = ("stop", "resume", "formation")
 
 
 @dataclass(frozen=True, eq=False)
@@ -665,6 +665,8 @@ class RobotStatus(Message):
         perceptions: perceptions its driver made.
         commands: commands it obeyed.
         failsafe_stops: times its fins were stopped for lack of commands.
+        formation: the shape an operator's order told its formation fish to take (None: as
+            configured).
     """
 
     type_name: ClassVar[str] = "robot_status"
@@ -680,6 +682,7 @@ class RobotStatus(Message):
     perceptions: int = 0
     commands: int = 0
     failsafe_stops: int = 0
+    formation: str | None = None
 
     def __post_init__(self) -> None:
         check_int("robot_id", self.robot_id)
@@ -699,6 +702,7 @@ class RobotStatus(Message):
         check_float("uptime", self.uptime, low=0.0)
         for name in ("perceptions", "commands", "failsafe_stops"):
             check_int(name, getattr(self, name))
+        _check_formation(self.formation)
 
 
 @dataclass(frozen=True, eq=False)
@@ -706,13 +710,18 @@ class RobotOrder(Message):
     """An operator's order to robots: base station → every robot's driver.
 
     Attributes:
-        action: ``stop`` (fins off, LEDs off, commands ignored) or ``resume``.
+        action: ``stop`` (fins off, LEDs off, commands ignored), ``resume``, or
+            ``formation`` (its formation fish take the shape ``formation`` from their next
+            perception on: on robots there is no world to tell them).
         robot_ids: the robots it is for, ascending; empty: every robot.
+        formation: with ``formation``, the shape (one of :data:`FORMATION_SHAPES`); None
+            with the other actions.
     """
 
     type_name: ClassVar[str] = "robot_order"
     action: str
     robot_ids: IntArray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    formation: str | None = None
 
     def __post_init__(self) -> None:
         check_text("action", self.action)
@@ -720,6 +729,12 @@ class RobotOrder(Message):
             raise ValueError(f"action must be one of {ROBOT_ORDERS}, got {self.action!r}")
         check_array(self, "robot_ids", np.int64, None)
         check_ids(self.robot_ids)
+        _check_formation(self.formation)
+        if (self.formation is None) == (self.action == "formation"):
+            raise ValueError(
+                "a formation order names its shape, and only a formation order names one: "
+                f"action {self.action!r} with formation {self.formation!r}"
+            )
 
     def addresses(self, robot_id: int) -> bool:
         """Whether the order is for robot ``robot_id``."""

@@ -100,10 +100,16 @@ async def inline(function: Callable[[], Look]) -> Look:
     return function()
 
 
-def make_driver(hardware: Hardware, link: list[bool], *, command_timeout: float = 1.0) -> Driver:
+def make_driver(
+    hardware: Hardware,
+    link: list[bool],
+    *,
+    command_timeout: float = 1.0,
+    behavior: str = "dispersion",
+) -> Driver:
     settings = DriverSettings(
         ROBOT,
-        "dispersion",
+        behavior,
         KEYS,
         control_period=0.5,
         command_timeout=command_timeout,
@@ -586,3 +592,55 @@ def test_a_short_command_timeout_is_watched_closely(hardware: Hardware) -> None:
         return trio.current_time() - start
 
     assert 0.15 <= run_mock(main) <= 0.19
+
+
+@pytest.mark.parametrize("behavior", ["formation", "dispersion"])
+def test_an_operators_formation_order_reaches_the_fish_in_its_next_perception(
+    hardware: Hardware, behavior: str
+) -> None:
+    """A robot has no world to tell its fish of a new shape: its driver takes the order,
+    names the shape in every perception from then on and in its status; an order for
+    another robot changes nothing, nor does one while stopped undo the stop (it is taken,
+    for when the robot resumes). A fish that
+    runs another behaviour has no formation to take: the order is let go."""
+
+    async def main() -> tuple[list[str | None], list[str | None], str]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True], command_timeout=10.0, behavior=behavior)
+        told: list[str | None] = []
+        reported: list[str | None] = []
+        local.subscribe(
+            KEYS.perception(ROBOT), lambda k, p: told.append(decode(p, Perception).formation)
+        )
+        remote.subscribe(
+            KEYS.robot_status(ROBOT),
+            lambda k, p: reported.append(decode(p, RobotStatus).formation),
+        )
+
+        def order(action: str, ids: list[int], shape: str | None = None) -> None:
+            ordered = RobotOrder(action, np.array(ids, dtype=np.int64), shape)
+            remote.put(KEYS.robot_order, encode(ordered))
+
+        async with trio.open_nursery() as nursery:
+            await nursery.start(driver.run, local, remote)
+            await trio.sleep(0.75)  # perceptions at 0 and 0.5 s
+            order("formation", [ROBOT + 1], "column")
+            await trio.sleep(0.5)  # 1 s
+            order("formation", [], "column")
+            await trio.sleep(0.5)  # 1.5 s
+            order("stop", [])
+            order("formation", [ROBOT], "diamond")
+            await trio.sleep(0.5)
+            state = driver.state
+            nursery.cancel_scope.cancel()
+        return told, reported, state
+
+    told, reported, state = run_mock(main)
+    assert state == "stopped"
+    if behavior == "formation":
+        # Perceptions at 0, 0.5, 1 and 1.5 s (the last after the order at 1 s); a stopped
+        # robot makes none, but its status names the shape its fish will take.
+        assert told == [None, None, None, "column"]
+        assert reported[-1] == "diamond" and "column" in reported
+    else:
+        assert set(told) == {None} and set(reported) == {None}

@@ -80,10 +80,10 @@ def worlds() -> Iterator[list[subprocess.Popen[str]]]:
         process.communicate(timeout=30)
 
 
-def settings(robot_id: int, endpoint: str) -> RobotSettings:
+def settings(robot_id: int, endpoint: str, behavior: str = "dispersion") -> RobotSettings:
     return RobotSettings(
-        DriverSettings(robot_id, "dispersion", KEYS, control_period=PERIOD, command_timeout=1.0),
-        Scenario(control_period=PERIOD).fish_params(),
+        DriverSettings(robot_id, behavior, KEYS, control_period=PERIOD, command_timeout=1.0),
+        Scenario(control_period=PERIOD, behavior=behavior).fish_params(),
         endpoint,
         hardware="mock",
         connect_timeout=10.0,
@@ -230,3 +230,64 @@ def test_a_mock_robot_vouches_for_itself_and_joins_a_secured_swarm(
     world.communicate(timeout=30)
     ids = {int(i) for s in read_recording(tmp_path / "run.mcap").snapshots for i in s.ids}
     assert ids == {0, 1, 2, 10}
+
+
+def test_fishswarm_formation_switches_robots_that_have_no_world_and_names_those_that_did_not(
+    worlds: list[subprocess.Popen[str]],
+) -> None:
+    """Robots in a tank with no simulated world: ``fishswarm formation`` orders them (no
+    world answers), robots 10 and 11 confirm the shape, and robot 12, whose fish run
+    dispersion, is named as not having taken it (exit 1)."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    worlds.append(
+        subprocess.Popen(
+            [sys.executable, "-m", "fishswarm", "router", "--listen", endpoint],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+    )
+    wait_for_port(port)
+    said: dict[str, tuple[int, str]] = {}
+
+    async def main() -> None:
+        async with trio.open_nursery() as nursery:
+            robots: list[Driver] = [
+                await nursery.start(run_robot, settings(robot_id, endpoint, behavior))
+                for robot_id, behavior in ((10, "formation"), (11, "formation"))
+            ]
+
+            async def formation(shape: str) -> tuple[int, str]:
+                done = await trio.run_process(
+                    [sys.executable, "-m", "fishswarm", "formation", shape, "--connect",
+                     endpoint, "--listen", "1.5"],
+                    capture_stdout=True, capture_stderr=True, check=False,
+                )  # fmt: skip
+                return done.returncode, done.stderr.decode()
+
+            said["two"] = await formation("column")
+            assert [r.statistics().orders for r in robots] == [1, 1]
+            listed = await trio.run_process(
+                [sys.executable, "-m", "fishswarm", "robots", "--connect", endpoint, "--json"],
+                capture_stdout=True,
+            )
+            rows = json.loads(listed.stdout)
+            assert [(row["id"], row["formation"]) for row in rows] == [
+                (10, "column"),
+                (11, "column"),
+            ]
+            await nursery.start(run_robot, settings(12, endpoint, "dispersion"))
+            said["three"] = await formation("diamond")
+            nursery.cancel_scope.cancel()
+
+    run_trio(main, timeout=120)
+    code, text = said["two"]
+    assert code == 0, text
+    assert text.strip().splitlines() == ["formation column on robots 10, 11"]
+    code, text = said["three"]
+    assert code == 1, text
+    assert "robot 12 did not confirm the formation (its fish run dispersion, not a formation)" in (
+        text
+    )
+    assert "formation diamond on robots 10, 11" in text

@@ -89,3 +89,27 @@ def test_a_robots_fish_actor_serves_its_one_fish_with_the_robots_timeout() -> No
     fish = robot.fish_settings()
     assert fish.fish_ids == (7,) and fish.params is params and fish.keys == keys
     assert fish.perception_timeout == 1.5 and fish.school is None
+
+
+def test_a_formation_order_is_confirmed_by_robots_whose_fish_name_its_shape() -> None:
+    """Robot 1 names the shape; robot 2 still names its own (it missed the order); robot 3's
+    fish run dispersion, which has no formation to take."""
+
+    def formation_status(robot_id: int, behavior: str, shape: str | None) -> RobotStatus:
+        return RobotStatus(
+            robot_id, "1.0", behavior, "swimming", 0.3, np.zeros(4), True, None, 9.0,
+            formation=shape,
+        )  # fmt: skip
+
+    fleet = [
+        FleetEntry(1, formation_status(1, "formation", "column"), True, 0.2),
+        FleetEntry(2, formation_status(2, "formation", None), True, 0.2),
+        FleetEntry(3, formation_status(3, "dispersion", None), True, 0.2),
+    ]
+    order = RobotOrder("formation", np.array([], dtype=np.int64), "column")
+    assert unconfirmed(fleet, order) == {
+        2: "its fish take their own",
+        3: "its fish run dispersion, not a formation",
+    }
+    again = RobotOrder("formation", np.array([], dtype=np.int64), "diamond")
+    assert unconfirmed(fleet[:1], again) == {1: "its fish take column"}

@@ -59,3 +59,15 @@ def test_counts_that_add_up_to_fewer_rows_than_there_are_are_refused() -> None:
             1, 1.0, np.array([0, 1]), np.array([0.5, 0.5]), np.array([1, 0]), np.zeros((2, 3)),
             np.array([0, 0]), np.zeros((0, 3)), np.array([0, 0]),
         )  # fmt: skip
+
+
+def test_a_formation_order_names_one_shape_and_no_other_order_names_one() -> None:
+    from fishswarm.protocols.messages import RobotOrder
+
+    assert RobotOrder("formation", formation="diamond").formation == "diamond"
+    with pytest.raises(ValueError, match="a formation order names its shape"):
+        RobotOrder("formation")
+    with pytest.raises(ValueError, match="action 'stop' with formation 'column'"):
+        RobotOrder("stop", formation="column")
+    with pytest.raises(ValueError, match="formation must be one of"):
+        RobotOrder("formation", formation="circle")

@@ -84,6 +84,10 @@ EXAMPLES: list[Message] = [
     FishAbout(np.array([0, 1, 2]), "dispersion", "0.1.0", 7),
     FishAbout(np.array([4]), "aggregation", "0.1.0", 2, "lennard-jones,homing"),
     RobotOrder("resume", np.array([2, 5])),
+    RobotOrder("formation", np.array([], dtype=np.int64), "column"),
+    RobotStatus(
+        5, "0.4.0", "formation", "swimming", 0.2, np.zeros(4), True, None, 3.0, formation="column"
+    ),
     WorldPulse(2**61 + 5, 12, "paused"),
     RunSettings(
         {"fish": 25, "duration": 15.0, "tank": (1.78, 1.78, 1.17), "model": None, "flags": True}
