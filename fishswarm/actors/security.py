@@ -294,6 +294,16 @@ def init_secure(
                 written += _issue(
                     folder, subject, authority_key, authority.subject, names, start, end
                 )
+        if "router" in held:
+            # A host asked for that the router's certificate does not name: clients that
+            # reach the router by it would be refused. Renewed under the same authority
+            # (its old names kept), so nothing given out changes.
+            named = _names_of(folder / "router.pem")
+            if any(name not in named for name in names):
+                wanted = [*named, *(name for name in names if name not in named)]
+                written += _issue(
+                    folder, "router", authority_key, authority.subject, wanted, start, end
+                )
         access = folder / ACCESS_FILE
         access.write_text(json.dumps(access_control(everyone, keys), indent=2), encoding="utf-8")
         return [*written, access]
@@ -348,6 +358,18 @@ def certified_subjects(folder: Path, keys: KeySpace) -> list[str]:
             continue
         held.append(path.stem)
     return held
+
+
+def _names_of(path: Path) -> list[Any]:
+    """The names (hosts and addresses) a certificate is valid for."""
+    from cryptography import x509
+
+    certificate = x509.load_pem_x509_certificate(path.read_bytes())
+    try:
+        extension = certificate.extensions.get_extension_for_class(x509.SubjectAlternativeName)
+    except x509.ExtensionNotFound:
+        return []
+    return list(extension.value)
 
 
 def _issue(

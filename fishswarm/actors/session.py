@@ -136,8 +136,19 @@ def _open_failure_hint(settings: SessionSettings, error: str) -> str:
             "this machine has no such address: listen on one of its own addresses "
             "(see 'ip -brief address'), or on 0.0.0.0 for all of them"
         )
+    if any(endpoint.startswith("tls/") for endpoint in settings.connect):
+        # A TLS handshake the router refuses looks like a router that is not there.
+        return (
+            "is a fishswarm router listening there, and does it accept this certificate? "
+            "--secure must name a folder of the router's own authority (made by the same "
+            "'fishswarm secure init'), and the router's certificate must name the host in "
+            "--connect (secure init --host HOST)"
+        )
     if settings.connect:
-        return "is a fishswarm run or router listening there?"
+        return (
+            "is a fishswarm run or router listening there? (a secured swarm's router "
+            "listens on tls/…: connect to tls/HOST:PORT with --secure DIR)"
+        )
     return "is another program using that port?"
 
 

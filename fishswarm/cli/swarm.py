@@ -668,11 +668,19 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
         raise UserError(f"cannot write into {args.folder}: {error}") from None
     subjects = sorted({p.stem for p in written if p.suffix == ".pem"} - {AUTHORITY})
     if args.folder / f"{AUTHORITY}.pem" not in written:  # added to the folder's authority
-        made = f"certificates for {', '.join(subjects)}" if subjects else "no new certificate"
+        renewed = "router" in subjects and "router" in before
+        added = [subject for subject in subjects if subject not in before]
+        made = f"certificates for {', '.join(added)}" if added else "no new certificate"
+        if renewed:
+            made += (
+                f"; renewed the router's certificate to name {', '.join(args.host or ())} "
+                "too (its other names kept)"
+            )
         print(
             f"{args.folder} already holds an authority: added {made} (signed by it; those "
-            f"given out stay valid) and rewrote the router's access control in {ACCESS_FILE} "
-            "(give the router the new one). --force makes a new authority instead.",
+            f"given out stay valid) and rewrote the router's access control in {ACCESS_FILE}. "
+            "Restart the router with the folder: it reads both when it starts. --force makes "
+            "a new authority instead.",
             file=sys.stderr,
         )
         return 0

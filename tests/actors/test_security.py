@@ -474,6 +474,46 @@ def test_a_fake_fish_shown_by_a_liveliness_token_is_not_admitted_to_a_secured_ru
         assert ids & {8, 9}  # the threat is real: the world took a fish nobody runs
 
 
+def test_secure_init_with_a_new_host_renews_the_routers_certificate_and_nothing_else(
+    secure_dir: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The router is to be reached at 10.0.0.1 too: secure init on the existing folder
+    renews the router's certificate under the same authority, naming the new host beside
+    the old names; every other file given out stays as it was, and asked again, nothing
+    changes. (It used to say it added nothing, and clients connecting by the new address
+    were refused.)"""
+    from cryptography import x509
+
+    from fishswarm.actors.security import AUTHORITY
+    from fishswarm.cli import main
+
+    folder = tmp_path / "lab"
+    shutil.copytree(secure_dir, folder)
+    before = {path.name: path.read_bytes() for path in folder.iterdir()}
+
+    def router_names() -> list[str]:
+        certificate = x509.load_pem_x509_certificate((folder / "router.pem").read_bytes())
+        names = certificate.extensions.get_extension_for_class(x509.SubjectAlternativeName)
+        return [str(getattr(name.value, "exploded", name.value)) for name in names.value]
+
+    assert router_names() == ["localhost", "127.0.0.1"]
+    assert main(["secure", "init", str(folder), "--host", "10.0.0.1"]) == 0
+    said = capsys.readouterr().err
+    assert "renewed the router's certificate to name 10.0.0.1 too" in said
+    assert "Restart the router" in said
+    assert router_names() == ["localhost", "127.0.0.1", "10.0.0.1"]
+    changed = sorted(
+        name for name, content in before.items() if (folder / name).read_bytes() != content
+    )
+    assert changed == ["router.key", "router.pem"]
+    check_subject(folder, "router")
+    assert (folder / f"{AUTHORITY}.pem").read_bytes() == before[f"{AUTHORITY}.pem"]
+    renewed = (folder / "router.pem").read_bytes()
+    assert main(["secure", "init", str(folder), "--host", "10.0.0.1"]) == 0
+    assert "renewed" not in capsys.readouterr().err
+    assert (folder / "router.pem").read_bytes() == renewed
+
+
 def test_secure_init_makes_each_subject_once_and_refuses_names_it_cannot_use(
     tmp_path: Path,
 ) -> None:

@@ -123,8 +123,29 @@ def test_connecting_to_nothing_fails_clearly() -> None:
         async with open_session(settings):
             pass
 
-    with pytest.raises(ConnectError, match="is a fishswarm run or router listening there"):
+    with pytest.raises(
+        ConnectError, match="is a fishswarm run or router listening there"
+    ) as raised:
         run_trio(main)
+    # A plain client of a secured router fails the same way: the message says where to look.
+    assert "a secured swarm's router listens on tls/" in str(raised.value)
+
+
+def test_a_tls_client_that_cannot_open_is_told_to_check_its_certificates() -> None:
+    """Zenoh gives the same timeout for a router that is not there and one that refuses the
+    handshake (another authority, a key that is not the certificate's, a host the router's
+    certificate does not name): the message names both."""
+    settings = SessionSettings(
+        mode="client", connect=[f"tls/127.0.0.1:{free_port()}"], connect_timeout=0.5
+    )
+
+    async def main() -> None:
+        async with open_session(settings):
+            pass
+
+    with pytest.raises(ConnectError, match="does it accept this certificate") as raised:
+        run_trio(main)
+    assert "--secure must name a folder of the router's own authority" in str(raised.value)
 
 
 def test_port_in_use_fails_clearly(endpoint: str) -> None:
