@@ -59,6 +59,8 @@ class Roster:
         self.channels = 0
         self.worlds: set[str] = set()
         """Liveliness tokens of the worlds of the swarm up now (a world's own among them)."""
+        self.robots: set[int] = set()
+        """Robots of the swarm up now (their drivers' tokens ``alive/robot/<id>``)."""
         self.queue: dict[str, tuple[int, int]] = {}
         """Places of the worlds of the swarm waiting for their turn, by their token (a
         world's own among them): see :meth:`KeySpace.queue_place`."""
@@ -82,6 +84,11 @@ class Roster:
             return None
         if member.role == "world":
             (self.worlds.add if alive else self.worlds.discard)(key)
+            return None
+        if member.role == "robot":
+            robot = fish_id_of(member.member_id)
+            if robot is not None:
+                (self.robots.add if alive else self.robots.discard)(robot)
             return None
         if member.role == "queue":
             place = self.keys.place_of(member.member_id)

@@ -500,6 +500,17 @@ class World:
                     with trio.move_on_at(not_before):  # woken by what comes meanwhile
                         self._handle(await self._events.receive())
 
+    def _warn_of_robots_in_lockstep(self) -> None:
+        """Robots swim in real time: a lockstep run goes as fast as the machine allows, and
+        is over before they have moved (a mock robot's body would move in bursts)."""
+        robots = sorted(self.roster.robots)
+        if robots and self.scenario.time_mode != "realtime":
+            log.warning(
+                "robots %s are up on this swarm, and this run is in %s time: robots swim in "
+                "real time; give --time realtime for a run with them",
+                ids_text(robots), self.scenario.time_mode,
+            )  # fmt: skip
+
     def _who_is_ahead(self) -> str:
         if self.roster.worlds - {self._token}:
             return f"another world runs swarm {self.keys.swarm!r} on this router"
@@ -533,6 +544,7 @@ class World:
             return
         if ready():
             self._turn = "started"
+            self._warn_of_robots_in_lockstep()
         elif self.ahead:
             self._ahead_for_too_long()
         missing = sorted(expected - self._admissible())

@@ -1552,6 +1552,40 @@ def test_a_world_whose_turn_comes_first_takes_in_all_that_came_with_it() -> None
     assert perceived[0] == pytest.approx(8.0 + world.settings.admit_delay)
 
 
+@pytest.mark.parametrize("time_mode", ["lockstep", "realtime"])
+def test_a_lockstep_world_warns_that_the_robots_up_on_its_swarm_swim_in_real_time(
+    time_mode: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Robots 3 and 4 are up (their drivers' tokens): a lockstep run is over before they
+    have moved, so the world says to run in real time; a realtime run says nothing."""
+    scenario = Scenario(fish=1, duration=1.0, time_mode=time_mode)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,)))
+        robots = [bus.declare_token(keys.alive("robot", robot)) for robot in (3, 4)]
+        async with trio.open_nursery() as nursery:
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        for robot in robots:
+            robot.undeclare()
+        return world
+
+    with caplog.at_level(logging.WARNING, logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    said = [r.getMessage() for r in caplog.records if "robots" in r.getMessage()]
+    assert world.state_name == "finished"
+    if time_mode == "lockstep":
+        assert said == [
+            "robots 3, 4 are up on this swarm, and this run is in lockstep time: robots swim "
+            "in real time; give --time realtime for a run with them"
+        ]
+    else:
+        assert said == []
+
+
 async def _stop(world: World) -> tuple[float, float]:
     """Ask ``world`` to stop: when it was asked, and when it had stopped."""
     asked = trio.current_time()
