@@ -137,23 +137,84 @@ def render(template: str, folder: Path, **variables: str) -> str:
     return destination.read_text()
 
 
-def test_the_service_starts_the_robot_with_arguments_the_cli_accepts(tmp_path: Path) -> None:
-    settings = render("fishswarm.env.j2", tmp_path, fish_id="7", fishswarm_hardware="mock")
+def _service_arguments(folder: Path, **variables: str) -> list[str]:
+    """The arguments the robot's service gives fishswarm, as systemd makes them of the unit
+    and the environment file: ``%i`` the instance, ``${NAME}`` one word, ``$NAME`` split
+    into words (none when empty)."""
+    settings = render("fishswarm.env.j2", folder, fish_id="7", **variables)
     environment = dict(
         line.split("=", 1) for line in settings.splitlines() if line and not line.startswith("#")
     )
-    unit = render("fishswarm-fish@.service.j2", tmp_path, fish_id="7")
+    unit = render("fishswarm-fish@.service.j2", folder, fish_id="7")
     command = next(line for line in unit.splitlines() if line.startswith("ExecStart="))
     words = shlex.split(command.removeprefix("ExecStart="))
     assert words[0] == "/opt/fishswarm/venv/bin/fishswarm"
-    # systemd puts the instance for %i and the environment file's values for ${...}.
-    words = [
-        re.sub(r"\$\{(\w+)\}", lambda m: environment[m.group(1)], w.replace("%i", "7"))
-        for w in words[1:]
-    ]
+    made: list[str] = []
+    for word in words[1:]:
+        if re.fullmatch(r"\$\w+", word):
+            made += environment[word[1:]].split()
+        else:
+            made.append(
+                re.sub(r"\$\{(\w+)\}", lambda m: environment[m.group(1)], word.replace("%i", "7"))
+            )
+    return made
+
+
+def test_a_secured_robots_service_gives_its_certificates_folder(tmp_path: Path) -> None:
+    plain = build_parser().parse_args(_service_arguments(tmp_path, fishswarm_hardware="mock"))
+    assert plain.secure is None
+    words = _service_arguments(
+        tmp_path, fishswarm_hardware="mock", fishswarm_secure_dir="/home/lab/lab-keys",
+        fishswarm_router="tls/10.0.0.1:7447",
+    )  # fmt: skip
+    at = words.index("--secure")
+    assert words[at + 1] == "/etc/fishswarm/keys"
+    # The robot's folder as the play fills it (ca.pem and its own pair): the robot takes it.
+    from fishswarm.actors.security import init_secure
+
+    keys = tmp_path / "keys"
+    init_secure(keys, robots=[7])
+    words[at + 1] = str(keys)
+    secured = build_parser().parse_args(words)
+    assert secured.secure == keys and secured.connect == "tls/10.0.0.1:7447"
+
+
+def test_the_playbook_gives_a_secured_robot_its_certificates_and_refuses_missing_ones(
+    tmp_path: Path, wheel: Path
+) -> None:
+    from fishswarm.actors.security import init_secure
+
+    keys = tmp_path / "lab-keys"
+    init_secure(keys, robots=[3])
+    secured = {"fishswarm_secure_dir": str(keys), "fishswarm_router": "tls/10.0.0.1:7447"}
+    path = inventory(tmp_path, wheel, fish_id=3, **secured)
+    result = ansible("ansible-playbook", "-i", str(path), "site.yml", "--check", "--diff")
+    assert result.returncode == 0, result.stdout + result.stderr
+    copied = result.stdout.split("Copy the authority's certificate")[1].split("TASK")[0]
+    for name in ("ca.pem", "robot-3.pem", "robot-3.key"):
+        assert f"changed: [localhost] => (item={name})" in copied
+    assert "ca.key" not in result.stdout  # the authority's key stays on the base station
+    assert "FISHSWARM_SECURE=--secure /etc/fishswarm/keys" in result.stdout
+    # Robot 4 has no certificate in the folder: the play says how to make one.
+    path = inventory(tmp_path, wheel, fish_id=4, **secured)
+    result = ansible("ansible-playbook", "-i", str(path), "site.yml", "--check")
+    assert result.returncode != 0
+    assert "robot-4.pem is missing" in result.stdout
+    assert f"fishswarm secure init {keys} --robots 4" in result.stdout
+    # A secured robot on a plain router's address: refused, with what to give.
+    path = inventory(tmp_path, wheel, fish_id=3, fishswarm_secure_dir=str(keys))
+    result = ansible("ansible-playbook", "-i", str(path), "site.yml", "--check")
+    assert result.returncode != 0
+    assert "give fishswarm_router as tls/HOST:PORT" in result.stdout
+
+
+def test_the_service_starts_the_robot_with_arguments_the_cli_accepts(tmp_path: Path) -> None:
+    words = _service_arguments(tmp_path, fishswarm_hardware="mock")
+    unit = (tmp_path / "fishswarm-fish@.service").read_text()
     args = build_parser().parse_args(words)
     assert (args.command, args.robot_id, args.hardware) == ("robot", 7, "mock")
     assert args.connect == "tcp/192.168.1.10:7447" and args.connect_timeout == -1
+    assert args.control_period == 1.0  # the world's default period
     assert "Restart=on-failure" in unit
     # lgpio makes its pipes in the working directory: one the robot's user may write.
     assert "RuntimeDirectory=fishswarm-%i" in unit.splitlines()
