@@ -783,7 +783,16 @@ class World:
                 held = self._unvouched.pop((fish_id, school), None)
                 if held is not None:
                     self.roster.on_alive(held, True, trio.current_time())
-        if about.run != self.run_id:
+        if about.run == self.run_id:
+            ids = about.ids.tolist()
+        elif about.run == 0:
+            # What fish say as they come up, or as a world does: a robot's fish serves its
+            # driver's runs, never the world's, so it says what it runs only so.
+            expected = set(self.settings.expected_fish)
+            ids = [i for i in about.ids.tolist() if not expected or i in expected]
+        else:
+            return
+        if not ids:
             return
         differences = []
         if about.behavior != self.scenario.behavior:
@@ -799,15 +808,11 @@ class World:
             )
         if not differences:
             return
-        self.mismatched.update(about.ids.tolist())
+        self.mismatched.update(ids)
         for difference in differences:
             if difference not in self._warned:
                 self._warned.add(difference)
-                log.warning(
-                    "fish %s %s (started with other settings?)",
-                    ids_text(about.ids.tolist()),
-                    difference,
-                )
+                log.warning("fish %s %s (started with other settings?)", ids_text(ids), difference)
 
     def _take_command(self, key: str, payload: bytes) -> None:
         sender, _ = self.keys.member_of(key)

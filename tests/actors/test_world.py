@@ -683,6 +683,41 @@ def test_fish_that_run_another_behaviour_are_named_once_and_counted(
     )
 
 
+def test_a_robots_fish_is_named_by_what_it_says_as_it_comes_up(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A robot's fish serves its driver's runs, never the world's: it says what it runs
+    only as it comes up (run 0). Fish 1 says aggregation so, in a dispersion world: named
+    and counted. Fish 9, which this world does not expect, is not its business."""
+    scenario = Scenario(fish=2, duration=2.0, seed=1)
+    keys = scenario.keys
+
+    def hello(fish_id: int) -> bytes:
+        return encode(FishAbout(np.array([fish_id]), "aggregation", __version__, 0))
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
+        async with trio.open_nursery() as nursery:
+            fish = FishSettings((0, 1), scenario.fish_params(), keys, school="s")
+            await nursery.start(Fish(fish).run, bus)
+            await nursery.start(world.run, bus)
+            bus.put(keys.about(1), hello(1))
+            bus.put(keys.about(9), hello(9))
+            await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    assert world.mismatched == {1}
+    said = [r.getMessage() for r in caplog.records if "scenario says" in r.getMessage()]
+    assert said == [
+        "fish 1 run 'aggregation', but this world's scenario says 'dispersion' "
+        "(started with other settings?)"
+    ]
+
+
 def test_fish_started_with_other_study_code_rules_are_named(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
