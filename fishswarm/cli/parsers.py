@@ -32,6 +32,23 @@ from fishswarm.sim.scenario import (
 from fishswarm.study.view_settings import GRPC_PORT, WEB_PORT
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+SECURE_ENDPOINT = "tls/127.0.0.1:7447"
+"""Where a command listens or connects by default: this machine, TLS in a secured swarm."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser that gives an endpoint not given on the command line its default:
+    this machine's, over TLS when the swarm is secured (``--secure``)."""
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        parsed, rest = super().parse_known_args(args, namespace)
+        secured = getattr(parsed, "secure", None) is not None
+        for name in ("connect", "listen"):
+            if hasattr(parsed, name) and getattr(parsed, name) is None:
+                setattr(parsed, name, SECURE_ENDPOINT if secured else DEFAULT_ENDPOINT)
+        return parsed, rest
 
 
 def seconds(text: str) -> float:
@@ -289,7 +306,7 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``fishswarm`` command line: every command and its options."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fishswarm",
         description="Run BlueBot robot-fish swarms as async actors over Eclipse Zenoh.",
         epilog="Run 'fishswarm COMMAND --help' for the options of a command.",
@@ -332,9 +349,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     run.add_argument(
         "--listen",
-        default=DEFAULT_ENDPOINT,
-        help=f"endpoint to listen on (default {DEFAULT_ENDPOINT}; "
-        "tcp/0.0.0.0:7447 lets observers on other machines attach)",
+        default=None,
+        help=f"endpoint to listen on (default {DEFAULT_ENDPOINT}, with --secure "
+        f"{SECURE_ENDPOINT}; tcp/0.0.0.0:7447 lets observers on other machines attach)",
     )
     run.add_argument(
         "--secure",
@@ -616,11 +633,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     router.add_argument(
         "--listen",
-        default="tcp/127.0.0.1:7447",
-        help="endpoint to listen on (default tcp/127.0.0.1:7447: this machine only, as "
-        "for run; tcp/0.0.0.0:7447 lets robots and other machines connect, and anyone who "
-        "reaches it can command the fish unless it is secured: with --secure a tls/ one, "
-        "e.g. tls/0.0.0.0:7447)",
+        default=None,
+        help=f"endpoint to listen on (default {DEFAULT_ENDPOINT}, with --secure "
+        f"{SECURE_ENDPOINT}: this machine only, as for run; tcp/0.0.0.0:7447 lets robots "
+        "and other machines connect, and anyone who reaches it can command the fish unless "
+        "it is secured: with --secure a tls/ one, e.g. tls/0.0.0.0:7447)",
     )
     router.add_argument(
         "--secure",
@@ -817,8 +834,9 @@ def _add_view_flags(parser: argparse.ArgumentParser) -> None:
 def _add_connect(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--connect",
-        default=DEFAULT_ENDPOINT,
-        help=f"router endpoint to connect to (default {DEFAULT_ENDPOINT})",
+        default=None,
+        help=f"router endpoint to connect to (default {DEFAULT_ENDPOINT}, with --secure "
+        f"{SECURE_ENDPOINT})",
     )
     parser.add_argument("--secure", type=secure_folder, metavar="DIR", help=SECURE_HELP)
     parser.add_argument(

@@ -215,6 +215,27 @@ def test_a_router_alone_listens_on_this_machine_only_unless_told_otherwise() -> 
     )
 
 
+def test_a_secured_command_listens_and_connects_over_tls_by_default(tmp_path: Path) -> None:
+    """With --secure and no endpoint given, a command takes this machine's over TLS (a
+    secured run complained of a --listen tcp/… its user never typed, and did not start);
+    without --secure, over TCP; an endpoint given is kept."""
+    from fishswarm.actors.security import init_secure
+    from fishswarm.cli.parsers import build_parser
+
+    folder = tmp_path / "keys"
+    init_secure(folder)
+    parser = build_parser()
+    secured = ["--secure", str(folder)]
+    assert parser.parse_args(["run", *secured]).listen == "tls/127.0.0.1:7447"
+    assert parser.parse_args(["router", *secured]).listen == "tls/127.0.0.1:7447"
+    assert parser.parse_args(["observe", *secured]).connect == "tls/127.0.0.1:7447"
+    assert parser.parse_args(["observe"]).connect == "tcp/127.0.0.1:7447"
+    given = parser.parse_args(["world", "--connect", "tls/10.0.0.1:7447", *secured])
+    assert given.connect == "tls/10.0.0.1:7447"
+    robots = parser.parse_args(["robots", *secured])
+    assert (robots.connect, robots.listen) == ("tls/127.0.0.1:7447", 1.5)  # s, not a place
+
+
 def test_an_observer_with_no_world_to_watch_says_what_it_waits_for() -> None:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
