@@ -63,6 +63,9 @@ log = logging.getLogger(__name__)
 
 BusEvent = tuple[str, str, bytes | bool]
 T = TypeVar("T")
+
+MISSING_NOTE_EVERY = 10.0
+"""How often a world waiting for its fish says which are not up yet, s."""
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
@@ -500,6 +503,21 @@ class World:
                     with trio.move_on_at(not_before):  # woken by what comes meanwhile
                         self._handle(await self._events.receive())
 
+    async def _say_who_is_missing(self, expected: set[int]) -> None:
+        """Every ``MISSING_NOTE_EVERY`` s of the wait for the fish, say which are not up
+        (an operator would otherwise hear nothing until the start timeout)."""
+        started = trio.current_time()
+        while True:
+            await trio.sleep(MISSING_NOTE_EVERY)
+            missing = sorted(expected - self._admissible())
+            if missing:
+                log.warning(
+                    "%d of %d fish up after %g s; waiting for fish %s (for up to %g s)",
+                    len(expected) - len(missing), len(expected),
+                    trio.current_time() - started, ids_text(missing),
+                    self.settings.start_timeout,
+                )  # fmt: skip
+
     def _warn_of_robots_in_lockstep(self) -> None:
         """Robots swim in real time: a lockstep run goes as fast as the machine allows, and
         is over before they have moved (a mock robot's body would move in bursts)."""
@@ -539,7 +557,10 @@ class World:
         def ready() -> bool:
             return expected <= self._admissible() and not self.ahead
 
-        await self._wait_until(ready, not_before=trio.current_time(), deadline=deadline)
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(self._say_who_is_missing, expected)
+            await self._wait_until(ready, not_before=trio.current_time(), deadline=deadline)
+            nursery.cancel_scope.cancel()
         if self._stop_requested:
             return
         if ready():

@@ -1621,6 +1621,38 @@ def test_a_lockstep_world_warns_that_the_robots_up_on_its_swarm_swim_in_real_tim
         assert said == []
 
 
+def test_a_world_waiting_for_its_fish_says_every_10_s_which_are_not_up(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Fish 0 and 1 are up, fish 2 comes at 25 s: the world says at 10 and 20 s which fish
+    it waits for, and nothing more once they are all up."""
+    scenario = Scenario(fish=3, duration=1.0)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2), start_timeout=60.0))
+        params = scenario.fish_params()
+        async with trio.open_nursery() as nursery:
+            await nursery.start(Fish(FishSettings((0, 1), params, keys)).run, bus)
+            nursery.start_soon(world.run, bus)
+            await trio.sleep(25.0)
+            await nursery.start(Fish(FishSettings((2,), params, keys)).run, bus)
+            await _until_state(world, "finished")
+            await trio.sleep(30.0)
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level(logging.WARNING, logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    said = [r.getMessage() for r in caplog.records if "fish up after" in r.getMessage()]
+    assert world.state_name == "finished"
+    assert said == [
+        "2 of 3 fish up after 10 s; waiting for fish 2 (for up to 60 s)",
+        "2 of 3 fish up after 20 s; waiting for fish 2 (for up to 60 s)",
+    ]
+
+
 async def _stop(world: World) -> tuple[float, float]:
     """Ask ``world`` to stop: when it was asked, and when it had stopped."""
     asked = trio.current_time()
