@@ -3,6 +3,7 @@ this machine, and the service it installs starts the robot with arguments our CL
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shlex
@@ -195,17 +196,30 @@ def test_the_playbook_gives_a_secured_robot_its_certificates_and_refuses_missing
         assert f"changed: [localhost] => (item={name})" in copied
     assert "ca.key" not in result.stdout  # the authority's key stays on the base station
     assert "FISHSWARM_SECURE=--secure /etc/fishswarm/keys" in result.stdout
-    # Robot 4 has no certificate in the folder: the play says how to make one.
-    path = inventory(tmp_path, wheel, fish_id=4, **secured)
-    result = ansible("ansible-playbook", "-i", str(path), "site.yml", "--check")
+    # Two robots the play refuses, in one run: robot 4 has no certificate in the folder
+    # (the play says how to make one); robot 3 is secured but given a plain router.
+    refused = tmp_path / "refused.yml"
+    common = {
+        "ansible_connection": "local", "ansible_python_interpreter": sys.executable,
+        "ansible_become": False, "fishswarm_hardware": "mock", "fishswarm_wheel": str(wheel),
+        "fishswarm_secure_dir": str(keys),
+    }  # fmt: skip
+    hosts = {
+        "no-certificate": {**common, "fish_id": 4, "fishswarm_router": "tls/10.0.0.1:7447"},
+        "plain-router": {**common, "fish_id": 3, "fishswarm_router": "tcp/10.0.0.1:7447"},
+    }
+    refused.write_text(json.dumps({"robots": {"hosts": hosts}}))
+    result = ansible("ansible-playbook", "-i", str(refused), "site.yml", "--check")
     assert result.returncode != 0
     assert "robot-4.pem is missing" in result.stdout
     assert f"fishswarm secure init {keys} --robots 4" in result.stdout
-    # A secured robot on a plain router's address: refused, with what to give.
-    path = inventory(tmp_path, wheel, fish_id=3, fishswarm_secure_dir=str(keys))
-    result = ansible("ansible-playbook", "-i", str(path), "site.yml", "--check")
-    assert result.returncode != 0
     assert "give fishswarm_router as tls/HOST:PORT" in result.stdout
+    assert re.search(
+        r"no-certificate\s+: ok=\d+\s+changed=\d+\s+unreachable=0\s+failed=1", result.stdout
+    )
+    assert re.search(
+        r"plain-router\s+: ok=\d+\s+changed=\d+\s+unreachable=0\s+failed=1", result.stdout
+    )
 
 
 def test_the_service_starts_the_robot_with_arguments_the_cli_accepts(tmp_path: Path) -> None:
