@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import logging
 import math
 import os
+import warnings
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +45,8 @@ watchdog turns the fins off, by default, s (the driver perceives every period: s
 silence are a frozen driver, not a slow one)."""
 ROBOT_LEASE = 1.0
 """The robot's Zenoh link lease, s: a link that carries nothing for this long is down."""
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -119,20 +123,26 @@ def open_bluebot_hardware() -> Iterator[Hardware]:
     state = os.environ.get("STATE_DIRECTORY")
     surface_file = Path(state.split(":")[0]) / SURFACE_FILE if state else None
 
-    try:
-        with contextlib.ExitStack() as opened:
-            fins = GpioFins()
-            opened.callback(fins.close)
-            leds = GpioLeds()
-            opened.callback(leds.close)
-            camera = PiCameras()
-            opened.callback(camera.close)
-            depth = i2c_depth_sensor(surface_file=surface_file)
-            opened.pop_all()
-    except (ImportError, OSError, SensorError, RuntimeError) as error:
-        raise HardwareError(
-            f"cannot open the BlueBot's hardware: {error} (on a laptop, use --hardware mock)"
-        ) from error
+    # gpiozero warns of each pin library it could not load before it finds one: on a robot
+    # worth a line in the log; where it finds none, the error below says all of it.
+    with warnings.catch_warnings(record=True) as fallbacks:
+        warnings.simplefilter("always")
+        try:
+            with contextlib.ExitStack() as opened:
+                fins = GpioFins()
+                opened.callback(fins.close)
+                leds = GpioLeds()
+                opened.callback(leds.close)
+                camera = PiCameras()
+                opened.callback(camera.close)
+                depth = i2c_depth_sensor(surface_file=surface_file)
+                opened.pop_all()
+        except (ImportError, OSError, SensorError, RuntimeError) as error:
+            raise HardwareError(
+                f"cannot open the BlueBot's hardware: {error} (on a laptop, use --hardware mock)"
+            ) from error
+    for fallback in fallbacks:
+        log.warning("opening the hardware: %s", fallback.message)
     hardware = Hardware(fins, leds, camera, depth)
     try:
         yield hardware

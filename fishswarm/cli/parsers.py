@@ -660,7 +660,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="create an authority, a certificate and key per role, and the access control",
         description="Write into DIR: ca.pem/ca.key (the authority: keep its key off the "
         "robots), a certificate and key for router, world, channel, admin (fishswarm robots, "
-        "formation), observer, each --observers NAME (observer-NAME) and each --robots ID "
+        "formation, control), observer, each --observers NAME (observer-NAME) and each --robots ID "
         "(robot-ID: the robot's fish and driver), and access_control.json for the router.",
     )
     init.add_argument("folder", type=Path, metavar="DIR", help="folder to write into")
