@@ -225,6 +225,35 @@ def test_sigterm_stops_each_actor_as_ctrl_c_does_and_keeps_the_worlds_recording(
     assert recording.complete and len(recording.snapshots) >= 5
 
 
+def test_a_world_says_when_it_loses_its_router_and_when_the_router_is_back() -> None:
+    """The router dies in mid-run (a real-time run): the world says so at once, rather than
+    only losing its fish one by one; a router back on the same address is said too."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    with started_commands() as start:
+        router = start("router", "--listen", endpoint)
+        wait_for_port(port)
+        start("fish", "--id", "0", "--connect", endpoint)
+        world = start("world", "--connect", endpoint, "--fish", "1", "--duration", "600",
+                      "--period", "0.2", "--time", "realtime", "--quiet")  # fmt: skip
+        lines = Lines(world)
+        lines.wait_for("world up on ", timeout=60)
+        time.sleep(1.0)
+        router.kill()
+        router.wait(timeout=10)
+        lines.wait_for(
+            rf"^fishswarm world: lost the router at {re.escape(endpoint)}: the swarm is out of "
+            r"reach until it is back \(Ctrl-C to stop\)$",
+            timeout=10,
+        )
+        start("router", "--listen", endpoint)
+        lines.wait_for(
+            rf"^fishswarm world: the router at {re.escape(endpoint)} is back$", timeout=30
+        )
+        world.send_signal(signal.SIGTERM)
+        assert world.wait(timeout=15) == 130
+
+
 def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_own_run(
     tmp_path: Path,
 ) -> None:
