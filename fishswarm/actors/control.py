@@ -28,23 +28,29 @@ async def run_control(
 ) -> None:
     """Answer the world's control and scenario queries until cancelled."""
     settings = encode(RunSettings(world.scenario.to_dict()))
+
+    # Whether the world was waiting its turn when a query came, not when trio takes it in:
+    # a stop for the world that runs ends it, and this one may take its turn meanwhile.
+    def answering() -> bool:
+        return world.answering
+
     async with (
-        open_queryable(session, world.keys.control) as queries,
-        open_queryable(session, world.keys.scenario) as asked,
+        open_queryable(session, world.keys.control, answering) as queries,
+        open_queryable(session, world.keys.scenario, answering) as asked,
         trio.open_nursery() as nursery,
     ):
 
         async def tell_the_scenario() -> None:
-            async for request in asked:
-                if world.queued:
+            async for request, answers in asked:
+                if not answers:
                     request.drop()  # the world that runs now answers
                 else:
                     reply(request, settings)
 
         nursery.start_soon(tell_the_scenario)
         task_status.started()
-        async for request in queries:
-            if world.queued:
+        async for request, answers in queries:
+            if not answers:
                 # An operator's pause or stop is for the world that runs now: a world that
                 # waits its turn answers nothing (Ctrl-C where it was started ends it).
                 request.drop()

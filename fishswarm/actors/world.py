@@ -225,6 +225,9 @@ class World:
         self._turn = "queued"
         """``queued`` (its place token up: worlds ahead may run first), ``taken`` (its token
         up, waiting for its fish) or ``started``."""
+        self.answering = True
+        """Whether the world answers queries (not :attr:`queued`), kept as a flag that
+        Zenoh's threads read as queries arrive (see :mod:`fishswarm.actors.control`)."""
         self._stop_requested = False
         self._messages_out = 0
         self._current = TickCommands()
@@ -307,6 +310,7 @@ class World:
                     if not self._stop_requested:
                         await holding.enter_async_context(open_token(bus, self._token))
                         self._turn = "taken"
+                        self.answering = not self.queued
                 await self._wait_for_fish(deadline)
                 started = time.perf_counter()
                 if self.state_name == "waiting":  # a pause or a stop asked meanwhile stands
@@ -565,6 +569,7 @@ class World:
             return
         if ready():
             self._turn = "started"
+            self.answering = True
             self._warn_of_robots_in_lockstep()
         elif self.ahead:
             self._ahead_for_too_long()
@@ -774,6 +779,7 @@ class World:
             left = self.roster.on_alive(key, payload, trio.current_time())
             if left is not None and left in self.sim.ids:
                 self._lose(left, "left (liveliness token gone)")
+            self.answering = not self.queued
             return
         assert isinstance(payload, bytes)
         if kind in ("command", "batch") and self.queued:

@@ -8,7 +8,7 @@ lockstep barrier (DESIGN §4).
 
 from __future__ import annotations
 
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from contextlib import asynccontextmanager
 
 import trio
@@ -69,11 +69,16 @@ class ZenohBus:
 
 @asynccontextmanager
 async def open_queryable(
-    session: zenoh.Session, key_expr: str
-) -> AsyncIterator[Inbox[zenoh.Query]]:
-    """Serve queries on ``key_expr``; answer each with :func:`reply` from trio."""
-    inbox: Inbox[zenoh.Query] = Inbox()
-    queryable = session.declare_queryable(key_expr, inbox.push)
+    session: zenoh.Session, key_expr: str, note: Callable[[], bool]
+) -> AsyncIterator[Inbox[tuple[zenoh.Query, bool]]]:
+    """Serve queries on ``key_expr``; answer each with :func:`reply` from trio.
+
+    Each query comes with ``note()`` as it was when the query arrived (called in Zenoh's
+    thread: a flag to read, not a computation), for what may have changed before trio
+    takes the query in.
+    """
+    inbox: Inbox[tuple[zenoh.Query, bool]] = Inbox()
+    queryable = session.declare_queryable(key_expr, lambda query: inbox.push((query, note())))
     try:
         yield inbox
     finally:

@@ -1875,36 +1875,42 @@ def test_a_world_waiting_its_turn_takes_none_of_the_running_worlds_commands() ->
         5, np.array([1]), np.zeros((1, 4)), np.zeros(1, dtype=bool), np.zeros(1, dtype=np.int64)
     )
 
-    async def main() -> tuple[World, list[bool]]:
+    async def main() -> tuple[World, list[bool], list[bool]]:
         bus = MemoryBus()
         world = World(WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0))
         queued = []
+        answering = []  # the flag queries read as they come
         async with trio.open_nursery() as nursery:
             nursery.start_soon(world.run, bus)
             await trio.sleep(1.0)  # no fish yet, no other world
             queued.append(world.queued)
+            answering.append(world.answering)
             other = bus.declare_token(keys.alive("world", 12345))
             await nursery.start(Fish(FishSettings((0,), params, keys)).run, bus)
             await nursery.start(Fish(FishSettings((1,), params, keys, school="t")).run, bus)
             await trio.sleep(1.0)
             queued.append(world.queued)
+            answering.append(world.answering)
             # The other world's run, answered by the fish: a command and a batch of its tick 5.
             bus.put(keys.command(0), encode(Command(0, 5, np.zeros(4))))
             bus.put(keys.school_commands("t"), encode(batch))
             await trio.sleep(1.0)
             queued.append(world.queued)
+            answering.append(world.answering)
             other.undeclare()
             await _until_state(world, "running")
             later = bus.declare_token(keys.alive("world", 54321))
             await trio.sleep(0.1)
             queued.append(world.queued)
+            answering.append(world.answering)
             await _until_state(world, "finished")
             later.undeclare()
             nursery.cancel_scope.cancel()
-        return world, queued
+        return world, queued, answering
 
-    world, queued = run_mock(main)
+    world, queued, answering = run_mock(main)
     assert queued == [False, True, True, False]
+    assert answering == [True, False, False, True]
     assert world.tick == 2 and world.lost == []
     assert world.statistics().rejected == {}
 

@@ -244,12 +244,12 @@ def test_an_answer_on_the_scenario_key_that_is_no_run_settings_is_refused_with_w
         async with (
             open_session(router) as hub,
             open_session(client) as other,
-            open_queryable(hub, keys.scenario) as asked,
+            open_queryable(hub, keys.scenario, lambda: True) as asked,
             trio.open_nursery() as nursery,
         ):
 
             async def answer_badly() -> None:
-                async for request in asked:
+                async for request, _ in asked:
                     reply(request, answer)
 
             async def ask_until_answered() -> None:

@@ -88,30 +88,42 @@ def test_liveliness_tokens_come_and_go(endpoint: str) -> None:
     assert run_trio(main) == [("alive/fish/7", True), ("alive/fish/7", False)]
 
 
-def test_queryable_answers_from_trio(endpoint: str) -> None:
+def test_queryable_answers_from_trio_with_what_was_noted_as_the_query_came(
+    endpoint: str,
+) -> None:
+    """A query comes with its note as it was on arrival: the flag changes right after, before
+    trio takes the query in, and the answer still says what it was."""
+    flag = [True]
+
+    def noted() -> bool:
+        answer = flag[0]
+        flag[0] = False  # changed at once: trio sees the query only later
+        return answer
+
     async def main() -> list[bytes]:
         router = SessionSettings(mode="router", listen=[endpoint])
         client = SessionSettings(mode="client", connect=[endpoint])
         async with (
             open_session(router) as hub,
             open_session(client) as asker,
-            open_queryable(hub, "ctl") as queries,
+            open_queryable(hub, "ctl", noted) as queries,
             trio.open_nursery() as nursery,
         ):
 
             async def serve() -> None:
-                request = await queries.receive()
-                assert request.payload is not None
-                reply(request, b"pong:" + request.payload.to_bytes())
+                async for request, note in queries:
+                    assert request.payload is not None
+                    reply(request, b"pong:%s:%r" % (request.payload.to_bytes(), note))
 
             nursery.start_soon(serve)
             # The queryable may take a moment to reach the asker's router: ask until answered.
             with trio.fail_after(10):
                 while not (answers := await query(asker, "ctl", b"ping", timeout=0.5)):
                     pass
+            nursery.cancel_scope.cancel()
             return answers
 
-    assert run_trio(main) == [b"pong:ping"]
+    assert run_trio(main) == [b"pong:ping:True"]
 
 
 def test_connecting_to_nothing_fails_clearly() -> None:
