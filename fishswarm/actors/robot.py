@@ -124,7 +124,9 @@ def open_bluebot_hardware() -> Iterator[Hardware]:
     surface_file = Path(state.split(":")[0]) / SURFACE_FILE if state else None
 
     # gpiozero warns of each pin library it could not load before it finds one: on a robot
-    # worth a line in the log; where it finds none, the error below says all of it.
+    # worth a line in the log; where it finds none, the reasons join the error's one line.
+    # (The hardware is opened before the robot starts any thread: catching warnings is
+    # process-wide.)
     with warnings.catch_warnings(record=True) as fallbacks:
         warnings.simplefilter("always")
         try:
@@ -138,8 +140,11 @@ def open_bluebot_hardware() -> Iterator[Hardware]:
                 depth = i2c_depth_sensor(surface_file=surface_file)
                 opened.pop_all()
         except (ImportError, OSError, SensorError, RuntimeError) as error:
+            tried = "; ".join(str(fallback.message) for fallback in fallbacks)
             raise HardwareError(
-                f"cannot open the BlueBot's hardware: {error} (on a laptop, use --hardware mock)"
+                f"cannot open the BlueBot's hardware: {error}"
+                + (f" ({tried})" if tried else "")
+                + " (on a laptop, use --hardware mock)"
             ) from error
     for fallback in fallbacks:
         log.warning("opening the hardware: %s", fallback.message)

@@ -195,11 +195,11 @@ async def _open_abandonably(config: zenoh.Config) -> zenoh.Session:
 
     try:
         return await trio.to_thread.run_sync(open_unless_abandoned, abandon_on_cancel=True)
-    except trio.Cancelled:
+    except BaseException:  # cancelled, or Ctrl-C delivered into this very task
         with lock:
             abandoned = True
         for session in opened:  # opened, but its result came too late to be taken
-            session.close()
+            session.close()  # blocks trio's thread for a moment: only ever at a shutdown
         raise
 
 

@@ -507,20 +507,24 @@ class World:
                     with trio.move_on_at(not_before):  # woken by what comes meanwhile
                         self._handle(await self._events.receive())
 
-    async def _say_who_is_missing(self, expected: set[int]) -> None:
-        """Every ``MISSING_NOTE_EVERY`` s of the wait for the fish, say which are not up
-        (an operator would otherwise hear nothing until the start timeout)."""
+    async def _say_who_is_missing(self, expected: set[int], deadline: float) -> None:
+        """Every ``MISSING_NOTE_EVERY`` s of the wait for the fish, say which are not up,
+        or which world holds this one up (an operator would otherwise hear nothing until
+        the start timeout)."""
         started = trio.current_time()
         while True:
             await trio.sleep(MISSING_NOTE_EVERY)
+            waited, left = trio.current_time() - started, deadline - trio.current_time()
             missing = sorted(expected - self._admissible())
             if missing:
                 log.warning(
-                    "%d of %d fish up after %g s; waiting for fish %s (for up to %g s)",
-                    len(expected) - len(missing), len(expected),
-                    trio.current_time() - started, ids_text(missing),
-                    self.settings.start_timeout,
+                    "%d of %d fish up after %.0f s; waiting for fish %s (for %.0f s more)",
+                    len(expected) - len(missing), len(expected), waited, ids_text(missing),
+                    left,
                 )  # fmt: skip
+            elif self.ahead:
+                log.warning("its fish are up after %.0f s; %s: waiting for its run to end "
+                            "(for %.0f s more)", waited, self._who_is_ahead(), left)  # fmt: skip
 
     def _warn_of_robots_in_lockstep(self) -> None:
         """Robots swim in real time: a lockstep run goes as fast as the machine allows, and
@@ -562,7 +566,7 @@ class World:
             return expected <= self._admissible() and not self.ahead
 
         async with trio.open_nursery() as nursery:
-            nursery.start_soon(self._say_who_is_missing, expected)
+            nursery.start_soon(self._say_who_is_missing, expected, deadline)
             await self._wait_until(ready, not_before=trio.current_time(), deadline=deadline)
             nursery.cancel_scope.cancel()
         if self._stop_requested:

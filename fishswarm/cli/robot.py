@@ -101,22 +101,24 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
             file=sys.stderr,
         )
         return 1
-    return say_unconfirmed(fleet, sent)
+    return 1 if say_unconfirmed(fleet, sent) else 0
 
 
-def say_unconfirmed(fleet: list[FleetEntry], sent: RobotOrder) -> int:
-    """Name each robot of ``fleet`` that does not report obeying ``sent``, and why; the
-    exit code (1 if any)."""
+def say_unconfirmed(fleet: list[FleetEntry], sent: RobotOrder) -> dict[int, str]:
+    """Name each robot of ``fleet`` that does not report obeying ``sent``, and why; those
+    robots, with why."""
     missing = unconfirmed(fleet, sent)
     restarted = "unstopped" if sent.action == "stop" else "as configured"
     for robot_id, why in missing.items():
-        print(
-            f"robot {robot_id} did not confirm the {sent.action} ({why}): a robot whose "
-            f"link is down never hears it, and one that restarts comes back {restarted}; "
-            "send it again",
-            file=sys.stderr,
+        advice = (
+            ""  # sending again cannot change the behaviour its fish run
+            if why.startswith("its fish run ")
+            else f": a robot whose link is down never hears it, and one that restarts comes "
+            f"back {restarted}; send it again"
         )
-    return 1 if missing else 0
+        print(f"robot {robot_id} did not confirm the {sent.action} ({why}){advice}",
+              file=sys.stderr)  # fmt: skip
+    return missing
 
 
 def _as_dict(entry: FleetEntry) -> dict[str, object]:

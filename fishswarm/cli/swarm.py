@@ -623,8 +623,7 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
     reply, order, fleet = _run_trio(main)
     if reply is not None and reply.refused is not None:
         raise UserError(f"the world did not switch to {args.shape}: {reply.refused}")
-    robots = [entry for entry in fleet if entry.status is not None]
-    if reply is None and not robots:
+    if reply is None and not fleet:
         raise UserError(
             f"no world of swarm {args.swarm!r} answered on {args.connect}, and no robot was "
             "heard from: is a run going?"
@@ -635,15 +634,13 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
             f"{reply.live_fish} fish)",
             file=sys.stderr,
         )
-    if not robots or order is None:
+    if not fleet or order is None:
         return 0
-    code = say_unconfirmed(robots, order)
-    confirmed = sorted(
-        entry.robot_id for entry in robots if entry.status and entry.status.formation == args.shape
-    )
+    missing = say_unconfirmed(fleet, order)
+    confirmed = sorted({entry.robot_id for entry in fleet} - set(missing))
     if confirmed:
         print(f"formation {args.shape} on robots {ids_text(confirmed)}", file=sys.stderr)
-    return code
+    return 1 if missing else 0
 
 
 def control(args: argparse.Namespace, scenario: Scenario | None) -> int:

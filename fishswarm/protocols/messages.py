@@ -71,6 +71,10 @@ class Message:
     """Base of all messages: field-wise equality (arrays compared by value) and a wire name."""
 
     type_name: ClassVar[str]
+    added_later: ClassVar[frozenset[str]] = frozenset()
+    """Fields added after the type was first sent: left off the wire while None (their
+    default), so that a peer of the earlier version still reads the message (a robot not
+    yet upgraded takes a base station's stop; :func:`fields_of`)."""
 
     def __eq__(self, other: object) -> bool:
         if type(other) is not type(self):
@@ -670,6 +674,7 @@ class RobotStatus(Message):
     """
 
     type_name: ClassVar[str] = "robot_status"
+    added_later: ClassVar[frozenset[str]] = frozenset({"formation"})
     robot_id: int
     version: str
     behavior: str
@@ -719,6 +724,7 @@ class RobotOrder(Message):
     """
 
     type_name: ClassVar[str] = "robot_order"
+    added_later: ClassVar[frozenset[str]] = frozenset({"formation"})
     action: str
     robot_ids: IntArray = dataclasses.field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     formation: str | None = None
@@ -776,5 +782,9 @@ def field_names(cls: type[Message]) -> tuple[str, ...]:
 
 
 def fields_of(message: Message) -> dict[str, Any]:
-    """The message's fields as a dict (arrays not copied)."""
-    return {name: getattr(message, name) for name in field_names(type(message))}
+    """The message's fields as a dict (arrays not copied), but those added later while None."""
+    fields = {name: getattr(message, name) for name in field_names(type(message))}
+    for name in message.added_later:
+        if fields[name] is None:
+            del fields[name]
+    return fields

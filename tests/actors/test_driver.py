@@ -604,7 +604,7 @@ def test_an_operators_formation_order_reaches_the_fish_in_its_next_perception(
     for when the robot resumes). A fish that
     runs another behaviour has no formation to take: the order is let go."""
 
-    async def main() -> tuple[list[str | None], list[str | None], str]:
+    async def main() -> tuple[list[str | None], list[str | None], str, int]:
         local, remote = MemoryBus(), MemoryBus()
         driver = make_driver(hardware, [True], command_timeout=10.0, behavior=behavior)
         told: list[str | None] = []
@@ -631,16 +631,17 @@ def test_an_operators_formation_order_reaches_the_fish_in_its_next_perception(
             order("stop", [])
             order("formation", [ROBOT], "diamond")
             await trio.sleep(0.5)
-            state = driver.state
+            state, orders = driver.state, driver.statistics().orders
             nursery.cancel_scope.cancel()
-        return told, reported, state
+        return told, reported, state, orders
 
-    told, reported, state = run_mock(main)
+    told, reported, state, orders = run_mock(main)
     assert state == "stopped"
     if behavior == "formation":
         # Perceptions at 0, 0.5, 1 and 1.5 s (the last after the order at 1 s); a stopped
         # robot makes none, but its status names the shape its fish will take.
         assert told == [None, None, None, "column"]
         assert reported[-1] == "diamond" and "column" in reported
-    else:
+    else:  # taken in and counted as an order, and let go
         assert set(told) == {None} and set(reported) == {None}
+        assert orders == 3  # its own three: the one for another robot is not its

@@ -1648,8 +1648,8 @@ def test_a_world_waiting_for_its_fish_says_every_10_s_which_are_not_up(
     said = [r.getMessage() for r in caplog.records if "fish up after" in r.getMessage()]
     assert world.state_name == "finished"
     assert said == [
-        "2 of 3 fish up after 10 s; waiting for fish 2 (for up to 60 s)",
-        "2 of 3 fish up after 20 s; waiting for fish 2 (for up to 60 s)",
+        "2 of 3 fish up after 10 s; waiting for fish 2 (for 50 s more)",
+        "2 of 3 fish up after 20 s; waiting for fish 2 (for 40 s more)",
     ]
 
 

@@ -362,7 +362,9 @@ def test_a_robot_that_cannot_open_its_hardware_or_configuration_says_so(tmp_path
     assert "use --hardware mock" in result.stderr
     # Not a line for each pin library gpiozero tried before it gave up: the error says it.
     assert "PinFactoryFallback" not in result.stderr
-    assert result.stderr.strip().splitlines()[0].startswith("fishswarm robot: error:")
+    (said,) = result.stderr.strip().splitlines()
+    # ... but the reasons it gave each, in the one line: the cause of a robot's failure.
+    assert said.startswith("fishswarm robot: error:") and "Falling back from lgpio" in said
     broken = tmp_path / "zenoh.json5"
     broken.write_text("{ mode: ")
     result = _run(

@@ -614,3 +614,20 @@ def test_a_fish_that_has_not_tired_yet_has_effort_zero() -> None:
 def test_settings_may_be_negative_integers_down_to_minus_two_to_the_62() -> None:
     settings = RunSettings({"offset": -3, "floor": -(2**62)})
     assert decode(encode(settings), RunSettings).scenario == {"offset": -3, "floor": -(2**62)}
+
+
+def test_fields_added_later_stay_off_the_wire_while_unset() -> None:
+    """A stop order and a robot's status without a formation carry only the fields the
+    first version of each had, so that a robot or base station not yet upgraded still
+    reads them; with a formation, the field goes along and comes back."""
+    import msgpack
+
+    def wire_fields(message: Message) -> set[str]:
+        return set(msgpack.unpackb(encode(message), raw=False, ext_hook=lambda c, d: d)["f"])
+
+    stop = RobotOrder("stop")
+    assert wire_fields(stop) == {"action", "robot_ids"} and decode(encode(stop)) == stop
+    status = RobotStatus(3, "1.0", "dispersion", "swimming", 0.4, np.zeros(4), True, None, 9.0)
+    assert "formation" not in wire_fields(status) and decode(encode(status)) == status
+    ordered = RobotOrder("formation", formation="column")
+    assert "formation" in wire_fields(ordered) and decode(encode(ordered)) == ordered
