@@ -63,12 +63,11 @@ log = logging.getLogger(__name__)
 
 BusEvent = tuple[str, str, bytes | bool]
 T = TypeVar("T")
-
-MISSING_NOTE_EVERY = 10.0
-"""How often a world waiting for its fish says which are not up yet, s."""
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
+MISSING_NOTE_EVERY = 10.0
+"""How often a world waiting for its fish says which are not up yet, s."""
 OFFLOAD_AFTER = 0.25
 """A simulation step whose last run took longer than this (s) runs in a worker thread: worth
 it only when the world would otherwise be deaf for long (and under a test's MockClock, whose
@@ -438,6 +437,11 @@ class World:
         return {i for i in self.roster.alive if (i, self.roster.school_of.get(i)) in self.vouched}
 
     @property
+    def other_worlds(self) -> set[str]:
+        """Liveliness tokens of the other worlds of this swarm that have taken their turn."""
+        return self.roster.worlds - {self._token}
+
+    @property
     def ahead(self) -> list[str]:
         """The liveliness tokens of the worlds of this swarm this one waits for, in order.
 
@@ -448,7 +452,7 @@ class World:
         """
         if self._turn == "started":
             return []
-        worlds = sorted(self.roster.worlds - {self._token})
+        worlds = sorted(self.other_worlds)
         if self._turn == "taken":
             return [w for w in worlds if self._run_id_of(w) < self.run_id]
         before = [
@@ -538,13 +542,13 @@ class World:
             )  # fmt: skip
 
     def _who_is_ahead(self) -> str:
-        if self.roster.worlds - {self._token}:
+        if self.other_worlds:
             return f"another world runs swarm {self.keys.swarm!r} on this router"
         return f"another world of swarm {self.keys.swarm!r} came up first on this router"
 
     def _ahead_for_too_long(self) -> None:
         waited = f"{self.settings.start_timeout:g} s"
-        if self.roster.worlds - {self._token}:
+        if self.other_worlds:
             which = (
                 f"another world ran swarm {self.keys.swarm!r} on this router for all of {waited}"
             )

@@ -351,7 +351,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--listen",
         default=None,
         help=f"endpoint to listen on (default {DEFAULT_ENDPOINT}, with --secure "
-        f"{SECURE_ENDPOINT}; tcp/0.0.0.0:7447 lets observers on other machines attach)",
+        f"{SECURE_ENDPOINT}; tcp/0.0.0.0:7447, or tls/0.0.0.0:7447 with --secure, lets "
+        "observers on other machines attach)",
     )
     run.add_argument(
         "--secure",

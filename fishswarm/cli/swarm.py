@@ -409,7 +409,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                 bus = ZenohBus(session)
                 await nursery.start(observer.run, bus)
                 await nursery.start(run_control, session, actor)
-                nursery.start_soon(say_when_the_router_goes, session, "world", args.connect)
+                nursery.start_soon(_say_when_the_router_goes, session, "world", args.connect)
                 ended = trio.Event()
 
                 async def run_world(*, task_status: trio.TaskStatus[None]) -> None:
@@ -477,7 +477,7 @@ ROUTER_CHECK_EVERY = 0.5
 """How often a client command looks whether it still reaches its router, s."""
 
 
-async def say_when_the_router_goes(session: zenoh.Session, command: str, endpoint: str) -> None:
+async def _say_when_the_router_goes(session: zenoh.Session, command: str, endpoint: str) -> None:
     """Say when this client loses its router, and when it has it again: everything it talks
     to goes through the router (a world's fish are lost with it, one by one)."""
     up = True
@@ -533,7 +533,7 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                 await nursery.start(observer.run, ZenohBus(session))
                 print(f"observing swarm {args.swarm!r} on {args.connect}", file=sys.stderr)
                 nursery.start_soon(_say_if_nothing_comes, observer, args.swarm)
-                nursery.start_soon(say_when_the_router_goes, session, "observe", args.connect)
+                nursery.start_soon(_say_when_the_router_goes, session, "observe", args.connect)
                 # Until the snapshot of --ticks, or the end of the run (the world leaves).
                 async with trio.open_nursery() as waiting:
 
