@@ -1110,6 +1110,14 @@ def test_a_world_waits_for_another_world_of_its_swarm_to_end(
     )
 
 
+def _world_of_fish_0(bus: MemoryBus, scenario: Scenario) -> tuple[World, list[float]]:
+    """A world that waits up to 20 s for fish 0, and the times fish 0 is sent perceptions."""
+    world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
+    perceived: list[float] = []
+    bus.subscribe(scenario.keys.perception(0), lambda k, p: perceived.append(trio.current_time()))
+    return world, perceived
+
+
 def test_two_worlds_that_come_up_together_run_one_after_the_other_first_come_first() -> None:
     """Two worlds of one swarm up at the same instant, both waiting for the same fish: the
     one whose place in the queue comes first runs, the other waits behind it and runs
@@ -1158,9 +1166,7 @@ def test_a_world_waits_behind_a_world_that_came_up_before_it_and_only_such_a_one
 
     async def main() -> tuple[World, list[float], list[bool]]:
         bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
-        perceived: list[float] = []
-        bus.subscribe(keys.perception(0), lambda k, p: perceived.append(trio.current_time()))
+        world, perceived = _world_of_fish_0(bus, scenario)
         queued = []
         async with trio.open_nursery() as nursery:
             await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
@@ -1460,9 +1466,7 @@ def test_a_world_held_by_a_lower_run_that_never_starts_gives_up_at_its_start_tim
 
     async def main() -> tuple[str, list[float]]:
         bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
-        perceived: list[float] = []
-        bus.subscribe(keys.perception(0), lambda k, p: perceived.append(trio.current_time()))
+        world, perceived = _world_of_fish_0(bus, scenario)
         async with trio.open_nursery() as nursery:
 
             async def first_run_and_fish() -> None:
@@ -1495,9 +1499,7 @@ def test_a_world_token_that_names_no_run_goes_before_a_world_that_took_its_turn(
 
     async def main() -> tuple[World, list[bool], list[float]]:
         bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
-        perceived: list[float] = []
-        bus.subscribe(keys.perception(0), lambda k, p: perceived.append(trio.current_time()))
+        world, perceived = _world_of_fish_0(bus, scenario)
         queued = []
         async with trio.open_nursery() as nursery:
             nursery.start_soon(world.run, bus)
@@ -1563,9 +1565,7 @@ def test_a_world_whose_turn_comes_first_takes_in_all_that_came_with_it() -> None
 
     async def main() -> tuple[World, list[float], list[bool]]:
         bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0,), start_timeout=20.0))
-        perceived: list[float] = []
-        bus.subscribe(keys.perception(0), lambda k, p: perceived.append(trio.current_time()))
+        world, perceived = _world_of_fish_0(bus, scenario)
         running = bus.declare_token(keys.alive("world", 12345))
         queued = []
         async with trio.open_nursery() as nursery:
