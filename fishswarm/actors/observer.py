@@ -18,7 +18,7 @@ from fishswarm.actors.bus import Bus, open_alive_events, open_subscriber, open_t
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.actors.world import OFFLOAD_FISH
-from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.keys import KeySpace, run_id_of
 from fishswarm.protocols.messages import Snapshot
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.metrics import (
@@ -236,7 +236,7 @@ class Observer:
             self.recorder.event(self._sim_time, event)
         # The world of the run being watched has left (a world token names its run): not
         # that of an earlier run, whose leaving may come after the next run's first snapshot.
-        watched = self.current_run in (None, _run_of(member.member_id))
+        watched = self.current_run in (None, run_id_of(member.member_id))
         if member.role == "world" and not alive and watched:
             self._world_left.set()
 
@@ -318,11 +318,3 @@ class Observer:
         self._tick_reached = trio.Event()
         if self.on_progress is not None:
             self.on_progress(progress)
-
-
-def _run_of(member_id: str) -> int | None:
-    """The run a world's liveliness token names (None for a token that names none)."""
-    try:
-        return int(member_id)
-    except ValueError:
-        return None

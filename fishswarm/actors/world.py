@@ -42,7 +42,7 @@ from fishswarm.actors.roster import LostFish, Roster
 from fishswarm.actors.tick_commands import TickCommands, among, values_at
 from fishswarm.behaviors.registry import rules_of
 from fishswarm.protocols.codec import MessageError, decode, encode
-from fishswarm.protocols.keys import fish_id_of
+from fishswarm.protocols.keys import fish_id_of, run_id_of
 from fishswarm.protocols.messages import (
     ChannelReport,
     Command,
@@ -463,8 +463,8 @@ class World:
         return worlds + before
 
     def _run_id_of(self, token: str) -> int:
-        run = self.keys.parse_alive(token).member_id
-        return int(run) if run.isascii() and run.isdigit() else -1  # naming none: first
+        run = run_id_of(self.keys.parse_alive(token).member_id)
+        return -1 if run is None else run  # a token naming no run: taken as first
 
     @property
     def queued(self) -> bool:
@@ -790,7 +790,7 @@ class World:
             self.answering = not self.queued
             return
         assert isinstance(payload, bytes)
-        if kind in ("command", "batch") and self.queued:
+        if kind in ("command", "batch") and not self.answering:  # queued (a flag: per event)
             return  # another world's run, answered by its fish: not this world's to count
         if kind == "report":
             report = self.intake.decode(key, payload, ChannelReport)

@@ -410,20 +410,14 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                 await nursery.start(observer.run, bus)
                 await nursery.start(run_control, session, actor)
                 nursery.start_soon(_say_when_the_router_goes, session, "world", args.connect)
-                ended = trio.Event()
-
-                async def run_world(*, task_status: trio.TaskStatus[None]) -> None:
-                    await actor.run(bus, task_status=task_status)
-                    ended.set()
-
-                await nursery.start(run_world)
-                print(
-                    f"world up on {args.connect} for swarm {scenario.swarm!r}: the run starts "
-                    f"when its {scenario.fish} fish are up, after any world of the swarm that "
-                    "runs or came up first",
-                    file=sys.stderr,
-                )
-                await ended.wait()
+                async with trio.open_nursery() as running:  # until the world's run ends
+                    await running.start(actor.run, bus)
+                    print(
+                        f"world up on {args.connect} for swarm {scenario.swarm!r}: the run "
+                        f"starts when its {scenario.fish} fish are up, after any world of the "
+                        "swarm that runs or came up first",
+                        file=sys.stderr,
+                    )
                 # Its own last snapshot comes back through the session: record it too.
                 with trio.move_on_after(WORLD_END_SETTLE):
                     await observer.wait_for_tick(actor.tick)
@@ -575,11 +569,11 @@ def _ask_world(args: argparse.Namespace, request: ControlRequest) -> ControlRepl
     """
     keys = KeySpace(args.swarm)
 
-    async def main() -> list[bytes]:
+    async def main() -> ControlReply | None:
         async with open_session(client_settings(args, "admin")) as session:
-            return await query(session, keys.control, encode(request), timeout=CONTROL_TIMEOUT)
+            return await _ask_control(session, keys, request)
 
-    reply = _control_reply(_run_trio(main))
+    reply: ControlReply | None = _run_trio(main)
     if reply is None:
         raise UserError(
             f"no world of swarm {args.swarm!r} answered on {args.connect}: is a run going?"
@@ -587,12 +581,16 @@ def _ask_world(args: argparse.Namespace, request: ControlRequest) -> ControlRepl
     return reply
 
 
-def _control_reply(replies: list[bytes]) -> ControlReply | None:
-    """The world's reply among ``replies`` (None: no world answered).
+async def _ask_control(
+    session: zenoh.Session, keys: KeySpace, request: ControlRequest
+) -> ControlReply | None:
+    """The reply of the world of ``keys``'s swarm to an operator's control request (None:
+    no world answered).
 
     Raises:
         UserError: its answer is not a control reply.
     """
+    replies = await query(session, keys.control, encode(request), timeout=CONTROL_TIMEOUT)
     if not replies:
         return None
     try:
@@ -608,12 +606,11 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
     from fishswarm.cli.robot import say_unconfirmed
 
     keys = KeySpace(args.swarm)
-    request = encode(ControlRequest("formation", formation=args.shape))
+    request = ControlRequest("formation", formation=args.shape)
 
     async def main() -> tuple[ControlReply | None, RobotOrder | None, list[FleetEntry]]:
         async with open_session(client_settings(args, "admin")) as session:
-            replies = await query(session, keys.control, request, timeout=CONTROL_TIMEOUT)
-            reply = _control_reply(replies)
+            reply = await _ask_control(session, keys, request)
             if reply is not None and reply.refused is not None:
                 return reply, None, []
             bus = ZenohBus(session)

@@ -22,6 +22,11 @@ def fish_id_of(text: str) -> int | None:
     return int(text) if _FISH_ID.fullmatch(text) else None
 
 
+def run_id_of(text: str) -> int | None:
+    """The run a world's liveliness token id names (ASCII digits), or None if it names none."""
+    return int(text) if text.isascii() and text.isdigit() else None
+
+
 def check_name(kind: str, value: str) -> str:
     """``value``, a name that may stand in a key (a swarm's, a school's, an observer's).
 
