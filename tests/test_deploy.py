@@ -83,12 +83,14 @@ def inventory(folder: Path, wheel: Path, **robot: object) -> Path:
     return path
 
 
+@pytest.mark.slow
 def test_the_deployment_lints_clean() -> None:
     result = ansible("ansible-lint", "--offline")
     assert result.returncode == 0, result.stdout + result.stderr
     assert "Passed" in result.stdout + result.stderr
 
 
+@pytest.mark.slow
 def test_the_playbook_runs_in_check_mode_against_this_machine(tmp_path: Path, wheel: Path) -> None:
     path = inventory(tmp_path, wheel, fish_id=3)
     result = ansible("ansible-playbook", "-i", str(path), "site.yml", "--check", "--diff")
@@ -161,6 +163,7 @@ def _service_arguments(folder: Path, **variables: str) -> list[str]:
     return made
 
 
+@pytest.mark.slow
 def test_a_secured_robots_service_gives_its_certificates_folder(tmp_path: Path) -> None:
     plain = build_parser().parse_args(_service_arguments(tmp_path, fishswarm_hardware="mock"))
     assert plain.secure is None
@@ -180,6 +183,7 @@ def test_a_secured_robots_service_gives_its_certificates_folder(tmp_path: Path) 
     assert secured.secure == keys and secured.connect == "tls/10.0.0.1:7447"
 
 
+@pytest.mark.slow
 def test_the_playbook_gives_a_secured_robot_its_certificates_and_refuses_missing_ones(
     tmp_path: Path, wheel: Path
 ) -> None:
@@ -222,6 +226,7 @@ def test_the_playbook_gives_a_secured_robot_its_certificates_and_refuses_missing
     )
 
 
+@pytest.mark.slow
 def test_the_service_starts_the_robot_with_arguments_the_cli_accepts(tmp_path: Path) -> None:
     words = _service_arguments(tmp_path, fishswarm_hardware="mock")
     unit = (tmp_path / "fishswarm-fish@.service").read_text()
@@ -260,6 +265,7 @@ installs with apt."""
 OFFLINE = ("NewConnectionError", "Temporary failure in name resolution", "Network is unreachable")
 
 
+@pytest.mark.slow
 def test_the_robot_runs_on_the_packages_the_role_installs(tmp_path: Path, wheel: Path) -> None:
     # The venv the role makes on a robot, with pip's copies of bookworm's packages standing
     # in for apt's, what the role asks pip for, and the wheel without its dependencies.

@@ -12,6 +12,12 @@ orders. So the fins' safety never depends on Wi-Fi:
 - **link loss**: the fish swims on its own perception for at most ``link_timeout``, then the
   fins stop until the link returns;
 - **operator's stop**: fins and LEDs off at once, commands ignored until ``resume``.
+
+The driver also plays the channel's part for formation flags, by light
+(:mod:`fishswarm.bluebot.flashes`): while its fish's flag says it holds its place, the LEDs
+flash; and while its fish flags, each camera takes a second frame half a flash period after
+the first, and each neighbour that flashes comes to the fish as a delivered flag, where the
+cameras see it.
 """
 
 from __future__ import annotations
@@ -20,9 +26,9 @@ import contextlib
 import logging
 import math
 import secrets
+import time
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, field
-from functools import partial
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -33,15 +39,19 @@ from fishswarm import __version__
 from fishswarm.actors.bus import Bus, Declared, open_alive_events, open_token
 from fishswarm.actors.inbox import Inbox, open_subscription
 from fishswarm.actors.intake import Intake
+from fishswarm.behaviors.formation import flag_by_light
 from fishswarm.bluebot.fisheye import Fisheye
+from fishswarm.bluebot.flashes import FRAME_GAP, merge_frames
 from fishswarm.bluebot.leds import LedVision, perceive_leds
-from fishswarm.bluebot.parameters import fin_frequencies
+from fishswarm.bluebot.parameters import LED_FLASH_FREQUENCY, fin_frequencies
 from fishswarm.bluebot.ports import CAMERA_SIDES, Camera, DepthSensor, Fins, Leds
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import (
+    Broadcast,
     Command,
     Delivery,
+    FormationFlag,
     Perception,
     RobotOrder,
     RobotStatus,
@@ -50,8 +60,10 @@ from fishswarm.protocols.messages import (
 log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
-Look = tuple[float, FloatArray]
-"""What the sensors give in one period: depth, m, and (K, 3) body-frame neighbours, m."""
+BoolArray = NDArray[np.bool_]
+Look = tuple[float, FloatArray, BoolArray]
+"""What the sensors give in one period: depth, m, (K, 3) body-frame neighbours, m, and (K,)
+which of them flash their LEDs."""
 
 LINK_TIMEOUT = 10.0
 """How long a robot that has lost its link to the base station swims on its own perception
@@ -156,6 +168,7 @@ class DriverStatistics:
         orders: operators' orders obeyed.
         deliveries: deliveries passed from the link to the fish.
         broadcasts: the fish's broadcasts passed to the link.
+        flags_seen: flashing neighbours handed to the fish as formation flags.
         rejected: messages rejected (malformed, misaddressed).
     """
 
@@ -168,6 +181,7 @@ class DriverStatistics:
     orders: int
     deliveries: int
     broadcasts: int
+    flags_seen: int
     rejected: int
 
 
@@ -225,6 +239,7 @@ class Driver:
                 "orders",
                 "deliveries",
                 "broadcasts",
+                "flags_seen",
             ),
             0,
         )
@@ -235,6 +250,11 @@ class Driver:
         self._gains = np.zeros(4)
         self._depth = 0.0
         self._unannounced = 0
+        self._own_flag: FormationFlag | None = None
+        """The fish's formation flag of its last decision (None: it flags nothing)."""
+        self._lit = False
+        self._shown: tuple[bool, bool] | None = None
+        """What the LEDs were last told: (lit, flashing)."""
         self._changed = trio.Event()
 
     def statistics(self) -> DriverStatistics:
@@ -295,9 +315,7 @@ class Driver:
                     nursery.start_soon(self._obey, commands)
                     nursery.start_soon(self._take_orders, orders)
                     nursery.start_soon(self._pass_deliveries, deliveries, local)
-                    nursery.start_soon(
-                        partial(self._pass_out, counted="broadcasts"), broadcasts, remote
-                    )
+                    nursery.start_soon(self._pass_broadcasts, broadcasts, remote)
                     nursery.start_soon(self._pass_out, abouts, remote)
                     nursery.start_soon(self._show_worlds, worlds, local)
                     nursery.start_soon(self._guard)
@@ -318,7 +336,7 @@ class Driver:
             deadline += period
             if self.state not in ("stopped", "stranded"):
                 try:
-                    depth, neighbors = await self._run_blocking(self._look)
+                    depth, neighbors, flashing = await self._run_blocking(self._look)
                 except SENSOR_ERRORS as error:
                     if isinstance(error, NotImplementedError | RecursionError):
                         raise  # RuntimeErrors that are defects, not a sensor's failure
@@ -331,7 +349,7 @@ class Driver:
                         )  # fmt: skip
                     self._failing = self._failure = None
                     self._depth = depth
-                    self._perceive(local, depth, neighbors)
+                    self._perceive(local, depth, neighbors, flashing)
             # A slow frame does not pile up periods: the next starts from now.
             deadline = max(deadline, trio.current_time())
             await trio.sleep_until(deadline)
@@ -354,19 +372,40 @@ class Driver:
             )  # fmt: skip
 
     def _look(self) -> Look:
-        """Depth and neighbours from the sensors (runs in a worker thread)."""
-        camera = self.hardware.camera
+        """Depth, neighbours and which of them flash, from the sensors (runs in a worker
+        thread). Only robots in a formation flash: only there does each camera take a
+        second frame, in which a neighbour dark in the first is lit."""
         depth = self.hardware.depth.read_depth()
-        images = {side: camera.capture(side) for side in CAMERA_SIDES}
-        neighbors = perceive_leds(
-            images,
+        started = time.monotonic()
+        first = self._see(depth)
+        if self.settings.behavior != "formation":
+            return depth, first, np.zeros(first.shape[0], dtype=np.bool_)
+        time.sleep(max(0.0, started + FRAME_GAP - time.monotonic()))
+        neighbors, flashing = merge_frames(first, self._see(depth))
+        return depth, neighbors, flashing
+
+    def _see(self, depth: float) -> FloatArray:
+        """The neighbours in one image of each camera."""
+        camera = self.hardware.camera
+        return perceive_leds(
+            {side: camera.capture(side) for side in CAMERA_SIDES},
             depth=depth,
             fisheye=self.settings.fisheye,
             vision=self.settings.leds,
         )
-        return depth, neighbors
 
-    def _perceive(self, local: Bus, depth: float, neighbors: FloatArray) -> None:
+    def _perceive(
+        self, local: Bus, depth: float, neighbors: FloatArray, flashing: BoolArray
+    ) -> None:
+        robot_id = self.settings.robot_id
+        if self._own_flag is not None and flashing.any():
+            # Each flashing neighbour, where it is seen, is a flag for this perception.
+            values = flag_by_light(self._own_flag).values()
+            for position in neighbors[flashing]:
+                flag = Delivery(robot_id, self._tick, "formation", values, position)
+                local.put(self.settings.keys.inbox(robot_id), encode(flag))
+            self._unannounced += int(flashing.sum())
+            self._counts["flags_seen"] += int(flashing.sum())
         message = Perception(
             fish_id=self.settings.robot_id,
             tick=self._tick,
@@ -395,7 +434,10 @@ class Driver:
             if command is None or self.state in ("stopped", "stranded"):
                 continue
             self._set_fins(command.fins)
-            self.hardware.leds.set_lit(command.led)
+            self._lit = command.led
+            if command.broadcasts == 0:
+                self._own_flag = None  # the fish flags nothing this time: no flashing
+            self._show_lights()
             self._last_command = trio.current_time()
             self._counts["commands"] += 1
             self.state = "swimming"
@@ -463,7 +505,7 @@ class Driver:
                 self._take_formation(order.formation)
             elif order.action == "stop":
                 self._stop("stopped")
-                self.hardware.leds.set_lit(False)
+                self._show_lights()
                 log.warning("robot %d: stopped by an operator", self.settings.robot_id)
             elif self.state == "stopped":
                 self.state = "waiting"
@@ -483,14 +525,40 @@ class Driver:
 
     # The link ---------------------------------------------------------------------------
 
-    async def _pass_out(
-        self, messages: Inbox[tuple[str, bytes]], remote: Bus, *, counted: str | None = None
-    ) -> None:
-        """The fish's messages onto the link, as they are (counted as ``counted``)."""
+    async def _pass_broadcasts(self, broadcasts: Inbox[tuple[str, bytes]], remote: Bus) -> None:
+        """The fish's broadcasts onto the link, and its formation flag into light."""
+        robot_id = self.settings.robot_id
+        async for key, payload in broadcasts:
+            remote.put(key, payload)
+            self._counts["broadcasts"] += 1
+            broadcast = self._intake.decode_addressed(
+                key, payload, Broadcast, field="sender_id", owner=robot_id
+            )
+            if broadcast is not None and broadcast.kind == "formation":
+                try:
+                    self._own_flag = FormationFlag.from_values(broadcast.values)
+                except (TypeError, ValueError) as error:
+                    self._intake.reject(key, "malformed", f"a formation flag that {error}")
+                    continue
+                self._show_lights()
+
+    def _show_lights(self) -> None:
+        """The LEDs as the fish wants them: flashing while its flag says it holds its place
+        (its flag by light), else lit or dark as its command says; dark once stopped."""
+        lit = self._lit and self.state != "stopped"
+        flashing = lit and self._own_flag is not None and self._own_flag.joined
+        if (lit, flashing) == self._shown:
+            return
+        self._shown = (lit, flashing)
+        if flashing:
+            self.hardware.leds.set_flashing(LED_FLASH_FREQUENCY)
+        else:
+            self.hardware.leds.set_lit(lit)
+
+    async def _pass_out(self, messages: Inbox[tuple[str, bytes]], remote: Bus) -> None:
+        """The fish's messages onto the link, as they are."""
         async for key, payload in messages:
             remote.put(key, payload)
-            if counted is not None:
-                self._counts[counted] += 1
 
     async def _show_worlds(self, worlds: Inbox[tuple[str, bool]], local: Bus) -> None:
         """Each world that is up on the link, shown to the fish by its liveliness token:
@@ -515,7 +583,9 @@ class Driver:
             )
             if delivery is None:
                 continue
-            local.put(key, payload)
+            # A channel numbers deliveries by its world's ticks; the fish acts on one at the
+            # driver's next perception, and waits for it under that perception's tick.
+            local.put(key, encode(replace(delivery, tick=self._tick)))
             self._unannounced += 1
             self._counts["deliveries"] += 1
 

@@ -5,7 +5,10 @@ A mock robot is a fish of a running simulated world. Its body lives in that worl
 :class:`MockBody` answers the world's perceptions for it with the gains its fins hold now
 (so the world moves it as its fins beat) and keeps the world's latest snapshot, from which
 :class:`SnapshotCamera` renders both camera images (:func:`~fishswarm.sim.camera.
-render_views`) and :class:`SnapshotDepth` reads its depth. What the robot perceives comes over
+render_views`) and :class:`SnapshotDepth` reads its depth. A robot whose LEDs flash (its
+formation flag by light) says so in its commands; the world names the flashing fish in its
+snapshots, and the cameras show their LEDs lit or dark as the capture's time falls in their
+flash period. What the robot perceives comes over
 its link, as a real robot's light comes through the water: cut the link and the frames go
 stale, the driver stops perceiving, and its failsafe stops the fins.
 """
@@ -13,6 +16,7 @@ stale, the driver stops perceiving, and its failsafe stops the fins.
 from __future__ import annotations
 
 import contextlib
+import math
 import threading
 import time
 from collections.abc import Iterator
@@ -28,6 +32,7 @@ from fishswarm.actors.driver import Hardware, SensorUnavailable
 from fishswarm.actors.inbox import open_subscription
 from fishswarm.actors.intake import Intake
 from fishswarm.bluebot.fisheye import Fisheye
+from fishswarm.bluebot.flashes import lit_at
 from fishswarm.bluebot.gpio import GpioFins, GpioLeds
 from fishswarm.bluebot.parameters import BlueBot
 from fishswarm.bluebot.ports import CameraSide, Fins
@@ -37,10 +42,14 @@ from fishswarm.protocols.messages import Command, Perception, Snapshot
 from fishswarm.sim.camera import Optics, render_views
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 STALE_AFTER = 0.6
 """A snapshot older than this (wall-clock s) gives no camera frame or depth reading, or than
 :data:`STALE_PERIODS` control periods when that is longer."""
+GOLDEN_FRACTION = (math.sqrt(5) - 1) / 2
+"""Where each flashing robot's period starts, as a fraction of it: fish id times this, modulo
+1 — spread out, and the same in every robot's cameras."""
 STALE_PERIODS = 1.5
 """A realtime world sends one snapshot a control period, and the driver reads at its own
 phase in the period: a snapshot must stay fresh for more than a period, or a driver whose
@@ -97,7 +106,8 @@ class WorldFeed:
 class SnapshotCamera:
     """Both fisheye cameras, rendered from the world's latest snapshot. Implements ``Camera``.
 
-    Images are rendered once per snapshot, both sides together, with seeded sensor noise.
+    Images are rendered both sides together, with seeded sensor noise: once per snapshot,
+    and once more for each other set of lit LEDs when robots flash theirs.
     """
 
     feed: WorldFeed
@@ -105,18 +115,26 @@ class SnapshotCamera:
     optics: Optics = field(default_factory=Optics)
     robot: BlueBot = field(default_factory=BlueBot)
     seed: int = 0
+    clock: Any = time.monotonic
+    """The time of a capture, s: when flashing LEDs are lit or dark."""
 
     def __post_init__(self) -> None:
         self._rng = np.random.default_rng([self.seed, self.feed.robot_id])
         self._lock = threading.Lock()
-        self._rendered: tuple[int, dict[CameraSide, NDArray[np.uint8]]] | None = None
+        self._tick = -1
+        self._rendered: dict[bytes, dict[CameraSide, NDArray[np.uint8]]] = {}
+        """This tick's images, by which LEDs are lit."""
 
     def capture(self, side: CameraSide) -> NDArray[np.uint8]:
-        """One camera's image of the world as the latest snapshot has it."""
+        """One camera's image of the world as the latest snapshot has it, now."""
         snapshot, row = self.feed.current()
+        lit = self._lit(snapshot, self.clock())
         with self._lock:
-            if self._rendered is None or self._rendered[0] != snapshot.tick:
-                images = render_views(
+            if self._tick != snapshot.tick:
+                self._tick, self._rendered = snapshot.tick, {}
+            images = self._rendered.get(lit.tobytes())
+            if images is None:
+                images = self._rendered[lit.tobytes()] = render_views(
                     np.asarray(snapshot.position),
                     np.asarray(snapshot.yaw),
                     row,
@@ -124,9 +142,20 @@ class SnapshotCamera:
                     optics=self.optics,
                     robot=self.robot,
                     rng=self._rng,
+                    lit=lit,
                 )
-                self._rendered = (snapshot.tick, images)
-            return self._rendered[1][side]
+            return images[side]
+
+    @staticmethod
+    def _lit(snapshot: Snapshot, now: float) -> BoolArray:
+        """Whose LEDs shine at ``now``: all but the flashing ones in the dark half of their
+        period."""
+        lit = np.ones(snapshot.ids.size, dtype=np.bool_)
+        if snapshot.flashing is not None and snapshot.flashing.any():
+            flashing = np.flatnonzero(snapshot.flashing)
+            phase = np.mod(snapshot.ids[flashing] * GOLDEN_FRACTION, 1.0)
+            lit[flashing] = lit_at(now, phase)
+        return lit
 
     def close(self) -> None:
         """Nothing to release."""
@@ -217,7 +246,13 @@ class MockBody:
                 )
                 if perception is None:
                     continue
-                answer = Command(self.robot_id, perception.tick, self.fins.gains, self.leds.lit)
+                answer = Command(
+                    self.robot_id,
+                    perception.tick,
+                    self.fins.gains,
+                    self.leds.lit,
+                    flashing=True if self.leds.flashing else None,
+                )
                 remote.put(keys.command(self.robot_id), encode(answer))
 
     def _take_snapshot(self, key: str, payload: bytes) -> None:

@@ -208,6 +208,8 @@ class World:
         self._broadcasts = np.zeros(0, dtype=np.int64)
         """How many broadcasts each of them sent (rows alike)."""
         self._announced = 0
+        self._flashing: set[int] = set()
+        """The fish whose last command said their LEDs flash (robots flagging by light)."""
         self._formation: str | None = None
         """The formation an operator asked for (it overrides the scenario's switch)."""
         self._report: ChannelReport | None = None
@@ -693,6 +695,9 @@ class World:
             self.sim.effort,
             self._told(time) if forming else None,
             self.run_id,
+            among(np.array(sorted(self._flashing), dtype=np.int64), self.sim.ids)
+            if self._flashing
+            else None,
         )
         self._put(bus, self.keys.snapshot, encode(snapshot))
 
@@ -855,6 +860,12 @@ class World:
             key, payload, Command, field="fish_id", owner=int(sender)
         )
         if command is not None:
+            # A robot's LEDs are its own, whatever tick its command answers: the cameras of
+            # the other robots see them flash from now on.
+            if command.flashing:
+                self._flashing.add(command.fish_id)
+            else:
+                self._flashing.discard(command.fish_id)
             self._accept(
                 key,
                 command.tick,

@@ -277,6 +277,17 @@ class HeardFlags:
     fewest_hops: IntArray
 
 
+def flag_by_light(own: FormationFlag) -> FormationFlag:
+    """What a robot learns from a neighbour whose LEDs flash, as a formation flag: the
+    neighbour holds its place (:mod:`fishswarm.bluebot.flashes`).
+
+    The light says nothing else. The flag takes the shape and orientation of the robot's
+    own last flag (the robots of a tank take one formation), no slot (so no swap of places
+    is asked of it), no hops from a leader, and no effort.
+    """
+    return FormationFlag(own.shape, -1, True, NO_HOPS, own.heading_mdeg, 0)
+
+
 def _heard_flags(inbox: Inbox, params: FormationParams) -> HeardFlags:
     """What the flags of this formation in the inbox say (nothing with flags off)."""
     shape = FORMATION_SHAPES.index(params.shape)

@@ -162,20 +162,38 @@ class GpioLeds:
 
     def __init__(self, *, wiring: Wiring = Wiring(), pin_factory: Any = None) -> None:
         self._device = _output_device(wiring.led_pin, pin_factory)
+        self._flashing = 0.0
 
     @property
     def lit(self) -> bool:
-        """Whether the LEDs are on."""
+        """Whether the LEDs are on now (a flashing LED is on half of the time)."""
         return bool(self._device.value)
 
+    @property
+    def flashing(self) -> float:
+        """The frequency the LEDs flash at, Hz (0: not flashing)."""
+        return self._flashing
+
     def set_lit(self, lit: bool) -> None:
-        """Switch the LEDs on or off."""
+        """Switch the LEDs on or off (a flashing stops)."""
+        self._flashing = 0.0
         if lit:
             self._device.on()
         else:
             self._device.off()
 
+    def set_flashing(self, frequency: float) -> None:
+        """Flash the LEDs at ``frequency`` Hz, lit for the first half of each period (by
+        gpiozero's own background thread, which keeps the rhythm whatever the event loop
+        does)."""
+        if not (math.isfinite(frequency) and frequency > 0):
+            raise ValueError(f"frequency must be a positive number of Hz, got {frequency}")
+        half = 0.5 / frequency
+        self._flashing = float(frequency)
+        self._device.blink(on_time=half, off_time=half, n=None, background=True)
+
     def close(self) -> None:
         """Switch the LEDs off and release the pin."""
+        self._flashing = 0.0
         self._device.off()
         self._device.close()

@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from fishswarm.bluebot.blobs import find_blobs
 from fishswarm.bluebot.fisheye import Fisheye, camera_position, camera_to_body
+from fishswarm.bluebot.flashes import match_sightings
 from fishswarm.bluebot.parameters import LED_SPACING
 from fishswarm.bluebot.ports import CameraSide
 
@@ -363,17 +364,12 @@ def perceive_leds(
 
 def _merge_cameras(estimates: list[FloatArray], fraction: float) -> FloatArray:
     """One neighbour for each one both cameras saw (the mean of the two estimates)."""
-    if len(estimates) != 2 or estimates[0].size == 0 or estimates[1].size == 0:
+    if len(estimates) != 2:
         return np.concatenate([e.reshape(-1, 3) for e in estimates] or [np.zeros((0, 3))])
     first, second = estimates
-    gap = np.linalg.norm(first[:, None, :] - second[None, :, :], axis=2)
-    reach = np.maximum(0.05, fraction * np.linalg.norm(first, axis=1))[:, None]
-    kept_second = np.ones(second.shape[0], dtype=bool)
+    rows, partners = match_sightings(first, second, fraction=fraction)
     merged = first.copy()
-    for row in range(first.shape[0]):
-        candidates = np.flatnonzero((gap[row] <= reach[row, 0]) & kept_second)
-        if candidates.size:
-            partner = int(candidates[np.argmin(gap[row, candidates])])
-            merged[row] = (first[row] + second[partner]) / 2
-            kept_second[partner] = False
-    return np.concatenate([merged, second[kept_second]])
+    merged[rows] = (first[rows] + second[partners]) / 2
+    kept_second = np.ones(second.shape[0], dtype=bool)
+    kept_second[partners] = False
+    return np.concatenate([merged, second[kept_second]]).reshape(-1, 3)

@@ -40,7 +40,12 @@ class Leds(Protocol):
     """The three LEDs, on one switch."""
 
     def set_lit(self, lit: bool) -> None:
-        """Switch the LEDs on or off."""
+        """Switch the LEDs on or off (a flashing stops)."""
+        ...
+
+    def set_flashing(self, frequency: float) -> None:
+        """Flash the LEDs at ``frequency`` Hz, lit for the first half of each period, until
+        the next call of either method."""
         ...
 
     def close(self) -> None:

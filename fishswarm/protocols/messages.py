@@ -147,14 +147,18 @@ class Command(Message):
         led: whether the LEDs are on.
         broadcasts: how many outbox messages the fish sent for this tick (the channel and the
             world wait for exactly that many).
+        flashing: a robot's LEDs flash — its formation flag by light (None: they do not;
+            only a mock robot's body tells the world, so that other robots' cameras show it).
     """
 
     type_name: ClassVar[str] = "command"
+    added_later: ClassVar[frozenset[str]] = frozenset({"flashing"})
     fish_id: int
     tick: int
     fins: FloatArray
     led: bool = True
     broadcasts: int = 0
+    flashing: bool | None = None
 
     def __post_init__(self) -> None:
         check_int("fish_id", self.fish_id)
@@ -165,6 +169,8 @@ class Command(Message):
         if not isinstance(self.led, bool):
             raise TypeError(f"led must be a bool, got {type(self.led).__name__}")
         check_int("broadcasts", self.broadcasts, high=MAX_ROWS)
+        if self.flashing is not None and not isinstance(self.flashing, bool):
+            raise TypeError(f"flashing must be a bool or None, got {type(self.flashing).__name__}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -411,9 +417,12 @@ class Snapshot(Message):
         formation: the shape formation fish are told to take at this tick, after a switch
             (None: as configured, or not a formation run).
         run: the world's run id, as its perceptions carry it (0: not told).
+        flashing: (N,) whose LEDs flash (robots flagging by light, as their commands say);
+            None: no one's.
     """
 
     type_name: ClassVar[str] = "snapshot"
+    added_later: ClassVar[frozenset[str]] = frozenset({"flashing"})
     tick: int
     time: float
     ids: IntArray
@@ -425,6 +434,7 @@ class Snapshot(Message):
     effort: FloatArray | None = None
     formation: str | None = None
     run: int = 0
+    flashing: BoolArray | None = None
 
     def __post_init__(self) -> None:
         _check_formation(self.formation)
@@ -442,6 +452,8 @@ class Snapshot(Message):
             check_array(self, "effort", np.float64, None, rows=count)
             if (self.effort < 0).any():
                 raise ValueError("effort must not be negative")
+        if self.flashing is not None:
+            check_array(self, "flashing", np.bool_, None, rows=count)
         check_ids(self.ids)
 
 

@@ -25,6 +25,7 @@ from fishswarm.bluebot.parameters import LED_POSITIONS, BlueBot
 from fishswarm.bluebot.ports import CAMERA_SIDES, CameraSide
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 _WATER_INDEX = 1.333
 
@@ -115,6 +116,7 @@ def render_views(
     optics: Optics,
     robot: BlueBot,
     rng: np.random.Generator,
+    lit: BoolArray | None = None,
 ) -> dict[CameraSide, NDArray[np.uint8]]:
     """Both camera images of fish ``viewer``.
 
@@ -126,17 +128,22 @@ def render_views(
         optics: LEDs and water.
         robot: body dimensions (the occluding ellipsoids).
         rng: the stream of the viewer's sensor noise.
+        lit: (N,) whether each fish's LEDs shine (a flashing fish's are dark for half of
+            each flash period); None: all shine. A dark fish's body still hides what lies
+            behind it.
 
     Returns:
         The left and right image, each (H, W, 3) RGB uint8.
     """
     others = np.flatnonzero(np.arange(position.shape[0]) != viewer)
+    shining = np.ones(others.size, dtype=bool) if lit is None else np.asarray(lit)[others]
     rotation = _rotation(yaw)
     leds = np.asarray(LED_POSITIONS)
     sources = (
         position[others, None, :] + np.einsum("nij,lj->nli", rotation[others], leds)
     ).reshape(-1, 3)
     owners = np.repeat(np.arange(others.size), leds.shape[0])
+    lights = shining[owners]
     semi_axes = np.array([robot.length, robot.width, robot.height]) / 2
     inverse = np.transpose(rotation[others], (0, 2, 1)) / semi_axes[None, :, None]
     centres = position[others]
@@ -147,6 +154,7 @@ def render_views(
         inverse = np.concatenate([inverse, inverse * mirror[None, None, :]])
         sources = np.concatenate([sources, mirrored])
         owners = np.concatenate([owners, owners + others.size])
+        lights = np.concatenate([lights, lights])
     images: dict[CameraSide, NDArray[np.uint8]] = {}
     for side in CAMERA_SIDES:
         camera = position[viewer] + rotation[viewer] @ camera_position(side)
@@ -158,7 +166,7 @@ def render_views(
             strength[half:] *= fresnel_reflectance(offsets[half:, 2] / distance[half:])
         to_camera = (rotation[viewer] @ camera_to_body(side)).T
         pixels, inside = fisheye.ray_to_pixel(offsets @ to_camera.T)
-        inside &= distance > 1e-6
+        inside &= (distance > 1e-6) & lights
         inside[inside] &= ~_blocked(camera, sources[inside], owners[inside], centres, inverse)
         images[side] = _expose(
             pixels[inside],

@@ -4,6 +4,7 @@ loss, operators' orders and the bridge."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Iterator
 
 import numpy as np
@@ -21,6 +22,7 @@ from fishswarm.actors.driver import (  # noqa: E402
     SensorUnavailable,
 )
 from fishswarm.actors.fish import Fish, FishSettings  # noqa: E402
+from fishswarm.behaviors.formation import NO_HOPS, flag_by_light  # noqa: E402
 from fishswarm.bluebot.fisheye import Fisheye  # noqa: E402
 from fishswarm.bluebot.gpio import GpioFins, GpioLeds  # noqa: E402
 from fishswarm.bluebot.parameters import BlueBot, Wiring  # noqa: E402
@@ -29,10 +31,12 @@ from fishswarm.bluebot.vision import to_body  # noqa: E402
 from fishswarm.protocols.codec import decode, encode  # noqa: E402
 from fishswarm.protocols.keys import KeySpace  # noqa: E402
 from fishswarm.protocols.messages import (  # noqa: E402
+    FORMATION_SHAPES,
     Broadcast,
     Command,
     Delivery,
     FishAbout,
+    FormationFlag,
     Perception,
     RobotOrder,
     RobotStatus,
@@ -435,13 +439,17 @@ def test_broadcasts_go_out_and_deliveries_come_in_announced(hardware: Hardware) 
             await perceptions.receive()  # the first perception, at start
             broadcast = encode(Broadcast(ROBOT, 1, "signal", np.array([7])))
             local.put(KEYS.outbox(ROBOT), broadcast)
-            delivery = Delivery(ROBOT, 1, "signal", np.array([9]), np.array([0.3, 0.0, 0.0]))
+            # A simulated channel numbers its deliveries by its world's ticks (here 57); the
+            # fish acts on it at the driver's next perception (tick 1), and waits for it
+            # under that perception's tick.
+            delivery = Delivery(ROBOT, 57, "signal", np.array([9]), np.array([0.3, 0.0, 0.0]))
             remote.put(KEYS.inbox(ROBOT), encode(delivery))
             remote.put(KEYS.inbox(ROBOT), b"garbage")
             _, got = await incoming.receive()
             _, payload = await perceptions.receive()
             sent = [p for _, p in outgoing.drain()]
-            assert decode(got, Delivery) == delivery
+            assert decode(got, Delivery) == dataclasses.replace(delivery, tick=1)
+            assert decode(payload, Perception).tick == 1
             nursery.cancel_scope.cancel()
         assert driver.statistics().rejected == 1
         return sent, decode(payload, Perception)
@@ -645,3 +653,115 @@ def test_an_operators_formation_order_reaches_the_fish_in_its_next_perception(
     else:  # taken in and counted as an order, and let go
         assert set(told) == {None} and set(reported) == {None}
         assert orders == 3  # its own three: the one for another robot is not its
+
+
+# The robot, a steady neighbour ahead to its right, and one 0.4 m to its left whose LEDs flash.
+FLASHER = np.array([[0.8, 0.4, 0.5]])
+
+
+class FlashingSceneCamera:
+    """Both cameras seeing the steady neighbour and a flasher: a camera's first image shows
+    the flasher lit, its next dark, and so on."""
+
+    def __init__(self) -> None:
+        scene = np.concatenate([POSITION, FLASHER])
+        yaw = np.append(YAW, 0.5)
+        self.images = [self._render(scene, yaw, lit) for lit in (True, False)]
+        self.taken = {"left": 0, "right": 0}
+
+    @staticmethod
+    def _render(scene: np.ndarray, yaw: np.ndarray, lit: bool) -> dict[CameraSide, np.ndarray]:
+        return render_views(
+            scene, yaw, 0, fisheye=Fisheye(), optics=Optics(), robot=BlueBot(),
+            rng=np.random.default_rng(0), lit=np.array([True, True, lit]),
+        )  # fmt: skip
+
+    def capture(self, side: CameraSide) -> np.ndarray:
+        image = self.images[self.taken[side] % 2][side]
+        self.taken[side] += 1
+        return image
+
+    def close(self) -> None:
+        pass
+
+
+def flag(joined: bool, tick: int) -> bytes:
+    shape = FORMATION_SHAPES.index("triangle")
+    values = FormationFlag(shape, 2, joined, 1, 45_000, tick + 1, 30).values()
+    return encode(Broadcast(ROBOT, tick, "formation", values))
+
+
+def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flashers_it_sees(
+    factory: object,
+) -> None:
+    """The driver plays the channel's part by light: the fish's flag, joined, flashes the
+    LEDs at 15 Hz; a neighbour seen in only one of two frames half a flash period apart
+    comes to the fish as a flag where the cameras see it, announced in its perception."""
+    hardware = Hardware(
+        GpioFins(pin_factory=factory),
+        GpioLeds(pin_factory=factory),
+        FlashingSceneCamera(),
+        FixedDepth(),
+    )
+    leds: GpioLeds = hardware.leds  # type: ignore[assignment]
+    lights: list[tuple[bool, float]] = []
+
+    async def main() -> tuple[list[Perception], list[Delivery], Driver]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True], command_timeout=10.0, behavior="formation")
+        perceptions: list[Perception] = []
+        async with (
+            subscription(local, KEYS.perception(ROBOT)) as perceived,
+            subscription(local, KEYS.inbox(ROBOT)) as inbox,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(driver.run, local, remote)
+
+            async def answer(*flags: bytes, broadcasts: int) -> None:
+                perception = decode((await perceived.receive())[1], Perception)
+                perceptions.append(perception)
+                for payload in flags:
+                    local.put(KEYS.outbox(ROBOT), payload)
+                local.put(
+                    KEYS.command(ROBOT),
+                    encode(Command(ROBOT, perception.tick, np.zeros(4), broadcasts=broadcasts)),
+                )
+                await trio.sleep(0.01)
+                lights.append((leds.lit, leds.flashing))
+
+            await answer(flag(True, 0), broadcasts=1)  # tick 0: joined → flashing
+            await answer(broadcasts=0)  # tick 1: no flag → steady
+            await answer(flag(False, 2), broadcasts=1)  # tick 2: seeking → steady
+            await answer(flag(True, 3), broadcasts=1)  # tick 3: joined again
+            remote.put(KEYS.robot_order, encode(RobotOrder("stop")))
+            await trio.sleep(0.01)
+            lights.append((leds.lit, leds.flashing))
+            local.put(KEYS.outbox(ROBOT), flag(True, 4))  # a flag while stopped
+            await trio.sleep(0.01)
+            lights.append((leds.lit, leds.flashing))
+            deliveries = [decode(payload, Delivery) for _, payload in inbox.drain()]
+            nursery.cancel_scope.cancel()
+        return perceptions, deliveries, driver
+
+    try:
+        perceptions, deliveries, driver = run_mock(main)
+    finally:
+        hardware.close()
+    assert [flashing for _, flashing in lights] == [15.0, 0.0, 0.0, 15.0, 0.0, 0.0]
+    assert [lit for lit, _ in lights[1:3]] == [True, True]  # steady, as the command says
+    assert [lit for lit, _ in lights[4:]] == [False, False]  # an operator's stop: dark
+    # Each camera takes two frames, and the flasher is lit in one of them: always one of
+    # the neighbours, and a flag for the fish once it flags itself (its shape is the one
+    # the flag by light takes). At tick 0 it had not flagged yet, at tick 2 it flagged
+    # nothing at its last decision.
+    assert [p.inbox_count for p in perceptions] == [0, 1, 0, 1]
+    assert [p.neighbors.shape[0] for p in perceptions] == [2, 2, 2, 2]
+    assert [d.tick for d in deliveries] == [1, 3]
+    own = FormationFlag.from_values(decode(flag(True, 0), Broadcast).values)
+    for delivery in deliveries:
+        assert delivery.kind == "formation" and delivery.receiver_id == ROBOT
+        assert FormationFlag.from_values(delivery.values) == flag_by_light(own)
+        truth = to_body((FLASHER - POSITION[0])[None], YAW[:1])[0, 0]
+        np.testing.assert_allclose(delivery.sender_position, truth, rtol=0.05, atol=0.02)
+    assert flag_by_light(own) == FormationFlag(own.shape, -1, True, NO_HOPS, 45_000, 0)
+    assert driver.statistics().flags_seen == 2

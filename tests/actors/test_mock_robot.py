@@ -133,3 +133,39 @@ def test_the_mock_camera_renders_once_per_snapshot_and_again_for_the_next() -> N
     moved = camera.capture("right")
     assert moved is not first and not np.array_equal(moved, first)
     assert camera.capture("right") is moved
+
+
+def test_the_mock_camera_shows_a_flashing_robot_lit_half_of_each_flash_period() -> None:
+    """A robot the snapshot names as flashing is lit when the capture's time falls in the
+    first half of its flash period (from a phase fixed by its id) and dark in the second;
+    the others shine all the time. Each set of lit LEDs is rendered once per snapshot."""
+    from fishswarm.actors.mock_robot import GOLDEN_FRACTION, SnapshotCamera
+    from fishswarm.bluebot.flashes import FRAME_GAP
+    from fishswarm.bluebot.leds import LedVision, perceive_leds
+
+    # The viewer 3 facing +x; 4 ahead and 5 to its right, both 0.6 m away.
+    ids = np.array([3, 4, 5])
+    position = np.array([[0.9, 0.9, 0.5], [1.5, 0.9, 0.5], [0.9, 1.5, 0.5]])
+    three = np.zeros(3)
+    flashing = Snapshot(
+        0, 0.0, ids, position, np.zeros((3, 3)), three, np.zeros(3, dtype=np.int64),
+        np.zeros(3, dtype=np.int64), three, flashing=np.array([False, False, True]),
+    )  # fmt: skip
+    clock = Clock()
+    feed = WorldFeed(3, clock=clock)
+    camera = SnapshotCamera(feed, clock=clock)
+    feed.take(flashing)
+    period = 2 * FRAME_GAP
+    start = (5 * GOLDEN_FRACTION) % 1.0 * period  # robot 5's period starts here
+
+    def seen_at(time: float) -> int:
+        clock.now = time
+        images = {side: camera.capture(side) for side in ("left", "right")}
+        return perceive_leds(images, depth=0.5, fisheye=camera.fisheye, vision=LedVision()).shape[0]  # type: ignore[arg-type]
+
+    assert seen_at(start + 0.1 * period) == 2  # lit
+    assert seen_at(start + 0.6 * period) == 1  # dark: only robot 4
+    assert seen_at(start + 1.2 * period) == 2
+    lit_again = camera.capture("right")
+    clock.now = start + 2.3 * period
+    assert camera.capture("right") is lit_again  # the same LEDs lit: not rendered again

@@ -25,9 +25,10 @@ from fishswarm.actors.robot import (
     survey_fleet,
 )
 from fishswarm.actors.security import init_secure, session_security
+from fishswarm.bluebot.gpio import GpioLeds
 from fishswarm.protocols.codec import decode
 from fishswarm.protocols.keys import KeySpace
-from fishswarm.protocols.messages import RobotStatus
+from fishswarm.protocols.messages import RobotStatus, Snapshot
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.recording import read_recording
 from tests.conftest import free_port, open_client_bus, run_trio, subscription, wait_for_port
@@ -105,6 +106,7 @@ def beating(driver: Driver) -> bool:
     return any(f > 0 for f in fins.frequencies)
 
 
+@pytest.mark.slow
 def test_mock_robots_join_obey_a_stop_and_survive_losing_the_router(
     tmp_path: Path, worlds: list[subprocess.Popen[str]]
 ) -> None:
@@ -232,6 +234,7 @@ def test_a_mock_robot_vouches_for_itself_and_joins_a_secured_swarm(
     assert ids == {0, 1, 2, 10}
 
 
+@pytest.mark.slow
 def test_fishswarm_formation_switches_robots_that_have_no_world_and_names_those_that_did_not(
     worlds: list[subprocess.Popen[str]],
 ) -> None:
@@ -291,3 +294,71 @@ def test_fishswarm_formation_switches_robots_that_have_no_world_and_names_those_
         text
     )
     assert "formation diamond on robots 10, 11" in text
+
+
+@pytest.mark.slow
+def test_two_mock_robots_in_a_formation_flag_to_each_other_by_light(
+    worlds: list[subprocess.Popen[str]],
+) -> None:
+    """Robots have no simulated channel: a robot whose fish holds its place flashes its
+    LEDs, the world names it flashing in its snapshots, and the other robot's cameras,
+    rendered from them, see it flash — its driver hands its fish the flag. Two robots 0
+    and 1 are the whole school of a world of two formation fish."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    worlds.append(fishswarm("router", "--listen", endpoint))
+    wait_for_port(port)
+    world = ["world", "--connect", endpoint, "--fish", "2", "--behavior", "formation"]
+    worlds.append(
+        fishswarm(*world, "--time", "realtime", "--period", str(PERIOD), "--duration", "60",
+                  "--spawn-radius", "0.5", "--quiet")
+    )  # fmt: skip
+    named: set[int] = set()
+
+    async def main() -> tuple[set[int], set[int], float]:
+        async with trio.open_nursery() as nursery:
+            robots: list[Driver] = [
+                await nursery.start(run_robot, settings(robot_id, endpoint, "formation"))
+                for robot_id in (0, 1)
+            ]
+            async with open_client_bus(endpoint, 5.0) as base:
+
+                def take(key: str, payload: bytes) -> None:
+                    snapshot = decode(payload, Snapshot)
+                    if snapshot.flashing is not None:
+                        named.update(snapshot.ids[snapshot.flashing].tolist())
+
+                base.subscribe(KEYS.snapshot, take)
+                took = await until(
+                    lambda: (
+                        any(flashing(r) for r in robots)
+                        and any(r.statistics().flags_seen > 0 for r in robots)
+                        and named
+                    ),
+                    timeout=30,
+                )
+                flashers = {r.settings.robot_id for r in robots if flashing(r)}
+                seers = {r.settings.robot_id for r in robots if r.statistics().flags_seen > 0}
+            nursery.cancel_scope.cancel()
+        return flashers, seers, took
+
+    flashers, seers, took = run_trio(main, timeout=90)
+    # The robot that flashes is named so by the world; the other sees its flag (a robot
+    # may both flash and see, once both hold their places).
+    assert flashers and seers and named and named <= {0, 1}, (flashers, seers, named, took)
+
+
+def flashing(driver: Driver) -> bool:
+    leds = driver.hardware.leds
+    assert isinstance(leds, GpioLeds)
+    return leds.flashing > 0
+
+
+def fishswarm(*words: str) -> subprocess.Popen[str]:
+    """A ``fishswarm`` command in its own process, its errors kept."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "fishswarm", *words],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )

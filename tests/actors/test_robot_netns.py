@@ -89,6 +89,7 @@ class Lines:
         return next((t - start for t, line in self.lines if t >= start and text in line), None)
 
 
+@pytest.mark.slow
 def test_a_robot_whose_link_is_cut_stops_its_fins_and_rejoins_when_it_returns(
     tmp_path: Path, link: Link
 ) -> None:

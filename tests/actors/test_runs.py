@@ -57,6 +57,7 @@ def test_actor_and_batch_engines_give_the_same_trajectories() -> None:
         "formation-energy",
     ],
 )
+@pytest.mark.slow
 def test_experiment_command_end_to_end(
     name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

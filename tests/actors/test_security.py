@@ -408,6 +408,7 @@ def test_a_secured_run_with_an_observer_that_tries_to_steer_it_equals_a_clean_ru
     np.testing.assert_array_equal(observed["pos"], simulate_batch(scenario).position)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("vouched_only", [True, False])
 def test_a_fake_fish_shown_by_a_liveliness_token_is_not_admitted_to_a_secured_run(
     secure_dir: Path, tmp_path: Path, vouched_only: bool, monkeypatch: pytest.MonkeyPatch

@@ -69,6 +69,7 @@ def test_25_fish_run_moves_the_mean_distance_the_right_way(
     assert (tmp_path / "run.json").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("behavior", "sign"), [("dispersion", 1), ("aggregation", -1)])
 def test_25_fish_seeing_through_their_cameras_still_disperse_and_aggregate(
     behavior: str, sign: int, endpoint: str, tmp_path: Path
@@ -102,6 +103,7 @@ def test_camera_vision_runs_the_same_over_zenoh_as_in_the_batch_engine(
     assert 0.5 < sight["recall"] <= 1.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("time_mode", ["lockstep", "jitter"])
 def test_a_large_swarm_runs_over_zenoh_as_in_the_batch_engine(
     endpoint: str, tmp_path: Path, time_mode: str

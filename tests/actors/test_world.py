@@ -319,6 +319,46 @@ def test_the_world_waits_for_a_slow_fish_at_every_tick() -> None:
     assert run_mock(main) == [0.0, 4.0, 8.0, 12.0]
 
 
+def test_the_snapshot_names_the_robots_whose_commands_say_their_leds_flash() -> None:
+    """A robot's LEDs are its own: the world names it flashing from its command that says
+    so until one that does not, whatever tick the command answers, so that other robots'
+    cameras show it; with no one flashing the snapshot says nothing of it."""
+    scenario = Scenario(fish=2, duration=4.0, seed=1)
+    keys = scenario.keys
+
+    async def main() -> list[list[bool] | None]:
+        bus = MemoryBus()
+        world = World(
+            WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0, turn_delay=0.0)
+        )
+        told: list[list[bool] | None] = []
+
+        def take(key: str, payload: bytes) -> None:
+            flashing = decode(payload, Snapshot).flashing
+            told.append(None if flashing is None else flashing.tolist())
+
+        bus.subscribe(keys.snapshot, take)
+        async with (
+            subscription(bus, keys.perception(0)) as first,
+            subscription(bus, keys.perception(1)) as second,
+            open_token(bus, keys.alive("fish", 0)),
+            open_token(bus, keys.alive("fish", 1)),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(world.run, bus)
+            # Fish 1 flashes from tick 1 to tick 2; fish 0 never.
+            for flashing in (None, True, True, None):
+                for fish, perceptions in ((0, first), (1, second)):
+                    tick = decode((await perceptions.receive())[1], Perception).tick
+                    said = flashing if fish == 1 else None
+                    command = Command(fish, tick, np.zeros(4), flashing=said)
+                    bus.put(keys.command(fish), encode(command))
+        return told
+
+    told = run_mock(main)
+    assert told[:5] == [None, None, [False, True], [False, True], None]
+
+
 def test_a_schools_commands_are_taken_only_for_its_own_awaited_fish() -> None:
     # School "t" holds fish 0, 1 and 2; fish 3 is on its own keys. At tick 0 the school
     # sends a batch naming fish 3 (misaddressed), one for tick 1 (stale), fish 0 and 2

@@ -264,6 +264,7 @@ def test_an_answer_on_the_scenario_key_that_is_no_run_settings_is_refused_with_w
     run_trio(main)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("pulse_period", [0.1, 60.0])
 def test_a_slow_world_keeps_its_fish_swimming_by_its_pulse(
     endpoint: str, monkeypatch: pytest.MonkeyPatch, pulse_period: float

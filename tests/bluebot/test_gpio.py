@@ -103,6 +103,34 @@ def test_leds_follow_commands(factory: object) -> None:
     assert not pin.state
 
 
+def test_flashing_leds_switch_every_half_period_until_told_otherwise(factory: object) -> None:
+    leds = GpioLeds(pin_factory=factory)
+    pin = factory.pin(Wiring().led_pin)  # type: ignore[attr-defined]
+    try:
+        pin.clear_states()
+        # 5 Hz: lit 0.1 s, dark 0.1 s (the driver flashes at 15 Hz; slower here so that the
+        # test's timing tolerance holds on a busy machine).
+        leds.set_flashing(5.0)
+        assert leds.flashing == 5.0
+        time.sleep(0.45)
+        leds.set_lit(True)
+        assert leds.flashing == 0.0 and pin.state
+        states = len(pin.states)
+        time.sleep(0.15)
+        assert len(pin.states) == states  # steady: no more switches
+        with pytest.raises(ValueError, match="positive number of Hz"):
+            leds.set_flashing(0.0)
+    finally:
+        leds.close()
+    assert not pin.state and leds.flashing == 0.0
+    # The pin's history (each state with the time since the one before): off when made,
+    # on at once, then a switch every 0.1 s.
+    flashed = pin.states[:6]
+    assert [state.state for state in flashed] == [False, True, False, True, False, True]
+    gaps = [state.timestamp for state in flashed[2:]]
+    np.testing.assert_allclose(gaps, [0.1, 0.1, 0.1, 0.1], atol=0.04)
+
+
 def test_a_fin_told_its_gains_again_and_again_keeps_its_beat(factory: object) -> None:
     """Gains every 0.1 s, more often than the 0.5-s half period of a 1-Hz fin: each repeat
     must not push the next switch away, or the fin would stall."""

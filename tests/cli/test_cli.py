@@ -36,6 +36,7 @@ def _outputs(tmp_path: Path, summary: Path) -> list[str]:
     return ["--listen", listen, "--record", str(tmp_path / "r.mcap"), "--summary", str(summary)]
 
 
+@pytest.mark.slow
 def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -> None:
     record, summary = tmp_path / "run.mcap", tmp_path / "run.json"
     result = _run(
@@ -236,6 +237,7 @@ def test_a_secured_command_listens_and_connects_over_tls_by_default(tmp_path: Pa
     assert (robots.connect, robots.listen) == ("tls/127.0.0.1:7447", 1.5)  # s, not a place
 
 
+@pytest.mark.slow
 def test_an_observer_with_no_world_to_watch_says_what_it_waits_for() -> None:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
@@ -294,6 +296,7 @@ def test_a_crowded_run_says_so_before_it_starts_and_runs_anyway(tmp_path: Path) 
     assert json.loads(summary.read_text())["scenario"]["spawn_region"] == "tank"
 
 
+@pytest.mark.slow
 def test_a_run_in_which_the_watchdog_stopped_fish_says_so_and_exits_4(tmp_path: Path) -> None:
     # Realtime at 1 Hz: perceptions (and the world's pulses) a second apart, against a
     # watchdog of 0.3 s: every fish is stopped between ticks.
@@ -374,6 +377,7 @@ def test_a_robot_that_cannot_open_its_hardware_or_configuration_says_so(tmp_path
     assert f"Zenoh configuration {broken} cannot be read" in result.stderr
 
 
+@pytest.mark.slow
 def test_a_non_recording_or_empty_file_fails_the_same_way_in_every_command(
     tmp_path: Path,
 ) -> None:
@@ -395,6 +399,7 @@ def test_a_non_recording_or_empty_file_fails_the_same_way_in_every_command(
             assert f"{path} {message}" in result.stderr
 
 
+@pytest.mark.slow
 def test_a_run_killed_outright_leaves_a_recording_readable_to_its_last_chunk(
     tmp_path: Path,
 ) -> None:
@@ -637,6 +642,7 @@ def test_a_formation_run_reports_its_shape_and_flags(tmp_path: Path) -> None:
     assert data["counts"]["deliveries"] >= 5 * 6 * 9
 
 
+@pytest.mark.slow
 def test_an_operator_pauses_resumes_and_stops_a_run_from_another_process(tmp_path: Path) -> None:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
@@ -707,6 +713,7 @@ def test_control_with_no_world_running_says_no_world_answered() -> None:
     )
 
 
+@pytest.mark.slow
 def test_an_operator_switches_a_running_schools_formation(tmp_path: Path) -> None:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"

@@ -47,6 +47,7 @@ def test_animate_draws_an_observers_recording_into_a_new_folder(tmp_path: Path) 
     assert out.read_bytes()[:6] in (b"GIF87a", b"GIF89a")
 
 
+@pytest.mark.slow
 def test_an_animation_plays_at_the_speed_asked_for(tmp_path: Path) -> None:
     # 12 s of run at 6× should play for 2 s (and one frame more, the last). At 15 fps a GIF
     # shows each frame 0.06 s, not 1/15 s: spaced by 1/15 s of play, the run played 10 %

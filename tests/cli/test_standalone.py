@@ -42,6 +42,7 @@ def started_commands() -> Iterator[Callable[..., subprocess.Popen[str]]]:
         end_processes(processes)
 
 
+@pytest.mark.slow
 def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: Path) -> None:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
@@ -110,6 +111,7 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
     assert any(e["role"] == "fish" for e in recording.events)
 
 
+@pytest.mark.slow
 def test_a_secured_swarm_runs_and_is_watched_as_a_plain_one(tmp_path: Path) -> None:
     import numpy as np
 
@@ -196,6 +198,7 @@ def test_a_secured_swarm_runs_and_is_watched_as_a_plain_one(tmp_path: Path) -> N
     np.testing.assert_array_equal(observed["pos"], reference.position)
 
 
+@pytest.mark.slow
 def test_sigterm_stops_each_actor_as_ctrl_c_does_and_keeps_the_worlds_recording(
     tmp_path: Path,
 ) -> None:
@@ -225,6 +228,7 @@ def test_sigterm_stops_each_actor_as_ctrl_c_does_and_keeps_the_worlds_recording(
     assert recording.complete and len(recording.snapshots) >= 5
 
 
+@pytest.mark.slow
 def test_a_world_says_when_it_loses_its_router_and_when_the_router_is_back() -> None:
     """The router dies in mid-run (a real-time run): the world says so at once, rather than
     only losing its fish one by one; a router back on the same address is said too."""
@@ -254,6 +258,7 @@ def test_a_world_says_when_it_loses_its_router_and_when_the_router_is_back() -> 
         assert world.wait(timeout=15) == 130
 
 
+@pytest.mark.slow
 def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_own_run(
     tmp_path: Path,
 ) -> None:
@@ -298,6 +303,7 @@ def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_ow
     assert {s.run for s in theirs.snapshots}.isdisjoint({s.run for s in own.snapshots})
 
 
+@pytest.mark.slow
 def test_two_worlds_started_together_before_their_fish_both_run_one_after_the_other(
     tmp_path: Path,
 ) -> None:
@@ -342,6 +348,7 @@ def test_two_worlds_started_together_before_their_fish_both_run_one_after_the_ot
     assert len({s.run for run in runs for s in run.snapshots}) == 2
 
 
+@pytest.mark.slow
 def test_a_standalone_channel_takes_each_runs_loss_and_seed_from_its_world(
     tmp_path: Path,
 ) -> None:

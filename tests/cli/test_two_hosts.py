@@ -129,6 +129,7 @@ def _run_two_hosts(
         end_processes(processes)
 
 
+@pytest.mark.slow
 def test_workers_on_another_host_give_the_one_host_trajectory_on_fast_and_slow_links(
     two_hosts: tuple[str, str, str], tmp_path: Path
 ) -> None:

@@ -110,6 +110,7 @@ def test_a_recording_is_replayed_on_a_page_served_from_this_machine(tmp_path: Pa
         _stop(process, lines)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(browser_missing() is not None, reason=str(browser_missing()))
 def test_the_live_view_shows_the_fish_moving_in_a_real_browser(tmp_path: Path) -> None:
     port = free_port()
@@ -132,6 +133,7 @@ def test_the_live_view_shows_the_fish_moving_in_a_real_browser(tmp_path: Path) -
         run.wait(timeout=10)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(browser_missing() is not None, reason=str(browser_missing()))
 def test_a_view_left_up_follows_the_swarms_next_run_in_a_real_browser(tmp_path: Path) -> None:
     """README's standing swarm (router and fish stay up, worlds come and go) watched by one
@@ -175,6 +177,7 @@ def test_a_view_left_up_follows_the_swarms_next_run_in_a_real_browser(tmp_path: 
         end_processes(processes)
 
 
+@pytest.mark.slow
 def test_a_view_left_up_tells_the_end_of_each_run_it_follows() -> None:
     """Two runs one after the other on a standing swarm, watched by one view (no browser):
     it says once when each ends, with the snapshots it showed of that run."""
@@ -230,6 +233,7 @@ def test_a_view_left_up_tells_the_end_of_each_run_it_follows() -> None:
         end_processes(processes)
 
 
+@pytest.mark.slow
 def test_a_view_with_no_world_to_follow_says_once_that_it_waits_for_one() -> None:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"

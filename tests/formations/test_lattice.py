@@ -57,6 +57,7 @@ def test_the_rule_agrees_with_the_observers_measure(count: int) -> None:
     np.testing.assert_array_equal(by_rule, _observed(_points(sites, 0.25), 0.25))
 
 
+@pytest.mark.slow
 def test_growth_leaves_at_most_two_fish_without_a_star() -> None:
     done = [sum(completes_star(s, set(star_sites(n))) for s in star_sites(n)) for n in range(1, 31)]
     # 1–3 fish make no star; a star needs four.

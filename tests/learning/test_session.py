@@ -100,6 +100,7 @@ def test_resume_needs_a_checkpoint(tmp_path: Path) -> None:
         load_replica(tmp_path / "missing.npz")
 
 
+@pytest.mark.slow
 def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     base = [
         sys.executable,
@@ -234,6 +235,7 @@ def test_the_target_judges_spacing_at_whole_seconds_5_to_15_and_the_final_speed(
     assert not slow["met"]
 
 
+@pytest.mark.slow
 def test_an_unbounded_run_resumes_with_the_radius_start_it_was_learned_with(
     tmp_path: Path,
 ) -> None:
@@ -252,6 +254,7 @@ def test_an_unbounded_run_resumes_with_the_radius_start_it_was_learned_with(
     assert json.loads((tmp_path / "summary.json").read_text())["generations"] == 3
 
 
+@pytest.mark.slow
 def test_learning_again_into_a_finished_run_needs_resume_or_force(tmp_path: Path) -> None:
     command = [
         sys.executable, "-m", "fishswarm", "learn", "--models", "4", "--classifiers", "4",

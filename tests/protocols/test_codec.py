@@ -631,3 +631,27 @@ def test_fields_added_later_stay_off_the_wire_while_unset() -> None:
     assert "formation" not in wire_fields(status) and decode(encode(status)) == status
     ordered = RobotOrder("formation", formation="column")
     assert "formation" in wire_fields(ordered) and decode(encode(ordered)) == ordered
+
+
+def test_which_leds_flash_stays_off_the_wire_until_a_robot_flashes() -> None:
+    """A command and a snapshot carry ``flashing`` only when a robot flashes its LEDs (its
+    formation flag by light): every other run sends what it sent before."""
+    import msgpack
+
+    def wire_fields(message: Message) -> set[str]:
+        return set(msgpack.unpackb(encode(message), raw=False, ext_hook=lambda c, d: d)["f"])
+
+    steady = Command(2, 5, np.zeros(4))
+    assert "flashing" not in wire_fields(steady) and decode(encode(steady)) == steady
+    flashing = Command(2, 5, np.zeros(4), flashing=True)
+    assert "flashing" in wire_fields(flashing)
+    assert decode(encode(flashing), Command).flashing is True
+    assert "flashing" not in wire_fields(_snapshot())
+    snapshot = _snapshot(flashing=np.array([False, True]))
+    assert decode(encode(snapshot), Snapshot).flashing.tolist() == [False, True]  # type: ignore[union-attr]
+    with pytest.raises(ValueError, match="flashing must have 2 rows"):
+        _snapshot(flashing=np.array([True]))
+    with pytest.raises(TypeError, match="flashing must be a boolean array"):
+        _snapshot(flashing=np.array([0, 1]))
+    with pytest.raises(TypeError, match="flashing must be a bool or None"):
+        Command(2, 5, np.zeros(4), flashing=1)  # type: ignore[arg-type]

@@ -76,6 +76,43 @@ def test_a_body_in_the_line_of_sight_hides_the_leds_behind_it() -> None:
     assert hidden.shape == near_only.shape  # only the near fish's LEDs are seen
 
 
+def test_a_fish_whose_leds_are_dark_shows_none_but_still_hides_what_lies_behind() -> None:
+    # The viewer; a far fish 1 m to its right; a near one 0.5 m to its right, broadside.
+    position = np.array([[0.5, 0.5, 0.6], [0.5, 1.5, 0.6], [0.5, 1.0, 0.6]])
+    yaw = np.array([0.0, 0.0, math.pi / 2])
+
+    def spots(
+        lit: list[bool], rows: tuple[int, ...] = (0, 1, 2), reflections: bool = False
+    ) -> np.ndarray:
+        images = render_views(
+            position[list(rows)], yaw[list(rows)], 0, fisheye=FISHEYE,
+            optics=Optics(reflections=reflections), robot=ROBOT,
+            rng=np.random.default_rng(0), lit=np.array(lit),
+        )  # fmt: skip
+        return blobs_of(images["right"])
+
+    near_lit = spots([True, True, True])
+    far_alone = spots([True, True], rows=(0, 1))
+    near_dark = spots([True, True, False])
+    assert near_lit.shape[0] == 3 and far_alone.shape[0] == 3
+    # The near fish dark: none of its LEDs, and of the far fish's only those its body does
+    # not hide (fewer than with the near fish gone), where they were.
+    assert 0 < near_dark.shape[0] < far_alone.shape[0]
+    assert all(np.linalg.norm(far_alone - spot, axis=1).min() < 0.5 for spot in near_dark)
+    # A dark fish's mirror images in the surface go dark with it (a fish seen at a grazing
+    # angle, whose mirror images are bright: see the next test).
+    shallow = np.array([[0.2, 0.2, 0.5], [0.2, 1.7, 0.2]])
+    for lit, seen in (([True, True], 6), ([True, False], 0)):
+        images = render_views(
+            shallow, np.zeros(2), 0, fisheye=FISHEYE, optics=Optics(), robot=ROBOT,
+            rng=np.random.default_rng(0), lit=np.array(lit),
+        )  # fmt: skip
+        assert blobs_of(images["right"]).shape[0] == seen
+    # Every fish but the viewer dark: nothing; the viewer's own entry is not looked at.
+    assert spots([True, False, False], reflections=True).shape[0] == 0
+    assert spots([False, True, True]).shape == near_lit.shape
+
+
 def test_the_surface_mirrors_leds_above_the_real_ones() -> None:
     # Seen at a grazing angle (beyond the critical angle) the mirror images are bright.
     position = np.array([[0.2, 0.2, 0.5], [0.2, 1.7, 0.2]])

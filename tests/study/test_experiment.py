@@ -206,6 +206,7 @@ def failing_first_seed(scenario: Scenario) -> tuple[np.ndarray, ...]:
     return simulate_on_batch_engine(scenario)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_a_failed_run_stops_the_sweep_and_returns_the_runs_that_finished(jobs: int) -> None:
     from fishswarm.study.sweep import SweepFailed, sweep_experiment
