@@ -203,6 +203,11 @@ class Observer:
         while self._last_tick < tick:
             await self._tick_reached.wait()
 
+    async def wait_for_world_left(self) -> None:
+        """Wait until the world of the run watched leaves the swarm (its liveliness token
+        gone, or a later run begun); its last snapshots may still be on their way."""
+        await self._world_left.wait()
+
     async def wait_for_world_end(self, *, settle: float = WORLD_END_SETTLE) -> None:
         """Wait until the world leaves the swarm and its last snapshots are in (bound it with
         a timeout).

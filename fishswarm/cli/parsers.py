@@ -536,7 +536,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="attach an observer to a running swarm",
         description="Watch a swarm's snapshots and liveliness from this or another machine; "
         "print progress and optionally record. Stops when the run ends (the world leaves), after "
-        "--ticks, or on Ctrl-C, and says what it saw.",
+        "--ticks, or on Ctrl-C, and says what it saw; exits 1 if it lost the router before the "
+        "run ended.",
     )
     _add_connect(observe)
     observe.add_argument(

@@ -535,13 +535,23 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                         await wait()
                         waiting.cancel_scope.cancel()
 
-                    waiting.start_soon(wait_then_stop, observer.wait_for_world_end)
+                    async def wait_for_world_end() -> None:
+                        await observer.wait_for_world_left()
+                        # A world's token is gone for everyone who loses the router too:
+                        # only a world that left while the router was there has ended.
+                        if not list(session.info.routers_zid()):
+                            router_lost.append(True)
+                            return
+                        await observer.wait_for_world_end()
+
+                    waiting.start_soon(wait_then_stop, wait_for_world_end)
                     if ticks is not None:
                         waiting.start_soon(wait_then_stop, lambda: observer.wait_for_tick(ticks))
                 nursery.cancel_scope.cancel()
             history[:] = observer.history
 
     history: list[Progress] = []
+    router_lost: list[bool] = []
     line = ProgressLine(sys.stderr)
     try:
         _run_trio(main)
@@ -554,6 +564,13 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
             f"{last.fish} fish at the end",
             file=sys.stderr,
         )
+    if router_lost:
+        print(
+            f"fishswarm observe: lost the router at {args.connect} before the run ended: what "
+            "became of the run is not known here (observe again once the router is back)",
+            file=sys.stderr,
+        )
+        return 1
     return 0
 
 

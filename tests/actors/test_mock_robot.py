@@ -142,6 +142,7 @@ def test_the_mock_camera_shows_a_flashing_robot_lit_half_of_each_flash_period() 
     from fishswarm.actors.mock_robot import GOLDEN_FRACTION, SnapshotCamera
     from fishswarm.bluebot.flashes import FRAME_GAP
     from fishswarm.bluebot.leds import LedVision, perceive_leds
+    from fishswarm.bluebot.ports import CAMERA_SIDES
 
     # The viewer 3 facing +x; 4 ahead and 5 to its right, both 0.6 m away.
     ids = np.array([3, 4, 5])
@@ -160,8 +161,9 @@ def test_the_mock_camera_shows_a_flashing_robot_lit_half_of_each_flash_period() 
 
     def seen_at(time: float) -> int:
         clock.now = time
-        images = {side: camera.capture(side) for side in ("left", "right")}
-        return perceive_leds(images, depth=0.5, fisheye=camera.fisheye, vision=LedVision()).shape[0]  # type: ignore[arg-type]
+        images = {side: camera.capture(side) for side in CAMERA_SIDES}
+        found = perceive_leds(images, depth=0.5, fisheye=camera.fisheye, vision=LedVision())
+        return int(found.shape[0])
 
     assert seen_at(start + 0.1 * period) == 2  # lit
     assert seen_at(start + 0.6 * period) == 1  # dark: only robot 4

@@ -93,9 +93,9 @@ def test_flashers_are_told_from_steady_lights_in_200_rendered_scenes() -> None:
     for _ in range(200):
         position, yaw = random_scene(rng)
         count = position.shape[0]
-        flashes = rng.random(count) < 0.5
+        flashes = rng.random((count,)) < 0.5
         flashes[0] = False
-        phase = rng.random(count)
+        phase = rng.random((count,))
         start = float(rng.uniform(0.0, 10.0))
         frames = []
         for time in (start, start + FRAME_GAP):

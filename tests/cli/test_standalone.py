@@ -231,7 +231,9 @@ def test_sigterm_stops_each_actor_as_ctrl_c_does_and_keeps_the_worlds_recording(
 @pytest.mark.slow
 def test_a_world_says_when_it_loses_its_router_and_when_the_router_is_back() -> None:
     """The router dies in mid-run (a real-time run): the world says so at once, rather than
-    only losing its fish one by one; a router back on the same address is said too."""
+    only losing its fish one by one; a router back on the same address is said too. An
+    observer of the run ends, exit 1, saying it lost the router before the run ended (the
+    world's token went with the router, which is no end of the run)."""
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     with started_commands() as start:
@@ -242,7 +244,10 @@ def test_a_world_says_when_it_loses_its_router_and_when_the_router_is_back() -> 
                       "--period", "0.2", "--time", "realtime", "--quiet")  # fmt: skip
         lines = Lines(world)
         lines.wait_for("world up on ", timeout=60)
-        time.sleep(1.0)
+        observer = start("observe", "--connect", endpoint)
+        watched = Lines(observer)
+        watched.wait_for("^observing swarm 'default'", timeout=30)
+        time.sleep(1.0)  # a few snapshots observed
         router.kill()
         router.wait(timeout=10)
         lines.wait_for(
@@ -250,6 +255,13 @@ def test_a_world_says_when_it_loses_its_router_and_when_the_router_is_back() -> 
             r"reach until it is back \(Ctrl-C to stop\)$",
             timeout=10,
         )
+        # The observer saw the world's token go with the router: not the run's end.
+        assert observer.wait(timeout=15) == 1, watched.seen
+        watched.wait_for(
+            rf"fishswarm observe: lost the router at {re.escape(endpoint)} before the run ended",
+            timeout=5,
+        )
+        watched.close()
         start("router", "--listen", endpoint)
         lines.wait_for(
             rf"^fishswarm world: the router at {re.escape(endpoint)} is back$", timeout=30
