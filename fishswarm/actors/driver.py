@@ -277,6 +277,8 @@ class Driver:
             commands=self._counts["commands"],
             failsafe_stops=self._counts["failsafe_stops"],
             formation=self._formation,
+            flashing=True if self._shown == (True, True) else None,
+            flags_seen=self._counts["flags_seen"] or None,
         )
 
     async def run(

@@ -130,6 +130,8 @@ def _as_dict(entry: FleetEntry) -> dict[str, object]:
         "version": status.version if status else None,
         "behavior": status.behavior if status else None,
         "formation": status.formation if status else None,
+        "flashing": bool(status.flashing) if status else None,
+        "flags_seen": (status.flags_seen or 0) if status else None,
         "state": status.state if status else None,
         "depth": status.depth if status else None,
         "link": status.link if status else None,
@@ -143,6 +145,7 @@ _COLUMNS = (
     ("version", "<8"),
     ("behavior", "<12"),
     ("state", "<9"),
+    ("light", "<5"),
     ("depth m", ">7"),
     ("link", "<4"),
     ("fins Hz", "<19"),
@@ -166,7 +169,7 @@ def fleet_table(fleet: list[FleetEntry]) -> str:
         if not entry.alive:
             seen += " (gone)"
         if status is None:
-            lines.append(_row([str(entry.robot_id), *["?"] * 7, seen]))
+            lines.append(_row([str(entry.robot_id), *["?"] * 8, seen]))
             continue
         temperature = status.cpu_temperature
         lines.append(
@@ -176,6 +179,7 @@ def fleet_table(fleet: list[FleetEntry]) -> str:
                     status.version,
                     status.behavior,
                     status.state,
+                    "flash" if status.flashing else "",
                     f"{status.depth:.2f}",
                     "up" if status.link else "down",
                     " ".join(f"{f:.1f}" for f in status.fin_frequencies),

@@ -683,10 +683,14 @@ class RobotStatus(Message):
         failsafe_stops: times its fins were stopped for lack of commands.
         formation: the shape an operator's order told its formation fish to take (None: as
             configured).
+        flashing: its LEDs flash: its fish holds its place, and says so by light (None:
+            they do not).
+        flags_seen: flashing neighbours its driver handed its fish as formation flags so far
+            (None: none).
     """
 
     type_name: ClassVar[str] = "robot_status"
-    added_later: ClassVar[frozenset[str]] = frozenset({"formation"})
+    added_later: ClassVar[frozenset[str]] = frozenset({"formation", "flashing", "flags_seen"})
     robot_id: int
     version: str
     behavior: str
@@ -700,6 +704,8 @@ class RobotStatus(Message):
     commands: int = 0
     failsafe_stops: int = 0
     formation: str | None = None
+    flashing: bool | None = None
+    flags_seen: int | None = None
 
     def __post_init__(self) -> None:
         check_int("robot_id", self.robot_id)
@@ -720,6 +726,10 @@ class RobotStatus(Message):
         for name in ("perceptions", "commands", "failsafe_stops"):
             check_int(name, getattr(self, name))
         _check_formation(self.formation)
+        if self.flashing is not None and not isinstance(self.flashing, bool):
+            raise TypeError(f"flashing must be a bool or None, got {type(self.flashing).__name__}")
+        if self.flags_seen is not None:
+            check_int("flags_seen", self.flags_seen)
 
 
 @dataclass(frozen=True, eq=False)

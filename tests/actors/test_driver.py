@@ -705,6 +705,8 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
     )
     leds: GpioLeds = hardware.leds  # type: ignore[assignment]
     lights: list[tuple[bool, float]] = []
+    said: list[bool | None] = []
+    seen_in_status: list[int | None] = []
 
     async def main() -> tuple[list[Perception], list[Delivery], Driver]:
         local, remote = MemoryBus(), MemoryBus()
@@ -728,11 +730,13 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
                 )
                 await trio.sleep(0.01)
                 lights.append((leds.lit, leds.flashing))
+                said.append(driver.status().flashing)
 
             await answer(flag(True, 0), broadcasts=1)  # tick 0: joined → flashing
             await answer(broadcasts=0)  # tick 1: no flag → steady
             await answer(flag(False, 2), broadcasts=1)  # tick 2: seeking → steady
             await answer(flag(True, 3), broadcasts=1)  # tick 3: joined again
+            seen_in_status.append(driver.status().flags_seen)
             remote.put(KEYS.robot_order, encode(RobotOrder("stop")))
             await trio.sleep(0.01)
             lights.append((leds.lit, leds.flashing))
@@ -748,6 +752,7 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
     finally:
         hardware.close()
     assert [flashing for _, flashing in lights] == [15.0, 0.0, 0.0, 15.0, 0.0, 0.0]
+    assert said == [True, None, None, True]  # as its status tells the base station
     assert [lit for lit, _ in lights[1:3]] == [True, True]  # steady, as the command says
     assert [lit for lit, _ in lights[4:]] == [False, False]  # an operator's stop: dark
     # Each camera takes two frames, and the flasher is lit in one of them: always one of
@@ -764,4 +769,4 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
         truth = to_body((FLASHER - POSITION[0])[None], YAW[:1])[0, 0]
         np.testing.assert_allclose(delivery.sender_position, truth, rtol=0.05, atol=0.02)
     assert flag_by_light(own) == FormationFlag(own.shape, -1, True, NO_HOPS, 45_000, 0)
-    assert driver.statistics().flags_seen == 2
+    assert driver.statistics().flags_seen == 2 == seen_in_status[0]

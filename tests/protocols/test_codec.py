@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import inspect
 import math
 import struct
@@ -655,3 +656,10 @@ def test_which_leds_flash_stays_off_the_wire_until_a_robot_flashes() -> None:
         _snapshot(flashing=np.array([0, 1]))
     with pytest.raises(TypeError, match="flashing must be a bool or None"):
         Command(2, 5, np.zeros(4), flashing=1)  # type: ignore[arg-type]
+    # A robot's status: whether it flashes and how many flags it saw, once it has.
+    quiet = RobotStatus(3, "1.0", "formation", "swimming", 0.4, np.zeros(4), True, None, 9.0)
+    assert not {"flashing", "flags_seen"} & wire_fields(quiet)
+    told = dataclasses.replace(quiet, flashing=True, flags_seen=4)
+    assert {"flashing", "flags_seen"} <= wire_fields(told) and decode(encode(told)) == told
+    with pytest.raises(ValueError, match="flags_seen"):
+        dataclasses.replace(quiet, flags_seen=-1)

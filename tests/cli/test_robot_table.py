@@ -1,0 +1,54 @@
+"""The fleet as ``fishswarm robots`` prints it: a table, one robot a line, and JSON."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fishswarm.actors.robot import FleetEntry
+from fishswarm.cli.robot import _as_dict, fleet_table
+from fishswarm.protocols.messages import RobotStatus
+
+
+def status(robot_id: int, **changes: object) -> RobotStatus:
+    fields: dict[str, object] = {
+        "robot_id": robot_id, "version": "1.2", "behavior": "formation", "state": "swimming",
+        "depth": 0.31, "fin_frequencies": np.array([2.0, 0.0, 0.0, 10.0]), "link": True,
+        "cpu_temperature": 48.4, "uptime": 30.0,
+    }  # fmt: skip
+    fields.update(changes)
+    return RobotStatus(**fields)  # type: ignore[arg-type]
+
+
+def test_the_table_lines_up_each_robots_state_light_and_fins() -> None:
+    fleet = [
+        FleetEntry(3, status(3, flashing=True, flags_seen=7), True, 0.2),
+        FleetEntry(4, status(4, state="failsafe", link=False, cpu_temperature=None), False, 3.0),
+        FleetEntry(12, None, True, None),
+    ]
+    lines = fleet_table(fleet).splitlines()
+    header = lines[0].split()
+    assert header[:5] == ["id", "version", "behavior", "state", "light"]
+    assert lines[1].split() == [
+        "3", "1.2", "formation", "swimming", "flash", "0.31", "up",
+        "2.0", "0.0", "0.0", "10.0", "48", "0.2", "s", "ago",
+    ]  # fmt: skip
+    # No light: the column is blank, and every later column stays under its heading.
+    assert lines[2].split()[:5] == ["4", "1.2", "formation", "failsafe", "0.31"]
+    assert lines[2].index("0.31") == lines[1].index("0.31")
+    assert lines[2].index("down") == lines[1].index("up")
+    assert "—" in lines[2] and lines[2].endswith("3.0 s ago (gone)")
+    # Alive but not heard from: a question mark under each heading but the last.
+    assert lines[3].split() == ["12", *["?"] * 8, "never"]
+
+
+def test_the_json_tells_whether_a_robot_flashes_and_how_many_flags_it_saw() -> None:
+    flashing = _as_dict(FleetEntry(3, status(3, flashing=True, flags_seen=7), True, 0.2))
+    steady = _as_dict(FleetEntry(4, status(4), True, 0.2))
+    unknown = _as_dict(FleetEntry(12, None, True, None))
+    assert (flashing["flashing"], flashing["flags_seen"]) == (True, 7)
+    assert (steady["flashing"], steady["flags_seen"]) == (False, 0)
+    assert (unknown["flashing"], unknown["flags_seen"]) == (None, None)
+
+
+def test_no_robots_heard_from_says_what_to_check() -> None:
+    assert fleet_table([]) == "no robots heard from (are they up and connected to this router?)"
