@@ -17,7 +17,7 @@ from __future__ import annotations
 import logging
 from collections import defaultdict, deque
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import trio
@@ -27,8 +27,14 @@ from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import fish_id_of
-from fishswarm.protocols.messages import Broadcast, ChannelReport, Delivery, Snapshot
-from fishswarm.sim.medium import receptions
+from fishswarm.protocols.messages import (
+    BROADCAST_KINDS,
+    Broadcast,
+    ChannelReport,
+    Delivery,
+    Snapshot,
+)
+from fishswarm.sim.medium import by_light, receptions
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.sim.streams import Stream, stream
 
@@ -211,6 +217,11 @@ class Channel:
     def _deliver(self, bus: Bus, snapshot: Snapshot, broadcasts: list[Broadcast]) -> None:
         index_of = {int(i): n for n, i in enumerate(snapshot.ids.tolist())}
         present = [b for b in broadcasts if b.sender_id in index_of]
+        sight = self.scenario.vision() if self.scenario.flag_medium == "light" else None
+        if sight is not None:
+            # By light, only "I hold my place" travels, and it says nothing else.
+            lit = [(b, by_light(BROADCAST_KINDS.index(b.kind), b.values)) for b in present]
+            present = [replace(b, values=values) for b, values in lit if values is not None]
         rngs = [self._rng(int(i)) for i in snapshot.ids.tolist()]
         found = receptions(
             snapshot.position,
@@ -219,6 +230,7 @@ class Channel:
             channel_range=self.scenario.channel_range,
             loss=self.scenario.channel_loss,
             rngs=rngs,
+            sight=sight,
         )
         counts = np.zeros(snapshot.ids.size, dtype=np.int64)
         for reception in found:
@@ -275,8 +287,17 @@ class Channel:
             chosen.seed,
         )
         # The rngs were let go at the run's first snapshot: the next draws use this seed.
+        # Flags by light reach the fish that see their sender: the world's vision decides.
         self.scenario = self.scenario.replace(
-            channel_range=chosen.channel_range, channel_loss=chosen.channel_loss, seed=chosen.seed
+            channel_range=chosen.channel_range,
+            channel_loss=chosen.channel_loss,
+            seed=chosen.seed,
+            flag_medium=chosen.flag_medium,
+            visual_range=chosen.visual_range,
+            blind_width=chosen.blind_width,
+            sphere_radius=chosen.sphere_radius,
+            study_code=chosen.study_code,
+            profile=chosen.profile,
         )
 
     def _let_go(self, tick: int, reason: str) -> None:

@@ -15,9 +15,8 @@ orders. So the fins' safety never depends on Wi-Fi:
 
 The driver also plays the channel's part for formation flags, by light
 (:mod:`fishswarm.bluebot.flashes`): while its fish's flag says it holds its place, the LEDs
-flash; and while its fish flags, each camera takes a second frame half a flash period after
-the first, and each neighbour that flashes comes to the fish as a delivered flag, where the
-cameras see it.
+flash; and once its fish flags, each camera takes two frames half a flash period apart, and
+each neighbour that flashes comes to the fish as a delivered flag, where the cameras see it.
 """
 
 from __future__ import annotations
@@ -26,7 +25,6 @@ import contextlib
 import logging
 import math
 import secrets
-import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -41,10 +39,10 @@ from fishswarm.actors.inbox import Inbox, open_subscription
 from fishswarm.actors.intake import Intake
 from fishswarm.behaviors.formation import flag_by_light
 from fishswarm.bluebot.fisheye import Fisheye
-from fishswarm.bluebot.flashes import FRAME_GAP, merge_frames
+from fishswarm.bluebot.flashes import FRAMES_APART, merge_frames
 from fishswarm.bluebot.leds import LedVision, perceive_leds
 from fishswarm.bluebot.parameters import LED_FLASH_FREQUENCY, fin_frequencies
-from fishswarm.bluebot.ports import CAMERA_SIDES, Camera, DepthSensor, Fins, Leds
+from fishswarm.bluebot.ports import CAMERA_SIDES, Camera, CameraSide, DepthSensor, Fins, Leds
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import (
@@ -252,6 +250,9 @@ class Driver:
         self._unannounced = 0
         self._own_flag: FormationFlag | None = None
         """The fish's formation flag of its last decision (None: it flags nothing)."""
+        self._flagging = False
+        """Whether the fish has flagged since the driver started: then neighbours may flash
+        too (the robots of a tank run alike), and each camera takes two frames."""
         self._lit = False
         self._shown: tuple[bool, bool] | None = None
         """What the LEDs were last told: (lit, flashing)."""
@@ -375,25 +376,25 @@ class Driver:
 
     def _look(self) -> Look:
         """Depth, neighbours and which of them flash, from the sensors (runs in a worker
-        thread). Only robots in a formation flash: only there does each camera take a
-        second frame, in which a neighbour dark in the first is lit."""
+        thread). Only robots whose fish flag flash theirs: only then does each camera take
+        two frames, half a flash period apart, in which a flashing neighbour is lit once."""
+        camera = self.hardware.camera
         depth = self.hardware.depth.read_depth()
-        started = time.monotonic()
-        first = self._see(depth)
-        if self.settings.behavior != "formation":
+        if not self._flagging:
+            first = self._see({side: camera.capture(side) for side in CAMERA_SIDES}, depth)
             return depth, first, np.zeros(first.shape[0], dtype=np.bool_)
-        time.sleep(max(0.0, started + FRAME_GAP - time.monotonic()))
-        neighbors, flashing = merge_frames(first, self._see(depth))
+        # Both of a camera's frames before the multiplexer switches (a switch drops frames),
+        # all four before the LED pipeline runs (it would hold up the next frame).
+        frames = {side: camera.capture_frames(side, FRAMES_APART + 1) for side in CAMERA_SIDES}
+        first = self._see({side: taken[0] for side, taken in frames.items()}, depth)
+        second = self._see({side: taken[-1] for side, taken in frames.items()}, depth)
+        neighbors, flashing = merge_frames(first, second)
         return depth, neighbors, flashing
 
-    def _see(self, depth: float) -> FloatArray:
+    def _see(self, images: dict[CameraSide, NDArray[np.uint8]], depth: float) -> FloatArray:
         """The neighbours in one image of each camera."""
-        camera = self.hardware.camera
         return perceive_leds(
-            {side: camera.capture(side) for side in CAMERA_SIDES},
-            depth=depth,
-            fisheye=self.settings.fisheye,
-            vision=self.settings.leds,
+            images, depth=depth, fisheye=self.settings.fisheye, vision=self.settings.leds
         )
 
     def _perceive(
@@ -453,9 +454,13 @@ class Driver:
             self.hardware.fins.stop()
 
     def _stop(self, state: str) -> None:
+        """Fins off, in ``state``; a robot that no longer swims holds no place, so its LEDs
+        stop flashing (and go dark if an operator stopped it)."""
         self._gains = np.zeros(4)
         self.hardware.fins.stop()
         self.state = state
+        self._own_flag = None
+        self._show_lights()
 
     async def _guard(self) -> None:
         """The failsafe and the link: fins off when commands stop or the link stays down."""
@@ -507,7 +512,6 @@ class Driver:
                 self._take_formation(order.formation)
             elif order.action == "stop":
                 self._stop("stopped")
-                self._show_lights()
                 log.warning("robot %d: stopped by an operator", self.settings.robot_id)
             elif self.state == "stopped":
                 self.state = "waiting"
@@ -531,17 +535,20 @@ class Driver:
         """The fish's broadcasts onto the link, and its formation flag into light."""
         robot_id = self.settings.robot_id
         async for key, payload in broadcasts:
-            remote.put(key, payload)
-            self._counts["broadcasts"] += 1
             broadcast = self._intake.decode_addressed(
                 key, payload, Broadcast, field="sender_id", owner=robot_id
             )
-            if broadcast is not None and broadcast.kind == "formation":
+            if broadcast is None:
+                continue
+            remote.put(key, payload)
+            self._counts["broadcasts"] += 1
+            if broadcast.kind == "formation":
                 try:
                     self._own_flag = FormationFlag.from_values(broadcast.values)
                 except (TypeError, ValueError) as error:
                     self._intake.reject(key, "malformed", f"a formation flag that {error}")
                     continue
+                self._flagging = True
                 self._show_lights()
 
     def _show_lights(self) -> None:

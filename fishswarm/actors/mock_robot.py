@@ -6,11 +6,12 @@ A mock robot is a fish of a running simulated world. Its body lives in that worl
 (so the world moves it as its fins beat) and keeps the world's latest snapshot, from which
 :class:`SnapshotCamera` renders both camera images (:func:`~fishswarm.sim.camera.
 render_views`) and :class:`SnapshotDepth` reads its depth. A robot whose LEDs flash (its
-formation flag by light) says so in its commands; the world names the flashing fish in its
-snapshots, and the cameras show their LEDs lit or dark as the capture's time falls in their
-flash period. What the robot perceives comes over
-its link, as a real robot's light comes through the water: cut the link and the frames go
-stale, the driver stops perceiving, and its failsafe stops the fins.
+formation flag by light) says so in its commands, as one whose LEDs are off does; the
+world tells every fish's LEDs in its snapshots, and the cameras show a flashing robot's LEDs
+lit or dark as the capture's time falls in its flash period, and a dark robot's not at all.
+What the robot perceives comes over its link, as a real robot's light comes through the
+water: cut the link and the frames go stale, the driver stops perceiving, and its failsafe
+stops the fins.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import contextlib
 import math
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -34,11 +35,11 @@ from fishswarm.actors.intake import Intake
 from fishswarm.bluebot.fisheye import Fisheye
 from fishswarm.bluebot.flashes import lit_at
 from fishswarm.bluebot.gpio import GpioFins, GpioLeds
-from fishswarm.bluebot.parameters import BlueBot
+from fishswarm.bluebot.parameters import CAMERA_FRAME_RATE, BlueBot
 from fishswarm.bluebot.ports import CameraSide, Fins
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
-from fishswarm.protocols.messages import Command, Perception, Snapshot
+from fishswarm.protocols.messages import DARK, FLASHING, Command, Perception, Snapshot
 from fishswarm.sim.camera import Optics, render_views
 
 FloatArray = NDArray[np.float64]
@@ -71,7 +72,11 @@ class WorldFeed:
     """
 
     def __init__(
-        self, robot_id: int, *, stale_after: float = STALE_AFTER, clock: Any = time.monotonic
+        self,
+        robot_id: int,
+        *,
+        stale_after: float = STALE_AFTER,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.robot_id = robot_id
         self.stale_after = stale_after
@@ -115,7 +120,7 @@ class SnapshotCamera:
     optics: Optics = field(default_factory=Optics)
     robot: BlueBot = field(default_factory=BlueBot)
     seed: int = 0
-    clock: Any = time.monotonic
+    clock: Callable[[], float] = time.monotonic
     """The time of a capture, s: when flashing LEDs are lit or dark."""
 
     def __post_init__(self) -> None:
@@ -127,8 +132,22 @@ class SnapshotCamera:
 
     def capture(self, side: CameraSide) -> NDArray[np.uint8]:
         """One camera's image of the world as the latest snapshot has it, now."""
+        return self.capture_frames(side, 1)[0]
+
+    def capture_frames(self, side: CameraSide, count: int) -> list[NDArray[np.uint8]]:
+        """``count`` images of one camera, a frame period (1/60 s) apart from now: the
+        latest snapshot's fish, the flashing ones lit or dark at each frame's time."""
         snapshot, row = self.feed.current()
-        lit = self._lit(snapshot, self.clock())
+        now = self.clock()
+        return [
+            self._image(snapshot, row, side, now + frame / CAMERA_FRAME_RATE)
+            for frame in range(count)
+        ]
+
+    def _image(
+        self, snapshot: Snapshot, row: int, side: CameraSide, time: float
+    ) -> NDArray[np.uint8]:
+        lit = self._lit(snapshot, time)
         with self._lock:
             if self._tick != snapshot.tick:
                 self._tick, self._rendered = snapshot.tick, {}
@@ -148,11 +167,13 @@ class SnapshotCamera:
 
     @staticmethod
     def _lit(snapshot: Snapshot, now: float) -> BoolArray:
-        """Whose LEDs shine at ``now``: all but the flashing ones in the dark half of their
-        period."""
-        lit = np.ones(snapshot.ids.size, dtype=np.bool_)
-        if snapshot.flashing is not None and snapshot.flashing.any():
-            flashing = np.flatnonzero(snapshot.flashing)
+        """Whose LEDs shine at ``now``: all but the dark ones and the flashing ones in the
+        dark half of their period."""
+        if snapshot.lights is None:
+            return np.ones(snapshot.ids.size, dtype=np.bool_)
+        lit: BoolArray = snapshot.lights != DARK
+        flashing = np.flatnonzero(snapshot.lights == FLASHING)
+        if flashing.size:
             phase = np.mod(snapshot.ids[flashing] * GOLDEN_FRACTION, 1.0)
             lit[flashing] = lit_at(now, phase)
         return lit
@@ -246,12 +267,13 @@ class MockBody:
                 )
                 if perception is None:
                     continue
+                flashing = self.leds.flash_frequency > 0
                 answer = Command(
                     self.robot_id,
                     perception.tick,
                     self.fins.gains,
-                    self.leds.lit,
-                    flashing=True if self.leds.flashing else None,
+                    flashing or self.leds.lit,
+                    flashing=True if flashing else None,
                 )
                 remote.put(keys.command(self.robot_id), encode(answer))
 

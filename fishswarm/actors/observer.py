@@ -19,7 +19,7 @@ from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.actors.world import OFFLOAD_FISH
 from fishswarm.protocols.keys import KeySpace, run_id_of
-from fishswarm.protocols.messages import Snapshot
+from fishswarm.protocols.messages import Snapshot, WorldPulse
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.metrics import (
     FormationTarget,
@@ -134,6 +134,10 @@ class Observer:
         """How many runs' snapshots have begun after the first's."""
         self._ended_runs: deque[int] = deque(maxlen=ENDED_RUNS_KEPT)
         """Runs that have given way to a later one, latest last."""
+        self._pulsing: deque[int] = deque(maxlen=ENDED_RUNS_KEPT)
+        """Runs whose world's pulse came through (a router may not pass it on)."""
+        self._said_ended: deque[int] = deque(maxlen=ENDED_RUNS_KEPT)
+        """Runs whose world said, by its last pulse, that the run is over."""
 
     @classmethod
     def of(
@@ -184,6 +188,7 @@ class Observer:
         self._inbox = inbox = Inbox[tuple[str, str, bytes | bool]]()
         async with (
             open_subscriber(bus, self.keys.snapshot, lambda k, p: inbox.push(("snapshot", k, p))),
+            open_subscriber(bus, self.keys.world_pulse, lambda k, p: inbox.push(("pulse", k, p))),
             open_alive_events(bus, self.keys.alive_all(), lambda k, a: inbox.push(("alive", k, a))),
             open_token(bus, self.keys.alive("observer", self.observer_id)),
         ):
@@ -192,6 +197,9 @@ class Observer:
                 if kind == "alive":
                     assert isinstance(payload, bool)
                     self._on_alive(key, payload)
+                elif kind == "pulse":
+                    assert isinstance(payload, bytes)
+                    self._on_pulse(key, payload)
                 else:
                     assert isinstance(payload, bytes)
                     await self._on_snapshot(key, payload)
@@ -202,6 +210,17 @@ class Observer:
         Any number of tasks may wait at once."""
         while self._last_tick < tick:
             await self._tick_reached.wait()
+
+    def world_said_ended(self) -> bool | None:
+        """Whether the world of the run watched said its run is over — at its end, or when
+        it was stopped or failed — by its last pulse: True; it pulsed but did not say so (it
+        died, or the router was lost): False; no pulse of it came through, so this cannot
+        be told (a secured router whose access control predates the pulse's reaching
+        observers): None."""
+        run = self.current_run
+        if run in self._said_ended:
+            return True
+        return False if run in self._pulsing else None
 
     async def wait_for_world_left(self) -> None:
         """Wait until the world of the run watched leaves the swarm (its liveliness token
@@ -224,6 +243,16 @@ class Observer:
                 await arrived.wait()
             if quiet.cancelled_caught:
                 return
+
+    def _on_pulse(self, key: str, payload: bytes) -> None:
+        pulse = self._intake.decode(key, payload, WorldPulse)
+        if pulse is None:
+            return
+        self._intake.disregard()  # a pulse is no snapshot: the count of those stays exact
+        if pulse.run not in self._pulsing:
+            self._pulsing.append(pulse.run)
+        if pulse.state == "ended" and pulse.run not in self._said_ended:
+            self._said_ended.append(pulse.run)
 
     def _on_alive(self, key: str, alive: bool) -> None:
         try:

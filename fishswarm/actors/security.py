@@ -125,7 +125,11 @@ def rights_of(subject: str, keys: KeySpace) -> Rights:
             queries=(keys.control, keys.scenario),
         )
     if subject == "observer" or subject.startswith("observer-"):
-        return Rights(subscribes=(keys.snapshot, keys.robot_statuses()), queries=(keys.scenario,))
+        # The pulse tells an observer whether its run ended or its world was lost.
+        return Rights(
+            subscribes=(keys.snapshot, keys.robot_statuses(), keys.world_pulse),
+            queries=(keys.scenario,),
+        )
     if subject.startswith("robot-") and subject[6:].isdigit():
         robot = int(subject[6:])
         return Rights(

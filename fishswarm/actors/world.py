@@ -44,6 +44,9 @@ from fishswarm.behaviors.registry import rules_of
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import fish_id_of, run_id_of
 from fishswarm.protocols.messages import (
+    DARK,
+    FLASHING,
+    STEADY,
     ChannelReport,
     Command,
     CommandBatch,
@@ -208,8 +211,9 @@ class World:
         self._broadcasts = np.zeros(0, dtype=np.int64)
         """How many broadcasts each of them sent (rows alike)."""
         self._announced = 0
-        self._flashing: set[int] = set()
-        """The fish whose last command said their LEDs flash (robots flagging by light)."""
+        self._lights: dict[int, int] = {}
+        """The fish whose last command said their LEDs are dark or flash (robots), by id:
+        an index into LIGHTS; the others' are steady."""
         self._formation: str | None = None
         """The formation an operator asked for (it overrides the scenario's switch)."""
         self._report: ChannelReport | None = None
@@ -695,11 +699,18 @@ class World:
             self.sim.effort,
             self._told(time) if forming else None,
             self.run_id,
-            among(np.array(sorted(self._flashing), dtype=np.int64), self.sim.ids)
-            if self._flashing
-            else None,
+            self._lights_now(),
         )
         self._put(bus, self.keys.snapshot, encode(snapshot))
+
+    def _lights_now(self) -> IntArray | None:
+        """Each fish's LEDs, as a snapshot tells them (None: all steady)."""
+        if not self._lights:
+            return None
+        ids = np.array(sorted(self._lights), dtype=np.int64)
+        said = np.array([self._lights[i] for i in ids.tolist()], dtype=np.int64)
+        # values_at gives 0 for the fish that said nothing: steady, once shifted back.
+        return values_at(ids, said - STEADY, self.sim.ids) + STEADY
 
     def _told(self, time: float) -> str | None:
         """The formation the fish are told to take at ``time``: an operator's switch, else
@@ -861,11 +872,12 @@ class World:
         )
         if command is not None:
             # A robot's LEDs are its own, whatever tick its command answers: the cameras of
-            # the other robots see them flash from now on.
-            if command.flashing:
-                self._flashing.add(command.fish_id)
+            # the other robots see them so from now on.
+            light = FLASHING if command.flashing else STEADY if command.led else DARK
+            if light == STEADY:
+                self._lights.pop(command.fish_id, None)
             else:
-                self._flashing.discard(command.fish_id)
+                self._lights[command.fish_id] = light
             self._accept(
                 key,
                 command.tick,
@@ -903,6 +915,7 @@ class World:
         current.take(rows, fins, broadcasts)
 
     def _lose(self, fish_id: int, reason: str) -> None:
+        self._lights.pop(fish_id, None)
         if self.roster.mark_lost(fish_id, self.tick, reason):
             self._leaving.add(fish_id)
         self._current.give_up(fish_id)

@@ -13,8 +13,9 @@ Each decision, for B fish at once:
    that it brakes before it arrives;
 4. a fish within the tolerance of its place has joined; with flags on it broadcasts a
    :class:`~fishswarm.protocols.messages.FormationFlag` (shape, slot, joined, hops from the
-   leader, the orientation it follows, a sequence number) and lights its LEDs — on a robot
-   the LED flashes are the flag.
+   leader, the orientation it follows, a sequence number) — on a robot its driver flashes
+   the LEDs while the flag says joined (:mod:`fishswarm.bluebot.flashes`); the LEDs stay
+   lit all the while, since neighbours see a robot by them.
 
 The orientation is a direction of the tank; a fish finds it in its own frame from its
 compass heading (the simulated world gives every fish one). A fish without a heading takes
@@ -308,7 +309,9 @@ def _with_senders(
 
     Returns:
         (B, K + M, 3) positions, (B, K + M) which are real, and (B, K + M) which are heard
-        to hold their place (joined flags).
+        to hold their slot (joined flags that name it: such a slot is claimed, and its
+        holder does not take part in sharing the others out). A flag by light names no slot
+        (:func:`flag_by_light`): its sender stands where it is seen, as any fish seen does.
     """
     senders = heard.flag
     both = bool(neighbors.shape[1] and senders.shape[1])
@@ -319,10 +322,11 @@ def _with_senders(
         senders = senders & ~(near & mask[:, :, None]).any(axis=1)
     known = np.concatenate([neighbors, inbox.sender], axis=1)
     real = np.concatenate([mask, senders], axis=1)
-    holding = np.concatenate([np.zeros_like(mask), heard.joined & senders], axis=1)
+    named = heard.joined & (heard.slot >= 0)
+    holding = np.concatenate([np.zeros_like(mask), named & senders], axis=1)
     if both:
-        # A seen fish whose flag says it holds its place holds it too.
-        holding[:, : mask.shape[1]] = (near & heard.joined[:, None, :]).any(axis=2)
+        # A seen fish whose flag says it holds its slot holds it too.
+        holding[:, : mask.shape[1]] = (near & named[:, None, :]).any(axis=2)
     return known, real, holding
 
 
@@ -615,8 +619,9 @@ def steer_formation(
         swaps.swap_from,
         swaps.swap_since,
     )
-    # LEDs lit while the fish is in its place: on a robot, the flag is the LED signal.
-    return after, Steering(aim, joined | ~np.bool_(params.flags), outbox)
+    # LEDs always lit: a robot's neighbours see it by them, seeking or not. A robot that
+    # holds its place flashes them: its driver makes that of the joined flag.
+    return after, Steering(aim, np.ones(count, dtype=np.bool_), outbox)
 
 
 FORMATION = Behavior(

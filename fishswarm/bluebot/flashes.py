@@ -4,8 +4,9 @@ which of the neighbours it sees are flashing.
 DESIGN §2: on robots the channel is physical. A robot whose fish has joined its formation
 flashes its LEDs at :data:`~fishswarm.bluebot.parameters.LED_FLASH_FREQUENCY` (15 Hz, as the
 research code flashed them, SPEC §6), half of each period lit. Its neighbours take each
-camera's image twice, half a flash period apart (:data:`FRAME_GAP`): a steady light is lit in
-both frames, a flashing one in exactly one of them. So a neighbour seen in only one of the two
+camera's image twice, half a flash period apart (:data:`FRAME_GAP`: two frame periods of the
+60-fps camera, :data:`FRAMES_APART`): a steady light is lit in both frames, a flashing one in
+exactly one of them. So a neighbour seen in only one of the two
 frames flashes, and it is where that frame shows it — the flag comes situated, as a simulated
 channel's delivery does.
 
@@ -20,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from fishswarm.bluebot.parameters import LED_FLASH_FREQUENCY
+from fishswarm.bluebot.parameters import CAMERA_FRAME_RATE, LED_FLASH_FREQUENCY
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -29,6 +30,9 @@ IntArray = NDArray[np.int64]
 FRAME_GAP = 0.5 / LED_FLASH_FREQUENCY
 """Time between the two frames a camera takes each control period, s: half a flash period,
 so that a flashing LED is lit in exactly one of them."""
+FRAMES_APART = round(FRAME_GAP * CAMERA_FRAME_RATE)
+"""The camera's frames between those two: they are the first and the last of this many + 1
+consecutive frames (2 at 60 fps: 33 ms)."""
 MATCH_FRACTION = 0.15
 """Two sightings are one neighbour when they lie closer than this fraction of its range (at
 least :data:`MATCH_FLOOR`): as the LED pipeline merges its two cameras' sightings."""

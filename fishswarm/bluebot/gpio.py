@@ -170,7 +170,7 @@ class GpioLeds:
         return bool(self._device.value)
 
     @property
-    def flashing(self) -> float:
+    def flash_frequency(self) -> float:
         """The frequency the LEDs flash at, Hz (0: not flashing)."""
         return self._flashing
 
@@ -183,9 +183,9 @@ class GpioLeds:
             self._device.off()
 
     def set_flashing(self, frequency: float) -> None:
-        """Flash the LEDs at ``frequency`` Hz, lit for the first half of each period (by
-        gpiozero's own background thread, which keeps the rhythm whatever the event loop
-        does)."""
+        """Flash the LEDs at ``frequency`` Hz, lit for the first half of each period, by
+        gpiozero's background thread (a Python thread: its rhythm does not wait for the
+        event loop, but shares the interpreter, and a Pi Zero's one core, with the rest)."""
         if not (math.isfinite(frequency) and frequency > 0):
             raise ValueError(f"frequency must be a positive number of Hz, got {frequency}")
         half = 0.5 / frequency

@@ -81,13 +81,26 @@ class PiCameras:
 
     def capture(self, side: CameraSide) -> NDArray[np.uint8]:
         """One frame of the camera on ``side``: (height, width, 3) RGB."""
+        return self.capture_frames(side, 1)[0]
+
+    def capture_frames(self, side: CameraSide, count: int) -> list[NDArray[np.uint8]]:
+        """``count`` consecutive frames of the camera on ``side``: the stream's next ones
+        after the switch (if any), taken back to back, so one frame period apart as long as
+        each is fetched before the next is exposed."""
         level = (side == "right") == self._wiring.camera_right_level
         if level != self._level:
             self._select(level)
             self._level = level
             for _ in range(CAMERA_SWITCH_FRAMES):
                 self._camera.capture_array("main", wait=CAMERA_CAPTURE_TIMEOUT)
-        frame = np.asarray(self._camera.capture_array("main", wait=CAMERA_CAPTURE_TIMEOUT))
+        taken = [
+            self._camera.capture_array("main", wait=CAMERA_CAPTURE_TIMEOUT) for _ in range(count)
+        ]
+        return [self._rgb(frame) for frame in taken]
+
+    def _rgb(self, captured: object) -> NDArray[np.uint8]:
+        """A captured frame as (height, width, 3) RGB, checked."""
+        frame = np.asarray(captured)
         width, height = self._resolution
         if frame.shape[:2] != (height, width) or frame.shape[2] < 3:
             raise RuntimeError(

@@ -60,6 +60,11 @@ class Camera(Protocol):
         """One image of the camera on ``side``: (height, width, 3) RGB."""
         ...
 
+    def capture_frames(self, side: CameraSide, count: int) -> list[NDArray[np.uint8]]:
+        """``count`` consecutive frames of the camera on ``side``, one frame period apart
+        (1/60 s), each (height, width, 3) RGB."""
+        ...
+
     def close(self) -> None:
         """Release the camera."""
         ...

@@ -218,6 +218,14 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
         bool,
         "with --behavior formation: fish neither send nor heed formation flags",
     ),
+    "flag_medium": (
+        "--flag-medium",
+        str,
+        "with --behavior formation: how the flags travel: channel (default: the simulated "
+        "channel, every flag to every fish within its range) or light (as between robots: "
+        "only 'I hold my place', from a fish that holds it, to the fish that see it; "
+        "docs/robot.md)",
+    ),
     "rotate_effort": (
         "--rotate-effort",
         SWITCH_ON,

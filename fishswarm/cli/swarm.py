@@ -537,12 +537,16 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
                     async def wait_for_world_end() -> None:
                         await observer.wait_for_world_left()
-                        # A world's token is gone for everyone who loses the router too:
-                        # only a world that left while the router was there has ended.
-                        if not list(session.info.routers_zid()):
-                            router_lost.append(True)
-                            return
+                        # A world's token is gone for everyone who loses the router too.
+                        router = bool(list(session.info.routers_zid()))
                         await observer.wait_for_world_end()
+                        said = observer.world_said_ended()
+                        if said is False or (said is None and not router):
+                            unfinished.append(
+                                "lost the router at " + args.connect
+                                if not list(session.info.routers_zid()) or not router
+                                else "the world left"
+                            )
 
                     waiting.start_soon(wait_then_stop, wait_for_world_end)
                     if ticks is not None:
@@ -551,7 +555,7 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
             history[:] = observer.history
 
     history: list[Progress] = []
-    router_lost: list[bool] = []
+    unfinished: list[str] = []
     line = ProgressLine(sys.stderr)
     try:
         _run_trio(main)
@@ -564,10 +568,10 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
             f"{last.fish} fish at the end",
             file=sys.stderr,
         )
-    if router_lost:
+    if unfinished:
         print(
-            f"fishswarm observe: lost the router at {args.connect} before the run ended: what "
-            "became of the run is not known here (observe again once the router is back)",
+            f"fishswarm observe: {unfinished[0]} before the run ended (its world never said "
+            "the run was over): what became of the run is not known here",
             file=sys.stderr,
         )
         return 1

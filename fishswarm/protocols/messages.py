@@ -48,6 +48,10 @@ flag."""
 BROADCAST_WIDTH = 8
 """Most numbers one broadcast carries."""
 
+LIGHTS = ("dark", "steady", "flashing")
+"""What a fish's LEDs do, as a snapshot tells it: off, on, or flashing (a robot's formation flag
+by light)."""
+DARK, STEADY, FLASHING = range(len(LIGHTS))
 FORMATION_SHAPES = (
     "fibonacci",
     "pyramid",
@@ -417,12 +421,13 @@ class Snapshot(Message):
         formation: the shape formation fish are told to take at this tick, after a switch
             (None: as configured, or not a formation run).
         run: the world's run id, as its perceptions carry it (0: not told).
-        flashing: (N,) whose LEDs flash (robots flagging by light, as their commands say);
-            None: no one's.
+        lights: (N,) each fish's LEDs as robots' commands tell them, an index into
+            :data:`LIGHTS` (dark, steady, or flashing: a formation flag by light); None: all
+            steady.
     """
 
     type_name: ClassVar[str] = "snapshot"
-    added_later: ClassVar[frozenset[str]] = frozenset({"flashing"})
+    added_later: ClassVar[frozenset[str]] = frozenset({"lights"})
     tick: int
     time: float
     ids: IntArray
@@ -434,7 +439,7 @@ class Snapshot(Message):
     effort: FloatArray | None = None
     formation: str | None = None
     run: int = 0
-    flashing: BoolArray | None = None
+    lights: IntArray | None = None
 
     def __post_init__(self) -> None:
         _check_formation(self.formation)
@@ -452,8 +457,10 @@ class Snapshot(Message):
             check_array(self, "effort", np.float64, None, rows=count)
             if (self.effort < 0).any():
                 raise ValueError("effort must not be negative")
-        if self.flashing is not None:
-            check_array(self, "flashing", np.bool_, None, rows=count)
+        if self.lights is not None:
+            check_array(self, "lights", np.int64, None, rows=count)
+            if ((self.lights < 0) | (self.lights >= len(LIGHTS))).any():
+                raise ValueError(f"lights must be indices into {LIGHTS}")
         check_ids(self.ids)
 
 

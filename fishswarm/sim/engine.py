@@ -124,6 +124,7 @@ def simulate_batch(scenario: Scenario) -> Trajectory:
                     channel_range=params.channel_range,
                     loss=params.channel_loss,
                     rngs=channel_rngs,
+                    sight=params.sight,
                 )
                 sent = None
         if not event.deciding:

@@ -4,10 +4,17 @@ On robots the medium is physical (LED signals); in simulation the channel actor 
 for it with this pure model: a broadcast reaches every other fish within range, each
 delivery lost with a seeded probability, and carries the sender's position as the receiver
 sees it (body frame, no id).
+
+With formation flags by light (``flag_medium = "light"``), the medium is the robots' own:
+only a formation flag that says its sender holds its place travels, reduced to what flashing
+LEDs say (:func:`~fishswarm.behaviors.formation.flag_by_light`), and it reaches the fish that
+see its sender — within visual range, outside their blind spot, not hidden by another body —
+instead of every fish within the channel's range.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -15,9 +22,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.behaviors.core import Heard, Inbox, Outbox, inbox_of
-from fishswarm.bluebot.vision import to_body
+from fishswarm.behaviors.formation import FORMATION_KIND, flag_by_light
+from fishswarm.bluebot.vision import Vision, perceive, to_body
+from fishswarm.protocols.messages import FormationFlag
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -39,6 +50,7 @@ def receptions(
     channel_range: float,
     loss: float,
     rngs: Sequence[np.random.Generator],
+    sight: Vision | None = None,
 ) -> list[Reception]:
     """Deliveries of one tick's broadcasts.
 
@@ -50,6 +62,8 @@ def receptions(
         loss: probability that one delivery is lost.
         rngs: one generator per fish (receiver), used only when ``loss`` > 0; each receiver
             draws once per broadcast in range, in order, so results do not depend on others.
+        sight: broadcasts by light: a broadcast reaches the fish that see its sender with
+            this vision model (its noise left out), not those within ``channel_range``.
 
     Returns:
         Deliveries ordered by receiver, then by broadcast.
@@ -59,8 +73,10 @@ def receptions(
         return result
     sender_index = np.asarray(senders, dtype=np.intp)
     relative = position[sender_index][None, :, :] - position[:, None, :]
-    distance = np.linalg.norm(relative, axis=2)
-    reach = distance <= channel_range
+    if sight is None:
+        reach = np.linalg.norm(relative, axis=2) <= channel_range
+    else:
+        reach = seeing(position, yaw, vision=sight)[:, sender_index]
     reach[sender_index, np.arange(sender_index.size)] = False
     body = to_body(np.ascontiguousarray(relative), yaw)
     for receiver in range(position.shape[0]):
@@ -73,6 +89,31 @@ def receptions(
     return result
 
 
+def seeing(position: FloatArray, yaw: FloatArray, *, vision: Vision) -> BoolArray:
+    """Which fish sees which: (N, N), row the viewer, column the fish seen (range, blind
+    spot and occlusion of ``vision``; its position noise, which moves no one out of sight,
+    left out)."""
+    perceived = perceive(position, yaw, vision=dataclasses.replace(vision, noise=0.0))
+    seen = np.zeros((position.shape[0], position.shape[0]), dtype=np.bool_)
+    viewers, rows = np.nonzero(perceived.mask)
+    seen[viewers, perceived.index[viewers, rows]] = True
+    return seen
+
+
+def by_light(kind: int, values: IntArray) -> IntArray | None:
+    """What flashing LEDs say of a broadcast: the numbers of the flag a fish that sees its
+    sender is handed (:func:`~fishswarm.behaviors.formation.flag_by_light`) for a formation
+    flag that says its sender holds its place; None for any other broadcast, which light
+    does not carry."""
+    if kind != FORMATION_KIND or values.shape[0] < 3 or values[2] != 1:
+        return None
+    try:
+        flag = FormationFlag.from_values(values)
+    except (TypeError, ValueError):
+        return None
+    return flag_by_light(flag).values()
+
+
 def deliver(
     position: FloatArray,
     yaw: FloatArray,
@@ -81,19 +122,25 @@ def deliver(
     channel_range: float,
     loss: float,
     rngs: Sequence[np.random.Generator],
+    sight: Vision | None = None,
 ) -> Inbox:
     """The inboxes of N fish after the broadcasts of ``outbox`` (rows of the same fish).
 
     The same receptions, in the same order and with the same random draws, as the channel
-    actor makes of the same broadcasts: senders in row (fish-id) order.
+    actor makes of the same broadcasts: senders in row (fish-id) order. With ``sight``,
+    broadcasts travel by light (:func:`by_light`, :func:`receptions`).
     """
-    senders = np.flatnonzero(outbox.mask).tolist()
+    sent = {int(row): outbox.values[row] for row in np.flatnonzero(outbox.mask)}
+    if sight is not None:
+        lit = {row: by_light(int(outbox.kind[row]), values) for row, values in sent.items()}
+        sent = {row: values for row, values in lit.items() if values is not None}
+    senders = list(sent)
     heard: list[list[Heard]] = [[] for _ in range(position.shape[0])]
     for reception in receptions(
-        position, yaw, senders, channel_range=channel_range, loss=loss, rngs=rngs
+        position, yaw, senders, channel_range=channel_range, loss=loss, rngs=rngs, sight=sight
     ):
         sender = reception.sender
         heard[reception.receiver].append(
-            (int(outbox.kind[sender]), outbox.values[sender], reception.sender_position)
+            (int(outbox.kind[sender]), sent[sender], reception.sender_position)
         )
     return inbox_of(heard)

@@ -48,6 +48,9 @@ from fishswarm.sim.wake import WAKE_LENGTH, WAKE_WIDTH
 SPAWN_REGIONS = ("ball", "tank")
 TIME_MODES = ("lockstep", "jitter", "realtime")
 VISION_MODELS = ("geometric", "camera")
+FLAG_MEDIA = ("channel", "light")
+"""How formation flags travel in a simulation: the simulated channel, or light (as between
+robots)."""
 STUDY_CODE_SWITCHES = {
     "euler-step": "Euler step 0.1 s, yaw turned by the rate before each substep's update",
     "drag": "backward drag 1.0, lateral and yaw drag growing with forward speed",
@@ -146,6 +149,10 @@ class Scenario:
         formation_lead: a formation fish aims short of its place by the drift it predicts
             over this time from its velocity relative to the place, s (0: at the place).
         flags: whether formation fish broadcast and heed formation flags.
+        flag_medium: how the flags travel: ``channel`` (default: the simulated channel,
+            every flag to every fish within ``channel_range``) or ``light`` (as between
+            robots, docs/robot.md: only a flag that says its sender holds its place, to the
+            fish that see the sender, telling nothing else).
         slot_rule: how formation fish pick slots of a global map: ``share`` (default) or
             ``study`` (the study's rank rule).
         local_rule: how formation fish make a local shape: ``lattice`` (default: places on
@@ -203,6 +210,7 @@ class Scenario:
     formation_heading_deg: float = 0.0
     formation_lead: float = DEFAULT_LEAD
     flags: bool = True
+    flag_medium: str = "channel"
     slot_rule: str = "share"
     local_rule: str = "lattice"
     switch_formation: str | None = None
@@ -375,6 +383,10 @@ class Scenario:
                 f"got {self.landmark!r}",
             )
         need(_positive(self.channel_range), "channel_range must be positive metres")
+        need(
+            self.flag_medium in FLAG_MEDIA,
+            f"flag_medium must be one of {', '.join(FLAG_MEDIA)}, got {self.flag_medium!r}",
+        )
         need(
             isinstance(self.channel_loss, int | float) and 0 <= self.channel_loss < 1,
             f"channel_loss must be a probability in [0, 1), got {self.channel_loss!r}",

@@ -72,6 +72,9 @@ class SceneCamera:
             raise SensorUnavailable("no frame")
         return self.images[side]
 
+    def capture_frames(self, side: CameraSide, count: int) -> list[np.ndarray]:
+        return [self.capture(side) for _ in range(count)]
+
     def close(self) -> None:
         pass
 
@@ -660,14 +663,14 @@ FLASHER = np.array([[0.8, 0.4, 0.5]])
 
 
 class FlashingSceneCamera:
-    """Both cameras seeing the steady neighbour and a flasher: a camera's first image shows
-    the flasher lit, its next dark, and so on."""
+    """Both cameras seeing the steady neighbour and a flasher at 15 Hz: of a burst of
+    frames at 60 fps, the first two show it lit, the next two dark, and so on; a lone
+    frame shows it lit."""
 
     def __init__(self) -> None:
         scene = np.concatenate([POSITION, FLASHER])
         yaw = np.append(YAW, 0.5)
         self.images = [self._render(scene, yaw, lit) for lit in (True, False)]
-        self.taken = {"left": 0, "right": 0}
 
     @staticmethod
     def _render(scene: np.ndarray, yaw: np.ndarray, lit: bool) -> dict[CameraSide, np.ndarray]:
@@ -677,9 +680,10 @@ class FlashingSceneCamera:
         )  # fmt: skip
 
     def capture(self, side: CameraSide) -> np.ndarray:
-        image = self.images[self.taken[side] % 2][side]
-        self.taken[side] += 1
-        return image
+        return self.images[0][side]
+
+    def capture_frames(self, side: CameraSide, count: int) -> list[np.ndarray]:
+        return [self.images[0 if frame % 4 < 2 else 1][side] for frame in range(count)]
 
     def close(self) -> None:
         pass
@@ -708,7 +712,7 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
     said: list[bool | None] = []
     seen_in_status: list[int | None] = []
 
-    async def main() -> tuple[list[Perception], list[Delivery], Driver]:
+    async def main() -> tuple[list[Perception], list[Delivery]]:
         local, remote = MemoryBus(), MemoryBus()
         driver = make_driver(hardware, [True], command_timeout=10.0, behavior="formation")
         perceptions: list[Perception] = []
@@ -729,7 +733,7 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
                     encode(Command(ROBOT, perception.tick, np.zeros(4), broadcasts=broadcasts)),
                 )
                 await trio.sleep(0.01)
-                lights.append((leds.lit, leds.flashing))
+                lights.append((leds.lit, leds.flash_frequency))
                 said.append(driver.status().flashing)
 
             await answer(flag(True, 0), broadcasts=1)  # tick 0: joined → flashing
@@ -737,28 +741,34 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
             await answer(flag(False, 2), broadcasts=1)  # tick 2: seeking → steady
             await answer(flag(True, 3), broadcasts=1)  # tick 3: joined again
             seen_in_status.append(driver.status().flags_seen)
+            deliveries = [decode(payload, Delivery) for _, payload in inbox.drain()]
+            # No more commands: the failsafe stops the fins, and a robot that no longer
+            # swims holds no place (its LEDs steady); nor does one stranded.
+            while driver.state != "failsafe":
+                await trio.sleep(0.1)
+            lights.append((leds.lit, leds.flash_frequency))
             remote.put(KEYS.robot_order, encode(RobotOrder("stop")))
             await trio.sleep(0.01)
-            lights.append((leds.lit, leds.flashing))
+            lights.append((leds.lit, leds.flash_frequency))
             local.put(KEYS.outbox(ROBOT), flag(True, 4))  # a flag while stopped
             await trio.sleep(0.01)
-            lights.append((leds.lit, leds.flashing))
-            deliveries = [decode(payload, Delivery) for _, payload in inbox.drain()]
+            lights.append((leds.lit, leds.flash_frequency))
             nursery.cancel_scope.cancel()
-        return perceptions, deliveries, driver
+        return perceptions, deliveries
 
     try:
-        perceptions, deliveries, driver = run_mock(main)
+        perceptions, deliveries = run_mock(main)
     finally:
         hardware.close()
-    assert [flashing for _, flashing in lights] == [15.0, 0.0, 0.0, 15.0, 0.0, 0.0]
+    assert [flashing for _, flashing in lights] == [15.0, 0.0, 0.0, 15.0, 0.0, 0.0, 0.0]
     assert said == [True, None, None, True]  # as its status tells the base station
     assert [lit for lit, _ in lights[1:3]] == [True, True]  # steady, as the command says
-    assert [lit for lit, _ in lights[4:]] == [False, False]  # an operator's stop: dark
-    # Each camera takes two frames, and the flasher is lit in one of them: always one of
-    # the neighbours, and a flag for the fish once it flags itself (its shape is the one
-    # the flag by light takes). At tick 0 it had not flagged yet, at tick 2 it flagged
-    # nothing at its last decision.
+    assert lights[4][0]  # the failsafe: steady
+    assert [lit for lit, _ in lights[5:]] == [False, False]  # an operator's stop: dark
+    # Tick 0 came before the fish's first flag: one frame per camera (the flasher lit in
+    # it). From then on each camera takes frames 0 and 2 of a burst, and the flasher is lit
+    # in one of them: a flag for the fish while it flags itself (its shape is the one the
+    # flag by light takes); at tick 2 it had flagged nothing at its last decision.
     assert [p.inbox_count for p in perceptions] == [0, 1, 0, 1]
     assert [p.neighbors.shape[0] for p in perceptions] == [2, 2, 2, 2]
     assert [d.tick for d in deliveries] == [1, 3]
@@ -769,4 +779,4 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
         truth = to_body((FLASHER - POSITION[0])[None], YAW[:1])[0, 0]
         np.testing.assert_allclose(delivery.sender_position, truth, rtol=0.05, atol=0.02)
     assert flag_by_light(own) == FormationFlag(own.shape, -1, True, NO_HOPS, 45_000, 0)
-    assert driver.statistics().flags_seen == 2 == seen_in_status[0]
+    assert seen_in_status == [2]  # by tick 3

@@ -14,7 +14,8 @@ from fishswarm.actors.mock_robot import (
     WorldFeed,
     stale_after,
 )
-from fishswarm.protocols.messages import Snapshot
+from fishswarm.bluebot.ports import CameraSide
+from fishswarm.protocols.messages import DARK, FLASHING, STEADY, Snapshot
 
 
 class Clock:
@@ -136,38 +137,47 @@ def test_the_mock_camera_renders_once_per_snapshot_and_again_for_the_next() -> N
 
 
 def test_the_mock_camera_shows_a_flashing_robot_lit_half_of_each_flash_period() -> None:
-    """A robot the snapshot names as flashing is lit when the capture's time falls in the
-    first half of its flash period (from a phase fixed by its id) and dark in the second;
-    the others shine all the time. Each set of lit LEDs is rendered once per snapshot."""
+    """A robot the snapshot tells flashing is lit when a frame's time falls in the first
+    half of its flash period (from a phase fixed by its id) and dark in the second; a dark
+    robot is never seen; the others shine all the time. A burst's frames are a frame period
+    apart. Each set of lit LEDs is rendered once per snapshot."""
     from fishswarm.actors.mock_robot import GOLDEN_FRACTION, SnapshotCamera
-    from fishswarm.bluebot.flashes import FRAME_GAP
+    from fishswarm.bluebot.flashes import FRAME_GAP, FRAMES_APART
     from fishswarm.bluebot.leds import LedVision, perceive_leds
     from fishswarm.bluebot.ports import CAMERA_SIDES
 
-    # The viewer 3 facing +x; 4 ahead and 5 to its right, both 0.6 m away.
-    ids = np.array([3, 4, 5])
-    position = np.array([[0.9, 0.9, 0.5], [1.5, 0.9, 0.5], [0.9, 1.5, 0.5]])
-    three = np.zeros(3)
-    flashing = Snapshot(
-        0, 0.0, ids, position, np.zeros((3, 3)), three, np.zeros(3, dtype=np.int64),
-        np.zeros(3, dtype=np.int64), three, flashing=np.array([False, False, True]),
+    # The viewer 3 facing +x; 4 ahead, 5 to its right and 6 to its left, all 0.6 m away.
+    ids = np.array([3, 4, 5, 6])
+    position = np.array([[0.9, 0.9, 0.5], [1.5, 0.9, 0.5], [0.9, 1.5, 0.5], [0.9, 0.3, 0.5]])
+    four = np.zeros(4)
+    snapshot = Snapshot(
+        0, 0.0, ids, position, np.zeros((4, 3)), four, np.zeros(4, dtype=np.int64),
+        np.zeros(4, dtype=np.int64), four, lights=np.array([STEADY, STEADY, FLASHING, DARK]),
     )  # fmt: skip
     clock = Clock()
     feed = WorldFeed(3, clock=clock)
     camera = SnapshotCamera(feed, clock=clock)
-    feed.take(flashing)
+    feed.take(snapshot)
     period = 2 * FRAME_GAP
     start = (5 * GOLDEN_FRACTION) % 1.0 * period  # robot 5's period starts here
 
-    def seen_at(time: float) -> int:
-        clock.now = time
-        images = {side: camera.capture(side) for side in CAMERA_SIDES}
+    def seen(images: dict[CameraSide, np.ndarray]) -> int:
         found = perceive_leds(images, depth=0.5, fisheye=camera.fisheye, vision=LedVision())
         return int(found.shape[0])
 
-    assert seen_at(start + 0.1 * period) == 2  # lit
+    def seen_at(time: float) -> int:
+        clock.now = time
+        return seen({side: camera.capture(side) for side in CAMERA_SIDES})
+
+    assert seen_at(start + 0.1 * period) == 2  # lit: robots 4 and 5 (6 is dark)
     assert seen_at(start + 0.6 * period) == 1  # dark: only robot 4
     assert seen_at(start + 1.2 * period) == 2
     lit_again = camera.capture("right")
     clock.now = start + 2.3 * period
     assert camera.capture("right") is lit_again  # the same LEDs lit: not rendered again
+    # A burst from early in the lit half: its first frame shows robot 5, the frame two
+    # frame periods (half a flash period) later does not.
+    clock.now = start + 0.05 * period
+    burst = {side: camera.capture_frames(side, FRAMES_APART + 1) for side in CAMERA_SIDES}
+    assert seen({side: frames[0] for side, frames in burst.items()}) == 2
+    assert seen({side: frames[-1] for side, frames in burst.items()}) == 1

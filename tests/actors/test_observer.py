@@ -14,7 +14,7 @@ from fishswarm.actors.bus import MemoryBus
 from fishswarm.actors.observer import Observer
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
-from fishswarm.protocols.messages import Snapshot
+from fishswarm.protocols.messages import Snapshot, WorldPulse
 from tests.conftest import run_mock
 
 KEYS = KeySpace()
@@ -423,3 +423,29 @@ def test_an_observer_that_does_not_follow_runs_lets_a_later_runs_snapshots_go() 
     assert [p.tick for p in observer.history] == [0, 1, 2] and observer.current_run == 3
     assert observer.statistics().rejected == 0 and observer.statistics().snapshots == 3
     assert ended == 2.0
+
+
+def test_an_observer_tells_a_run_its_world_ended_from_one_whose_world_vanished() -> None:
+    """The world's last pulse says its run is over; a world that dies, or is cut off with
+    the router, never sends it. Pulses of another run say nothing of this one, and none
+    is counted as a snapshot."""
+
+    async def main(pulses: list[WorldPulse]) -> tuple[bool | None, int]:
+        bus = MemoryBus()
+        observer = Observer(KEYS)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            bus.put(KEYS.snapshot, _snapshot(0))  # run 0: the snapshots' own
+            for pulse in pulses:
+                await trio.sleep(1.0)
+                bus.put(KEYS.world_pulse, encode(pulse))
+            bus.put(KEYS.world_pulse, b"not a pulse")
+            await trio.sleep(1.0)
+            nursery.cancel_scope.cancel()
+        return observer.world_said_ended(), observer.statistics().snapshots
+
+    ended = [WorldPulse(0, 3, "running"), WorldPulse(0, 7, "ended")]
+    assert run_mock(lambda: main(ended)) == (True, 1)
+    vanished = [WorldPulse(0, 3, "running"), WorldPulse(9, 7, "ended")]
+    assert run_mock(lambda: main(vanished)) == (False, 1)
+    assert run_mock(lambda: main([])) == (None, 1)  # no pulse came through: cannot tell

@@ -28,7 +28,7 @@ from fishswarm.actors.security import init_secure, session_security
 from fishswarm.bluebot.gpio import GpioLeds
 from fishswarm.protocols.codec import decode
 from fishswarm.protocols.keys import KeySpace
-from fishswarm.protocols.messages import RobotStatus, Snapshot
+from fishswarm.protocols.messages import FLASHING, RobotStatus, Snapshot
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.recording import read_recording
 from tests.conftest import free_port, open_client_bus, run_trio, subscription, wait_for_port
@@ -315,7 +315,7 @@ def test_two_mock_robots_in_a_formation_flag_to_each_other_by_light(
     )  # fmt: skip
     named: set[int] = set()
 
-    async def main() -> tuple[set[int], set[int], float]:
+    async def main() -> tuple[tuple[int, int], float]:
         async with trio.open_nursery() as nursery:
             robots: list[Driver] = [
                 await nursery.start(run_robot, settings(robot_id, endpoint, "formation"))
@@ -325,33 +325,38 @@ def test_two_mock_robots_in_a_formation_flag_to_each_other_by_light(
 
                 def take(key: str, payload: bytes) -> None:
                     snapshot = decode(payload, Snapshot)
-                    if snapshot.flashing is not None:
-                        named.update(snapshot.ids[snapshot.flashing].tolist())
+                    if snapshot.lights is not None:
+                        named.update(snapshot.ids[snapshot.lights == FLASHING].tolist())
 
                 base.subscribe(KEYS.snapshot, take)
+                # One robot flashes while the other has been handed flags by light.
                 took = await until(
                     lambda: (
-                        any(flashing(r) for r in robots)
-                        and any(r.statistics().flags_seen > 0 for r in robots)
+                        any(
+                            flashing(a) and b.statistics().flags_seen > 0
+                            for a, b in (robots, robots[::-1])
+                        )
                         and named
                     ),
-                    timeout=30,
+                    timeout=60,
                 )
-                flashers = {r.settings.robot_id for r in robots if flashing(r)}
-                seers = {r.settings.robot_id for r in robots if r.statistics().flags_seen > 0}
+                flasher, seer = next(
+                    (a.settings.robot_id, b.settings.robot_id)
+                    for a, b in (robots, robots[::-1])
+                    if flashing(a) and b.statistics().flags_seen > 0
+                )
             nursery.cancel_scope.cancel()
-        return flashers, seers, took
+        return (flasher, seer), took
 
-    flashers, seers, took = run_trio(main, timeout=90)
-    # The robot that flashes is named so by the world; the other sees its flag (a robot
-    # may both flash and see, once both hold their places).
-    assert flashers and seers and named and named <= {0, 1}, (flashers, seers, named, took)
+    (flasher, seer), took = run_trio(main, timeout=120)
+    # One robot flashed, the world named it so, and the other was handed its flags.
+    assert flasher != seer and flasher in named and named <= {0, 1}, (flasher, named, took)
 
 
 def flashing(driver: Driver) -> bool:
     leds = driver.hardware.leds
     assert isinstance(leds, GpioLeds)
-    return leds.flashing > 0
+    return leds.flash_frequency > 0
 
 
 def fishswarm(*words: str) -> subprocess.Popen[str]:

@@ -21,7 +21,10 @@ from fishswarm.actors.observer import Observer
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.messages import (
+    DARK,
+    FLASHING,
     FORMATION_SHAPES,
+    STEADY,
     Broadcast,
     Command,
     CommandBatch,
@@ -101,6 +104,17 @@ async def _swarm(scenario: Scenario, *, schools: int) -> tuple[World, list[Snaps
             "spacing": 0.25,
             "rotate_effort": True,
             "effort_margin": 1.0,
+        },
+        {
+            # Flags by light: only "I hold my place", to the fish that see the sender (the
+            # trajectory departs from one without flags at tick 2).
+            "behavior": "formation",
+            "formation": "column",
+            "flag_medium": "light",
+            "channel_loss": 0.2,
+            "controller": "pid",
+            "spawn_radius": 0.3,
+            "spacing": 0.25,
         },
     ],
 )
@@ -319,23 +333,23 @@ def test_the_world_waits_for_a_slow_fish_at_every_tick() -> None:
     assert run_mock(main) == [0.0, 4.0, 8.0, 12.0]
 
 
-def test_the_snapshot_names_the_robots_whose_commands_say_their_leds_flash() -> None:
-    """A robot's LEDs are its own: the world names it flashing from its command that says
-    so until one that does not, whatever tick the command answers, so that other robots'
-    cameras show it; with no one flashing the snapshot says nothing of it."""
-    scenario = Scenario(fish=2, duration=4.0, seed=1)
+def test_the_snapshot_tells_the_leds_of_robots_whose_commands_say_they_flash_or_are_dark() -> None:
+    """A robot's LEDs are its own: the world tells them from its command that says so until
+    one that says otherwise, whatever tick the command answers, so that other robots'
+    cameras show them; with every fish's steady the snapshot says nothing of them."""
+    scenario = Scenario(fish=2, duration=5.0, seed=1)
     keys = scenario.keys
 
-    async def main() -> list[list[bool] | None]:
+    async def main() -> list[list[int] | None]:
         bus = MemoryBus()
         world = World(
             WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0, turn_delay=0.0)
         )
-        told: list[list[bool] | None] = []
+        told: list[list[int] | None] = []
 
         def take(key: str, payload: bytes) -> None:
-            flashing = decode(payload, Snapshot).flashing
-            told.append(None if flashing is None else flashing.tolist())
+            lights = decode(payload, Snapshot).lights
+            told.append(None if lights is None else lights.tolist())
 
         bus.subscribe(keys.snapshot, take)
         async with (
@@ -346,17 +360,18 @@ def test_the_snapshot_names_the_robots_whose_commands_say_their_leds_flash() -> 
             trio.open_nursery() as nursery,
         ):
             nursery.start_soon(world.run, bus)
-            # Fish 1 flashes from tick 1 to tick 2; fish 0 never.
-            for flashing in (None, True, True, None):
+            # Fish 1 flashes at ticks 1 and 2, goes dark at tick 3, steady at tick 4.
+            for led, flashing in ((True, None), (True, True), (True, True), (False, None),
+                                  (True, None)):  # fmt: skip
                 for fish, perceptions in ((0, first), (1, second)):
                     tick = decode((await perceptions.receive())[1], Perception).tick
-                    said = flashing if fish == 1 else None
-                    command = Command(fish, tick, np.zeros(4), flashing=said)
+                    said = (led, flashing) if fish == 1 else (True, None)
+                    command = Command(fish, tick, np.zeros(4), led=said[0], flashing=said[1])
                     bus.put(keys.command(fish), encode(command))
         return told
 
     told = run_mock(main)
-    assert told[:5] == [None, None, [False, True], [False, True], None]
+    assert told[:6] == [None, None, [STEADY, FLASHING], [STEADY, FLASHING], [STEADY, DARK], None]
 
 
 def test_a_schools_commands_are_taken_only_for_its_own_awaited_fish() -> None:

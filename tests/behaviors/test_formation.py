@@ -71,8 +71,8 @@ def test_a_follower_heads_for_a_slot_behind_the_flagged_leader() -> None:
     assert memory.place.tolist() == [1] and memory.joined.tolist() == [False]
     np.testing.assert_allclose(steering.target, [[0.0, -0.7, 0.0]], atol=1e-12)
     # Not there yet: its flag says which slot it seeks, not joined, one hop from the leader;
-    # its LEDs stay dark.
-    assert steering.outbox.mask.tolist() == [True] and steering.led.tolist() == [False]
+    # its LEDs stay lit (neighbours see a robot by them, seeking or not).
+    assert steering.outbox.mask.tolist() == [True] and steering.led.tolist() == [True]
     sought = FormationFlag.from_values(steering.outbox.values[0])
     assert sought == FormationFlag(FORMATION_SHAPES.index("column"), 1, False, 1, 0, 1)
     # Sharing the free slots instead: the nearest free slot is the last one, 0.6 m behind
@@ -548,8 +548,10 @@ def test_a_fish_has_joined_only_within_the_tolerance_of_its_place(
     inbox = inbox_of([[(FLAG, leader_flag.values(), np.array([0.0, leader_y, 0.0]))]])
     perception = _perception((0.0, leader_y, 0.0), heading=math.pi / 2)
     memory, steering = steer_formation(fresh_formation_memory(1), perception, inbox, params=params)
-    assert memory.place.tolist() == [1]
-    assert memory.joined.tolist() == [joined] and steering.led.tolist() == [joined]
+    assert memory.place.tolist() == [1] and memory.joined.tolist() == [joined]
+    # Its flag says so (on a robot: the LEDs flash), and its LEDs stay lit either way.
+    assert FormationFlag.from_values(steering.outbox.values[0]).joined is joined
+    assert steering.led.tolist() == [True]
 
 
 @pytest.mark.parametrize(("seen_x", "merged"), [(1.1, False), (1.03, True)])

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -82,11 +83,14 @@ def test_two_frames_half_a_period_apart_see_a_flasher_lit_in_exactly_one(
     assert lit_at(time, phases)[0] != lit_at(time + FRAME_GAP, phases)[0]
 
 
-def test_flashers_are_told_from_steady_lights_in_200_rendered_scenes() -> None:
+@pytest.mark.parametrize(
+    "seed", [3, pytest.param(4, marks=pytest.mark.slow), pytest.param(5, marks=pytest.mark.slow)]
+)
+def test_flashers_are_told_from_steady_lights_in_200_rendered_scenes(seed: int) -> None:
     """Half the neighbours flash, each from its own phase: each camera's image is rendered
     at a time and again FRAME_GAP later, and the LED pipeline's neighbours in the two are
     merged. Counted over the neighbours geometric vision sees within 2 m."""
-    rng = np.random.default_rng(3)
+    rng = np.random.default_rng(seed)
     fisheye, optics, robot, leds, vision = Fisheye(), Optics(), BlueBot(), LedVision(), Vision()
     found_flashers = lost_flashers = found_steady = lost_steady = 0
     told = steady_as_flashers = 0
@@ -127,9 +131,9 @@ def test_flashers_are_told_from_steady_lights_in_200_rendered_scenes() -> None:
                 steady_as_flashers += hit and bool(flashing[best])
     flashers = found_flashers + lost_flashers
     steady = found_steady + lost_steady
-    # Measured on these scenes (and two other sets of 200, seeds 4 and 5): flashers found
-    # 0.979 (0.968, 0.983), of those told flashing 0.992 (0.991, 0.985); steady lights
-    # found 0.974 (0.970, 0.977), of those taken for flashers 0.019 (0.027, 0.018).
+    # Measured with seeds 3, 4 and 5: flashers found 0.979, 0.968, 0.983, of those told
+    # flashing 0.992, 0.991, 0.985; steady lights found 0.974, 0.970, 0.977, of those taken
+    # for flashers 0.019, 0.027, 0.018.
     assert flashers > 200 and steady > 200
     assert found_flashers / flashers >= 0.95
     assert told / found_flashers >= 0.97

@@ -111,10 +111,10 @@ def test_flashing_leds_switch_every_half_period_until_told_otherwise(factory: ob
         # 5 Hz: lit 0.1 s, dark 0.1 s (the driver flashes at 15 Hz; slower here so that the
         # test's timing tolerance holds on a busy machine).
         leds.set_flashing(5.0)
-        assert leds.flashing == 5.0
+        assert leds.flash_frequency == 5.0
         time.sleep(0.45)
         leds.set_lit(True)
-        assert leds.flashing == 0.0 and pin.state
+        assert leds.flash_frequency == 0.0 and pin.state
         states = len(pin.states)
         time.sleep(0.15)
         assert len(pin.states) == states  # steady: no more switches
@@ -122,7 +122,7 @@ def test_flashing_leds_switch_every_half_period_until_told_otherwise(factory: ob
             leds.set_flashing(0.0)
     finally:
         leds.close()
-    assert not pin.state and leds.flashing == 0.0
+    assert not pin.state and leds.flash_frequency == 0.0
     # The pin's history (each state with the time since the one before): off when made,
     # on at once, then a switch every 0.1 s.
     flashed = pin.states[:6]

@@ -184,3 +184,22 @@ def test_a_stalled_camera_is_a_sensor_failure_the_driver_skips() -> None:
     with pytest.raises(TimeoutError) as stalled:
         cameras.capture("left")
     assert isinstance(stalled.value, SENSOR_ERRORS)
+
+
+def test_a_burst_is_one_cameras_next_frames_back_to_back_after_one_switch() -> None:
+    """Both of a camera's frames for the flashes (``capture_frames``) come from one switch:
+    the frames in flight dropped once, then ``count`` frames one after the other, each one
+    frame period after the last; the other side then switches once more."""
+    device = MuxedCamera()
+    cameras = PiCameras(camera=device, select=device.select)
+    right = cameras.capture_frames("right", 3)
+    assert device.frames == CAMERA_SWITCH_FRAMES + 3 and len(right) == 3
+    for frame in right:
+        np.testing.assert_array_equal(frame, IMAGES["right"])
+    left = cameras.capture_frames("left", 3)
+    assert device.frames == 2 * (CAMERA_SWITCH_FRAMES + 3)
+    np.testing.assert_array_equal(left[0], IMAGES["left"])
+    assert [call for call in device.calls if call[0] == "select"] == [
+        ("select", True),
+        ("select", False),
+    ]

@@ -19,8 +19,11 @@ from hypothesis.extra import numpy as hnp
 from fishswarm.protocols import MessageError, decode, encode
 from fishswarm.protocols.checks import MAX_ROWS
 from fishswarm.protocols.messages import (
+    DARK,
+    FLASHING,
     MESSAGE_TYPES,
     SCHEMA_VERSION,
+    STEADY,
     Broadcast,
     ChannelReport,
     Command,
@@ -635,8 +638,9 @@ def test_fields_added_later_stay_off_the_wire_while_unset() -> None:
 
 
 def test_which_leds_flash_stays_off_the_wire_until_a_robot_flashes() -> None:
-    """A command and a snapshot carry ``flashing`` only when a robot flashes its LEDs (its
-    formation flag by light): every other run sends what it sent before."""
+    """A command carries ``flashing``, a snapshot ``lights``, only when a robot flashes its
+    LEDs (its formation flag by light) or darkens them: every other run sends what it sent
+    before."""
     import msgpack
 
     def wire_fields(message: Message) -> set[str]:
@@ -647,13 +651,14 @@ def test_which_leds_flash_stays_off_the_wire_until_a_robot_flashes() -> None:
     flashing = Command(2, 5, np.zeros(4), flashing=True)
     assert "flashing" in wire_fields(flashing)
     assert decode(encode(flashing), Command).flashing is True
-    assert "flashing" not in wire_fields(_snapshot())
-    snapshot = _snapshot(flashing=np.array([False, True]))
-    assert decode(encode(snapshot), Snapshot).flashing.tolist() == [False, True]  # type: ignore[union-attr]
-    with pytest.raises(ValueError, match="flashing must have 2 rows"):
-        _snapshot(flashing=np.array([True]))
-    with pytest.raises(TypeError, match="flashing must be a boolean array"):
-        _snapshot(flashing=np.array([0, 1]))
+    assert "lights" not in wire_fields(_snapshot())
+    snapshot = _snapshot(lights=np.array([STEADY, FLASHING]))
+    lights = decode(encode(snapshot), Snapshot).lights
+    assert lights is not None and lights.tolist() == [STEADY, FLASHING]
+    with pytest.raises(ValueError, match="lights must have 2 rows"):
+        _snapshot(lights=np.array([DARK]))
+    with pytest.raises(ValueError, match="lights must be indices into"):
+        _snapshot(lights=np.array([0, 3]))
     with pytest.raises(TypeError, match="flashing must be a bool or None"):
         Command(2, 5, np.zeros(4), flashing=1)  # type: ignore[arg-type]
     # A robot's status: whether it flashes and how many flags it saw, once it has.
