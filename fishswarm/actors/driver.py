@@ -25,9 +25,10 @@ import contextlib
 import logging
 import math
 import secrets
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import trio
@@ -50,12 +51,15 @@ from fishswarm.protocols.messages import (
     Command,
     Delivery,
     FormationFlag,
+    Message,
     Perception,
     RobotOrder,
     RobotStatus,
 )
 
 log = logging.getLogger(__name__)
+
+M = TypeVar("M", bound=Message)
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -427,14 +431,23 @@ class Driver:
 
     # Acting -----------------------------------------------------------------------------
 
+    async def _addressed(
+        self, messages: Inbox[tuple[str, bytes]], expected: type[M], field: str
+    ) -> AsyncIterator[tuple[str, bytes, M]]:
+        """The fish's messages of type ``expected`` that name this robot in ``field``, as
+        they come (others rejected and counted), with their key and payload."""
+        robot_id = self.settings.robot_id
+        async for key, payload in messages:
+            message = self._intake.decode_addressed(
+                key, payload, expected, field=field, owner=robot_id
+            )
+            if message is not None:
+                yield key, payload, message
+
     async def _obey(self, commands: Inbox[tuple[str, bytes]]) -> None:
         """Write each command to fins and LEDs, unless stopped or stranded."""
-        robot_id = self.settings.robot_id
-        async for key, payload in commands:
-            command = self._intake.decode_addressed(
-                key, payload, Command, field="fish_id", owner=robot_id
-            )
-            if command is None or self.state in ("stopped", "stranded"):
+        async for _, _, command in self._addressed(commands, Command, "fish_id"):
+            if self.state in ("stopped", "stranded"):
                 continue
             self._set_fins(command.fins)
             self._lit = command.led
@@ -533,13 +546,7 @@ class Driver:
 
     async def _pass_broadcasts(self, broadcasts: Inbox[tuple[str, bytes]], remote: Bus) -> None:
         """The fish's broadcasts onto the link, and its formation flag into light."""
-        robot_id = self.settings.robot_id
-        async for key, payload in broadcasts:
-            broadcast = self._intake.decode_addressed(
-                key, payload, Broadcast, field="sender_id", owner=robot_id
-            )
-            if broadcast is None:
-                continue
+        async for key, payload, broadcast in self._addressed(broadcasts, Broadcast, "sender_id"):
             remote.put(key, payload)
             self._counts["broadcasts"] += 1
             if broadcast.kind == "formation":
@@ -585,13 +592,7 @@ class Driver:
                 token.undeclare()
 
     async def _pass_deliveries(self, deliveries: Inbox[tuple[str, bytes]], local: Bus) -> None:
-        robot_id = self.settings.robot_id
-        async for key, payload in deliveries:
-            delivery = self._intake.decode_addressed(
-                key, payload, Delivery, field="receiver_id", owner=robot_id
-            )
-            if delivery is None:
-                continue
+        async for key, _, delivery in self._addressed(deliveries, Delivery, "receiver_id"):
             # A channel numbers deliveries by its world's ticks; the fish acts on one at the
             # driver's next perception, and waits for it under that perception's tick.
             local.put(key, encode(replace(delivery, tick=self._tick)))
