@@ -109,13 +109,21 @@ def say_unconfirmed(fleet: list[FleetEntry], sent: RobotOrder) -> dict[int, str]
     robots, with why."""
     missing = unconfirmed(fleet, sent)
     restarted = "unstopped" if sent.action == "stop" else "as configured"
+    known = [entry.robot_id for entry in fleet]
+    heard = ", ".join(map(str, known)) if known else "none"
     for robot_id, why in missing.items():
-        advice = (
-            ""  # sending again cannot change the behaviour its fish run
-            if why.startswith("its fish run ")
-            else f": a robot whose link is down never hears it, and one that restarts comes "
-            f"back {restarted}; send it again"
-        )
+        if why.startswith("its fish run "):
+            advice = ""  # sending again cannot change the behaviour its fish run
+        elif robot_id not in known:
+            advice = (
+                f": no robot {robot_id} is known on this router (robots heard from: {heard}); "
+                "check the id, or whether it is up and connected"
+            )
+        else:
+            advice = (
+                f": a robot whose link is down never hears it, and one that restarts comes "
+                f"back {restarted}; send it again"
+            )
         print(f"robot {robot_id} did not confirm the {sent.action} ({why}){advice}",
               file=sys.stderr)  # fmt: skip
     return missing

@@ -1,12 +1,14 @@
-"""The fleet as ``fishswarm robots`` prints it: a table, one robot a line, and JSON."""
+"""The fleet as ``fishswarm robots`` prints it: a table, one robot a line, and JSON; and
+what it says of robots that did not confirm an order."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from fishswarm.actors.robot import FleetEntry
-from fishswarm.cli.robot import _as_dict, fleet_table
-from fishswarm.protocols.messages import RobotStatus
+from fishswarm.cli.robot import _as_dict, fleet_table, say_unconfirmed
+from fishswarm.protocols.messages import RobotOrder, RobotStatus
 
 
 def status(robot_id: int, **changes: object) -> RobotStatus:
@@ -52,3 +54,31 @@ def test_the_json_tells_whether_a_robot_flashes_and_how_many_flags_it_saw() -> N
 
 def test_no_robots_heard_from_says_what_to_check() -> None:
     assert fleet_table([]) == "no robots heard from (are they up and connected to this router?)"
+
+
+def test_robots_that_did_not_confirm_an_order_are_named_with_what_to_do(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Robot 11 is up but did not stop: send it again. Robot 99 was never heard from: not a
+    robot of this router, most likely a wrong id. Robot 12's fish run dispersion: a
+    formation order cannot reach them, and sending again changes nothing."""
+    fleet = [
+        FleetEntry(10, status(10, state="stopped"), True, 0.1),
+        FleetEntry(11, status(11), True, 0.1),
+        FleetEntry(12, status(12, behavior="dispersion"), True, 0.1),
+    ]
+    stop = RobotOrder("stop", np.array([10, 11, 99]))
+    assert sorted(say_unconfirmed(fleet, stop)) == [11, 99]
+    said = capsys.readouterr().err.splitlines()
+    assert said == [
+        "robot 11 did not confirm the stop (still swimming): a robot whose link is down never "
+        "hears it, and one that restarts comes back unstopped; send it again",
+        "robot 99 did not confirm the stop (not heard from): no robot 99 is known on this "
+        "router (robots heard from: 10, 11, 12); check the id, or whether it is up and "
+        "connected",
+    ]
+    formation = RobotOrder("formation", np.array([12]), "column")
+    assert list(say_unconfirmed(fleet, formation)) == [12]
+    assert capsys.readouterr().err.strip() == (
+        "robot 12 did not confirm the formation (its fish run dispersion, not a formation)"
+    )
