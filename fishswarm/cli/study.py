@@ -241,6 +241,21 @@ def _formations_of(recording: Recording) -> list[FormationTarget] | None:
     return [targets.told(snapshot.formation, snapshot.time) for snapshot in recording.snapshots]
 
 
+def _switches_of(recording: Recording) -> list[tuple[float, str]]:
+    """When the shape a recorded formation's fish were told to take changed, s, and to
+    which: as the snapshots name it, or (recorded before they did) the scenario's switch."""
+    ran = Scenario.as_recorded(recording.scenario)
+    told = [
+        snapshot.formation or (ran.switch_formation if snapshot.time >= ran.switch_at else None)
+        for snapshot in recording.snapshots
+    ]
+    return [
+        (snapshot.time, shape)
+        for before, shape, snapshot in zip(told, told[1:], recording.snapshots[1:], strict=False)
+        if shape is not None and shape != before
+    ]
+
+
 def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm plot RECORDING``."""
     from fishswarm.study.figures import FiguresUnavailable, figure_of_run
@@ -265,6 +280,7 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     orbit = _orbit_of(settings)
     formations = _formations_of(recording)
     formation = None if formations is None else formations[-1]
+    switches = _switches_of(recording) if formations is not None else []
     if formations is not None:
         series = [
             target.metrics(s.position)
@@ -286,7 +302,7 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
         tank = _tank_of(settings, arrays["pos"])
         figure = figure_of_run(
             arrays["t"], arrays["pos"], metrics, tank, title=title, orbit=orbit,
-            formation=formation,
+            formation=formation, switches=switches,
         )  # fmt: skip
         figure.savefig(out, dpi=110)
     except FiguresUnavailable as error:

@@ -118,18 +118,20 @@ def figure_of_run(
     title: str,
     orbit: OrbitTarget | None = None,
     formation: FormationTarget | None = None,
+    switches: Sequence[tuple[float, str]] = (),
 ) -> Figure:
     """One run: tracks from above and from the side, and every metric over time (for
     circling fish, given ``orbit``: the post and R drawn, radius, revolutions and speed;
     for a formation, given ``formation``: the fish at the end coloured by role and joined
-    state, the target laid onto them, shape error, joined fraction and collisions)."""
+    state, the target laid onto them, shape error, joined fraction and collisions, each
+    switch of shape — (time s, the new shape) in ``switches`` — marked over time)."""
     plt = _pyplot()
     figure = plt.figure(figsize=(12, 7), layout="constrained")
     if orbit is not None or formation is not None:
         if orbit is not None:
             _orbit_panels(figure, t, position, metrics, tank, orbit)
         elif formation is not None:
-            _formation_panels(figure, t, position, metrics, tank, formation)
+            _formation_panels(figure, t, position, metrics, tank, formation, switches)
         figure.suptitle(title)
         special: Figure = figure
         return special
@@ -258,6 +260,7 @@ def _formation_panels(
     metrics: dict[str, FloatArray],
     tank: Sequence[float],
     formation: FormationTarget,
+    switches: Sequence[tuple[float, str]],
 ) -> None:
     from matplotlib.lines import Line2D
 
@@ -292,6 +295,15 @@ def _formation_panels(
     crowded = figure.add_subplot(grid[2, 1])
     crowded.plot(t, metrics["collisions"], color="tab:red")
     crowded.set(xlabel="time (s)", ylabel=METRIC_LABELS["collisions"])
+    # The metrics jump where the fish were told another shape: mark where, and which.
+    for time, shape in switches:
+        for over_time in (error, joined, crowded):
+            over_time.axvline(time, color="dimgrey", linestyle="-.", linewidth=0.8)
+        error.annotate(
+            f"→ {shape}", (time, 1.0), xycoords=("data", "axes fraction"),
+            xytext=(3, -3), textcoords="offset points", va="top", fontsize=8, color="dimgrey",
+            bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.85, "pad": 1},
+        )  # fmt: skip
 
 
 def experiment_figures(

@@ -216,3 +216,53 @@ def test_learning_figures_name_their_units_and_keep_the_key_off_the_data(tmp_pat
     ]
     tracks = trajectories_figure(evaluation)
     assert _labels(tracks.axes[0]) == ("x (units)", "y (units)")
+
+
+def test_a_formation_runs_figure_marks_each_switch_of_shape_over_time() -> None:
+    from fishswarm.formations.maps import target_map
+    from fishswarm.study.metrics import FormationTarget
+
+    target = FormationTarget(target_map("diamond", 6, spacing=0.3), 0.3, 0.1)
+    position = np.zeros((4, 6, 3)) + np.array([0.9, 0.9, 0.5])
+    metrics = {
+        "shape_error": np.array([0.05, 0.04, 0.3, 0.2]),
+        "joined_fraction": np.array([1.0, 1.0, 0.0, 0.5]),
+        "collisions": np.zeros(4),
+    }
+
+    def marks(switches: list[tuple[float, str]]) -> tuple[list[list[float]], list[str]]:
+        figure = figure_of_run(
+            np.arange(4.0), position, metrics, (1.78, 1.78, 1.17), title="f",
+            formation=target, switches=switches,
+        )  # fmt: skip
+        _, _, error, joined, crowded = figure.axes
+        upright = [
+            np.asarray(line.get_xdata(), dtype=float).tolist()
+            for axes in (error, joined, crowded)
+            for line in axes.get_lines()
+            if line.get_linestyle() == "-."
+        ]
+        return upright, [text.get_text() for text in error.texts]
+
+    # Told a diamond at 2 s: a mark at 2 s on the three panels over time, named once.
+    assert marks([(2.0, "diamond")]) == ([[2.0, 2.0]] * 3, ["→ diamond"])
+    assert marks([]) == ([], [])
+
+
+def test_the_switches_of_a_recorded_formation_are_where_the_told_shape_changes() -> None:
+    from types import SimpleNamespace
+
+    from fishswarm.cli.study import _switches_of
+
+    def recording(told: list[str | None], **scenario: object) -> Any:
+        snapshots = [SimpleNamespace(time=float(n), formation=f) for n, f in enumerate(told)]
+        settings = {"behavior": "formation", "fish": 6, **scenario}
+        return SimpleNamespace(scenario=settings, snapshots=snapshots)
+
+    # An operator's switches, as the snapshots name them (back to the first shape too).
+    told = [None, None, "diamond", "diamond", "pyramid"]
+    assert _switches_of(recording(told)) == [(2.0, "diamond"), (4.0, "pyramid")]
+    # Recorded before snapshots named the shape: the scenario's own switch.
+    scheduled = recording([None] * 4, switch_formation="column", switch_at=1.5)
+    assert _switches_of(scheduled) == [(2.0, "column")]
+    assert _switches_of(recording([None] * 3)) == []
