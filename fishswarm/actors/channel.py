@@ -281,10 +281,11 @@ class Channel:
             )
         chosen = own if world is None else world
         log.info(
-            "channel: a run starts: range %g m, loss %g, seed %d",
+            "channel: a run starts: range %g m, loss %g, seed %d, flags by %s",
             chosen.channel_range,
             chosen.channel_loss,
             chosen.seed,
+            chosen.flag_medium,
         )
         # The rngs were let go at the run's first snapshot: the next draws use this seed.
         # Flags by light reach the fish that see their sender: the world's vision decides.

@@ -434,7 +434,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
         f"status: {actor.state_name} at tick {statistics.ticks} "
         f"({actor.time:g} s simulated, "
         f"{actor.wall_time:.1f} s wall time); {statistics.lost_fish} fish lost, "
-        f"{statistics.rejected_total} messages rejected",
+        f"{statistics.rejected_total} messages rejected by the world",
         file=sys.stderr,
     )
     print(json.dumps(dataclasses.asdict(statistics)), file=sys.stderr)
@@ -448,6 +448,7 @@ the world's wait for the channel's first report)."""
 
 def channel(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm channel``: the channel alone."""
+    served: list[Channel] = []
 
     async def main() -> None:
         async with open_session(client_settings(args, "channel")) as session:
@@ -456,14 +457,25 @@ def channel(args: argparse.Namespace, scenario: Scenario) -> int:
                 return await ask_scenario(session, scenario.keys, timeout=WORLD_ANSWER_TIMEOUT)
 
             async with trio.open_nursery() as nursery:
-                await nursery.start(Channel(scenario, ask_world=ask_world).run, ZenohBus(session))
+                served.append(Channel(scenario, ask_world=ask_world))
+                await nursery.start(served[0].run, ZenohBus(session))
                 print(
                     f"channel up on {args.connect} for swarm {scenario.swarm!r}: it takes each "
-                    "run's range, loss and seed from the run's world",
+                    "run's range, loss, seed and flag medium from the run's world",
                     file=sys.stderr,
                 )
 
-    _run_trio(main)
+    try:
+        _run_trio(main)
+    finally:  # said however it ends (Ctrl-C, SIGTERM): what the channel did
+        if served:
+            statistics = served[0].statistics()
+            print(
+                f"channel: {statistics.delivered} deliveries made, "
+                f"{statistics.missing_broadcasts} broadcasts announced but missing, "
+                f"{statistics.rejected} messages rejected by the channel",
+                file=sys.stderr,
+            )
     return 0
 
 

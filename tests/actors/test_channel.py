@@ -265,13 +265,13 @@ def test_a_channel_apart_from_its_world_takes_each_runs_medium_from_the_world(
         "own (range 3 m, loss 0, seed 0)"
     )
     assert said == [
-        "channel: a run starts: range 3 m, loss 0.5, seed 4",
+        "channel: a run starts: range 3 m, loss 0.5, seed 4, flags by channel",
         own,
-        "channel: a run starts: range 3 m, loss 0, seed 0",
+        "channel: a run starts: range 3 m, loss 0, seed 0, flags by channel",
         "channel: the world's answer is no run settings",
         own,
-        "channel: a run starts: range 3 m, loss 0, seed 0",
-        "channel: a run starts: range 3 m, loss 0, seed 4",
+        "channel: a run starts: range 3 m, loss 0, seed 0, flags by channel",
+        "channel: a run starts: range 3 m, loss 0, seed 4, flags by channel",
     ]
 
 
@@ -287,7 +287,7 @@ def test_a_channel_apart_from_its_world_takes_the_worlds_range_alone(
     with caplog.at_level(logging.INFO, "fishswarm.actors.channel"):
         counts = run_mock(lambda: _runs(Channel(Scenario(fish=3), ask_world=ask_world), 1))
     assert counts == [[[0, 1, 0]] * 8]
-    assert "channel: a run starts: range 0.15 m, loss 0, seed 0" in caplog.text
+    assert "channel: a run starts: range 0.15 m, loss 0, seed 0, flags by channel" in caplog.text
 
 
 def test_a_channel_serving_run_after_run_gives_each_the_losses_of_a_run_alone() -> None:
@@ -318,3 +318,21 @@ def test_a_channel_serving_run_after_run_gives_each_the_losses_of_a_run_alone() 
     heard = sum(c[1] + c[2] for c in first)
     assert 4 <= heard <= 12  # of 16 receptions, about half lost (the seed's draw)
     assert channel.statistics().rejected == 1
+
+
+def test_a_channel_apart_from_its_world_takes_how_its_flags_travel_and_who_sees_whom() -> None:
+    """A world whose flags go by light, with its own vision: the channel takes both, and
+    the run's signals (which light does not carry) reach no one."""
+
+    async def ask_world() -> Scenario | None:
+        return Scenario(
+            fish=3, flag_medium="light", visual_range=0.5, blind_width=0.1, sphere_radius=0.02
+        )
+
+    channel = Channel(Scenario(fish=3), ask_world=ask_world)
+    counts = run_mock(lambda: _runs(channel, 1))
+    taken = channel.scenario
+    assert (taken.flag_medium, taken.visual_range, taken.blind_width, taken.sphere_radius) == (
+        "light", 0.5, 0.1, 0.02,
+    )  # fmt: skip
+    assert counts == [[[0, 0, 0]] * 8]

@@ -85,7 +85,7 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
             assert f"status: finished at tick {duration} ({duration} s simulated, " in (
                 world.stderr
             )
-            assert " wall time); 0 fish lost, 0 messages rejected" in world.stderr
+            assert " wall time); 0 fish lost, 0 messages rejected by the world" in world.stderr
             assert statistics["lost_fish"] == 0
             assert statistics["rejected"] == {}
         _, observer_errors = observer.communicate(timeout=30)
@@ -352,8 +352,10 @@ def test_two_worlds_started_together_before_their_fish_both_run_one_after_the_ot
         start("fish", "--id", "0", "--id", "1", "--connect", endpoint)
         for world, said, simulated in zip(worlds, lines, ("3", "1.5"), strict=True):
             assert world.wait(timeout=60) == 0, said.seen
-            said.wait_for(rf"^status: finished at tick 3 \({re.escape(simulated)} s simulated, "
-                          r"\d+\.\d s wall time\); 0 fish lost, 0 messages rejected$")  # fmt: skip
+            said.wait_for(
+                rf"^status: finished at tick 3 \({re.escape(simulated)} s simulated, "
+                r"\d+\.\d s wall time\); 0 fish lost, 0 messages rejected by the world$"
+            )
     runs = [read_recording(record) for record in records]
     assert [[s.tick for s in run.snapshots] for run in runs] == [[0, 1, 2, 3]] * 2
     assert all(run.complete for run in runs)
@@ -402,7 +404,17 @@ def test_a_standalone_channel_takes_each_runs_loss_and_seed_from_its_world(
         statistics = json.loads(world.stderr.strip().splitlines()[-1])
         assert statistics["ticks"] == 20 and statistics["lost_fish"] == 0
         assert statistics["rejected"] == {} and statistics["mismatched_fish"] == 0
-        channel_lines.wait_for("channel: a run starts: range 3 m, loss 0.5, seed 3$", timeout=10)
+        channel_lines.wait_for(
+            "channel: a run starts: range 3 m, loss 0.5, seed 3, flags by channel$", timeout=10
+        )
+        # Stopped, the channel says what it did: the world counted no rejection, nor it.
+        channel.send_signal(signal.SIGTERM)
+        assert channel.wait(timeout=15) == 130
+        done = channel_lines.wait_for(
+            r"^channel: (\d+) deliveries made, 0 broadcasts announced but missing, "
+            r"0 messages rejected by the channel$"
+        )
+        assert int(done.group(1)) > 0
     reference = simulate_batch(
         Scenario(fish=6, behavior="formation", duration=20.0, seed=3, channel_loss=0.5)
     )
