@@ -364,6 +364,15 @@ def certified_subjects(folder: Path, keys: KeySpace) -> list[str]:
     return held
 
 
+def router_names(folder: Path) -> list[str]:
+    """The hosts and addresses the router's certificate in ``folder`` is valid for (none
+    without one)."""
+    path = folder / "router.pem"
+    if not path.is_file():
+        return []
+    return [str(getattr(name.value, "exploded", name.value)) for name in _names_of(path)]
+
+
 def _names_of(path: Path) -> list[Any]:
     """The names (hosts and addresses) a certificate is valid for."""
     from cryptography import x509

@@ -35,6 +35,7 @@ from fishswarm.actors.security import (
     init_secure,
     observer_subject,
     robot_subject,
+    router_names,
 )
 from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
@@ -704,6 +705,7 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
     control."""
     try:
         before = certified_subjects(args.folder, KeySpace(args.swarm))
+        named = router_names(args.folder)
         written = init_secure(
             args.folder,
             robots=args.robots,
@@ -726,9 +728,10 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
         added = [subject for subject in subjects if subject not in before]
         made = f"certificates for {', '.join(added)}" if added else "no new certificate"
         if renewed:
+            new = [name for name in router_names(args.folder) if name not in named]
             made += (
-                f"; renewed the router's certificate to name {', '.join(args.host or ())} "
-                "too (its other names kept)"
+                f"; renewed the router's certificate to name {', '.join(new)} too (its other "
+                "names kept)"
             )
         print(
             f"{args.folder} already holds an authority: added {made} (signed by it; those "

@@ -513,6 +513,10 @@ def test_secure_init_with_a_new_host_renews_the_routers_certificate_and_nothing_
     assert main(["secure", "init", str(folder), "--host", "10.0.0.1"]) == 0
     assert "renewed" not in capsys.readouterr().err
     assert (folder / "router.pem").read_bytes() == renewed
+    # A second host besides the first: the message names the new one only.
+    assert main(["secure", "init", str(folder), "--host", "10.0.0.1", "--host", "lab.local"]) == 0
+    assert "to name lab.local too" in capsys.readouterr().err
+    assert router_names() == ["localhost", "127.0.0.1", "10.0.0.1", "lab.local"]
 
 
 def test_secure_init_makes_each_subject_once_and_refuses_names_it_cannot_use(
