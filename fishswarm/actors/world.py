@@ -58,7 +58,7 @@ from fishswarm.protocols.messages import (
 )
 from fishswarm.sim.clocks import Event
 from fishswarm.sim.physics import WorldParams
-from fishswarm.sim.scenario import COMMAND_TIMEOUT, START_TIMEOUT, Scenario
+from fishswarm.sim.scenario import COMMAND_TIMEOUT, START_TIMEOUT, TURN_DELAY, Scenario
 from fishswarm.sim.tick import WorldSim
 from fishswarm.study.progress import ids_text
 
@@ -127,7 +127,7 @@ class WorldSettings:
     command_timeout: float = COMMAND_TIMEOUT
     channel_timeout: float = OUTBOX_TIMEOUT + 1.0
     admit_delay: float = 0.1
-    turn_delay: float = 0.1
+    turn_delay: float = TURN_DELAY
     pulse_period: float = 1.0
     vouched_only: bool = False
 

@@ -24,6 +24,7 @@ from fishswarm.sim.scenario import (
     PROFILES,
     START_TIMEOUT,
     STUDY_CODE_SWITCHES,
+    TURN_DELAY,
     ConfigError,
     Scenario,
     scenario_table,
@@ -518,6 +519,15 @@ def build_parser() -> argparse.ArgumentParser:
         type=seconds,
         default=START_TIMEOUT,
         help=f"longest wait for the fish, s (default {START_TIMEOUT:g})",
+    )
+    world.add_argument(
+        "--turn-delay",
+        type=seconds,
+        default=TURN_DELAY,
+        help="worlds of one swarm run one after the other, first come first served: a world "
+        "takes its turn no sooner than this after it came up, so that the places in the queue "
+        "of worlds up before it reach it first; raise it where the worlds' links to the "
+        f"router are slower than that, s (default {TURN_DELAY:g})",
     )
 
     world.add_argument(

@@ -385,6 +385,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
             scenario,
             tuple(range(scenario.fish)),
             args.start_timeout,
+            turn_delay=args.turn_delay,
             vouched_only=args.secure is not None,
         )
     )

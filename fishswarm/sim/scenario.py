@@ -79,6 +79,9 @@ MAX_TARGET_DISTANCE = 1000.0
 twelfth powers overflow)."""
 START_TIMEOUT = 60.0
 """How long a run's world waits for its fish to come up by default, s."""
+TURN_DELAY = 0.1
+"""How long after it came up a world takes its turn at the earliest by default, s: the places
+in the queue of the worlds of its swarm up before it reach it first."""
 COMMAND_TIMEOUT = 10.0
 """How long a run's world waits for a fish's command before it marks the fish lost, by
 default, s."""

@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -891,3 +892,27 @@ def test_a_command_waiting_for_its_router_forever_ends_at_once_on_sigterm(
         assert process.stderr is not None
         errors = process.stderr.read()
     assert code == 130 and errors.rstrip().endswith("fishswarm: interrupted"), errors
+
+
+def test_a_standalone_worlds_turn_delay_comes_from_its_command_line(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """--turn-delay reaches the world's settings; without it, the default (0.1 s)."""
+    from fishswarm.cli import main, swarm
+    from fishswarm.sim.scenario import TURN_DELAY
+
+    class Made(Exception):
+        pass
+
+    made: list[Any] = []
+
+    def world(settings: Any) -> Any:
+        made.append(settings)
+        raise Made
+
+    monkeypatch.setattr(swarm, "World", world)
+    for words, delay in ((["--turn-delay", "0.75"], 0.75), ([], TURN_DELAY)):
+        with pytest.raises(Made):
+            main(["world", "--fish", "2", *words])
+        assert made.pop().turn_delay == delay
+    assert TURN_DELAY == 0.1
