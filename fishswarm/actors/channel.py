@@ -34,7 +34,7 @@ from fishswarm.protocols.messages import (
     Delivery,
     Snapshot,
 )
-from fishswarm.sim.medium import by_light, receptions
+from fishswarm.sim.medium import one_bit, receptions
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.sim.streams import Stream, stream
 
@@ -80,7 +80,8 @@ class Channel:
         ask_world: Callable[[], Awaitable[Scenario | None]] | None = None,
     ) -> None:
         self.scenario = scenario
-        """The medium's settings now (a standalone channel's: its last run's world's)."""
+        """The medium's settings now (a standalone channel's: its last run's world's
+        scenario; the channel's keys stay its own)."""
         self._own = scenario
         self._ask_world = ask_world
         self.keys = scenario.keys
@@ -217,11 +218,10 @@ class Channel:
     def _deliver(self, bus: Bus, snapshot: Snapshot, broadcasts: list[Broadcast]) -> None:
         index_of = {int(i): n for n, i in enumerate(snapshot.ids.tolist())}
         present = [b for b in broadcasts if b.sender_id in index_of]
-        sight = self.scenario.vision() if self.scenario.flag_medium == "light" else None
-        if sight is not None:
-            # By light, only "I hold my place" travels, and it says nothing else.
-            lit = [(b, by_light(BROADCAST_KINDS.index(b.kind), b.values)) for b in present]
-            present = [replace(b, values=values) for b, values in lit if values is not None]
+        if self.scenario.one_bit_flags:
+            # By light or beacon, only "I hold my place" travels, and it says nothing else.
+            said = [(b, one_bit(BROADCAST_KINDS.index(b.kind), b.values)) for b in present]
+            present = [replace(b, values=values) for b, values in said if values is not None]
         rngs = [self._rng(int(i)) for i in snapshot.ids.tolist()]
         found = receptions(
             snapshot.position,
@@ -230,7 +230,7 @@ class Channel:
             channel_range=self.scenario.channel_range,
             loss=self.scenario.channel_loss,
             rngs=rngs,
-            sight=sight,
+            sight=self.scenario.flag_sight(),
         )
         counts = np.zeros(snapshot.ids.size, dtype=np.int64)
         for reception in found:
@@ -262,9 +262,10 @@ class Channel:
     async def _take_the_worlds_medium(
         self, ask_world: Callable[[], Awaitable[Scenario | None]]
     ) -> None:
-        """Take range, loss and seed from the world of the run that starts (before its first
-        broadcasts are delivered, at the snapshot of tick 1); the channel's own settings, said
-        in a warning, if the world does not tell them."""
+        """Take the medium — range, loss, seed, how flags travel and who sees whom — from the
+        world of the run that starts (before its first broadcasts are delivered, at the
+        snapshot of tick 1); the channel's own settings, said in a warning, if the world does
+        not tell them."""
         own = self._own
         try:
             world = await ask_world()
@@ -274,10 +275,11 @@ class Channel:
         if world is None:
             log.warning(
                 "channel: the run's world did not tell its settings: the medium takes the "
-                "channel's own (range %g m, loss %g, seed %d)",
+                "channel's own (range %g m, loss %g, seed %d, flags by %s)",
                 own.channel_range,
                 own.channel_loss,
                 own.seed,
+                own.flag_medium,
             )
         chosen = own if world is None else world
         log.info(
@@ -288,18 +290,9 @@ class Channel:
             chosen.flag_medium,
         )
         # The rngs were let go at the run's first snapshot: the next draws use this seed.
-        # Flags by light reach the fish that see their sender: the world's vision decides.
-        self.scenario = self.scenario.replace(
-            channel_range=chosen.channel_range,
-            channel_loss=chosen.channel_loss,
-            seed=chosen.seed,
-            flag_medium=chosen.flag_medium,
-            visual_range=chosen.visual_range,
-            blind_width=chosen.blind_width,
-            sphere_radius=chosen.sphere_radius,
-            study_code=chosen.study_code,
-            profile=chosen.profile,
-        )
+        # The world's scenario whole: its range, loss, seed and flag medium, and its vision
+        # (flags by light reach the fish that see their sender).
+        self.scenario = chosen
 
     def _let_go(self, tick: int, reason: str) -> None:
         """Count every broadcast of ``tick`` in the outbox as unannounced, and drop them."""

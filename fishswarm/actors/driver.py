@@ -453,10 +453,10 @@ class Driver:
             self._lit = command.led
             if command.broadcasts == 0:
                 self._own_flag = None  # the fish flags nothing this time: no flashing
-            self._show_lights()
             self._last_command = trio.current_time()
             self._counts["commands"] += 1
             self.state = "swimming"
+            self._show_lights()
             self._wake()
 
     def _set_fins(self, gains: FloatArray) -> None:
@@ -559,10 +559,17 @@ class Driver:
                 self._show_lights()
 
     def _show_lights(self) -> None:
-        """The LEDs as the fish wants them: flashing while its flag says it holds its place
-        (its flag by light), else lit or dark as its command says; dark once stopped."""
+        """The LEDs as the fish wants them: flashing while it swims and its flag says it
+        holds its place (its flag by light), else lit or dark as its command says; dark once
+        stopped. A robot whose fins the failsafe or a lost link stopped holds no place, even
+        if a flag of a decision under way comes after."""
         lit = self._lit and self.state != "stopped"
-        flashing = lit and self._own_flag is not None and self._own_flag.joined
+        flashing = (
+            lit
+            and self.state == "swimming"
+            and self._own_flag is not None
+            and self._own_flag.joined
+        )
         if (lit, flashing) == self._shown:
             return
         self._shown = (lit, flashing)

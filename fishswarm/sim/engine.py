@@ -124,7 +124,8 @@ def simulate_batch(scenario: Scenario) -> Trajectory:
                     channel_range=params.channel_range,
                     loss=params.channel_loss,
                     rngs=channel_rngs,
-                    sight=params.sight,
+                    sight=params.flag_sight,
+                    one_bit_flags=params.one_bit_flags,
                 )
                 sent = None
         if not event.deciding:

@@ -6,10 +6,11 @@ delivery lost with a seeded probability, and carries the sender's position as th
 sees it (body frame, no id).
 
 With formation flags by light (``flag_medium = "light"``), the medium is the robots' own:
-only a formation flag that says its sender holds its place travels, reduced to what flashing
-LEDs say (:func:`~fishswarm.behaviors.formation.flag_by_light`), and it reaches the fish that
-see its sender — within visual range, outside their blind spot, not hidden by another body —
-instead of every fish within the channel's range.
+only a formation flag that says its sender holds its place travels, reduced to that one bit
+(:func:`one_bit`), and it reaches the fish that see its sender — within visual range,
+outside their blind spot, not hidden by another body — instead of every fish within the
+channel's range. By beacon (``"beacon"``) the same one bit reaches every fish within the
+channel's range, whether it sees the sender or not.
 """
 
 from __future__ import annotations
@@ -100,11 +101,12 @@ def seeing(position: FloatArray, yaw: FloatArray, *, vision: Vision) -> BoolArra
     return seen
 
 
-def by_light(kind: int, values: IntArray) -> IntArray | None:
-    """What flashing LEDs say of a broadcast: the numbers of the flag a fish that sees its
-    sender is handed (:func:`~fishswarm.behaviors.formation.flag_by_light`) for a formation
-    flag that says its sender holds its place; None for any other broadcast, which light
-    does not carry."""
+def one_bit(kind: int, values: IntArray) -> IntArray | None:
+    """What a one-bit flag (light, a beacon) says of a broadcast: for a formation flag that
+    says its sender holds its place, the numbers of that flag reduced to it
+    (:func:`~fishswarm.behaviors.formation.flag_by_light`: the shape and orientation kept —
+    a school's fish share them, where a robot gives the flags it sees its own fish's — no
+    slot, hops, effort or swap); None for any other broadcast, which is not sent."""
     if kind != FORMATION_KIND or values.shape[0] < 3 or values[2] != 1:
         return None
     try:
@@ -123,17 +125,19 @@ def deliver(
     loss: float,
     rngs: Sequence[np.random.Generator],
     sight: Vision | None = None,
+    one_bit_flags: bool = False,
 ) -> Inbox:
     """The inboxes of N fish after the broadcasts of ``outbox`` (rows of the same fish).
 
     The same receptions, in the same order and with the same random draws, as the channel
-    actor makes of the same broadcasts: senders in row (fish-id) order. With ``sight``,
-    broadcasts travel by light (:func:`by_light`, :func:`receptions`).
+    actor makes of the same broadcasts: senders in row (fish-id) order. With ``sight``
+    broadcasts reach the fish that see their sender (:func:`receptions`); with
+    ``one_bit_flags`` only formation flags of fish that hold their place travel, reduced to that.
     """
     sent = {int(row): outbox.values[row] for row in np.flatnonzero(outbox.mask)}
-    if sight is not None:
-        lit = {row: by_light(int(outbox.kind[row]), values) for row, values in sent.items()}
-        sent = {row: values for row, values in lit.items() if values is not None}
+    if one_bit_flags:
+        said = {row: one_bit(int(outbox.kind[row]), values) for row, values in sent.items()}
+        sent = {row: values for row, values in said.items() if values is not None}
     senders = list(sent)
     heard: list[list[Heard]] = [[] for _ in range(position.shape[0])]
     for reception in receptions(

@@ -46,8 +46,9 @@ class WorldParams:
         spawn_radius: radius of the ``ball`` fish start in, m.
         channel_range: how far a broadcast carries, m.
         channel_loss: probability that one delivery is lost.
-        flag_medium: how formation flags travel: ``channel`` or ``light``
-            (:mod:`fishswarm.sim.medium`).
+        flag_sight: the vision by which formation flags travel (by light: to the fish that
+            see their sender), or None (within ``channel_range``).
+        one_bit_flags: formation flags say only "I hold my place" (:mod:`fishswarm.sim.medium`).
         switch_formation: a formation the fish are told to switch to, or None.
         switch_at: when, s.
         robot: the BlueBot's parameters.
@@ -73,7 +74,8 @@ class WorldParams:
     spawn_radius: float
     channel_range: float
     channel_loss: float
-    flag_medium: str = "channel"
+    flag_sight: Vision | None = None
+    one_bit_flags: bool = False
     switch_formation: str | None = None
     switch_at: float = 0.0
     robot: BlueBot = BlueBot()
@@ -101,7 +103,8 @@ class WorldParams:
             spawn_radius=scenario.resolved_spawn_radius(),
             channel_range=scenario.channel_range,
             channel_loss=scenario.channel_loss,
-            flag_medium=scenario.flag_medium,
+            flag_sight=scenario.flag_sight(),
+            one_bit_flags=scenario.one_bit_flags,
             switch_formation=scenario.switch_formation,
             switch_at=scenario.switch_at,
             robot=scenario.robot(),
@@ -115,12 +118,6 @@ class WorldParams:
             wake_length=scenario.wake_length,
             wake_width=scenario.wake_width,
         )
-
-    @property
-    def sight(self) -> Vision | None:
-        """The vision by which broadcasts travel when formation flags go by light (None:
-        by the channel)."""
-        return self.vision if self.flag_medium == "light" else None
 
     def formation_at(self, time: float) -> str | None:
         """The formation fish are told to take at ``time`` by the scenario's switch (None:

@@ -48,9 +48,11 @@ from fishswarm.sim.wake import WAKE_LENGTH, WAKE_WIDTH
 SPAWN_REGIONS = ("ball", "tank")
 TIME_MODES = ("lockstep", "jitter", "realtime")
 VISION_MODELS = ("geometric", "camera")
-FLAG_MEDIA = ("channel", "light")
-"""How formation flags travel in a simulation: the simulated channel, or light (as between
-robots)."""
+FLAG_MEDIA = ("channel", "light", "beacon")
+"""How formation flags travel in a simulation: the simulated channel (every flag, within its
+range); light, as between robots (only "I hold my place", to the fish that see the sender);
+or a beacon (only "I hold my place", within the channel's range: what a robot's medium would
+need to reach fish that do not see it, docs/robot.md)."""
 STUDY_CODE_SWITCHES = {
     "euler-step": "Euler step 0.1 s, yaw turned by the rate before each substep's update",
     "drag": "backward drag 1.0, lateral and yaw drag growing with forward speed",
@@ -152,10 +154,12 @@ class Scenario:
         formation_lead: a formation fish aims short of its place by the drift it predicts
             over this time from its velocity relative to the place, s (0: at the place).
         flags: whether formation fish broadcast and heed formation flags.
-        flag_medium: how the flags travel: ``channel`` (default: the simulated channel,
-            every flag to every fish within ``channel_range``) or ``light`` (as between
-            robots, docs/robot.md: only a flag that says its sender holds its place, to the
-            fish that see the sender, telling nothing else).
+        flag_medium: how the flags travel (:data:`FLAG_MEDIA`): ``channel`` (default: the
+            simulated channel, every flag to every fish within ``channel_range``), ``light``
+            (as between robots, docs/robot.md: only a flag that says its sender holds its
+            place, telling nothing else, to the fish that see the sender — by the geometric
+            vision model, whatever ``vision_model`` says) or ``beacon`` (the same flag, to
+            every fish within ``channel_range``).
         slot_rule: how formation fish pick slots of a global map: ``share`` (default) or
             ``study`` (the study's rank rule).
         local_rule: how formation fish make a local shape: ``lattice`` (default: places on
@@ -489,6 +493,16 @@ class Scenario:
             yaw_before_update="euler-step" in study,
             speed_dependent_drag="drag" in study,
         )
+
+    def flag_sight(self) -> Vision | None:
+        """The vision by which formation flags travel: with flags by light, the fish that
+        see a flag's sender receive it; None: those within ``channel_range``."""
+        return self.vision() if self.flag_medium == "light" else None
+
+    @property
+    def one_bit_flags(self) -> bool:
+        """Whether formation flags say only "I hold my place" (by light or by beacon)."""
+        return self.flag_medium in ("light", "beacon")
 
     def vision(self) -> Vision:
         """The vision model."""

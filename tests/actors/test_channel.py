@@ -262,7 +262,7 @@ def test_a_channel_apart_from_its_world_takes_each_runs_medium_from_the_world(
     said = [r.getMessage() for r in caplog.records]
     own = (
         "channel: the run's world did not tell its settings: the medium takes the channel's "
-        "own (range 3 m, loss 0, seed 0)"
+        "own (range 3 m, loss 0, seed 0, flags by channel)"
     )
     assert said == [
         "channel: a run starts: range 3 m, loss 0.5, seed 4, flags by channel",

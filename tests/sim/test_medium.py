@@ -9,7 +9,7 @@ from fishswarm.behaviors.core import Outbox
 from fishswarm.behaviors.formation import FORMATION_KIND, NO_HOPS
 from fishswarm.bluebot.vision import Vision
 from fishswarm.protocols.messages import BROADCAST_KINDS, FORMATION_SHAPES, FormationFlag
-from fishswarm.sim.medium import by_light, deliver, receptions, seeing
+from fishswarm.sim.medium import deliver, one_bit, receptions, seeing
 
 # Four fish on the x axis, at 0, 0.95, 1.0 and 1.5 m; all facing +x except fish 2, which
 # faces +y (yaw 90°).
@@ -68,27 +68,36 @@ def joined_flag(joined: bool, slot: int = 4) -> np.ndarray:
 
 
 def test_light_carries_only_a_joined_formation_flag_and_only_that_it_is_joined() -> None:
-    said = by_light(FORMATION_KIND, joined_flag(True))
+    said = one_bit(FORMATION_KIND, joined_flag(True))
     assert said is not None
     flag = FormationFlag.from_values(said)
     # The shape and orientation (which all fish of a school share), joined; no slot, hops,
     # sequence, effort or swap.
     assert flag == FormationFlag(FORMATION_SHAPES.index("pyramid"), -1, True, NO_HOPS, 90_000, 0)
-    assert by_light(FORMATION_KIND, joined_flag(False)) is None
-    assert by_light(BROADCAST_KINDS.index("signal"), joined_flag(True)) is None
+    assert one_bit(FORMATION_KIND, joined_flag(False)) is None
+    assert one_bit(BROADCAST_KINDS.index("signal"), joined_flag(True)) is None
 
 
-def test_flags_by_light_reach_only_the_fish_that_see_their_sender() -> None:
-    """Fish 0 and 2 hold their places, fish 1 seeks one: fish 1 alone sees a joined flagger
-    (fish 2, 1 m ahead of it); fish 0's flag reaches no one (fish 1 has it behind, fish 2
-    too), and fish 1's is not sent by light at all."""
+def test_flags_by_light_reach_only_the_fish_that_see_their_sender_and_by_beacon_all() -> None:
+    """Fish 0 and 2 hold their places, fish 1 seeks one: by light, fish 1 alone sees a
+    joined flagger (fish 2, 1 m ahead of it); fish 0's flag reaches no one (fish 1 has it
+    behind, fish 2 too), and fish 1's is not sent at all."""
     values = np.stack([joined_flag(True), joined_flag(False), joined_flag(True)])
     outbox = Outbox(np.full(3, FORMATION_KIND), values, np.ones(3, dtype=bool))
     rngs = [np.random.default_rng(n) for n in range(3)]
-    inbox = deliver(ROW, AHEAD, outbox, channel_range=3.0, loss=0.0, rngs=rngs, sight=Vision())
+    inbox = deliver(
+        ROW, AHEAD, outbox, channel_range=3.0, loss=0.0, rngs=rngs, sight=Vision(),
+        one_bit_flags=True,
+    )  # fmt: skip
     assert inbox.mask.sum(axis=1).tolist() == [0, 1, 0]
-    np.testing.assert_array_equal(inbox.values[1, 0], by_light(FORMATION_KIND, values[2]))
+    np.testing.assert_array_equal(inbox.values[1, 0], one_bit(FORMATION_KIND, values[2]))
     np.testing.assert_allclose(inbox.sender[1, 0], [1.0, 0.0, 0.0], atol=1e-12)
-    # By the channel, every flag reaches both others.
+    # By the channel, every flag reaches both others; by beacon, the two joined fish's
+    # flags, reduced as by light, reach both others whether they see them or not.
     by_channel = deliver(ROW, AHEAD, outbox, channel_range=3.0, loss=0.0, rngs=rngs)
     assert by_channel.mask.sum(axis=1).tolist() == [2, 2, 2]
+    by_beacon = deliver(
+        ROW, AHEAD, outbox, channel_range=3.0, loss=0.0, rngs=rngs, one_bit_flags=True
+    )
+    assert by_beacon.mask.sum(axis=1).tolist() == [1, 2, 1]
+    np.testing.assert_array_equal(by_beacon.values[0, 0], one_bit(FORMATION_KIND, values[2]))
