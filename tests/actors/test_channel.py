@@ -13,8 +13,16 @@ import trio
 from fishswarm.actors.bus import MemoryBus
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.inbox import Inbox
+from fishswarm.behaviors.formation import flag_by_light
 from fishswarm.protocols.codec import decode, encode
-from fishswarm.protocols.messages import Broadcast, ChannelReport, Delivery, Snapshot
+from fishswarm.protocols.messages import (
+    FORMATION_SHAPES,
+    Broadcast,
+    ChannelReport,
+    Delivery,
+    FormationFlag,
+    Snapshot,
+)
 from fishswarm.sim.scenario import ConfigError, Scenario
 from tests.conftest import run_mock, subscription
 
@@ -336,3 +344,83 @@ def test_a_channel_apart_from_its_world_takes_how_its_flags_travel_and_who_sees_
         "light", 0.5, 0.1, 0.02,
     )  # fmt: skip
     assert counts == [[[0, 0, 0]] * 8]
+
+
+# Three fish in a row along +x, 1 m apart, all facing +x: each sees the one ahead of it
+# (the one beyond is hidden behind it); the ones behind are in its blind spot.
+ROW = np.array([[0.5, 1.0, 0.5], [1.5, 1.0, 0.5], [2.5, 1.0, 0.5]])
+JOINED = (True, False, True)
+"""Whose formation flags say they hold their places."""
+
+
+def formation_flag(sender: int, tick: int, joined: bool) -> Broadcast:
+    values = FormationFlag(FORMATION_SHAPES.index("pyramid"), 3 - sender, joined, 2, 90_000, 7)
+    return Broadcast(sender, tick, "formation", values.values())
+
+
+async def _light_run(channel: Channel) -> tuple[list[list[int]], list[Delivery]]:
+    """Tick 0: fish 0 and 2 flag that they hold their places, fish 1 that it seeks its
+    place; tick 1: fish 2 sends a signal. Each tick's inbox counts, and the deliveries."""
+    bus = MemoryBus()
+    zeros = np.zeros(3, dtype=np.int64)
+
+    def row_snapshot(tick: int, broadcasts: list[int]) -> bytes:
+        announced = np.array(broadcasts, dtype=np.int64)
+        return encode(Snapshot(tick, float(tick), IDS, ROW, np.zeros((3, 3)), np.zeros(3),
+                               zeros, announced))  # fmt: skip
+
+    counts = []
+    async with (
+        subscription(bus, KEYS.channel_report) as reports,
+        subscription(bus, KEYS.fish_inboxes()) as inboxes,
+        trio.open_nursery() as nursery,
+    ):
+        await nursery.start(channel.run, bus)
+        bus.put(KEYS.snapshot, row_snapshot(0, [0, 0, 0]))
+        for sender, joined in enumerate(JOINED):
+            bus.put(KEYS.outbox(sender), encode(formation_flag(sender, 0, joined)))
+        bus.put(KEYS.snapshot, row_snapshot(1, [1, 1, 1]))
+        counts.append(decode((await reports.receive())[1], ChannelReport).inbox_counts.tolist())
+        bus.put(KEYS.outbox(2), broadcast(2, 1, 5))
+        bus.put(KEYS.snapshot, row_snapshot(2, [0, 0, 1]))
+        counts.append(decode((await reports.receive())[1], ChannelReport).inbox_counts.tolist())
+        nursery.cancel_scope.cancel()
+    return counts, [decode(payload, Delivery) for _, payload in inboxes.drain()]
+
+
+def test_by_light_only_a_joined_flag_travels_to_the_fish_that_see_its_sender() -> None:
+    """With flags by light the channel plays the robots' medium: only fish 2's flag (it
+    holds its place) travels, to fish 1 alone, which sees it 1 m ahead (fish 0's reaches no
+    one: the others have it behind them; fish 1's says it seeks its place), reduced to what
+    light says; the signal travels not at all. By the channel, every broadcast reaches
+    both other fish (3 m range), as it is."""
+    counts, deliveries = run_mock(
+        lambda: _light_run(Channel(Scenario(fish=3, flag_medium="light")))
+    )
+    assert counts == [[0, 1, 0], [0, 0, 0]]
+    [delivery] = deliveries
+    assert (delivery.receiver_id, delivery.tick, delivery.kind) == (1, 1, "formation")
+    own = FormationFlag.from_values(formation_flag(2, 0, True).values)
+    assert FormationFlag.from_values(delivery.values) == flag_by_light(own)
+    np.testing.assert_allclose(delivery.sender_position, [1.0, 0.0, 0.0], atol=1e-12)
+    counts, deliveries = run_mock(lambda: _light_run(Channel(Scenario(fish=3))))
+    assert counts == [[2, 2, 2], [1, 1, 0]]
+    sent = [formation_flag(n, 0, joined).values.tolist() for n, joined in enumerate(JOINED)]
+    flags = [d.values.tolist() for d in deliveries if d.kind == "formation"]
+    assert sorted(flags) == sorted(sent * 2)
+
+
+@pytest.mark.parametrize(("visual_range", "counts"), [(3.0, [0, 1, 0]), (0.5, [0, 0, 0])])
+def test_a_channel_apart_from_its_world_takes_its_flag_medium_and_its_sight(
+    visual_range: float, counts: list[int]
+) -> None:
+    """A channel started with the simulated channel's flags takes flags by light from the
+    world of the run, and the world's vision decides who sees whom: with a visual range of
+    0.5 m, fish 1 does not see fish 2, 1 m ahead, and no flag travels."""
+
+    async def ask_world() -> Scenario | None:
+        return Scenario(fish=3, flag_medium="light", visual_range=visual_range)
+
+    channel = Channel(Scenario(fish=3), ask_world=ask_world)
+    got, _ = run_mock(lambda: _light_run(channel))
+    assert got == [counts, [0, 0, 0]]

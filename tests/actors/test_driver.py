@@ -780,3 +780,158 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
         np.testing.assert_allclose(delivery.sender_position, truth, rtol=0.05, atol=0.02)
     assert flag_by_light(own) == FormationFlag(own.shape, -1, True, NO_HOPS, 45_000, 0)
     assert seen_in_status == [2]  # by tick 3
+
+
+class RecordingLeds:
+    """LEDs that note what they were told."""
+
+    def __init__(self) -> None:
+        self.told: list[str] = []
+
+    def set_lit(self, lit: bool) -> None:
+        self.told.append(f"lit {lit}")
+
+    def set_flashing(self, frequency: float) -> None:
+        self.told.append(f"flashing {frequency:g}")
+
+    def close(self) -> None:
+        self.told.append("close")
+
+
+class BurstCountingCamera(FlashingSceneCamera):
+    """The flashing scene, counting the bursts of frames the driver asks for."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.bursts = 0
+
+    def capture_frames(self, side: CameraSide, count: int) -> list[np.ndarray]:
+        self.bursts += 1
+        return super().capture_frames(side, count)
+
+
+def test_a_robot_that_goes_on_holding_its_place_starts_its_flashing_once(
+    factory: object,
+) -> None:
+    """While the fish's flags go on saying it holds its place, the LEDs are told to flash
+    once: told again at every flag and command, gpiozero's blinking thread would start
+    afresh, lit, each period, and a flasher would no longer be lit in exactly one of two
+    frames half a flash period apart. A broadcast of another kind makes the cameras take
+    no bursts of frames: only a formation flag does."""
+    leds = RecordingLeds()
+    camera = BurstCountingCamera()
+    hardware = Hardware(GpioFins(pin_factory=factory), leds, camera, FixedDepth())
+    signal = encode(Broadcast(ROBOT, 0, "signal", np.array([7])))
+
+    async def main() -> tuple[list[int], list[str]]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True], command_timeout=10.0, behavior="formation")
+        bursts: list[int] = []
+        async with (
+            subscription(local, KEYS.perception(ROBOT)) as perceived,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(driver.run, local, remote)
+            for step in range(4):
+                tick = decode((await perceived.receive())[1], Perception).tick
+                bursts.append(camera.bursts)
+                local.put(KEYS.outbox(ROBOT), signal if step == 0 else flag(True, tick))
+                fins = np.zeros(4)
+                local.put(KEYS.command(ROBOT), encode(Command(ROBOT, tick, fins, broadcasts=1)))
+            await trio.sleep(0.01)
+            told = list(leds.told)
+            nursery.cancel_scope.cancel()
+        return bursts, told
+
+    try:
+        bursts, told = run_mock(main)
+    finally:
+        hardware.close()
+    # No burst before the first formation flag (after tick 1's perception); then one of
+    # each camera at each perception.
+    assert bursts == [0, 0, 2, 4]
+    # Lit by the first command; flashing from the first joined flag, and left flashing.
+    assert told == ["lit True", "flashing 15"]
+
+
+class PhasedFlashingCamera(FlashingSceneCamera):
+    """The flashing scene, the flasher's period starting ``offset`` frames before a burst:
+    lit in the frames where (frame + offset) mod 4 is 0 or 1."""
+
+    def __init__(self, offset: int) -> None:
+        super().__init__()
+        self.offset = offset
+
+    def capture_frames(self, side: CameraSide, count: int) -> list[np.ndarray]:
+        lit = [(frame + self.offset) % 4 < 2 for frame in range(count)]
+        return [self.images[0 if shown else 1][side] for shown in lit]
+
+
+@pytest.mark.parametrize("offset", [0, 1, 2, 3])
+def test_a_flasher_is_told_from_frames_0_and_2_of_a_burst_whatever_its_phase(
+    factory: object, offset: int
+) -> None:
+    """At 60 fps a 15-Hz flasher is lit in two consecutive frames of every four: frames 0
+    and 2 of a burst, half a flash period apart, show it lit in exactly one, whatever the
+    phase of its period; any other pair of frames misses it (both dark) or takes it for
+    steady (both lit) at some phase."""
+    hardware = Hardware(
+        GpioFins(pin_factory=factory), RecordingLeds(), PhasedFlashingCamera(offset), FixedDepth()
+    )
+
+    async def main() -> Perception:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True], command_timeout=10.0, behavior="formation")
+        async with (
+            subscription(local, KEYS.perception(ROBOT)) as perceived,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(driver.run, local, remote)
+            await perceived.receive()  # tick 0, before the fish flags: no burst
+            local.put(KEYS.outbox(ROBOT), flag(True, 0))
+            local.put(KEYS.command(ROBOT), encode(Command(ROBOT, 0, np.zeros(4), broadcasts=1)))
+            perception = decode((await perceived.receive())[1], Perception)
+            nursery.cancel_scope.cancel()
+        return perception
+
+    try:
+        perception = run_mock(main)
+    finally:
+        hardware.close()
+    # Both neighbours seen, the flasher handed to the fish as a flag.
+    assert perception.neighbors.shape[0] == 2 and perception.inbox_count == 1
+
+
+def test_a_command_that_darkens_the_leds_ends_their_flashing(factory: object) -> None:
+    """The fish's command says whether its LEDs are on: dark LEDs do not flash, even while
+    its flag says it holds its place; lit again, they flash again."""
+    leds = RecordingLeds()
+    hardware = Hardware(GpioFins(pin_factory=factory), leds, FlashingSceneCamera(), FixedDepth())
+
+    async def main() -> list[str]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True], command_timeout=10.0, behavior="formation")
+        async with (
+            subscription(local, KEYS.perception(ROBOT)) as perceived,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(driver.run, local, remote)
+            await perceived.receive()  # tick 0: lit, no flag
+            local.put(KEYS.command(ROBOT), encode(Command(ROBOT, 0, np.zeros(4))))
+            for led in (True, False, True):
+                tick = decode((await perceived.receive())[1], Perception).tick
+                local.put(KEYS.outbox(ROBOT), flag(True, tick))
+                answer = Command(ROBOT, tick, np.zeros(4), led=led, broadcasts=1)
+                local.put(KEYS.command(ROBOT), encode(answer))
+            await trio.sleep(0.01)
+            told = list(leds.told)
+            nursery.cancel_scope.cancel()
+        return told
+
+    try:
+        told = run_mock(main)
+    finally:
+        hardware.close()
+    # Tick 0: lit; tick 1: flashing; tick 2: dark (its flag says it holds its place);
+    # tick 3: lit, and flashing again.
+    assert told == ["lit True", "flashing 15", "lit False", "flashing 15"]

@@ -181,3 +181,85 @@ def test_the_mock_camera_shows_a_flashing_robot_lit_half_of_each_flash_period() 
     burst = {side: camera.capture_frames(side, FRAMES_APART + 1) for side in CAMERA_SIDES}
     assert seen({side: frames[0] for side, frames in burst.items()}) == 2
     assert seen({side: frames[-1] for side, frames in burst.items()}) == 1
+
+
+def test_a_mock_robots_commands_say_its_leds_flash_only_while_they_do() -> None:
+    """The body answers each of the world's perceptions with a command that tells the
+    world its LEDs: flashing while gpiozero blinks them (lit, whatever half of the period
+    the pin is in), steady or dark otherwise (the world's snapshots tell other robots'
+    cameras)."""
+    import trio
+
+    from fishswarm.actors.bus import MemoryBus
+    from fishswarm.actors.mock_robot import open_mock_hardware
+    from fishswarm.protocols.codec import decode, encode
+    from fishswarm.protocols.keys import KeySpace
+    from fishswarm.protocols.messages import Command, Perception
+    from tests.conftest import run_mock, subscription
+
+    keys = KeySpace()
+    told: list[tuple[bool, bool | None]] = []
+    with open_mock_hardware(7, keys) as (hardware, body):
+
+        async def main() -> None:
+            bus = MemoryBus()
+            async with (
+                subscription(bus, keys.command(7)) as commands,
+                trio.open_nursery() as nursery,
+            ):
+                await nursery.start(body.run, bus)
+                for tick, show in enumerate(("steady", "flashing", "dark", "flashing", "steady")):
+                    if show == "flashing":
+                        hardware.leds.set_flashing(15.0)
+                    else:
+                        hardware.leds.set_lit(show == "steady")
+                    perception = Perception(7, tick, 0.0, 0.5, np.zeros((0, 3)), np.zeros((0, 3)))
+                    bus.put(keys.perception(7), encode(perception))
+                    command = decode((await commands.receive())[1], Command)
+                    told.append((command.led, command.flashing))
+                nursery.cancel_scope.cancel()
+
+        run_mock(main)
+    steady, flashing, dark = (True, None), (True, True), (False, None)
+    assert told == [steady, flashing, dark, flashing, steady]
+
+
+def test_the_mock_camera_flashes_robots_each_from_a_phase_of_its_own() -> None:
+    """Flashing robots are not in step: each one's flash period starts at its id times the
+    golden fraction (mod 1) of the period, the same in every robot's cameras. Robots 4 and
+    5, both flashing, both 0.6 m ahead of the viewer 3, one to each side: in the lit half of
+    robot 5's period robot 4 (whose period starts 0.38 of one later) is dark."""
+    from fishswarm.actors.mock_robot import GOLDEN_FRACTION, SnapshotCamera
+    from fishswarm.bluebot.flashes import FRAME_GAP
+    from fishswarm.bluebot.leds import LedVision, perceive_leds
+    from fishswarm.bluebot.ports import CAMERA_SIDES
+
+    ids = np.array([3, 4, 5])
+    position = np.array([[0.9, 0.9, 0.5], [1.4, 1.25, 0.5], [1.4, 0.55, 0.5]])
+    three = np.zeros(3)
+    snapshot = Snapshot(
+        0, 0.0, ids, position, np.zeros((3, 3)), three, np.zeros(3, dtype=np.int64),
+        np.zeros(3, dtype=np.int64), three, lights=np.array([STEADY, FLASHING, FLASHING]),
+    )  # fmt: skip
+    clock = Clock()
+    feed = WorldFeed(3, clock=clock)
+    camera = SnapshotCamera(feed, clock=clock)
+    feed.take(snapshot)
+    period = 2 * FRAME_GAP
+    phase = {fish: (fish * GOLDEN_FRACTION) % 1.0 for fish in (4, 5)}
+    assert phase[4] - phase[5] == pytest.approx(0.382, abs=1e-3)
+
+    def seen_at(cycles: float) -> np.ndarray:
+        clock.now = cycles * period
+        images = {side: camera.capture(side) for side in CAMERA_SIDES}
+        return perceive_leds(images, depth=0.5, fisheye=camera.fisheye, vision=LedVision())
+
+    # Early in robot 5's lit half (robot 4 still in its dark half): robot 5 alone, to the
+    # viewer's right (negative y in its body frame).
+    alone = seen_at(phase[5] + 0.05)
+    assert alone.shape[0] == 1 and alone[0, 1] < 0
+    # Early in robot 4's lit half (robot 5 still lit too): both.
+    assert seen_at(phase[4] + 0.05).shape[0] == 2
+    # Robot 5 dark, robot 4 lit: robot 4 alone, to the left.
+    left = seen_at(phase[5] + 0.55)
+    assert left.shape[0] == 1 and left[0, 1] > 0

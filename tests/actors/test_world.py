@@ -4,6 +4,7 @@ and the same trajectories as the batch engine."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from collections.abc import Awaitable, Callable
@@ -372,6 +373,103 @@ def test_the_snapshot_tells_the_leds_of_robots_whose_commands_say_they_flash_or_
 
     told = run_mock(main)
     assert told[:6] == [None, None, [STEADY, FLASHING], [STEADY, FLASHING], [STEADY, DARK], None]
+
+
+def test_the_snapshot_tells_each_robots_leds_whatever_order_their_commands_came_in() -> None:
+    """Three robots: robot 2 starts flashing at tick 1, robot 0 goes dark at tick 2 (a
+    later command for a lower id): the snapshot tells each its own, in the rows of its
+    ids."""
+    scenario = Scenario(fish=3, duration=5.0, seed=1)
+    keys = scenario.keys
+    said: dict[int, dict[int, tuple[bool, bool | None]]] = {
+        1: {2: (True, True)},
+        2: {0: (False, None), 2: (True, True)},
+    }
+
+    async def main() -> list[list[int] | None]:
+        bus = MemoryBus()
+        world = World(
+            WorldSettings(scenario, expected_fish=(0, 1, 2), admit_delay=0.0, turn_delay=0.0)
+        )
+        told: list[list[int] | None] = []
+
+        def take(key: str, payload: bytes) -> None:
+            lights = decode(payload, Snapshot).lights
+            told.append(None if lights is None else lights.tolist())
+
+        bus.subscribe(keys.snapshot, take)
+        async with contextlib.AsyncExitStack() as stack:
+            perceptions = [
+                await stack.enter_async_context(subscription(bus, keys.perception(fish)))
+                for fish in range(3)
+            ]
+            for fish in range(3):
+                await stack.enter_async_context(open_token(bus, keys.alive("fish", fish)))
+            nursery = await stack.enter_async_context(trio.open_nursery())
+            nursery.start_soon(world.run, bus)
+            for step in range(3):
+                for fish in range(3):
+                    tick = decode((await perceptions[fish].receive())[1], Perception).tick
+                    led, flashing = said.get(step, {}).get(fish, (True, None))
+                    command = Command(fish, tick, np.zeros(4), led=led, flashing=flashing)
+                    bus.put(keys.command(fish), encode(command))
+            await trio.sleep(0.01)
+            nursery.cancel_scope.cancel()
+        return told
+
+    told = run_mock(main)
+    assert told[2] == [STEADY, STEADY, FLASHING]
+    assert told[3] == [DARK, STEADY, FLASHING]
+
+
+def test_a_lost_robots_leds_are_forgotten() -> None:
+    """Robot 1 flashes, then falls silent and is lost: the world forgets its LEDs with it,
+    so that its snapshots say nothing of them again (every fish left is steady), and a
+    robot that comes back under its id is not shown flashing before it says so."""
+    scenario = Scenario(fish=2, duration=5.0, seed=1)
+    keys = scenario.keys
+
+    async def main() -> list[tuple[list[int], list[int] | None]]:
+        bus = MemoryBus()
+        world = World(
+            WorldSettings(
+                scenario, expected_fish=(0, 1), admit_delay=0.0, turn_delay=0.0,
+                command_timeout=1.0,
+            )
+        )  # fmt: skip
+        told: list[tuple[list[int], list[int] | None]] = []
+
+        def take(key: str, payload: bytes) -> None:
+            snapshot = decode(payload, Snapshot)
+            lights = snapshot.lights
+            told.append((snapshot.ids.tolist(), None if lights is None else lights.tolist()))
+
+        bus.subscribe(keys.snapshot, take)
+        async with (
+            subscription(bus, keys.perception(0)) as first,
+            subscription(bus, keys.perception(1)) as second,
+            open_token(bus, keys.alive("fish", 0)),
+            open_token(bus, keys.alive("fish", 1)),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(world.run, bus)
+            # Robot 1 steady at tick 0, flashing at tick 1, silent from tick 2 on.
+            for step in range(4):
+                for fish, perceptions in ((0, first), (1, second)):
+                    if fish == 1 and step >= 2:
+                        continue
+                    tick = decode((await perceptions.receive())[1], Perception).tick
+                    flashing = True if fish == 1 and step == 1 else None
+                    command = Command(fish, tick, np.zeros(4), flashing=flashing)
+                    bus.put(keys.command(fish), encode(command))
+            await trio.sleep(0.01)
+            nursery.cancel_scope.cancel()
+        return told
+
+    told = run_mock(main)
+    assert told[2] == ([0, 1], [STEADY, FLASHING])
+    gone = [lights for ids, lights in told if ids == [0]]
+    assert gone and gone == [None] * len(gone)
 
 
 def test_a_schools_commands_are_taken_only_for_its_own_awaited_fish() -> None:

@@ -571,6 +571,22 @@ def test_a_seen_fish_where_a_flag_shows_its_sender_is_that_sender(
     assert holding.tolist() == [[merged, False, not merged]]
 
 
+def test_a_seen_fish_that_flags_by_light_holds_no_slot() -> None:
+    # A flag by light says its sender holds its place, and names no slot: the fish seen
+    # where it shows its sender (0.03 m off) is that sender, and stands where it is seen,
+    # as any fish seen does; it claims no slot, so it takes part in sharing them out.
+    from fishswarm.behaviors.formation import _heard_flags, _with_senders, flag_by_light
+
+    params = FormationParams("column", count=3, spacing=0.3)
+    light = flag_by_light(FormationFlag.from_values(_flag(1, True))).values()
+    inbox = inbox_of([[(FLAG, light, np.array([1.0, 0.0, 0.0]))]])
+    neighbors = np.array([[[1.03, 0.0, 0.0], [2.0, 0.0, 0.0]]])
+    mask = np.ones((1, 2), dtype=np.bool_)
+    _, real, holding = _with_senders(neighbors, mask, inbox, _heard_flags(inbox, params), params)
+    assert real.tolist() == [[True, True, False]]
+    assert holding.tolist() == [[False, False, False]]
+
+
 def test_flags_naming_no_slot_or_one_past_the_map_claim_nothing() -> None:
     """A column of 3 (slots 1.0, 0.7 and 0.4 m ahead of the fish, behind a leader flagged 1 m
     ahead): flags, joined, for slot −1 and slot 40 (a larger map's, or forged) from fish

@@ -8,9 +8,15 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from fishswarm.bluebot.fisheye import Fisheye
-from fishswarm.bluebot.flashes import FRAME_GAP, lit_at, match_sightings, merge_frames
+from fishswarm.bluebot.flashes import (
+    FRAME_GAP,
+    FRAMES_APART,
+    lit_at,
+    match_sightings,
+    merge_frames,
+)
 from fishswarm.bluebot.leds import LedVision, perceive_leds
-from fishswarm.bluebot.parameters import LED_FLASH_FREQUENCY, BlueBot
+from fishswarm.bluebot.parameters import CAMERA_FRAME_RATE, LED_FLASH_FREQUENCY, BlueBot
 from fishswarm.bluebot.vision import Vision, perceive, to_body
 from fishswarm.sim.camera import Optics, render_views
 from tests.sim.test_camera import random_scene
@@ -36,6 +42,22 @@ def test_each_sighting_is_taken_once_nearest_first() -> None:
     second = np.array([[1.03, 0.0, 0.0]])
     rows, partners = match_sightings(first, second)
     assert rows.tolist() == [0] and partners.tolist() == [0]
+
+
+def test_of_several_sightings_within_reach_the_nearest_is_taken() -> None:
+    # At 1 m the reach is 0.15 m: both sightings of the second frame are within it, the
+    # one 0.01 m off is the same neighbour, not the one 0.12 m off (listed first).
+    first = np.array([[1.0, 0.0, 0.0]])
+    second = np.array([[1.12, 0.0, 0.0], [1.01, 0.0, 0.0]])
+    rows, partners = match_sightings(first, second)
+    assert rows.tolist() == [0] and partners.tolist() == [1]
+
+
+def test_the_two_frames_are_half_a_flash_period_apart_at_the_cameras_frame_rate() -> None:
+    # Frames 0 and 2 of a burst at 60 fps: 33 ms apart, half of a 15-Hz flash period. Any
+    # other count of frames between them would see a flasher lit (or dark) in both.
+    assert FRAMES_APART == 2
+    assert abs(FRAMES_APART / CAMERA_FRAME_RATE - FRAME_GAP) < 1e-12
 
 
 def test_a_neighbour_seen_in_one_frame_only_flashes_where_it_was_seen() -> None:

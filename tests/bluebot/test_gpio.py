@@ -131,6 +131,16 @@ def test_flashing_leds_switch_every_half_period_until_told_otherwise(factory: ob
     np.testing.assert_allclose(gaps, [0.1, 0.1, 0.1, 0.1], atol=0.04)
 
 
+def test_leds_closed_while_flashing_are_dark_and_flash_no_more(factory: object) -> None:
+    # The driver ends (Ctrl-C, an error) while its fish holds its place: the LEDs go dark
+    # and say they flash at no frequency.
+    leds = GpioLeds(pin_factory=factory)
+    pin = factory.pin(Wiring().led_pin)  # type: ignore[attr-defined]
+    leds.set_flashing(15.0)
+    leds.close()
+    assert not pin.state and leds.flash_frequency == 0.0
+
+
 def test_a_fin_told_its_gains_again_and_again_keeps_its_beat(factory: object) -> None:
     """Gains every 0.1 s, more often than the 0.5-s half period of a 1-Hz fin: each repeat
     must not push the next switch away, or the fin would stall."""

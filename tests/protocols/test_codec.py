@@ -659,6 +659,8 @@ def test_which_leds_flash_stays_off_the_wire_until_a_robot_flashes() -> None:
         _snapshot(lights=np.array([DARK]))
     with pytest.raises(ValueError, match="lights must be indices into"):
         _snapshot(lights=np.array([0, 3]))
+    with pytest.raises(ValueError, match="lights must be indices into"):
+        _snapshot(lights=np.array([-1, 0]))
     with pytest.raises(TypeError, match="flashing must be a bool or None"):
         Command(2, 5, np.zeros(4), flashing=1)  # type: ignore[arg-type]
     # A robot's status: whether it flashes and how many flags it saw, once it has.
@@ -668,3 +670,5 @@ def test_which_leds_flash_stays_off_the_wire_until_a_robot_flashes() -> None:
     assert {"flashing", "flags_seen"} <= wire_fields(told) and decode(encode(told)) == told
     with pytest.raises(ValueError, match="flags_seen"):
         dataclasses.replace(quiet, flags_seen=-1)
+    with pytest.raises(TypeError, match="flashing must be a bool or None"):
+        dataclasses.replace(quiet, flashing=1)  # type: ignore[arg-type]
