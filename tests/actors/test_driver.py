@@ -935,3 +935,49 @@ def test_a_command_that_darkens_the_leds_ends_their_flashing(factory: object) ->
     # Tick 0: lit; tick 1: flashing; tick 2: dark (its flag says it holds its place);
     # tick 3: lit, and flashing again.
     assert told == ["lit True", "flashing 15", "lit False", "flashing 15"]
+
+
+@pytest.mark.parametrize("end", ["stranded", "failsafe"])
+def test_a_flag_of_a_decision_under_way_does_not_restart_a_stopped_robots_flashing(
+    factory: object, end: str
+) -> None:
+    """The fins stop — the link lost too long, or no command for the timeout — and the
+    LEDs steady; a joined flag of a decision that was under way comes after: a robot that
+    no longer swims holds no place, so they stay steady."""
+    leds = RecordingLeds()
+    hardware = Hardware(GpioFins(pin_factory=factory), leds, FlashingSceneCamera(), FixedDepth())
+    link = [True]
+
+    async def main() -> tuple[str, list[str], bool | None]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, link, command_timeout=1.0, behavior="formation")
+
+        def swim(tick: int) -> None:
+            local.put(KEYS.outbox(ROBOT), flag(True, tick))
+            fins = np.full(4, 0.5)
+            local.put(KEYS.command(ROBOT), encode(Command(ROBOT, tick, fins, broadcasts=1)))
+
+        async with trio.open_nursery() as nursery:
+            await nursery.start(driver.run, local, remote)
+            swim(0)
+            await trio.sleep(0.01)
+            assert leds.told[-1] == "flashing 15"
+            if end == "stranded":
+                link[0] = False
+                while driver.state != "stranded":  # commands keep coming: the link decides
+                    swim(0)
+                    await trio.sleep(0.1)
+            else:
+                while driver.state != "failsafe":
+                    await trio.sleep(0.1)
+            local.put(KEYS.outbox(ROBOT), flag(True, 1))  # the late flag
+            await trio.sleep(5.0)
+            told, flashing = list(leds.told), driver.status().flashing
+            nursery.cancel_scope.cancel()
+        return driver.state, told, flashing
+
+    state, told, flashing = run_mock(main)
+    hardware.close()
+    assert state == end
+    assert told[-1] == "lit True" and told.count("flashing 15") == 1, told
+    assert flashing is None
