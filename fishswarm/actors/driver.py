@@ -432,14 +432,14 @@ class Driver:
     # Acting -----------------------------------------------------------------------------
 
     async def _addressed(
-        self, messages: Inbox[tuple[str, bytes]], expected: type[M], field: str
+        self, messages: Inbox[tuple[str, bytes]], expected: type[M], id_field: str
     ) -> AsyncIterator[tuple[str, bytes, M]]:
-        """The fish's messages of type ``expected`` that name this robot in ``field``, as
+        """The fish's messages of type ``expected`` that name this robot in ``id_field``, as
         they come (others rejected and counted), with their key and payload."""
         robot_id = self.settings.robot_id
         async for key, payload in messages:
             message = self._intake.decode_addressed(
-                key, payload, expected, field=field, owner=robot_id
+                key, payload, expected, field=id_field, owner=robot_id
             )
             if message is not None:
                 yield key, payload, message

@@ -370,7 +370,7 @@ def router_names(folder: Path) -> list[str]:
     path = folder / "router.pem"
     if not path.is_file():
         return []
-    return [str(getattr(name.value, "exploded", name.value)) for name in _names_of(path)]
+    return [str(name.value) for name in _names_of(path)]
 
 
 def _names_of(path: Path) -> list[Any]:

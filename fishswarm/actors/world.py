@@ -710,7 +710,9 @@ class World:
         ids = np.array(sorted(self._lights), dtype=np.int64)
         said = np.array([self._lights[i] for i in ids.tolist()], dtype=np.int64)
         # values_at gives 0 for the fish that said nothing: steady, once shifted back.
-        return values_at(ids, said - STEADY, self.sim.ids) + STEADY
+        lights = values_at(ids, said - STEADY, self.sim.ids) + STEADY
+        # Only the lights of fish not in the world (yet): the snapshot says nothing.
+        return None if (lights == STEADY).all() else lights
 
     def _told(self, time: float) -> str | None:
         """The formation the fish are told to take at ``time``: an operator's switch, else

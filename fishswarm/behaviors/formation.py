@@ -66,6 +66,8 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
+DEFAULT_SHAPE = "pyramid"
+"""The formation fish take when none is named."""
 DEFAULT_SPACING = 0.3
 """Default distance between neighbouring places, m (about 2.3 body lengths)."""
 DEFAULT_LEAD = 2.5
@@ -226,7 +228,7 @@ def formation_params(settings: Mapping[str, Any]) -> FormationParams:
     spacing = DEFAULT_SPACING if spacing is None else float(spacing)
     tolerance = settings.get("tolerance")
     station = settings.get("station_distance")
-    shape = str(settings.get("formation") or "pyramid")
+    shape = str(settings.get("formation") or DEFAULT_SHAPE)
     rotate_effort = bool(settings.get("rotate_effort", False))
     if rotate_effort and shape in LOCAL_SHAPES:
         # Refused here, where a user asks for it; a live switch to a local shape only pauses

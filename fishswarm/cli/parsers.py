@@ -223,9 +223,10 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
         "--flag-medium",
         str,
         "with --behavior formation: how the flags travel: channel (default: the simulated "
-        "channel, every flag to every fish within its range) or light (as between robots: "
-        "only 'I hold my place', from a fish that holds it, to the fish that see it; "
-        "docs/robot.md)",
+        "channel, every flag to every fish within its range), light (as between robots: "
+        "only 'I hold my place', from a fish that holds it, to the fish that see it by the "
+        "geometric vision model, even with --vision camera) or beacon (that one bit to every "
+        "fish within the channel's range); docs/robot.md",
     ),
     "rotate_effort": (
         "--rotate-effort",

@@ -244,15 +244,21 @@ def _formations_of(recording: Recording) -> list[FormationTarget] | None:
 def _switches_of(recording: Recording) -> list[tuple[float, str]]:
     """When the shape a recorded formation's fish were told to take changed, s, and to
     which: as the snapshots name it, or (recorded before they did) the scenario's switch."""
+    from fishswarm.behaviors.formation import DEFAULT_SHAPE
+
     ran = Scenario.as_recorded(recording.scenario)
+    # A shape told is compared as a shape: an order for the configured one changes nothing.
     told = [
-        snapshot.formation or (ran.switch_formation if snapshot.time >= ran.switch_at else None)
+        snapshot.formation
+        or (ran.switch_formation if snapshot.time >= ran.switch_at else None)
+        or ran.formation
+        or DEFAULT_SHAPE
         for snapshot in recording.snapshots
     ]
     return [
         (snapshot.time, shape)
         for before, shape, snapshot in zip(told, told[1:], recording.snapshots[1:], strict=False)
-        if shape is not None and shape != before
+        if shape != before
     ]
 
 

@@ -915,4 +915,3 @@ def test_a_standalone_worlds_turn_delay_comes_from_its_command_line(
         with pytest.raises(Made):
             main(["world", "--fish", "2", *words])
         assert made.pop().turn_delay == delay
-    assert TURN_DELAY == 0.1

@@ -259,9 +259,13 @@ def test_the_switches_of_a_recorded_formation_are_where_the_told_shape_changes()
         settings = {"behavior": "formation", "fish": 6, **scenario}
         return SimpleNamespace(scenario=settings, snapshots=snapshots)
 
-    # An operator's switches, as the snapshots name them (back to the first shape too).
-    told = [None, None, "diamond", "diamond", "pyramid"]
+    # An operator's switches, as the snapshots name them (back to the first shape too); an
+    # order for the shape the fish already take is none.
+    told = [None, "pyramid", "diamond", "diamond", "pyramid"]
     assert _switches_of(recording(told)) == [(2.0, "diamond"), (4.0, "pyramid")]
+    assert _switches_of(recording(told, formation="column")) == [
+        (1.0, "pyramid"), (2.0, "diamond"), (4.0, "pyramid"),
+    ]  # fmt: skip
     # Recorded before snapshots named the shape: the scenario's own switch.
     scheduled = recording([None] * 4, switch_formation="column", switch_at=1.5)
     assert _switches_of(scheduled) == [(2.0, "column")]
