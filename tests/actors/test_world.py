@@ -107,8 +107,9 @@ async def _swarm(scenario: Scenario, *, schools: int) -> tuple[World, list[Snaps
             "effort_margin": 1.0,
         },
         {
-            # Flags by light: only "I hold my place", to the fish that see the sender (the
-            # trajectory departs from one without flags at tick 2).
+            # Flags by light: only "I hold my place", to the fish that see the sender. They
+            # change no trajectory (test_medium.py); here the channel's reports of them
+            # must match what it delivers, or the fish would wait for them.
             "behavior": "formation",
             "formation": "column",
             "flag_medium": "light",

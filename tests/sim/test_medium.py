@@ -4,12 +4,15 @@ a lossy channel drops."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from fishswarm.behaviors.core import Outbox
 from fishswarm.behaviors.formation import FORMATION_KIND, NO_HOPS
 from fishswarm.bluebot.vision import Vision
 from fishswarm.protocols.messages import BROADCAST_KINDS, FORMATION_SHAPES, FormationFlag
+from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.medium import deliver, one_bit, receptions, seeing
+from fishswarm.sim.scenario import Scenario
 
 # Four fish on the x axis, at 0, 0.95, 1.0 and 1.5 m; all facing +x except fish 2, which
 # faces +y (yaw 90°).
@@ -101,3 +104,20 @@ def test_flags_by_light_reach_only_the_fish_that_see_their_sender_and_by_beacon_
     )
     assert by_beacon.mask.sum(axis=1).tolist() == [1, 2, 1]
     np.testing.assert_array_equal(by_beacon.values[0, 0], one_bit(FORMATION_KIND, values[2]))
+
+
+@pytest.mark.parametrize("shape", ["column", "trigonal-planar"])
+def test_flags_by_light_tell_a_formation_fish_nothing_its_eyes_do_not(shape: str) -> None:
+    """By light a flag reaches only fish that see its sender, and says only that it holds
+    its place, where it is seen: a formation fish takes nothing from it that sight does not
+    give. The run is the one in which flags are sent and none arrives (docs/robot.md); a
+    beacon's same one bit, reaching fish that do not see its sender, changes it."""
+    base = Scenario(
+        fish=7, behavior="formation", formation=shape, duration=6.0, seed=5, controller="pid",
+        spawn_radius=0.3, spacing=0.25,
+    )  # fmt: skip
+    light = simulate_batch(base.replace(flag_medium="light")).position
+    none_arrive = simulate_batch(base.replace(channel_range=1e-9)).position
+    beacon = simulate_batch(base.replace(flag_medium="beacon")).position
+    np.testing.assert_array_equal(light, none_arrive)
+    assert not np.array_equal(beacon, none_arrive)
