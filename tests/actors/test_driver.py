@@ -5,7 +5,9 @@ loss, operators' orders and the bridge."""
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Iterator
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
+from contextlib import asynccontextmanager
+from typing import TypeVar
 
 import numpy as np
 import pytest
@@ -22,6 +24,7 @@ from fishswarm.actors.driver import (  # noqa: E402
     SensorUnavailable,
 )
 from fishswarm.actors.fish import Fish, FishSettings  # noqa: E402
+from fishswarm.actors.inbox import Inbox  # noqa: E402
 from fishswarm.behaviors.formation import NO_HOPS, flag_by_light  # noqa: E402
 from fishswarm.bluebot.fisheye import Fisheye  # noqa: E402
 from fishswarm.bluebot.gpio import GpioFins, GpioLeds  # noqa: E402
@@ -46,6 +49,7 @@ from fishswarm.sim.scenario import Scenario  # noqa: E402
 from tests.conftest import run_mock, subscription  # noqa: E402
 
 KEYS = KeySpace("drv")
+T = TypeVar("T")
 ROBOT = 4
 # The robot at 0.5 m depth facing +x; a neighbour 0.6 m ahead and 0.2 m to its right.
 POSITION = np.array([[0.8, 0.8, 0.5], [1.4, 1.0, 0.5]])
@@ -689,6 +693,41 @@ class FlashingSceneCamera:
         pass
 
 
+@asynccontextmanager
+async def running_formation_driver(
+    hardware: Hardware,
+) -> AsyncIterator[tuple[MemoryBus, Inbox[tuple[str, bytes]], Driver]]:
+    """A formation robot's driver running on ``hardware``, its link up: its local Bus, its
+    fish's perceptions and the driver, until the block ends."""
+    local, remote = MemoryBus(), MemoryBus()
+    driver = make_driver(hardware, [True], command_timeout=10.0, behavior="formation")
+    async with (
+        subscription(local, KEYS.perception(ROBOT)) as perceived,
+        trio.open_nursery() as nursery,
+    ):
+        await nursery.start(driver.run, local, remote)
+        yield local, perceived, driver
+        nursery.cancel_scope.cancel()
+
+
+def run_closing(hardware: Hardware, main: Callable[[], Awaitable[T]]) -> T:
+    """``main`` under trio's MockClock, the robot's ports released after, however it ends."""
+    try:
+        return run_mock(main)
+    finally:
+        hardware.close()
+
+
+def answer_flagging(
+    local: MemoryBus, tick: int, *, joined: bool = True, led: bool = True, gain: float = 0.0
+) -> None:
+    """A formation fish's answer to the perception of ``tick``: its flag, then its command
+    (every fin at ``gain``), which announces the flag."""
+    local.put(KEYS.outbox(ROBOT), flag(joined, tick))
+    command = Command(ROBOT, tick, np.full(4, gain), led=led, broadcasts=1)
+    local.put(KEYS.command(ROBOT), encode(command))
+
+
 def flag(joined: bool, tick: int) -> bytes:
     shape = FORMATION_SHAPES.index("triangle")
     values = FormationFlag(shape, 2, joined, 1, 45_000, tick + 1, 30).values()
@@ -756,10 +795,7 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
             nursery.cancel_scope.cancel()
         return perceptions, deliveries
 
-    try:
-        perceptions, deliveries = run_mock(main)
-    finally:
-        hardware.close()
+    perceptions, deliveries = run_closing(hardware, main)
     assert [flashing for _, flashing in lights] == [15.0, 0.0, 0.0, 15.0, 0.0, 0.0, 0.0]
     assert said == [True, None, None, True]  # as its status tells the base station
     assert [lit for lit, _ in lights[1:3]] == [True, True]  # steady, as the command says
@@ -824,29 +860,22 @@ def test_a_robot_that_goes_on_holding_its_place_starts_its_flashing_once(
     signal = encode(Broadcast(ROBOT, 0, "signal", np.array([7])))
 
     async def main() -> tuple[list[int], list[str]]:
-        local, remote = MemoryBus(), MemoryBus()
-        driver = make_driver(hardware, [True], command_timeout=10.0, behavior="formation")
         bursts: list[int] = []
-        async with (
-            subscription(local, KEYS.perception(ROBOT)) as perceived,
-            trio.open_nursery() as nursery,
-        ):
-            await nursery.start(driver.run, local, remote)
+        async with running_formation_driver(hardware) as (local, perceived, _):
             for step in range(4):
                 tick = decode((await perceived.receive())[1], Perception).tick
                 bursts.append(camera.bursts)
-                local.put(KEYS.outbox(ROBOT), signal if step == 0 else flag(True, tick))
-                fins = np.zeros(4)
-                local.put(KEYS.command(ROBOT), encode(Command(ROBOT, tick, fins, broadcasts=1)))
+                if step == 0:
+                    local.put(KEYS.outbox(ROBOT), signal)
+                    command = Command(ROBOT, tick, np.zeros(4), broadcasts=1)
+                    local.put(KEYS.command(ROBOT), encode(command))
+                else:
+                    answer_flagging(local, tick)
             await trio.sleep(0.01)
             told = list(leds.told)
-            nursery.cancel_scope.cancel()
         return bursts, told
 
-    try:
-        bursts, told = run_mock(main)
-    finally:
-        hardware.close()
+    bursts, told = run_closing(hardware, main)
     # No burst before the first formation flag (after tick 1's perception); then one of
     # each camera at each perception.
     assert bursts == [0, 0, 2, 4]
@@ -880,24 +909,13 @@ def test_a_flasher_is_told_from_frames_0_and_2_of_a_burst_whatever_its_phase(
     )
 
     async def main() -> Perception:
-        local, remote = MemoryBus(), MemoryBus()
-        driver = make_driver(hardware, [True], command_timeout=10.0, behavior="formation")
-        async with (
-            subscription(local, KEYS.perception(ROBOT)) as perceived,
-            trio.open_nursery() as nursery,
-        ):
-            await nursery.start(driver.run, local, remote)
+        async with running_formation_driver(hardware) as (local, perceived, _):
             await perceived.receive()  # tick 0, before the fish flags: no burst
-            local.put(KEYS.outbox(ROBOT), flag(True, 0))
-            local.put(KEYS.command(ROBOT), encode(Command(ROBOT, 0, np.zeros(4), broadcasts=1)))
+            answer_flagging(local, 0)
             perception = decode((await perceived.receive())[1], Perception)
-            nursery.cancel_scope.cancel()
         return perception
 
-    try:
-        perception = run_mock(main)
-    finally:
-        hardware.close()
+    perception = run_closing(hardware, main)
     # Both neighbours seen, the flasher handed to the fish as a flag.
     assert perception.neighbors.shape[0] == 2 and perception.inbox_count == 1
 
@@ -909,29 +927,17 @@ def test_a_command_that_darkens_the_leds_ends_their_flashing(factory: object) ->
     hardware = Hardware(GpioFins(pin_factory=factory), leds, FlashingSceneCamera(), FixedDepth())
 
     async def main() -> list[str]:
-        local, remote = MemoryBus(), MemoryBus()
-        driver = make_driver(hardware, [True], command_timeout=10.0, behavior="formation")
-        async with (
-            subscription(local, KEYS.perception(ROBOT)) as perceived,
-            trio.open_nursery() as nursery,
-        ):
-            await nursery.start(driver.run, local, remote)
+        async with running_formation_driver(hardware) as (local, perceived, _):
             await perceived.receive()  # tick 0: lit, no flag
             local.put(KEYS.command(ROBOT), encode(Command(ROBOT, 0, np.zeros(4))))
             for led in (True, False, True):
                 tick = decode((await perceived.receive())[1], Perception).tick
-                local.put(KEYS.outbox(ROBOT), flag(True, tick))
-                answer = Command(ROBOT, tick, np.zeros(4), led=led, broadcasts=1)
-                local.put(KEYS.command(ROBOT), encode(answer))
+                answer_flagging(local, tick, led=led)
             await trio.sleep(0.01)
             told = list(leds.told)
-            nursery.cancel_scope.cancel()
         return told
 
-    try:
-        told = run_mock(main)
-    finally:
-        hardware.close()
+    told = run_closing(hardware, main)
     # Tick 0: lit; tick 1: flashing; tick 2: dark (its flag says it holds its place);
     # tick 3: lit, and flashing again.
     assert told == ["lit True", "flashing 15", "lit False", "flashing 15"]
@@ -952,20 +958,15 @@ def test_a_flag_of_a_decision_under_way_does_not_restart_a_stopped_robots_flashi
         local, remote = MemoryBus(), MemoryBus()
         driver = make_driver(hardware, link, command_timeout=1.0, behavior="formation")
 
-        def swim(tick: int) -> None:
-            local.put(KEYS.outbox(ROBOT), flag(True, tick))
-            fins = np.full(4, 0.5)
-            local.put(KEYS.command(ROBOT), encode(Command(ROBOT, tick, fins, broadcasts=1)))
-
         async with trio.open_nursery() as nursery:
             await nursery.start(driver.run, local, remote)
-            swim(0)
+            answer_flagging(local, 0, gain=0.5)
             await trio.sleep(0.01)
             assert leds.told[-1] == "flashing 15"
             if end == "stranded":
                 link[0] = False
                 while driver.state != "stranded":  # commands keep coming: the link decides
-                    swim(0)
+                    answer_flagging(local, 0, gain=0.5)
                     await trio.sleep(0.1)
             else:
                 while driver.state != "failsafe":
@@ -976,8 +977,7 @@ def test_a_flag_of_a_decision_under_way_does_not_restart_a_stopped_robots_flashi
             nursery.cancel_scope.cancel()
         return driver.state, told, flashing
 
-    state, told, flashing = run_mock(main)
-    hardware.close()
+    state, told, flashing = run_closing(hardware, main)
     assert state == end
     assert told[-1] == "lit True" and told.count("flashing 15") == 1, told
     assert flashing is None

@@ -10,6 +10,7 @@ from fishswarm.actors.driver import SensorUnavailable
 from fishswarm.actors.mock_robot import (
     STALE_AFTER,
     BodyFins,
+    SnapshotCamera,
     SnapshotDepth,
     WorldFeed,
     stale_after,
@@ -141,7 +142,7 @@ def test_the_mock_camera_shows_a_flashing_robot_lit_half_of_each_flash_period() 
     half of its flash period (from a phase fixed by its id) and dark in the second; a dark
     robot is never seen; the others shine all the time. A burst's frames are a frame period
     apart. Each set of lit LEDs is rendered once per snapshot."""
-    from fishswarm.actors.mock_robot import GOLDEN_FRACTION, SnapshotCamera
+    from fishswarm.actors.mock_robot import GOLDEN_FRACTION
     from fishswarm.bluebot.flashes import FRAME_GAP, FRAMES_APART
     from fishswarm.bluebot.leds import LedVision, perceive_leds
     from fishswarm.bluebot.ports import CAMERA_SIDES
@@ -149,15 +150,7 @@ def test_the_mock_camera_shows_a_flashing_robot_lit_half_of_each_flash_period() 
     # The viewer 3 facing +x; 4 ahead, 5 to its right and 6 to its left, all 0.6 m away.
     ids = np.array([3, 4, 5, 6])
     position = np.array([[0.9, 0.9, 0.5], [1.5, 0.9, 0.5], [0.9, 1.5, 0.5], [0.9, 0.3, 0.5]])
-    four = np.zeros(4)
-    snapshot = Snapshot(
-        0, 0.0, ids, position, np.zeros((4, 3)), four, np.zeros(4, dtype=np.int64),
-        np.zeros(4, dtype=np.int64), four, lights=np.array([STEADY, STEADY, FLASHING, DARK]),
-    )  # fmt: skip
-    clock = Clock()
-    feed = WorldFeed(3, clock=clock)
-    camera = SnapshotCamera(feed, clock=clock)
-    feed.take(snapshot)
+    clock, camera = still_camera(ids, position, [STEADY, STEADY, FLASHING, DARK])
     period = 2 * FRAME_GAP
     start = (5 * GOLDEN_FRACTION) % 1.0 * period  # robot 5's period starts here
 
@@ -229,22 +222,14 @@ def test_the_mock_camera_flashes_robots_each_from_a_phase_of_its_own() -> None:
     golden fraction (mod 1) of the period, the same in every robot's cameras. Robots 4 and
     5, both flashing, both 0.6 m ahead of the viewer 3, one to each side: in the lit half of
     robot 5's period robot 4 (whose period starts 0.38 of one later) is dark."""
-    from fishswarm.actors.mock_robot import GOLDEN_FRACTION, SnapshotCamera
+    from fishswarm.actors.mock_robot import GOLDEN_FRACTION
     from fishswarm.bluebot.flashes import FRAME_GAP
     from fishswarm.bluebot.leds import LedVision, perceive_leds
     from fishswarm.bluebot.ports import CAMERA_SIDES
 
     ids = np.array([3, 4, 5])
     position = np.array([[0.9, 0.9, 0.5], [1.4, 1.25, 0.5], [1.4, 0.55, 0.5]])
-    three = np.zeros(3)
-    snapshot = Snapshot(
-        0, 0.0, ids, position, np.zeros((3, 3)), three, np.zeros(3, dtype=np.int64),
-        np.zeros(3, dtype=np.int64), three, lights=np.array([STEADY, FLASHING, FLASHING]),
-    )  # fmt: skip
-    clock = Clock()
-    feed = WorldFeed(3, clock=clock)
-    camera = SnapshotCamera(feed, clock=clock)
-    feed.take(snapshot)
+    clock, camera = still_camera(ids, position, [STEADY, FLASHING, FLASHING])
     period = 2 * FRAME_GAP
     phase = {fish: (fish * GOLDEN_FRACTION) % 1.0 for fish in (4, 5)}
     assert phase[4] - phase[5] == pytest.approx(0.382, abs=1e-3)
@@ -263,3 +248,21 @@ def test_the_mock_camera_flashes_robots_each_from_a_phase_of_its_own() -> None:
     # Robot 5 dark, robot 4 lit: robot 4 alone, to the left.
     left = seen_at(phase[5] + 0.55)
     assert left.shape[0] == 1 and left[0, 1] > 0
+
+
+def still_camera(
+    ids: np.ndarray, position: np.ndarray, lights: list[int]
+) -> tuple[Clock, SnapshotCamera]:
+    """Robot ``ids[0]``'s mock cameras on a snapshot of fish at ``position`` (all at rest),
+    their LEDs as ``lights`` say, and the clock that times each frame."""
+    count = ids.size
+    snapshot = Snapshot(
+        0, 0.0, ids, position, np.zeros((count, 3)), np.zeros(count),
+        np.zeros(count, dtype=np.int64), np.zeros(count, dtype=np.int64), np.zeros(count),
+        lights=np.array(lights),
+    )  # fmt: skip
+    clock = Clock()
+    feed = WorldFeed(int(ids[0]), clock=clock)
+    camera = SnapshotCamera(feed, clock=clock)
+    feed.take(snapshot)
+    return clock, camera

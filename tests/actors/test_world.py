@@ -7,7 +7,8 @@ from __future__ import annotations
 import contextlib
 import logging
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable
+from contextlib import asynccontextmanager
 from typing import Any, cast
 
 import numpy as np
@@ -18,6 +19,7 @@ from fishswarm import __version__
 from fishswarm.actors.bus import Declared, MemoryBus, open_token
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.fish import Fish, FishSettings
+from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.observer import Observer
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
 from fishswarm.protocols.codec import decode, encode
@@ -335,33 +337,44 @@ def test_the_world_waits_for_a_slow_fish_at_every_tick() -> None:
     assert run_mock(main) == [0.0, 4.0, 8.0, 12.0]
 
 
+@asynccontextmanager
+async def two_fish_world(
+    settings: WorldSettings, told: list[tuple[list[int], list[int] | None]]
+) -> AsyncIterator[tuple[MemoryBus, Inbox[tuple[str, bytes]], Inbox[tuple[str, bytes]]]]:
+    """The world of ``settings`` running with fish 0 and 1 up, on an in-memory Bus; each
+    snapshot's ids and lights noted in ``told``. The Bus and the two fish's perceptions."""
+    bus = MemoryBus()
+    keys = settings.scenario.keys
+
+    def take(key: str, payload: bytes) -> None:
+        snapshot = decode(payload, Snapshot)
+        lights = snapshot.lights
+        told.append((snapshot.ids.tolist(), None if lights is None else lights.tolist()))
+
+    bus.subscribe(keys.snapshot, take)
+    async with (
+        subscription(bus, keys.perception(0)) as first,
+        subscription(bus, keys.perception(1)) as second,
+        open_token(bus, keys.alive("fish", 0)),
+        open_token(bus, keys.alive("fish", 1)),
+        trio.open_nursery() as nursery,
+    ):
+        nursery.start_soon(World(settings).run, bus)
+        yield bus, first, second
+        nursery.cancel_scope.cancel()
+
+
 def test_the_snapshot_tells_the_leds_of_robots_whose_commands_say_they_flash_or_are_dark() -> None:
     """A robot's LEDs are its own: the world tells them from its command that says so until
     one that says otherwise, whatever tick the command answers, so that other robots'
     cameras show them; with every fish's steady the snapshot says nothing of them."""
     scenario = Scenario(fish=2, duration=5.0, seed=1)
     keys = scenario.keys
+    settings = WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0, turn_delay=0.0)
+    told: list[tuple[list[int], list[int] | None]] = []
 
-    async def main() -> list[list[int] | None]:
-        bus = MemoryBus()
-        world = World(
-            WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0, turn_delay=0.0)
-        )
-        told: list[list[int] | None] = []
-
-        def take(key: str, payload: bytes) -> None:
-            lights = decode(payload, Snapshot).lights
-            told.append(None if lights is None else lights.tolist())
-
-        bus.subscribe(keys.snapshot, take)
-        async with (
-            subscription(bus, keys.perception(0)) as first,
-            subscription(bus, keys.perception(1)) as second,
-            open_token(bus, keys.alive("fish", 0)),
-            open_token(bus, keys.alive("fish", 1)),
-            trio.open_nursery() as nursery,
-        ):
-            nursery.start_soon(world.run, bus)
+    async def main() -> None:
+        async with two_fish_world(settings, told) as (bus, first, second):
             # Fish 1 flashes at ticks 1 and 2, goes dark at tick 3, steady at tick 4.
             for led, flashing in ((True, None), (True, True), (True, True), (False, None),
                                   (True, None)):  # fmt: skip
@@ -370,10 +383,11 @@ def test_the_snapshot_tells_the_leds_of_robots_whose_commands_say_they_flash_or_
                     said = (led, flashing) if fish == 1 else (True, None)
                     command = Command(fish, tick, np.zeros(4), led=said[0], flashing=said[1])
                     bus.put(keys.command(fish), encode(command))
-        return told
+            await trio.sleep(0.01)
 
-    told = run_mock(main)
-    assert told[:6] == [None, None, [STEADY, FLASHING], [STEADY, FLASHING], [STEADY, DARK], None]
+    run_mock(main)
+    lights = [said for _, said in told]
+    assert lights[:6] == [None, None, [STEADY, FLASHING], [STEADY, FLASHING], [STEADY, DARK], None]
 
 
 def test_the_snapshot_tells_each_robots_leds_whatever_order_their_commands_came_in() -> None:
@@ -429,31 +443,13 @@ def test_a_lost_robots_leds_are_forgotten() -> None:
     robot that comes back under its id is not shown flashing before it says so."""
     scenario = Scenario(fish=2, duration=5.0, seed=1)
     keys = scenario.keys
+    settings = WorldSettings(
+        scenario, expected_fish=(0, 1), admit_delay=0.0, turn_delay=0.0, command_timeout=1.0
+    )
+    told: list[tuple[list[int], list[int] | None]] = []
 
-    async def main() -> list[tuple[list[int], list[int] | None]]:
-        bus = MemoryBus()
-        world = World(
-            WorldSettings(
-                scenario, expected_fish=(0, 1), admit_delay=0.0, turn_delay=0.0,
-                command_timeout=1.0,
-            )
-        )  # fmt: skip
-        told: list[tuple[list[int], list[int] | None]] = []
-
-        def take(key: str, payload: bytes) -> None:
-            snapshot = decode(payload, Snapshot)
-            lights = snapshot.lights
-            told.append((snapshot.ids.tolist(), None if lights is None else lights.tolist()))
-
-        bus.subscribe(keys.snapshot, take)
-        async with (
-            subscription(bus, keys.perception(0)) as first,
-            subscription(bus, keys.perception(1)) as second,
-            open_token(bus, keys.alive("fish", 0)),
-            open_token(bus, keys.alive("fish", 1)),
-            trio.open_nursery() as nursery,
-        ):
-            nursery.start_soon(world.run, bus)
+    async def main() -> None:
+        async with two_fish_world(settings, told) as (bus, first, second):
             # Robot 1 steady at tick 0, flashing at tick 1, silent from tick 2 on.
             for step in range(4):
                 for fish, perceptions in ((0, first), (1, second)):
@@ -464,10 +460,8 @@ def test_a_lost_robots_leds_are_forgotten() -> None:
                     command = Command(fish, tick, np.zeros(4), flashing=flashing)
                     bus.put(keys.command(fish), encode(command))
             await trio.sleep(0.01)
-            nursery.cancel_scope.cancel()
-        return told
 
-    told = run_mock(main)
+    run_mock(main)
     assert told[2] == ([0, 1], [STEADY, FLASHING])
     gone = [lights for ids, lights in told if ids == [0]]
     assert gone and gone == [None] * len(gone)
