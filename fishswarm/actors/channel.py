@@ -7,7 +7,8 @@ the world how many deliveries each fish gets, so that each fish can wait for all
 deterministic, and nothing lost.
 
 A channel run apart from its world (``fishswarm channel``) asks each run's world for its
-scenario when the run starts and takes the world's range, loss and seed: a channel started
+scenario when the run starts and takes the world's medium — range, loss, seed, how flags
+travel and the vision that decides who sees whom: a channel started
 with other settings would otherwise deliver what no batch run of the world's scenario
 delivers.
 """
@@ -64,11 +65,11 @@ class Channel:
     """The simulated broadcast medium. ``await channel.run(bus)`` serves until cancelled.
 
     Args:
-        scenario: range, loss and seed of the medium.
+        scenario: the medium: range, loss, seed, how flags travel and who sees whom.
         outbox_timeout: longest wait for the broadcasts a snapshot announces, s.
         ask_world: for a channel apart from its world, how to ask the world of a run that
             starts for its scenario (None if no world answers; it may raise
-            :class:`ConfigError`); the medium then takes the world's range, loss and seed.
+            :class:`ConfigError`); the medium then takes the world's scenario.
             None (the default): ``scenario`` is the world's, as in ``fishswarm run``.
     """
 
@@ -230,7 +231,7 @@ class Channel:
             channel_range=self.scenario.channel_range,
             loss=self.scenario.channel_loss,
             rngs=rngs,
-            sight=self.scenario.flag_sight(),
+            sight=self.scenario.flag_sight,
         )
         counts = np.zeros(snapshot.ids.size, dtype=np.int64)
         for reception in found:

@@ -116,7 +116,7 @@ def rights_of(subject: str, keys: KeySpace) -> Rights:
         return Rights(
             publishes=(keys.inbox("*"), keys.channel_report),
             subscribes=(keys.snapshot, keys.fish_outboxes()),
-            queries=(keys.scenario,),  # each run's range, loss and seed, from its world
+            queries=(keys.scenario,),  # each run's medium, from its world
         )
     if subject == "admin":
         return Rights(

@@ -544,8 +544,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run the simulated broadcast medium: it delivers the fish's broadcasts "
         "(formation flags) to the fish in range, situated and with the scenario's seeded "
         "loss, and tells the world how many each fish gets. At the start of each run it "
-        "asks that run's world for its settings and takes the world's channel range, loss "
-        "and seed; its own (--seed, --config) serve only if no world answers.",
+        "asks that run's world for its settings and takes the world's medium: channel "
+        "range, loss, seed, how formation flags travel and the vision that decides who "
+        "sees whom; its own (--seed, --config) serve only if no world answers.",
     )
     _add_connect(channel)
     _add_scenario_flags(channel, ["seed", "swarm"])

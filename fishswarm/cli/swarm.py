@@ -463,7 +463,8 @@ def channel(args: argparse.Namespace, scenario: Scenario) -> int:
                 await nursery.start(served[0].run, ZenohBus(session))
                 print(
                     f"channel up on {args.connect} for swarm {scenario.swarm!r}: it takes each "
-                    "run's range, loss, seed and flag medium from the run's world",
+                    "run's medium (range, loss, seed, how flags travel, vision) from the run's "
+                    "world",
                     file=sys.stderr,
                 )
 

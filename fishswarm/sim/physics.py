@@ -103,7 +103,7 @@ class WorldParams:
             spawn_radius=scenario.resolved_spawn_radius(),
             channel_range=scenario.channel_range,
             channel_loss=scenario.channel_loss,
-            flag_sight=scenario.flag_sight(),
+            flag_sight=scenario.flag_sight,
             one_bit_flags=scenario.one_bit_flags,
             switch_formation=scenario.switch_formation,
             switch_at=scenario.switch_at,

@@ -494,6 +494,7 @@ class Scenario:
             speed_dependent_drag="drag" in study,
         )
 
+    @property
     def flag_sight(self) -> Vision | None:
         """The vision by which formation flags travel: with flags by light, the fish that
         see a flag's sender receive it; None: those within ``channel_range``."""

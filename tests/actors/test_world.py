@@ -120,6 +120,17 @@ async def _swarm(scenario: Scenario, *, schools: int) -> tuple[World, list[Snaps
             "spawn_radius": 0.3,
             "spacing": 0.25,
         },
+        {
+            # Flags by beacon: that one bit to every fish within range, a fifth of them lost
+            # (it changes the trajectory: test_medium.py).
+            "behavior": "formation",
+            "formation": "column",
+            "flag_medium": "beacon",
+            "channel_loss": 0.2,
+            "controller": "pid",
+            "spawn_radius": 0.3,
+            "spacing": 0.25,
+        },
     ],
 )
 def test_the_actors_give_the_batch_engines_trajectory(changes: dict[str, object]) -> None:

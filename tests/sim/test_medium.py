@@ -106,12 +106,13 @@ def test_flags_by_light_reach_only_the_fish_that_see_their_sender_and_by_beacon_
     np.testing.assert_array_equal(by_beacon.values[0, 0], one_bit(FORMATION_KIND, values[2]))
 
 
-@pytest.mark.parametrize("shape", ["column", "trigonal-planar"])
+@pytest.mark.parametrize("shape", ["pyramid", "column", "trigonal-planar"])
 def test_flags_by_light_tell_a_formation_fish_nothing_its_eyes_do_not(shape: str) -> None:
     """By light a flag reaches only fish that see its sender, and says only that it holds
-    its place, where it is seen: a formation fish takes nothing from it that sight does not
-    give. The run is the one in which flags are sent and none arrives (docs/robot.md); a
-    beacon's same one bit, reaching fish that do not see its sender, changes it."""
+    its place, where it is seen: with the geometric vision model (noiseless, as in the
+    experiments) a formation fish takes nothing from it that sight does not give. The run
+    is the one in which flags are sent and none arrives (docs/robot.md); a beacon's same
+    one bit, reaching fish that do not see its sender, changes it."""
     base = Scenario(
         fish=7, behavior="formation", formation=shape, duration=6.0, seed=5, controller="pid",
         spawn_radius=0.3, spacing=0.25,
@@ -121,3 +122,18 @@ def test_flags_by_light_tell_a_formation_fish_nothing_its_eyes_do_not(shape: str
     beacon = simulate_batch(base.replace(flag_medium="beacon")).position
     np.testing.assert_array_equal(light, none_arrive)
     assert not np.array_equal(beacon, none_arrive)
+
+
+@pytest.mark.parametrize("changes", [{"vision_model": "camera"}, {"vision_noise": 0.06}])
+def test_with_eyes_that_miss_flags_by_light_tell_what_they_miss(changes: dict[str, object]) -> None:
+    """The limit of the above: a flag by light shows its sender where it is, and reaches
+    the fish the geometric model says see it; a fish that sees through its cameras' images,
+    or with noise over half the tolerance, misses or misplaces some of them, and the flags
+    then change its run."""
+    base = Scenario(
+        fish=7, behavior="formation", formation="column", duration=6.0, seed=5,
+        controller="pid", spawn_radius=0.3, spacing=0.25,
+    ).replace(**changes)  # fmt: skip
+    light = simulate_batch(base.replace(flag_medium="light")).position
+    none_arrive = simulate_batch(base.replace(channel_range=1e-9)).position
+    assert not np.array_equal(light, none_arrive)
