@@ -5,8 +5,8 @@ in-memory Bus (``local``): the driver reads both cameras and the depth sensor, r
 pipeline (:func:`~fishswarm.bluebot.leds.perceive_leds`) and hands the fish a
 :class:`Perception`; the fish answers with a :class:`Command`, which the driver writes to
 fins and LEDs. Only what must leave the robot crosses the Zenoh link (``remote``): the
-fish's broadcasts and deliveries, the robot's status and liveliness token, and operators'
-orders. So the fins' safety never depends on Wi-Fi:
+fish's broadcasts (but formation flags, which go by light) and deliveries, the robot's
+status and liveliness token, and operators' orders. So the fins' safety never depends on Wi-Fi:
 
 - **failsafe**: no command for ``command_timeout`` → fins off, whatever the network does;
 - **link loss**: the fish swims on its own perception for at most ``link_timeout``, then the
@@ -169,7 +169,8 @@ class DriverStatistics:
         stranded_stops: times the fins stopped because the link stayed down too long.
         orders: operators' orders obeyed.
         deliveries: deliveries passed from the link to the fish.
-        broadcasts: the fish's broadcasts passed to the link.
+        broadcasts: the fish's broadcasts passed to the link (all but its formation flags,
+            which go by light).
         flags_seen: flashing neighbours handed to the fish as formation flags.
         rejected: messages rejected (malformed, misaddressed).
     """
@@ -303,7 +304,8 @@ class Driver:
                     for bus, key in (
                         (local, keys.command(robot_id)),
                         (remote, keys.robot_order),
-                        # The bridge: the fish's broadcasts out, deliveries to it in, and
+                        # The bridge: the fish's broadcasts out (its formation flags go by
+                        # light), deliveries to it in, and
                         # its vouching for itself out (a secured world admits only fish
                         # vouched for on their own about keys).
                         (local, keys.outbox(robot_id)),
@@ -545,18 +547,18 @@ class Driver:
     # The link ---------------------------------------------------------------------------
 
     async def _pass_broadcasts(self, broadcasts: Inbox[tuple[str, bytes]], remote: Bus) -> None:
-        """The fish's broadcasts onto the link, and its formation flag into light."""
+        """The fish's formation flag into light, its other broadcasts onto the link (flags
+        travel between robots by light: on the link nothing takes them, and a simulated
+        channel, which numbers broadcasts by its world's ticks, would refuse them)."""
         async for key, payload, broadcast in self._addressed(broadcasts, Broadcast, "sender_id"):
-            remote.put(key, payload)
-            self._counts["broadcasts"] += 1
-            if broadcast.kind == "formation":
-                try:
-                    self._own_flag = FormationFlag.from_values(broadcast.values)
-                except (TypeError, ValueError) as error:
-                    self._intake.reject(key, "malformed", f"a formation flag that {error}")
-                    continue
-                self._flagging = True
-                self._show_lights()
+            if broadcast.kind != "formation":
+                remote.put(key, payload)
+                self._counts["broadcasts"] += 1
+                continue
+            # A broadcast is checked on decoding: a formation broadcast's numbers are a flag.
+            self._own_flag = FormationFlag.from_values(broadcast.values)
+            self._flagging = True
+            self._show_lights()
 
     def _show_lights(self) -> None:
         """The LEDs as the fish wants them: flashing while it swims and its flag says it

@@ -758,6 +758,7 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
         async with (
             subscription(local, KEYS.perception(ROBOT)) as perceived,
             subscription(local, KEYS.inbox(ROBOT)) as inbox,
+            subscription(remote, KEYS.outbox(ROBOT)) as outgoing,
             trio.open_nursery() as nursery,
         ):
             await nursery.start(driver.run, local, remote)
@@ -781,6 +782,8 @@ def test_a_robot_flashes_while_its_fish_holds_its_place_and_hands_it_the_flasher
             await answer(flag(True, 3), broadcasts=1)  # tick 3: joined again
             seen_in_status.append(driver.status().flags_seen)
             deliveries = [decode(payload, Delivery) for _, payload in inbox.drain()]
+            # The flags went by light: none onto the link.
+            assert outgoing.drain() == [] and driver.statistics().broadcasts == 0
             # No more commands: the failsafe stops the fins, and a robot that no longer
             # swims holds no place (its LEDs steady); nor does one stranded.
             while driver.state != "failsafe":
