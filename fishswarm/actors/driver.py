@@ -410,11 +410,12 @@ class Driver:
         if self._own_flag is not None and flashing.any():
             # Each flashing neighbour, where it is seen, is a flag for this perception.
             values = flag_by_light(self._own_flag).values()
-            for position in neighbors[flashing]:
+            flashers = neighbors[flashing]
+            for position in flashers:
                 flag = Delivery(robot_id, self._tick, "formation", values, position)
                 local.put(self.settings.keys.inbox(robot_id), encode(flag))
-            self._unannounced += int(flashing.sum())
-            self._counts["flags_seen"] += int(flashing.sum())
+            self._unannounced += len(flashers)
+            self._counts["flags_seen"] += len(flashers)
         message = Perception(
             fish_id=self.settings.robot_id,
             tick=self._tick,

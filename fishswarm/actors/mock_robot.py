@@ -148,12 +148,13 @@ class SnapshotCamera:
         self, snapshot: Snapshot, row: int, side: CameraSide, time: float
     ) -> NDArray[np.uint8]:
         lit = self._lit(snapshot, time)
+        shining = lit.tobytes()
         with self._lock:
             if self._tick != snapshot.tick:
                 self._tick, self._rendered = snapshot.tick, {}
-            images = self._rendered.get(lit.tobytes())
+            images = self._rendered.get(shining)
             if images is None:
-                images = self._rendered[lit.tobytes()] = render_views(
+                images = self._rendered[shining] = render_views(
                     np.asarray(snapshot.position),
                     np.asarray(snapshot.yaw),
                     row,

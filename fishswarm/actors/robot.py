@@ -18,6 +18,7 @@ import os
 import warnings
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +32,7 @@ from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.inbox import Inbox, open_subscription
 from fishswarm.actors.intake import Intake
 from fishswarm.actors.mock_robot import open_mock_hardware
-from fishswarm.actors.session import SessionSettings, open_session
+from fishswarm.actors.session import SessionSettings, open_session, reaches_router
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.behaviors.core import FishParams
 from fishswarm.protocols.codec import encode
@@ -197,10 +198,7 @@ async def run_robot(
 
 
 def _link_probe(session: zenoh.Session) -> Callable[[], bool]:
-    def link_up() -> bool:
-        return bool(list(session.info.routers_zid()))
-
-    return link_up
+    return partial(reaches_router, session)
 
 
 @dataclass(frozen=True)

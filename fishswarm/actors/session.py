@@ -203,6 +203,11 @@ async def _open_abandonably(config: zenoh.Config) -> zenoh.Session:
         raise
 
 
+def reaches_router(session: zenoh.Session) -> bool:
+    """Whether a client session is connected to a router now."""
+    return bool(list(session.info.routers_zid()))
+
+
 def _without_source(reason: str) -> str:
     """Zenoh's reason without the place in Zenoh's Rust source it was raised at (``… at
     /root/.cargo/…/orchestrator.rs:388.``), which says nothing to the user."""

@@ -162,7 +162,7 @@ class GpioLeds:
 
     def __init__(self, *, wiring: Wiring = Wiring(), pin_factory: Any = None) -> None:
         self._device = _output_device(wiring.led_pin, pin_factory)
-        self._flashing = 0.0
+        self._flash_frequency = 0.0
 
     @property
     def lit(self) -> bool:
@@ -172,11 +172,11 @@ class GpioLeds:
     @property
     def flash_frequency(self) -> float:
         """The frequency the LEDs flash at, Hz (0: not flashing)."""
-        return self._flashing
+        return self._flash_frequency
 
     def set_lit(self, lit: bool) -> None:
         """Switch the LEDs on or off (a flashing stops)."""
-        self._flashing = 0.0
+        self._flash_frequency = 0.0
         if lit:
             self._device.on()
         else:
@@ -189,11 +189,11 @@ class GpioLeds:
         if not (math.isfinite(frequency) and frequency > 0):
             raise ValueError(f"frequency must be a positive number of Hz, got {frequency}")
         half = 0.5 / frequency
-        self._flashing = float(frequency)
+        self._flash_frequency = float(frequency)
         self._device.blink(on_time=half, off_time=half, n=None, background=True)
 
     def close(self) -> None:
         """Switch the LEDs off and release the pin."""
-        self._flashing = 0.0
+        self._flash_frequency = 0.0
         self._device.off()
         self._device.close()

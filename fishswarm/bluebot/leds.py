@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from fishswarm.bluebot.blobs import find_blobs
 from fishswarm.bluebot.fisheye import Fisheye, camera_position, camera_to_body
-from fishswarm.bluebot.flashes import match_sightings
+from fishswarm.bluebot.flashes import merge_frames
 from fishswarm.bluebot.parameters import LED_SPACING
 from fishswarm.bluebot.ports import CameraSide
 
@@ -363,13 +363,9 @@ def perceive_leds(
 
 
 def _merge_cameras(estimates: list[FloatArray], fraction: float) -> FloatArray:
-    """One neighbour for each one both cameras saw (the mean of the two estimates)."""
+    """One neighbour for each one both cameras saw (the mean of the two estimates), as two
+    frames' sightings are merged (:func:`~fishswarm.bluebot.flashes.merge_frames`)."""
     if len(estimates) != 2:
         return np.concatenate([e.reshape(-1, 3) for e in estimates] or [np.zeros((0, 3))])
-    first, second = estimates
-    rows, partners = match_sightings(first, second, fraction=fraction)
-    merged = first.copy()
-    merged[rows] = (first[rows] + second[partners]) / 2
-    kept_second = np.ones(second.shape[0], dtype=bool)
-    kept_second[partners] = False
-    return np.concatenate([merged, second[kept_second]]).reshape(-1, 3)
+    merged, _ = merge_frames(estimates[0], estimates[1], fraction=fraction)
+    return merged

@@ -37,7 +37,7 @@ from fishswarm.actors.security import (
     robot_subject,
     router_names,
 )
-from fishswarm.actors.session import SessionSettings, open_session
+from fishswarm.actors.session import SessionSettings, open_session, reaches_router
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus, query
 from fishswarm.bluebot.parameters import BODY_LENGTH
@@ -492,7 +492,7 @@ async def _say_when_the_router_goes(session: zenoh.Session, command: str, endpoi
     up = True
     while True:
         await trio.sleep(ROUTER_CHECK_EVERY)
-        now = bool(list(session.info.routers_zid()))
+        now = reaches_router(session)
         if now == up:
             continue
         up = now
@@ -553,13 +553,13 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                     async def wait_for_world_end() -> None:
                         await observer.wait_for_world_left()
                         # A world's token is gone for everyone who loses the router too.
-                        router = bool(list(session.info.routers_zid()))
+                        router = reaches_router(session)
                         await observer.wait_for_world_end()
                         said = observer.world_said_ended()
                         if said is False or (said is None and not router):
                             unfinished.append(
                                 "lost the router at " + args.connect
-                                if not list(session.info.routers_zid()) or not router
+                                if not (router and reaches_router(session))
                                 else "the world left"
                             )
 

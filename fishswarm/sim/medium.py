@@ -107,13 +107,11 @@ def one_bit(kind: int, values: IntArray) -> IntArray | None:
     (:func:`~fishswarm.behaviors.formation.flag_by_light`: the shape and orientation kept —
     a school's fish share them, where a robot gives the flags it sees its own fish's — no
     slot, hops, effort or swap); None for any other broadcast, which is not sent."""
-    if kind != FORMATION_KIND or values.shape[0] < 3 or values[2] != 1:
+    if kind != FORMATION_KIND:
         return None
-    try:
-        flag = FormationFlag.from_values(values)
-    except (TypeError, ValueError):
-        return None
-    return flag_by_light(flag).values()
+    # A decision's and a decoded broadcast's formation numbers are a flag, checked.
+    flag = FormationFlag.from_values(values)
+    return flag_by_light(flag).values() if flag.joined else None
 
 
 def deliver(
