@@ -3,8 +3,9 @@
 First the floors: the Zenoh echo round trip (``bench_bridge.py``) and, for each size, the
 in-process batch engine's tick (compiled kernels from 200 fish on when numba is installed,
 as the world uses them). Then whole swarms through the actor system over Zenoh on 127.0.0.1
-(1 Hz control, full physics and vision) for 25, 1 000 and 10 000 fish with 1 and 2 worker
-processes; beyond 25 fish the tank grows so that each fish has about 25 others within visual
+(1 Hz control, full physics and vision) for 25, 1 000 and 10 000 fish with the fish in the
+launcher's own process beside the world (``workers`` 0, still over Zenoh) and with 1 and 2
+worker processes; beyond 25 fish the tank grows so that each fish has about 25 others within visual
 range. A worker's fish form a school: one perception batch (in parts when large) and one
 command batch per tick. Each row gives the tick (from the snapshot of tick 4 to the last, as
 the batch engine's leaves out its start-up and first tick; beside it the whole tick loop's
@@ -213,7 +214,7 @@ def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None
             [r[0] for r in rows],
             [r[3] * 1e3 for r in rows],
             "s--",
-            label=f"actor system, {procs} worker{'s' if procs > 1 else ''}",
+            label=f"actor system, {_workers(procs)}",
         )
     axis.set(
         xscale="log",
@@ -237,9 +238,16 @@ def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None
     plt.close(figure)
 
 
+def _workers(procs: int) -> str:
+    """``fish in the world's process``, ``1 worker``, ``2 workers``."""
+    if procs == 0:
+        return "fish in the world's process"
+    return f"{procs} worker{'s' if procs > 1 else ''}"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_sizes(parser, fish=[25, 1000, 10_000], procs=[1, 2])
+    add_sizes(parser, fish=[25, 1000, 10_000], procs=[0, 1, 2])
     parser.add_argument(
         "--round-trips",
         type=int,

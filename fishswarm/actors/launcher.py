@@ -1,10 +1,10 @@
 """The launcher behind ``fishswarm run``: one command runs a whole simulated swarm.
 
 It opens the listening endpoint (a Zenoh router), starts the observer, the channel and the
-world in this process, spawns the fish over worker processes, runs the scenario, writes the
-recording and the summary, and tears everything down — on success, on Ctrl-C and when a
-worker dies (the run goes on without its fish, and ends with a clear message and a non-zero
-exit).
+world in this process, spawns the fish over worker processes (or, with none, runs them here
+too), runs the scenario, writes the recording and the summary, and tears everything down —
+on success, on Ctrl-C and when a worker dies (the run goes on without its fish, and ends
+with a clear message and a non-zero exit).
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ import trio
 
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.control import run_control
-from fishswarm.actors.fish import PERCEPTION_TIMEOUT
+from fishswarm.actors.fish import PERCEPTION_TIMEOUT, Fish, FishSettings, FishStatistics
 from fishswarm.actors.observer import Observer, Progress
 from fishswarm.actors.security import secure_run
 from fishswarm.actors.session import SessionSettings, open_session
@@ -41,7 +41,8 @@ from fishswarm.actors.workers import (
 from fishswarm.actors.world import World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.protocols.jsontext import json_text
-from fishswarm.sim.decision_kernels import with_compiled_decisions
+from fishswarm.protocols.keys import KeySpace
+from fishswarm.sim.decision_kernels import prepare, with_compiled_decisions
 from fishswarm.sim.scenario import COMMAND_TIMEOUT, START_TIMEOUT, Scenario
 from fishswarm.study.experiment import ORBIT_SUMMARIES
 from fishswarm.study.metrics import METRIC_NAMES, formation_summary
@@ -68,7 +69,9 @@ class LaunchSettings:
 
     Attributes:
         scenario: what to run.
-        procs: number of fish worker processes.
+        procs: number of fish worker processes; 0 runs the fish in this process, as trio
+            tasks beside the world, talking to it over this process's own Zenoh session
+            (fastest for small swarms; a fish's failure then loses all of them).
         listen: endpoint the router listens on (loopback by default; 0.0.0.0 lets observers
             on other machines attach).
         record: MCAP recording to write (None: none).
@@ -117,14 +120,17 @@ async def launch_swarm(
     calls ``on_progress`` and ``on_scene`` (e.g. a live view) after every snapshot."""
     scenario = settings.scenario
     started = time.perf_counter()
-    schools = split_fish(list(range(scenario.fish)), settings.procs)
+    everyone = tuple(range(scenario.fish))
+    schools = split_fish(list(everyone), settings.procs) if settings.procs > 0 else []
+    here = settings.procs == 0
     workers: list[Worker] = []
+    fish_here: Fish | None = None
     died: list[str] = []
     status = "failed"
     world = World(
         WorldSettings(
             scenario,
-            expected_fish=tuple(range(scenario.fish)),
+            expected_fish=everyone,
             start_timeout=settings.start_timeout,
             command_timeout=settings.command_timeout,
             vouched_only=settings.secure is not None,
@@ -159,7 +165,9 @@ async def launch_swarm(
             observer.world_run = world.run_id
             try:
                 async with trio.open_nursery() as nursery:
-                    bus = ZenohBus(session)
+                    # With the fish here, every message of a tick goes between actors of
+                    # this process: delivered inside the put, nothing waits for a thread.
+                    bus = ZenohBus(session, inline=here)
                     await nursery.start(observer.run, bus)
                     await nursery.start(channel.run, bus)
                     await nursery.start(run_control, session, world)
@@ -176,6 +184,18 @@ async def launch_swarm(
                             session_extra=worker_extra.get(school_of(index), {}),
                         )
                         workers.append(start_worker(spec))
+                    if here:
+                        fish_here = Fish(
+                            FishSettings(
+                                everyone,
+                                params,
+                                KeySpace(scenario.swarm),
+                                perception_timeout=settings.perception_timeout,
+                                school=school_of(0),
+                            )
+                        )
+                        prepare(params)
+                        await nursery.start(_run_fish_here, fish_here, bus, died)
                     nursery.start_soon(_watch_workers, workers, died, world)
                     if settings.handle_signals:
                         nursery.start_soon(_watch_signals, interrupted, nursery.cancel_scope)
@@ -200,7 +220,8 @@ async def launch_swarm(
                     world,
                     channel,
                     observer,
-                    workers,
+                    [w.statistics for w in workers if w.statistics is not None]
+                    + ([fish_here.statistics()] if fish_here is not None else []),
                     died,
                     time.perf_counter() - started,
                 )
@@ -274,6 +295,36 @@ async def _watch_signals(interrupted: trio.Event, scope: trio.CancelScope) -> No
             return
 
 
+async def _run_fish_here(
+    fish: Fish,
+    bus: ZenohBus,
+    died: list[str],
+    *,
+    task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
+) -> None:
+    """Serve the fish in the launcher's process. A failure of theirs once they are up loses
+    them, as a dead worker loses its fish, and the world goes on until it notices; one
+    before they are up fails the run, as a worker that dies then does."""
+    up = False
+    try:
+        async with trio.open_nursery() as nursery:
+            await nursery.start(fish.run, bus)
+            up = True
+            task_status.started()
+    except Exception as error:
+        if not up:
+            raise
+        while isinstance(error, ExceptionGroup) and len(error.exceptions) == 1:
+            error = error.exceptions[0]
+        ids = fish.settings.fish_ids
+        message = (
+            f"the fish in the launcher's process (fish {ids[0]}–{ids[-1]}) failed: "
+            f"{type(error).__name__}: {error}; they are lost"
+        )
+        log.error(message, exc_info=error)
+        died.append(message)
+
+
 async def _watch_workers(workers: list[Worker], died: list[str], world: World) -> None:
     while True:
         for worker in workers:
@@ -325,7 +376,7 @@ def _summary(
     world: World,
     channel: Channel,
     observer: Observer,
-    workers: list[Worker],
+    fish_statistics: list[FishStatistics],
     died: list[str],
     wall_time: float,
 ) -> dict[str, Any]:
@@ -353,10 +404,8 @@ def _summary(
             },
         }
     fish_totals: dict[str, int] = {}
-    for worker in workers:
-        if worker.statistics is None:
-            continue
-        for name, value in dataclasses.asdict(worker.statistics).items():
+    for statistics in fish_statistics:
+        for name, value in dataclasses.asdict(statistics).items():
             fish_totals[name] = fish_totals.get(name, 0) + int(value)
     if status == "finished" and fish_totals.get("watchdog_stops", 0):
         # Fins were off for part of the run: its trajectory is not what the fish decided.
@@ -367,7 +416,7 @@ def _summary(
     return {
         "status": status,
         "scenario": settings.scenario.to_dict(),
-        "procs": len(workers),
+        "procs": min(settings.procs, settings.scenario.fish),
         "listen": settings.listen,
         "metrics": metrics,
         "formation": formation,

@@ -24,13 +24,22 @@ class ZenohBus:
     Args:
         session: the session.
         droppable: puts may be dropped under congestion (best-effort data such as progress).
+        inline: run subscribers' callbacks on the thread that delivers the sample — for a
+            put from this process, inside the put — rather than on a Python thread of their
+            own (zenoh's ``indirect`` callbacks). For actors that share a process and talk
+            among themselves: a sample from elsewhere then holds one of Zenoh's network
+            threads while its callback waits for the interpreter, so a process that routes
+            other processes' traffic keeps the default.
     """
 
-    def __init__(self, session: zenoh.Session, *, droppable: bool = False) -> None:
+    def __init__(
+        self, session: zenoh.Session, *, droppable: bool = False, inline: bool = False
+    ) -> None:
         self.session = session
         self._congestion = (
             zenoh.CongestionControl.DROP if droppable else zenoh.CongestionControl.BLOCK
         )
+        self._inline = inline
         self._declared: dict[str, zenoh.KeyExpr] = {}
 
     def put(self, key: str, payload: bytes) -> None:
@@ -50,7 +59,8 @@ class ZenohBus:
             def callback(sample: zenoh.Sample) -> None:
                 on_sample(key_expr, sample.payload.to_bytes())
 
-        subscriber: Declared = self.session.declare_subscriber(key_expr, callback)
+        handler = zenoh.handlers.Callback(callback, indirect=not self._inline)
+        subscriber: Declared = self.session.declare_subscriber(key_expr, handler)
         return subscriber
 
     def declare_token(self, key: str) -> Declared:

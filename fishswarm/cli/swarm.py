@@ -159,10 +159,21 @@ def _warn_if_crowded(command: str, scenario: Scenario) -> None:
         print(f"fishswarm {command}: warning: {crowded}", file=sys.stderr)
 
 
+def _where_fish_run(procs: int, fish: int) -> str:
+    """``the fish in this process`` or ``2 worker processes``."""
+    if procs == 0:
+        return "the fish in this process"
+    workers = min(procs, fish)
+    return f"{workers} worker process{'es' if workers > 1 else ''}"
+
+
 def run(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm run``."""
-    if args.procs < 1:
-        raise ConfigError(f"--procs must be at least 1, got {args.procs}")
+    if args.procs < 0:
+        raise ConfigError(
+            f"--procs must be 0 (the fish in this process) or more worker processes, got "
+            f"{args.procs}"
+        )
     if not args.perception_timeout > 0:
         raise ConfigError(
             f"--perception-timeout must be a positive number of seconds, got "
@@ -187,7 +198,7 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
     print(
         f"fishswarm: {scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
         f"{1 / scenario.control_period:g} Hz, seed {scenario.seed}, "
-        f"{min(args.procs, scenario.fish)} worker process(es), listening on {settings.listen}",
+        f"{_where_fish_run(args.procs, scenario.fish)}, listening on {settings.listen}",
         file=sys.stderr,
     )
     _warn_if_crowded("run", scenario)

@@ -130,10 +130,11 @@ def test_same_seed_same_trajectory_across_processes_and_batch_engine(
     scenario = Scenario(fish=12, duration=8.0, seed=11, vision_noise=0.05, time_mode=time_mode)
     reference = simulate_batch(scenario)
     np.testing.assert_array_equal(simulate_batch(scenario).position, reference.position)
-    for procs in (1, 2):
+    for procs in (0, 1, 2):  # 0: the fish in the launcher's process
         path = tmp_path / f"procs{procs}.mcap"
         result = _launch(scenario, endpoint, path, procs=procs)
         assert result.exit_code == 0
+        assert result.summary["procs"] == procs
         arrays = read_recording(path).arrays()
         np.testing.assert_array_equal(arrays["pos"], reference.position)
         np.testing.assert_array_equal(arrays["yaw"], reference.yaw)
@@ -222,6 +223,34 @@ def test_killed_worker_loses_its_fish_and_the_run_completes(endpoint: str, tmp_p
     assert "SIGKILL" in summary["workers_died"][0]
     assert result.history[-1].fish == 4
     assert summary["counts"]["lost_fish"] == 4
+
+
+def test_fish_that_fail_in_the_launchers_process_are_lost_and_the_run_completes(
+    endpoint: str,
+) -> None:
+    from fishswarm.behaviors.registry import BEHAVIORS, register
+    from tests.behaviors.signal_behavior import SIGNAL, SignalMemory, steer_signal
+
+    def steer_until_the_third(memory: SignalMemory, *args: Any, **kwargs: Any) -> Any:
+        if memory.decisions.max() == 3:
+            raise RuntimeError("no third decision")
+        return steer_signal(memory, *args, **kwargs)
+
+    failing = dataclasses.replace(SIGNAL, name="test-fails-at-third", steer=steer_until_the_third)
+    if failing.name not in BEHAVIORS:
+        register(failing)
+    scenario = Scenario(fish=4, duration=8.0, seed=2, behavior=failing.name)
+    settings = LaunchSettings(scenario, procs=0, listen=endpoint)
+    result = run_trio(lambda: launch_swarm(settings), timeout=120)
+    summary = result.summary
+    assert result.exit_code == EXIT_WORKER_DIED
+    assert summary["status"] == "finished"
+    assert summary["counts"]["ticks"] == 8
+    assert sorted(lost["id"] for lost in summary["lost"]) == [0, 1, 2, 3]
+    assert {lost["tick"] for lost in summary["lost"]} == {3}
+    (died,) = summary["workers_died"]
+    assert "fish 0–3" in died and "RuntimeError: no third decision" in died
+    assert summary["fish"]["batches"] == 3  # their counters up to the failure are kept
 
 
 def test_a_killed_worker_is_noticed_by_liveliness_not_by_the_command_timeout(
@@ -358,7 +387,7 @@ def test_a_formation_with_flags_flowing_is_the_same_across_processes_and_engines
         control_period=0.5, controller="pid", spawn_radius=0.4, spacing=0.25, channel_loss=0.2,
     )  # fmt: skip
     reference = simulate_batch(scenario)
-    for procs in (1, 2):
+    for procs in (0, 1, 2):
         path = tmp_path / f"formation{procs}.mcap"
         result = _launch(scenario, endpoint, path, procs=procs)
         assert result.exit_code == 0

@@ -70,6 +70,35 @@ def test_put_reaches_subscriber_through_router(endpoint: str) -> None:
     assert run_trio(main) == [("test/0", b"\x00"), ("test/1", b"\x01"), ("test/2", b"\x02")]
 
 
+@pytest.mark.parametrize("inline", [True, False])
+def test_an_inline_subscriber_hears_its_own_session_inside_the_put(
+    endpoint: str, inline: bool
+) -> None:
+    # Actors sharing a process (the launcher's fish beside its world) hand each other a
+    # sample without a thread in between; by default each subscriber has a thread of its own.
+    async def main() -> tuple[list[tuple[int, bytes]], bool]:
+        async with open_session(SessionSettings(mode="router", listen=[endpoint])) as session:
+            bus = ZenohBus(session, inline=inline)
+            heard: list[tuple[int, bytes]] = []
+            subscriber = bus.subscribe(
+                "test/inline", lambda _, payload: heard.append((threading.get_ident(), payload))
+            )
+            try:
+                bus.put("test/inline", b"one")
+                inside = heard == [(threading.get_ident(), b"one")]
+                with trio.fail_after(5):
+                    while not heard:
+                        await trio.sleep(0.01)
+            finally:
+                subscriber.undeclare()
+            return heard, inside
+
+    heard, inside = run_trio(main)
+    assert [payload for _, payload in heard] == [b"one"]
+    assert inside is inline
+    assert (heard[0][0] == threading.get_ident()) is inline
+
+
 def test_liveliness_tokens_come_and_go(endpoint: str) -> None:
     async def main() -> list[tuple[str, bool]]:
         router = SessionSettings(mode="router", listen=[endpoint])

@@ -146,7 +146,7 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["run", "--behavior", "schooling"], "behavior must be one of dispersion, aggregation"),
         (["run", "--duration", "-3"], "duration must be a positive number of seconds"),
         (["run", "--listen", "localhost"], "write PROTOCOL/HOST:PORT"),
-        (["run", "--procs", "0"], "--procs must be at least 1"),
+        (["run", "--procs", "-1"], "--procs must be 0 (the fish in this process) or more"),
         (["run", "--perception-timeout", "0"], "--perception-timeout must be a positive number"),
         (["run", "--fish", "many"], "invalid int value"),
         (["export", "nowhere.mcap"], "say what to write"),
