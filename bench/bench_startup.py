@@ -52,7 +52,7 @@ def first_tick(fish: int, procs: int) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_sizes(parser, fish=[25, 10_000], procs=[1, 2])
+    add_sizes(parser, fish=[25, 10_000], procs=[0, 1, 2])
     parser.add_argument("--repeat", type=int, default=3, help="fresh runs per row")
     args = parser.parse_args()
     context = multiprocessing.get_context("spawn")

@@ -69,9 +69,11 @@ class LaunchSettings:
 
     Attributes:
         scenario: what to run.
-        procs: number of fish worker processes; 0 runs the fish in this process, as trio
-            tasks beside the world, talking to it over this process's own Zenoh session
-            (fastest for small swarms; a fish's failure then loses all of them).
+        procs: number of fish worker processes; 0 (the default) runs the fish in this
+            process, as trio tasks beside the world, talking to it over this process's own
+            Zenoh session: a tick then waits for no other process (measured the fastest at
+            25, 1 000 and 10 000 fish on two cores, docs/benchmarks.md); as with one
+            worker, a failure of a fish loses them all.
         listen: endpoint the router listens on (loopback by default; 0.0.0.0 lets observers
             on other machines attach).
         record: MCAP recording to write (None: none).
@@ -89,7 +91,7 @@ class LaunchSettings:
     """
 
     scenario: Scenario
-    procs: int = 1
+    procs: int = 0
     listen: str = "tcp/127.0.0.1:7447"
     record: Path | None = None
     summary: Path | None = None

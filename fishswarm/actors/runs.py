@@ -1,7 +1,7 @@
 """Runs of a scenario through the whole actor system, as an experiment engine.
 
-Router, world, channel, observer and one fish worker over Zenoh on a free loopback port,
-recorded to a temporary MCAP file that is read back: what
+Router, world, channel, observer and the fish (in the launcher's process) over Zenoh on a
+free loopback port, recorded to a temporary MCAP file that is read back: what
 :func:`fishswarm.study.sweep.sweep_experiment` calls for ``--engine actors``.
 """
 

@@ -340,13 +340,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--procs",
         type=int,
-        default=1,
-        help="fish worker processes (default 1). 0 runs the fish in this process, beside "
-        "the world, still over Zenoh: the fastest for small swarms (25 fish: ticks 10-15 %% "
-        "shorter, the first one after 0.2 s instead of 0.7 s), but a fish's failure loses "
-        "them all. On two cores a second worker pays off only at thousands of fish: in "
-        "three runs 10 000 fish 3-7 %% faster, 1 000 fish 3 %% faster to 17 %% slower, 25 "
-        "fish 13-20 %% slower; docs/benchmarks.md",
+        default=0,
+        help="fish worker processes (default 0: the fish run in this process, beside the "
+        "world, still over Zenoh; the fastest on two cores at every size measured: 25 fish "
+        "10-15 %% shorter ticks than with one worker and the first tick after 0.2 s instead "
+        "of 0.7 s). Workers keep the fish apart from the world (a fish that crashes its "
+        "process leaves the world running); a second one pays off only at thousands of "
+        "fish. docs/benchmarks.md",
     )
     run.add_argument(
         "--record",

@@ -263,9 +263,10 @@ def _report(result: RunResult) -> None:
         print(f"fishswarm run: error: {line}", file=sys.stderr)
     print(_summary_text(summary), file=sys.stderr)
     if result.exit_code == EXIT_WORKER_DIED:
+        who = "a worker process died" if summary["procs"] else "the fish failed"
         print(
-            "fishswarm run: a worker process died; the run finished without its fish "
-            "(see 'lost' in the summary)",
+            f"fishswarm run: {who}; the run finished without those fish (see 'lost' in the "
+            "summary)",
             file=sys.stderr,
         )
 
