@@ -62,9 +62,11 @@ def swarm(secure: Path | None) -> dict[str, float]:
     listen = free_loopback_endpoint()
     if secure is not None:
         listen = listen.replace("tcp/", "tls/")
+    # One worker process: the tick's messages cross the secured link (fish in the launcher's
+    # process would talk to the world inside it, where TLS has no part).
     settings = LaunchSettings(
         Scenario(fish=25, duration=30.0, seed=2), procs=1, listen=listen, secure=secure
-    )  # a worker: its tick's messages cross the secured link
+    )
     summary = trio.run(lambda: launch_swarm(settings)).summary
     return {
         "real_time_factor": summary["real_time_factor"],

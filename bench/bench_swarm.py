@@ -5,16 +5,16 @@ in-process batch engine's tick (compiled kernels from 200 fish on when numba is 
 as the world uses them). Then whole swarms through the actor system over Zenoh on 127.0.0.1
 (1 Hz control, full physics and vision) for 25, 1 000 and 10 000 fish with the fish in the
 launcher's own process beside the world (``workers`` 0, still over Zenoh) and with 1 and 2
-worker processes; beyond 25 fish the tank grows so that each fish has about 25 others within visual
-range. A worker's fish form a school: one perception batch (in parts when large) and one
-command batch per tick. Each row gives the tick (from the snapshot of tick 4 to the last, as
-the batch engine's leaves out its start-up and first tick; beside it the whole tick loop's
-average, first ticks included), the time from launch to the first tick's
+worker processes; beyond 25 fish the tank grows so that each fish has about 25 others within
+visual range. The fish of a process form a school: one perception batch (in parts when
+large) and one command batch per tick. Each row gives the tick (from the snapshot of tick 4
+to the last, as the batch engine's leaves out its start-up and first tick; beside it the
+whole tick loop's average, first ticks included), the time from launch to the first tick's
 snapshot (what issue 14's start-up target counts), start-up (launch to the end of the run,
-less the tick loop: processes, sessions, tokens, and teardown too), and the ratios issue 14 sets
-targets for: the actor tick over (batch tick + one echo) at 25 fish, over the batch tick
-alone at 1 000, and the batch engine's speed as a share at 10 000. Then the perception →
-command round trip of one fish actor on its own keys (as on a robot) in a worker process,
+less the tick loop: processes, sessions, tokens, and teardown too), and the ratios issue 14
+sets targets for: the actor tick over (batch tick + one echo) at 25 fish, over the batch
+tick alone at 1 000, and the batch engine's speed as a share at 10 000. Then the perception
+→ command round trip of one fish actor on its own keys (as on a robot) in a worker process,
 timed from a plain Zenoh session and from a trio task.
 
 Usage:
@@ -214,7 +214,7 @@ def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None
             [r[0] for r in rows],
             [r[3] * 1e3 for r in rows],
             "s--",
-            label=f"actor system, {_workers(procs)}",
+            label=f"actor system, {_where_fish_run(procs)}",
         )
     axis.set(
         xscale="log",
@@ -238,10 +238,10 @@ def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None
     plt.close(figure)
 
 
-def _workers(procs: int) -> str:
-    """``fish in the world's process``, ``1 worker``, ``2 workers``."""
+def _where_fish_run(procs: int) -> str:
+    """``fish in the launcher's process``, ``1 worker``, ``2 workers``: a plot's label."""
     if procs == 0:
-        return "fish in the world's process"
+        return "fish in the launcher's process"
     return f"{procs} worker{'s' if procs > 1 else ''}"
 
 

@@ -191,7 +191,7 @@ class Fish:
         self._order = np.argsort(ids)
         self._sorted_ids = ids[self._order]
         self._all_rows = np.arange(count)
-        self._intake = Intake(f"fish {_span(settings.fish_ids)}")
+        self._intake = Intake(f"fish {fish_span(settings.fish_ids)}")
         self._params = settings.params
         """What the fish do now (an operator may switch their formation)."""
         self._memory = FishMemory.fresh(settings.params, count)
@@ -385,7 +385,7 @@ class Fish:
         if run != self._latest_run:
             if self._latest_run >= 0:
                 self._counts["runs"] += 1
-                log.info("fish %s: a new run (%d) starts", _span(self._ids[rows].tolist()), run)
+                log.info("fish %s: a new run (%d) starts", fish_span(self._ids[rows].tolist()), run)
             self._latest_run = run
         self._run[rows] = run
         self._unannounced.append((rows, run))
@@ -487,7 +487,7 @@ class Fish:
         directive = next((p.formation for p in ready if p.formation is not None), None)
         switched, self._memory = apply_directive(self._params, self._memory, directive)
         if switched is not self._params:
-            log.info("fish %s switch to formation %s", _span(self.settings.fish_ids), directive)
+            log.info("fish %s switch to formation %s", fish_span(self.settings.fish_ids), directive)
             self._params = switched
         rows = np.concatenate([p.rows for p in ready]) if len(ready) > 1 else ready[0].rows
         whole = rows.size == self._ids.size and bool((rows == self._all_rows).all())
@@ -657,7 +657,8 @@ def _pusher(events: Inbox[Event], index: int, kind: str) -> Callable[[str, bytes
     return push
 
 
-def _span(ids: list[int] | tuple[int, ...]) -> str:
+def fish_span(ids: list[int] | tuple[int, ...]) -> str:
+    """``4`` for one fish, ``0–24`` for several (ascending ids): as messages name them."""
     return str(ids[0]) if len(ids) == 1 else f"{ids[0]}–{ids[-1]}"
 
 

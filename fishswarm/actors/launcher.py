@@ -26,7 +26,13 @@ import trio
 
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.control import run_control
-from fishswarm.actors.fish import PERCEPTION_TIMEOUT, Fish, FishSettings, FishStatistics
+from fishswarm.actors.fish import (
+    PERCEPTION_TIMEOUT,
+    Fish,
+    FishSettings,
+    FishStatistics,
+    fish_span,
+)
 from fishswarm.actors.observer import Observer, Progress
 from fishswarm.actors.security import secure_run
 from fishswarm.actors.session import SessionSettings, open_session
@@ -60,7 +66,8 @@ EXIT_INTERRUPTED = 130
 
 
 class WorkerFailed(RuntimeError):
-    """A worker process died before its fish came up."""
+    """A worker process died, or the fish in the launcher's process failed, before the
+    fish came up."""
 
 
 @dataclass(frozen=True)
@@ -69,11 +76,10 @@ class LaunchSettings:
 
     Attributes:
         scenario: what to run.
-        procs: number of fish worker processes; 0 (the default) runs the fish in this
-            process, as trio tasks beside the world, talking to it over this process's own
-            Zenoh session: a tick then waits for no other process (measured the fastest at
-            25, 1 000 and 10 000 fish on two cores, docs/benchmarks.md); as with one
-            worker, a failure of a fish loses them all.
+        procs: number of fish worker processes; 0 runs the fish in this process, as trio
+            tasks beside the world, talking to it over this process's own Zenoh session (a
+            tick then waits for no other process; as with one worker, a failure of a fish
+            loses them all). None: :func:`default_procs` of the scenario's fish.
         listen: endpoint the router listens on (loopback by default; 0.0.0.0 lets observers
             on other machines attach).
         record: MCAP recording to write (None: none).
@@ -91,7 +97,7 @@ class LaunchSettings:
     """
 
     scenario: Scenario
-    procs: int = 0
+    procs: int | None = None
     listen: str = "tcp/127.0.0.1:7447"
     record: Path | None = None
     summary: Path | None = None
@@ -101,6 +107,26 @@ class LaunchSettings:
     log_level: str = "WARNING"
     handle_signals: bool = False
     secure: Path | None = None
+
+    @property
+    def worker_processes(self) -> int:
+        """The fish worker processes of the run: ``procs``, or the default for its fish."""
+        return default_procs(self.scenario.fish) if self.procs is None else self.procs
+
+
+IN_PROCESS_MAX_FISH = 2_000
+"""Up to this many fish a run keeps them in the launcher's process unless told otherwise.
+Measured on two cores (docs/benchmarks.md, twenty-eighth session), the fish there against
+one worker process: 25 fish 8-31 % shorter ticks in six interleaved pairs, 1 000 fish 0-14 %,
+and the first tick after 0.2-0.3 s instead of 0.7-1.4 s; at 10 000 fish one worker gave
+0.72-0.78 of the batch engine's speed where the launcher's process gave 0.63-0.76, as the
+world's sending of a large school's perceptions in parts overlaps a worker's deciding."""
+
+
+def default_procs(fish: int) -> int:
+    """Worker processes for a run of ``fish`` when none are asked for: none (the fish in
+    the launcher's process) up to :data:`IN_PROCESS_MAX_FISH`, one beyond."""
+    return 0 if fish <= IN_PROCESS_MAX_FISH else 1
 
 
 @dataclass
@@ -121,10 +147,13 @@ async def launch_swarm(
     """Run a whole swarm to the end of its scenario and return the summary; the observer
     calls ``on_progress`` and ``on_scene`` (e.g. a live view) after every snapshot."""
     scenario = settings.scenario
+    procs = settings.worker_processes
+    if procs < 0:
+        raise ValueError(f"procs must be 0 (the fish in this process) or more, got {procs}")
     started = time.perf_counter()
     everyone = tuple(range(scenario.fish))
-    schools = split_fish(list(everyone), settings.procs) if settings.procs > 0 else []
-    here = settings.procs == 0
+    schools = split_fish(list(everyone), procs) if procs > 0 else []
+    here = procs == 0
     workers: list[Worker] = []
     fish_here: Fish | None = None
     died: list[str] = []
@@ -187,6 +216,7 @@ async def launch_swarm(
                         )
                         workers.append(start_worker(spec))
                     if here:
+                        prepare(params)
                         fish_here = Fish(
                             FishSettings(
                                 everyone,
@@ -196,9 +226,9 @@ async def launch_swarm(
                                 school=school_of(0),
                             )
                         )
-                        prepare(params)
-                        await nursery.start(_run_fish_here, fish_here, bus, died)
-                    nursery.start_soon(_watch_workers, workers, died, world)
+                        await nursery.start(_run_fish_here, fish_here, bus, died, world)
+                    if workers:
+                        nursery.start_soon(_watch_workers, workers, died, world)
                     if settings.handle_signals:
                         nursery.start_soon(_watch_signals, interrupted, nursery.cancel_scope)
                     await world.run(bus)
@@ -301,12 +331,13 @@ async def _run_fish_here(
     fish: Fish,
     bus: ZenohBus,
     died: list[str],
+    world: World,
     *,
     task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
 ) -> None:
-    """Serve the fish in the launcher's process. A failure of theirs once they are up loses
-    them, as a dead worker loses its fish, and the world goes on until it notices; one
-    before they are up fails the run, as a worker that dies then does."""
+    """Serve the fish in the launcher's process. A failure of theirs once the run is under
+    way loses them, as a dead worker loses its fish, and the world goes on without them; one
+    before the world has them all fails the run, as a worker that dies then does."""
     up = False
     try:
         async with trio.open_nursery() as nursery:
@@ -318,11 +349,13 @@ async def _run_fish_here(
             raise
         while isinstance(error, ExceptionGroup) and len(error.exceptions) == 1:
             error = error.exceptions[0]
-        ids = fish.settings.fish_ids
-        message = (
-            f"the fish in the launcher's process (fish {ids[0]}–{ids[-1]}) failed: "
-            f"{type(error).__name__}: {error}; they are lost"
+        failure = (
+            f"the fish in the launcher's process (fish {fish_span(fish.settings.fish_ids)}) "
+            f"failed: {type(error).__name__}: {error}"
         )
+        if world.state_name == "waiting":
+            raise WorkerFailed(f"{failure}, before the world had them all") from error
+        message = f"{failure}; they are lost"
         log.error(message, exc_info=error)
         died.append(message)
 
@@ -418,7 +451,7 @@ def _summary(
     return {
         "status": status,
         "scenario": settings.scenario.to_dict(),
-        "procs": min(settings.procs, settings.scenario.fish),
+        "procs": min(settings.worker_processes, settings.scenario.fish),
         "listen": settings.listen,
         "metrics": metrics,
         "formation": formation,

@@ -18,7 +18,13 @@ from typing import Any
 
 import trio
 
-from fishswarm.actors.fish import PERCEPTION_TIMEOUT, Fish, FishSettings, FishStatistics
+from fishswarm.actors.fish import (
+    PERCEPTION_TIMEOUT,
+    Fish,
+    FishSettings,
+    FishStatistics,
+    fish_span,
+)
 from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.behaviors.core import FishParams
@@ -62,13 +68,12 @@ class WorkerSpec:
 
     def describe(self) -> str:
         """``worker 1 (fish 13–24)``."""
-        ids = self.fish_ids
-        span = f"fish {ids[0]}" if len(ids) == 1 else f"fish {ids[0]}–{ids[-1]}"
-        return f"worker {self.index} ({span})"
+        return f"worker {self.index} (fish {fish_span(self.fish_ids)})"
 
 
 def school_of(index: int) -> str:
-    """The school name of worker ``index``."""
+    """The school name of the fish of worker ``index`` (``worker-0`` also for fish in the
+    launcher's own process)."""
     return f"worker-{index}"
 
 

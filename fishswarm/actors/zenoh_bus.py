@@ -24,12 +24,14 @@ class ZenohBus:
     Args:
         session: the session.
         droppable: puts may be dropped under congestion (best-effort data such as progress).
-        inline: run subscribers' callbacks on the thread that delivers the sample — for a
-            put from this process, inside the put — rather than on a Python thread of their
-            own (zenoh's ``indirect`` callbacks). For actors that share a process and talk
-            among themselves: a sample from elsewhere then holds one of Zenoh's network
-            threads while its callback waits for the interpreter, so a process that routes
-            other processes' traffic keeps the default.
+        inline: run :meth:`subscribe`'s callbacks on the thread that delivers the sample —
+            for a put from this process, inside the put — rather than on a Python thread of
+            their own (zenoh's ``direct`` callbacks, ``indirect=False``, which zenoh-python
+            marks unstable; ``tests/actors/test_zenoh_bus.py`` checks them). For actors that
+            share a process and talk mostly among themselves: a sample from another process
+            then holds one of Zenoh's network threads while its callback waits for the
+            interpreter, which is cheap when such samples are few (observers, operators)
+            and not when they carry the tick. Liveliness callbacks keep their threads.
     """
 
     def __init__(
@@ -59,6 +61,10 @@ class ZenohBus:
             def callback(sample: zenoh.Sample) -> None:
                 on_sample(key_expr, sample.payload.to_bytes())
 
+        if self._inline:
+            # Run inside a put from trio, a callback may be where Ctrl-C lands; zenoh would
+            # swallow the KeyboardInterrupt (and the sample): trio is to deliver it instead.
+            callback = trio.lowlevel.enable_ki_protection(callback)
         handler = zenoh.handlers.Callback(callback, indirect=not self._inline)
         subscriber: Declared = self.session.declare_subscriber(key_expr, handler)
         return subscriber

@@ -169,7 +169,7 @@ def _where_fish_run(procs: int, fish: int) -> str:
 
 def run(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm run``."""
-    if args.procs < 0:
+    if args.procs is not None and args.procs < 0:
         raise ConfigError(
             f"--procs must be 0 (the fish in this process) or more worker processes, got "
             f"{args.procs}"
@@ -198,7 +198,8 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
     print(
         f"fishswarm: {scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
         f"{1 / scenario.control_period:g} Hz, seed {scenario.seed}, "
-        f"{_where_fish_run(args.procs, scenario.fish)}, listening on {settings.listen}",
+        f"{_where_fish_run(settings.worker_processes, scenario.fish)}, listening on "
+        f"{settings.listen}",
         file=sys.stderr,
     )
     _warn_if_crowded("run", scenario)

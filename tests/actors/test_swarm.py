@@ -18,6 +18,7 @@ from fishswarm.actors.launcher import (
     EXIT_WORKER_DIED,
     LaunchSettings,
     RunResult,
+    WorkerFailed,
     launch_swarm,
     shared_memory_pool_bytes,
 )
@@ -50,6 +51,17 @@ def test_the_shared_memory_pool_grows_with_the_swarm_within_the_free_space() -> 
     # Docker's 64 MB /dev/shm: half of it; with less room than that, Zenoh's default.
     assert shared_memory_pool_bytes(10_000, free=64 * mebibyte) == 32 * mebibyte
     assert shared_memory_pool_bytes(10_000, free=20 * mebibyte) is None
+
+
+def test_small_swarms_keep_their_fish_in_the_launchers_process_unless_told_otherwise() -> None:
+    def workers(fish: int, procs: int | None = None) -> int:
+        return LaunchSettings(Scenario(fish=fish), procs=procs).worker_processes
+
+    assert workers(25) == 0
+    assert workers(2000) == 0
+    assert workers(2001) == 1  # large schools: the world's sending in parts overlaps a worker
+    assert workers(25, procs=2) == 2
+    assert workers(10_000, procs=0) == 0
 
 
 @pytest.mark.parametrize(("behavior", "sign"), [("dispersion", 1), ("aggregation", -1)])
@@ -226,9 +238,9 @@ def test_killed_worker_loses_its_fish_and_the_run_completes(endpoint: str, tmp_p
 
 
 def test_fish_that_fail_in_the_launchers_process_are_lost_and_the_run_completes(
-    endpoint: str,
+    endpoint: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    from fishswarm.behaviors.registry import BEHAVIORS, register
+    from fishswarm.behaviors.registry import BEHAVIORS
     from tests.behaviors.signal_behavior import SIGNAL, SignalMemory, steer_signal
 
     def steer_until_the_third(memory: SignalMemory, *args: Any, **kwargs: Any) -> Any:
@@ -237,8 +249,7 @@ def test_fish_that_fail_in_the_launchers_process_are_lost_and_the_run_completes(
         return steer_signal(memory, *args, **kwargs)
 
     failing = dataclasses.replace(SIGNAL, name="test-fails-at-third", steer=steer_until_the_third)
-    if failing.name not in BEHAVIORS:
-        register(failing)
+    monkeypatch.setitem(BEHAVIORS, failing.name, failing)
     scenario = Scenario(fish=4, duration=8.0, seed=2, behavior=failing.name)
     settings = LaunchSettings(scenario, procs=0, listen=endpoint)
     result = run_trio(lambda: launch_swarm(settings), timeout=120)
@@ -251,6 +262,33 @@ def test_fish_that_fail_in_the_launchers_process_are_lost_and_the_run_completes(
     (died,) = summary["workers_died"]
     assert "fish 0–3" in died and "RuntimeError: no third decision" in died
     assert summary["fish"]["batches"] == 3  # their counters up to the failure are kept
+
+
+@pytest.mark.parametrize("up", [False, True])
+def test_fish_that_fail_in_the_launchers_process_before_the_world_has_them_fail_the_run(
+    endpoint: str, monkeypatch: pytest.MonkeyPatch, up: bool
+) -> None:
+    # Before the fish are up, or up but before the world admitted them: the run fails at
+    # once (as when a worker dies then), not after the start timeout.
+    from fishswarm.actors.fish import Fish
+
+    async def fail(self: Fish, bus: Any, *, task_status: Any = trio.TASK_STATUS_IGNORED) -> None:
+        if up:
+            task_status.started()
+        raise OSError("no fins today")
+
+    monkeypatch.setattr(Fish, "run", fail)
+    settings = LaunchSettings(
+        Scenario(fish=3, duration=2.0, seed=1), procs=0, listen=endpoint, start_timeout=60
+    )
+    started = time.monotonic()
+    with pytest.raises(ExceptionGroup) as raised:
+        run_trio(lambda: launch_swarm(settings), timeout=60)
+    if up:
+        assert raised.group_contains(WorkerFailed, match="OSError: no fins today, before the")
+    else:
+        assert raised.group_contains(OSError, match="no fins today")
+    assert time.monotonic() - started < 10
 
 
 def test_a_killed_worker_is_noticed_by_liveliness_not_by_the_command_timeout(

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import queue
+import signal
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -97,6 +99,34 @@ def test_an_inline_subscriber_hears_its_own_session_inside_the_put(
     assert [payload for _, payload in heard] == [b"one"]
     assert inside is inline
     assert (heard[0][0] == threading.get_ident()) is inline
+
+
+def test_ctrl_c_inside_an_inline_callback_reaches_trio_and_the_sample_is_kept(
+    endpoint: str,
+) -> None:
+    # Zenoh logs and drops whatever a callback raises; an inline callback runs in trio's
+    # thread, where the signal may land, so the interrupt must wait for trio to deliver it.
+    heard: list[bytes] = []
+
+    def interrupted_while_hearing(_: str, payload: bytes) -> None:
+        signal.raise_signal(signal.SIGINT)
+        heard.append(payload)
+
+    async def main() -> None:
+        async with open_session(SessionSettings(mode="router", listen=[endpoint])) as session:
+            bus = ZenohBus(session, inline=True)
+            subscriber = bus.subscribe("test/interrupted", interrupted_while_hearing)
+            try:
+                bus.put("test/interrupted", b"kept")
+                await trio.sleep(5)  # the interrupt ends this at the first checkpoint
+            finally:
+                subscriber.undeclare()
+
+    started = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        trio.run(main)
+    assert heard == [b"kept"]
+    assert time.monotonic() - started < 4
 
 
 def test_liveliness_tokens_come_and_go(endpoint: str) -> None:

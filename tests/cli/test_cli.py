@@ -497,7 +497,8 @@ def test_bad_school_name_is_explained() -> None:
     assert "school name 'a/b' is not valid: use 1 to 64 letters, digits" in result.stderr
 
 
-def test_ctrl_c_stops_the_run_within_two_seconds(tmp_path: Path) -> None:
+@pytest.mark.parametrize("procs", ["0", "2"])  # the fish in the launcher's process, or not
+def test_ctrl_c_stops_the_run_within_two_seconds(tmp_path: Path, procs: str) -> None:
     with subprocess.Popen(
         [
             *FISHSWARM,
@@ -507,7 +508,7 @@ def test_ctrl_c_stops_the_run_within_two_seconds(tmp_path: Path) -> None:
             "--duration",
             "1000000",
             "--procs",
-            "2",
+            procs,
             "--listen",
             f"tcp/127.0.0.1:{free_port()}",
             "--record",
@@ -534,9 +535,12 @@ def test_ctrl_c_stops_the_run_within_two_seconds(tmp_path: Path) -> None:
     assert _no_worker_left()
 
 
-def test_sigterm_to_the_process_group_mid_run_keeps_the_fish_counters(tmp_path: Path) -> None:
+@pytest.mark.parametrize("procs", ["0", "2"])
+def test_sigterm_to_the_process_group_mid_run_keeps_the_fish_counters(
+    tmp_path: Path, procs: str
+) -> None:
     with subprocess.Popen(
-        [*FISHSWARM, "run", "--fish", "4", "--duration", "1000000", "--procs", "2",
+        [*FISHSWARM, "run", "--fish", "4", "--duration", "1000000", "--procs", procs,
          "--time", "realtime", "--period", "0.2", "--listen", f"tcp/127.0.0.1:{free_port()}",
          "--record", str(tmp_path / "r.mcap"), "--summary", str(tmp_path / "s.json")],
         stderr=subprocess.PIPE, text=True, start_new_session=True,
