@@ -118,15 +118,16 @@ IN_PROCESS_MAX_FISH = 2_000
 """Up to this many fish a run keeps them in the launcher's process unless told otherwise.
 Measured on two cores (docs/benchmarks.md, twenty-eighth session), the fish there against
 one worker process: 25 fish 8-31 % shorter ticks in six interleaved pairs, 1 000 fish 0-14 %,
-and the first tick after 0.2-0.3 s instead of 0.7-1.4 s; at 10 000 fish one worker gave
-0.72-0.78 of the batch engine's speed where the launcher's process gave 0.63-0.76, as the
-world's sending of a large school's perceptions in parts overlaps a worker's deciding."""
+and the first tick after 0.2-0.3 s instead of 0.7-1.4 s. At 10 000 fish, over four runs,
+two workers gave 0.70-0.85 of the batch engine's speed (mean 0.76), one 0.69-0.78 (0.73),
+the launcher's process 0.63-0.78 (0.71): the world's sending of large schools'
+perceptions in parts overlaps the workers' deciding."""
 
 
 def default_procs(fish: int) -> int:
     """Worker processes for a run of ``fish`` when none are asked for: none (the fish in
-    the launcher's process) up to :data:`IN_PROCESS_MAX_FISH`, one beyond."""
-    return 0 if fish <= IN_PROCESS_MAX_FISH else 1
+    the launcher's process) up to :data:`IN_PROCESS_MAX_FISH`, two beyond (one a core)."""
+    return 0 if fish <= IN_PROCESS_MAX_FISH else 2
 
 
 @dataclass

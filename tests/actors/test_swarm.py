@@ -59,7 +59,7 @@ def test_small_swarms_keep_their_fish_in_the_launchers_process_unless_told_other
 
     assert workers(25) == 0
     assert workers(2000) == 0
-    assert workers(2001) == 1  # large schools: the world's sending in parts overlaps a worker
+    assert workers(2001) == 2  # large schools: the world's sending in parts overlaps workers
     assert workers(25, procs=2) == 2
     assert workers(10_000, procs=0) == 0
 
