@@ -6,6 +6,12 @@ the positions of tick k+1, publishes the deliveries for tick k+1, and then a rep
 the world how many deliveries each fish gets, so that each fish can wait for all of them:
 deterministic, and nothing lost.
 
+In a world with robots, the channel also plays the robots' light for the simulated fish: a
+robot whose LEDs flash (the snapshot says so; its fish holds its place in a formation, and
+its flags go by light, never onto the link) reaches the simulated fish that see it with a
+one-bit formation flag, as a robot's cameras would take it. Robots take flags by their own
+cameras only, so their drivers let such deliveries go.
+
 A channel run apart from its world (``fishswarm channel``) asks each run's world for its
 scenario when the run starts and takes the world's medium — range, loss, seed, how flags
 travel and the vision that decides who sees whom: a channel started
@@ -22,14 +28,18 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import trio
+from numpy.typing import NDArray
 
 from fishswarm.actors.bus import Bus, open_subscriber, open_token
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
+from fishswarm.behaviors.core import FishParams
+from fishswarm.behaviors.formation import flag_seen_in_light
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import fish_id_of
 from fishswarm.protocols.messages import (
     BROADCAST_KINDS,
+    FLASHING,
     Broadcast,
     ChannelReport,
     Delivery,
@@ -38,6 +48,8 @@ from fishswarm.protocols.messages import (
 from fishswarm.sim.medium import one_bit, receptions
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.sim.streams import Stream, stream
+
+IntArray = NDArray[np.int64]
 
 log = logging.getLogger(__name__)
 
@@ -94,6 +106,9 @@ class Channel:
         self._early: deque[tuple[str, bytes]] = deque()
         """Snapshots that came while the channel gathered an earlier one's broadcasts."""
         self._rngs: dict[int, np.random.Generator] = {}
+        self._params: FishParams | None = None
+        self._params_of: Scenario | None = None
+        """The scenario ``_params`` were read from."""
         self._delivered = 0
         self._missing = 0
         self._last_tick = 0
@@ -121,7 +136,7 @@ class Channel:
                     if self._ask_world is not None:
                         await self._take_the_worlds_medium(self._ask_world)
                     continue
-                if int(snapshot.broadcasts.sum()) == 0:
+                if int(snapshot.broadcasts.sum()) == 0 and not _flashing(snapshot).size:
                     self._settle(snapshot.tick - 1, {})  # nothing announced: nothing to wait for
                     continue
                 broadcasts = await self._gather(snapshot)
@@ -233,20 +248,31 @@ class Channel:
             rngs=rngs,
             sight=self.scenario.flag_sight,
         )
-        counts = np.zeros(snapshot.ids.size, dtype=np.int64)
-        for reception in found:
-            broadcast = present[reception.broadcast]
-            receiver_id = int(snapshot.ids[reception.receiver])
-            delivery = Delivery(
-                receiver_id,
-                snapshot.tick,
-                broadcast.kind,
-                broadcast.values,
-                reception.sender_position,
+        deliveries = [(r, present[r.broadcast].kind, present[r.broadcast].values) for r in found]
+        flashing = _flashing(snapshot)
+        flag = (
+            flag_seen_in_light(self._fish_params(), snapshot.formation) if flashing.size else None
+        )
+        if flag is not None:
+            # After the broadcasts, so that their receptions and losses are those of a run
+            # without robots; seen with the world's eyes, lost as the run's flags are.
+            seen = receptions(
+                snapshot.position,
+                snapshot.yaw,
+                [index_of[int(robot)] for robot in flashing],
+                channel_range=self.scenario.channel_range,
+                loss=self.scenario.channel_loss,
+                rngs=rngs,
+                sight=self.scenario.vision(),
             )
+            deliveries += [(r, "formation", flag.values()) for r in seen]
+        counts = np.zeros(snapshot.ids.size, dtype=np.int64)
+        for reception, kind, values in deliveries:
+            receiver_id = int(snapshot.ids[reception.receiver])
+            delivery = Delivery(receiver_id, snapshot.tick, kind, values, reception.sender_position)
             bus.put(self.keys.inbox(receiver_id), encode(delivery))
             counts[reception.receiver] += 1
-        self._delivered += len(found)
+        self._delivered += len(deliveries)
         bus.put(
             self.keys.channel_report, encode(ChannelReport(snapshot.tick, snapshot.ids, counts))
         )
@@ -301,7 +327,22 @@ class Channel:
             for _ in broadcasts:
                 self._intake.reject(self.keys.outbox(fish), "unannounced", reason)
 
+    def _fish_params(self) -> FishParams:
+        """What the fish of the medium's scenario decide with (read once per scenario)."""
+        if self._params_of is not self.scenario:
+            self._params, self._params_of = self.scenario.fish_params(), self.scenario
+        assert self._params is not None
+        return self._params
+
     def _rng(self, fish_id: int) -> np.random.Generator:
         if fish_id not in self._rngs:
             self._rngs[fish_id] = stream(self.scenario.seed, Stream.CHANNEL, fish_id)
         return self._rngs[fish_id]
+
+
+def _flashing(snapshot: Snapshot) -> IntArray:
+    """The fish whose LEDs flash in the snapshot (robots whose fish hold their places)."""
+    if snapshot.lights is None:
+        return np.zeros(0, dtype=np.int64)
+    flashing: IntArray = snapshot.ids[snapshot.lights == FLASHING]
+    return flashing

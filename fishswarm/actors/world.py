@@ -609,8 +609,10 @@ class World:
             if event.snapshot is not None:
                 self.tick = event.snapshot
                 broadcasts = values_at(self._broadcasters, self._broadcasts, self.sim.ids)
-                # The channel delivers what the snapshot announces, and reports only then.
-                self._announced = int(broadcasts.sum())
+                # The channel delivers what the snapshot announces, and reports only then:
+                # the fish's broadcasts, and the flags of robots whose LEDs flash, which it
+                # shows the simulated fish that see them.
+                self._announced = int(broadcasts.sum()) + self._flashing_now()
                 if self._defers(event):
                     # Built, too, once the perceptions are out: nothing it shows changes
                     # before the fins are held (0.15 ms off the fish's wait at 1 000 fish).
@@ -713,6 +715,15 @@ class World:
         lights = values_at(ids, said - STEADY, self.sim.ids) + STEADY
         # Only the lights of fish not in the world (yet): the snapshot says nothing.
         return None if (lights == STEADY).all() else lights
+
+    def _flashing_now(self) -> int:
+        """How many robots in the world flash their LEDs now (their fish hold their places
+        in a formation), for a channel to show the simulated fish; none without a channel,
+        and none in jitter mode, which delivers nothing."""
+        if not self._lights or not self.roster.channels or self.scenario.time_mode == "jitter":
+            return 0
+        flashing = [fish for fish, light in self._lights.items() if light == FLASHING]
+        return int(among(self.sim.ids, np.array(flashing, dtype=np.int64)).sum())
 
     def _told(self, time: float) -> str | None:
         """The formation the fish are told to take at ``time``: an operator's switch, else

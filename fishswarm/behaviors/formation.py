@@ -291,6 +291,28 @@ def flag_by_light(own: FormationFlag) -> FormationFlag:
     return FormationFlag(own.shape, -1, True, NO_HOPS, own.heading_mdeg, 0)
 
 
+def flag_seen_in_light(params: FishParams, told: str | None) -> FormationFlag | None:
+    """What a simulated fish of ``params`` takes a robot's flashing LEDs for, in the shape
+    it is told (``told``; None: its own): that the robot holds its place in that shape, as
+    :func:`flag_by_light` says it (shape and orientation the fish's own). None when the fish
+    do not heed flags (another behaviour, or flags off)."""
+    if told is not None:
+        params = with_formation(params, told)
+    steering = params.steering
+    if params.behavior.name != FORMATION.name or not isinstance(steering, FormationParams):
+        return None
+    if not steering.flags:
+        return None
+    shape = FORMATION_SHAPES.index(steering.shape)
+    own = FormationFlag(shape, -1, True, NO_HOPS, _heading_mdeg(steering.orientation), 0)
+    return flag_by_light(own)
+
+
+def _heading_mdeg(orientation: float) -> int:
+    """A formation's orientation as a flag carries it: millidegrees in (−180°, 180°]."""
+    return round(math.degrees(math.remainder(orientation, 2 * math.pi)) * 1000)
+
+
 def _heard_flags(inbox: Inbox, params: FormationParams) -> HeardFlags:
     """What the flags of this formation in the inbox say (nothing with flags off)."""
     shape = FORMATION_SHAPES.index(params.shape)
@@ -597,7 +619,7 @@ def steer_formation(
     sending = np.full(count, params.flags)
     sequence = memory.sequence + sending
     values = np.zeros((count, BROADCAST_WIDTH), dtype=np.int64)
-    heading_mdeg = round(math.degrees(math.remainder(params.orientation, 2 * math.pi)) * 1000)
+    heading_mdeg = _heading_mdeg(params.orientation)
     for row in np.flatnonzero(sending).tolist():
         flag = FormationFlag(
             FORMATION_SHAPES.index(params.shape),

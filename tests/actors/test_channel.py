@@ -13,10 +13,13 @@ import trio
 from fishswarm.actors.bus import MemoryBus
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.inbox import Inbox
-from fishswarm.behaviors.formation import flag_by_light
+from fishswarm.behaviors.formation import NO_HOPS, flag_by_light
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.messages import (
+    DARK,
+    FLASHING,
     FORMATION_SHAPES,
+    STEADY,
     Broadcast,
     ChannelReport,
     Delivery,
@@ -424,3 +427,62 @@ def test_a_channel_apart_from_its_world_takes_its_flag_medium_and_its_sight(
     channel = Channel(Scenario(fish=3), ask_world=ask_world)
     got, _ = run_mock(lambda: _light_run(channel))
     assert got == [counts, [0, 0, 0]]
+
+
+async def _robot_lights(
+    channel: Channel, lights: list[int], told: str | None = None
+) -> tuple[list[int], list[Delivery]]:
+    """Fish 0, 1 and 2 in a row facing +x, nothing broadcast; the snapshot of tick 1 says
+    each fish's LEDs as ``lights`` (a robot's flash when its fish holds its place). The
+    tick's inbox counts and the deliveries."""
+    bus = MemoryBus()
+    zeros = np.zeros(3, dtype=np.int64)
+    async with (
+        subscription(bus, KEYS.channel_report) as reports,
+        subscription(bus, KEYS.fish_inboxes()) as inboxes,
+        trio.open_nursery() as nursery,
+    ):
+        await nursery.start(channel.run, bus)
+        for tick in (0, 1):
+            bus.put(KEYS.snapshot, encode(Snapshot(
+                tick, float(tick), IDS, ROW, np.zeros((3, 3)), np.zeros(3), zeros, zeros,
+                formation=told, lights=np.array(lights),
+            )))  # fmt: skip
+        counts = decode((await reports.receive())[1], ChannelReport).inbox_counts.tolist()
+        nursery.cancel_scope.cancel()
+    return counts, [decode(payload, Delivery) for _, payload in inboxes.drain()]
+
+
+@pytest.mark.parametrize("told", [None, "triangle"])
+def test_a_flashing_robot_shows_the_simulated_fish_that_see_it_that_it_holds_its_place(
+    told: str | None,
+) -> None:
+    """Robot 2 flashes (its fish holds its place): fish 1, which sees it 1 m ahead, gets a
+    formation flag that says so in its own shape (the one it is told, if any) and
+    orientation, nothing else; fish 0 has it behind fish 1, out of its sight. Flags travel
+    by the simulated channel here: a robot's go by light whatever the medium."""
+    scenario = Scenario(fish=3, behavior="formation", formation="pyramid",
+                        formation_heading_deg=90.0)  # fmt: skip
+    counts, deliveries = run_mock(
+        lambda: _robot_lights(Channel(scenario), [STEADY, DARK, FLASHING], told)
+    )
+    assert counts == [0, 1, 0]
+    [delivery] = deliveries
+    assert (delivery.receiver_id, delivery.tick, delivery.kind) == (1, 1, "formation")
+    flag = FormationFlag.from_values(delivery.values)
+    shape = told or "pyramid"
+    assert flag == FormationFlag(FORMATION_SHAPES.index(shape), -1, True, NO_HOPS, 90_000, 0)
+    np.testing.assert_allclose(delivery.sender_position, [1.0, 0.0, 0.0], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "scenario", [Scenario(fish=3), Scenario(fish=3, behavior="formation", flags=False)]
+)
+def test_flashing_robots_mean_nothing_to_fish_that_heed_no_flags(scenario: Scenario) -> None:
+    """Dispersing fish, or formation fish with flags off, get nothing from a flashing
+    robot; the tick is still reported, so that the world, which announced it, goes on."""
+    counts, deliveries = run_mock(
+        lambda: _robot_lights(Channel(scenario), [DARK, STEADY, FLASHING])
+    )
+    assert counts == [0, 0, 0]
+    assert deliveries == []

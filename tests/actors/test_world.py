@@ -22,6 +22,7 @@ from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.observer import Observer
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
+from fishswarm.bluebot.vision import to_body
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.messages import (
     DARK,
@@ -399,6 +400,54 @@ def test_the_snapshot_tells_the_leds_of_robots_whose_commands_say_they_flash_or_
     run_mock(main)
     lights = [said for _, said in told]
     assert lights[:6] == [None, None, [STEADY, FLASHING], [STEADY, FLASHING], [STEADY, DARK], None]
+
+
+def test_a_simulated_fish_that_sees_a_flashing_robot_waits_for_its_flag() -> None:
+    """Fish 0 simulated, fish 1 a robot whose fish holds its place (its command says its
+    LEDs flash) and which fish 0 sees: the world announces the robot's light to the
+    channel, waits for the channel's report, and tells fish 0 in its next perception that
+    one delivery comes; the channel delivers it, a formation flag from where fish 0 sees
+    fish 1."""
+    scenario = Scenario(fish=2, behavior="formation", duration=5.0, seed=1, spawn_radius=0.3)
+    keys = scenario.keys
+    settings = WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0, turn_delay=0.0)
+    snapshots: list[Snapshot] = []
+
+    async def main() -> tuple[list[int], list[Delivery]]:
+        bus = MemoryBus()
+        bus.subscribe(keys.snapshot, lambda _, payload: snapshots.append(decode(payload, Snapshot)))
+        counts: list[int] = []
+        async with (
+            subscription(bus, keys.perception(0)) as first,
+            subscription(bus, keys.perception(1)) as second,
+            subscription(bus, keys.inbox(0)) as inbox,
+            open_token(bus, keys.alive("fish", 0)),
+            open_token(bus, keys.alive("fish", 1)),
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(Channel(scenario).run, bus)
+            nursery.start_soon(World(settings).run, bus)
+            for _ in range(3):
+                perception = decode((await first.receive())[1], Perception)
+                counts.append(perception.inbox_count)
+                bus.put(keys.command(0), encode(Command(0, perception.tick, np.zeros(4))))
+                tick = decode((await second.receive())[1], Perception).tick
+                robot = Command(1, tick, np.zeros(4), led=True, flashing=True)
+                bus.put(keys.command(1), encode(robot))
+            nursery.cancel_scope.cancel()
+        return counts, [decode(payload, Delivery) for _, payload in inbox.drain()]
+
+    counts, deliveries = run_mock(main)
+    # The robot's first command (answering tick 0) makes its LEDs flash from tick 1 on.
+    assert counts == [0, 1, 1]
+    first = snapshots[1]
+    assert first.lights is not None and first.lights.tolist() == [STEADY, FLASHING]
+    told = [(d.receiver_id, d.tick, d.kind) for d in deliveries]
+    assert told == [(0, 1, "formation"), (0, 2, "formation")]
+    flag = FormationFlag.from_values(deliveries[0].values)
+    assert flag.joined and flag.slot == -1 and flag.shape == FORMATION_SHAPES.index("pyramid")
+    seen = to_body((first.position[1] - first.position[0])[None, None], first.yaw[:1])[0, 0]
+    np.testing.assert_allclose(deliveries[0].sender_position, seen, atol=1e-9)
 
 
 def test_the_snapshot_tells_each_robots_leds_whatever_order_their_commands_came_in() -> None:
