@@ -25,10 +25,18 @@ from fishswarm.actors.robot import (
     survey_fleet,
 )
 from fishswarm.actors.security import init_secure, session_security
+from fishswarm.behaviors.formation import NO_HOPS
 from fishswarm.bluebot.gpio import GpioLeds
 from fishswarm.protocols.codec import decode
 from fishswarm.protocols.keys import KeySpace
-from fishswarm.protocols.messages import FLASHING, RobotStatus, Snapshot
+from fishswarm.protocols.messages import (
+    FLASHING,
+    FORMATION_SHAPES,
+    Delivery,
+    FormationFlag,
+    RobotStatus,
+    Snapshot,
+)
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.recording import read_recording
 from tests.conftest import free_port, open_client_bus, run_trio, subscription, wait_for_port
@@ -351,6 +359,55 @@ def test_two_mock_robots_in_a_formation_flag_to_each_other_by_light(
     (flasher, seer), took = run_trio(main, timeout=120)
     # One robot flashed, the world named it so, and the other was handed its flags.
     assert flasher != seer and flasher in named and named <= {0, 1}, (flasher, named, took)
+
+
+@pytest.mark.slow
+def test_a_simulated_fish_among_mock_robots_is_shown_a_flashing_robots_flag(
+    worlds: list[subprocess.Popen[str]],
+) -> None:
+    """Robots 0 and 1 and a simulated fish 2 in one formation: once a robot holds its place
+    and flashes, the channel shows fish 2, which sees it, a one-bit flag (no slot, joined,
+    no hops); the robots let the channel's flags go (they see flags with their cameras)."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    worlds.append(fishswarm("router", "--listen", endpoint))
+    wait_for_port(port)
+    worlds.append(fishswarm("channel", "--connect", endpoint))
+    worlds.append(
+        fishswarm("world", "--connect", endpoint, "--fish", "3", "--behavior", "formation",
+                  "--time", "realtime", "--period", str(PERIOD), "--duration", "60",
+                  "--spawn-radius", "0.5", "--quiet")
+    )  # fmt: skip
+    worlds.append(
+        fishswarm("fish", "--id", "2", "--connect", endpoint, "--behavior", "formation",
+                  "--period", str(PERIOD))
+    )  # fmt: skip
+    shown: list[Delivery] = []
+
+    async def main() -> list[Driver]:
+        async with trio.open_nursery() as nursery:
+            robots: list[Driver] = [
+                await nursery.start(run_robot, settings(robot_id, endpoint, "formation"))
+                for robot_id in (0, 1)
+            ]
+            async with open_client_bus(endpoint, 5.0) as base:
+
+                def take(key: str, payload: bytes) -> None:
+                    delivery = decode(payload, Delivery)
+                    flag = FormationFlag.from_values(delivery.values)
+                    if delivery.kind == "formation" and flag.slot == -1:
+                        shown.append(delivery)
+
+                base.subscribe(KEYS.inbox(2), take)
+                await until(lambda: bool(shown) and any(map(flashing, robots)), timeout=90)
+            nursery.cancel_scope.cancel()
+        return robots
+
+    robots = run_trio(main, timeout=150)
+    flag = FormationFlag.from_values(shown[0].values)
+    assert flag.joined and flag.hops == NO_HOPS and flag.shape == FORMATION_SHAPES.index("pyramid")
+    # Fish 2's own flags reached the robots through the channel, and were let go there.
+    assert sum(robot.statistics().flags_let_go for robot in robots) > 0
 
 
 def flashing(driver: Driver) -> bool:
