@@ -9,8 +9,9 @@ deterministic, and nothing lost.
 In a world with robots, the channel also plays the robots' light for the simulated fish: a
 robot whose LEDs flash (the snapshot says so; its fish holds its place in a formation, and
 its flags go by light, never onto the link) reaches the simulated fish that see it with a
-one-bit formation flag, as a robot's cameras would take it. Robots take flags by their own
-cameras only, so their drivers let such deliveries go.
+one-bit formation flag, as a robot's cameras would take it. Robots (known by their drivers'
+liveliness tokens) get none of these: they see each other flash with their cameras. The
+simulated fish's own flags still reach robots through the channel, their only way there.
 
 A channel run apart from its world (``fishswarm channel``) asks each run's world for its
 scenario when the run starts and takes the world's medium — range, loss, seed, how flags
@@ -30,7 +31,7 @@ import numpy as np
 import trio
 from numpy.typing import NDArray
 
-from fishswarm.actors.bus import Bus, open_subscriber, open_token
+from fishswarm.actors.bus import Bus, open_alive_events, open_subscriber, open_token
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.behaviors.core import FishParams
@@ -43,6 +44,7 @@ from fishswarm.protocols.messages import (
     Broadcast,
     ChannelReport,
     Delivery,
+    FormationFlag,
     Snapshot,
 )
 from fishswarm.sim.medium import one_bit, receptions
@@ -106,6 +108,10 @@ class Channel:
         self._early: deque[tuple[str, bytes]] = deque()
         """Snapshots that came while the channel gathered an earlier one's broadcasts."""
         self._rngs: dict[int, np.random.Generator] = {}
+        self._light_rngs: dict[int, np.random.Generator] = {}
+        self._robot_events: Inbox[tuple[str, bool]]
+        self._robots: set[int] = set()
+        """Robots up on the swarm (their drivers' tokens)."""
         self._params: FishParams | None = None
         self._params_of: Scenario | None = None
         """The scenario ``_params`` were read from."""
@@ -122,10 +128,12 @@ class Channel:
     ) -> None:
         """Deliver broadcasts until cancelled."""
         self._events = events = Inbox[tuple[str, str, bytes]]()
+        self._robot_events = robots = Inbox[tuple[str, bool]]()
         keys = self.keys
         async with (
             open_subscriber(bus, keys.snapshot, lambda k, p: events.push(("snapshot", k, p))),
             open_subscriber(bus, keys.fish_outboxes(), lambda k, p: events.push(("outbox", k, p))),
+            open_alive_events(bus, keys.alive_all("robot"), lambda k, up: robots.push((k, up))),
             open_token(bus, keys.alive("channel", 0)),
         ):
             task_status.started()
@@ -136,7 +144,7 @@ class Channel:
                     if self._ask_world is not None:
                         await self._take_the_worlds_medium(self._ask_world)
                     continue
-                if int(snapshot.broadcasts.sum()) == 0 and not _flashing(snapshot).size:
+                if int(snapshot.broadcasts.sum()) == 0 and not self._shows_lights(snapshot):
                     self._settle(snapshot.tick - 1, {})  # nothing announced: nothing to wait for
                     continue
                 broadcasts = await self._gather(snapshot)
@@ -250,22 +258,22 @@ class Channel:
         )
         deliveries = [(r, present[r.broadcast].kind, present[r.broadcast].values) for r in found]
         flashing = _flashing(snapshot)
-        flag = (
-            flag_seen_in_light(self._fish_params(), snapshot.formation) if flashing.size else None
-        )
+        flag = self._light_flag(snapshot) if self._shows_lights(snapshot) else None
         if flag is not None:
-            # After the broadcasts, so that their receptions and losses are those of a run
-            # without robots; seen with the world's eyes, lost as the run's flags are.
+            # Seen with the world's eyes, lost at the run's rate, with losses of their own:
+            # the broadcasts' receptions and draws stay those of a run without robots.
+            robots = self._robots_now()
             seen = receptions(
                 snapshot.position,
                 snapshot.yaw,
                 [index_of[int(robot)] for robot in flashing],
                 channel_range=self.scenario.channel_range,
                 loss=self.scenario.channel_loss,
-                rngs=rngs,
+                rngs=[self._rng(int(i), Stream.LIGHT) for i in snapshot.ids.tolist()],
                 sight=self.scenario.vision(),
             )
-            deliveries += [(r, "formation", flag.values()) for r in seen]
+            shown = [r for r in seen if int(snapshot.ids[r.receiver]) not in robots]
+            deliveries += [(r, "formation", flag.values()) for r in shown]
         counts = np.zeros(snapshot.ids.size, dtype=np.int64)
         for reception, kind, values in deliveries:
             receiver_id = int(snapshot.ids[reception.receiver])
@@ -282,6 +290,7 @@ class Channel:
         that serves run after run gives each the losses its seed gives a run alone; what
         an earlier run left in the outbox is counted and let go."""
         self._rngs.clear()
+        self._light_rngs.clear()
         # A new run's first broadcasts are of ticks 0 to 2: anything later is the last run's.
         for old in [tick for tick in self._outbox if tick > 2]:
             self._let_go(old, f"a broadcast of tick {old}, of a run that has ended")
@@ -327,17 +336,40 @@ class Channel:
             for _ in broadcasts:
                 self._intake.reject(self.keys.outbox(fish), "unannounced", reason)
 
-    def _fish_params(self) -> FishParams:
-        """What the fish of the medium's scenario decide with (read once per scenario)."""
-        if self._params_of is not self.scenario:
-            self._params, self._params_of = self.scenario.fish_params(), self.scenario
+    def _light_flag(self, snapshot: Snapshot) -> FormationFlag | None:
+        """The flag a simulated fish takes a flashing robot for, in the shape the snapshot
+        tells (None: its fish heed no flags)."""
+        scenario = self.scenario
+        if scenario.behavior != "formation" or not scenario.flags:
+            return None  # and no parameters to read (a replica model's file, say)
+        if self._params_of is not scenario:
+            self._params, self._params_of = scenario.fish_params(), scenario
         assert self._params is not None
-        return self._params
+        return flag_seen_in_light(self._params, snapshot.formation)
 
-    def _rng(self, fish_id: int) -> np.random.Generator:
-        if fish_id not in self._rngs:
-            self._rngs[fish_id] = stream(self.scenario.seed, Stream.CHANNEL, fish_id)
-        return self._rngs[fish_id]
+    def _shows_lights(self, snapshot: Snapshot) -> bool:
+        """Whether robots flash in the snapshot and simulated fish are there to be shown
+        (as the world announces it: robots see each other's flashes with their cameras)."""
+        if not _flashing(snapshot).size:
+            return False
+        return bool(set(snapshot.ids.tolist()) - self._robots_now())
+
+    def _robots_now(self) -> set[int]:
+        """The robots up on the swarm now, from their drivers' tokens."""
+        for key, up in self._robot_events.drain():
+            try:
+                robot = fish_id_of(self.keys.parse_alive(key).member_id)
+            except ValueError:
+                continue  # not a robot's token (anyone may show a token): nobody to spare
+            if robot is not None:
+                (self._robots.add if up else self._robots.discard)(robot)
+        return self._robots
+
+    def _rng(self, fish_id: int, role: Stream = Stream.CHANNEL) -> np.random.Generator:
+        rngs = self._rngs if role == Stream.CHANNEL else self._light_rngs
+        if fish_id not in rngs:
+            rngs[fish_id] = stream(self.scenario.seed, role, fish_id)
+        return rngs[fish_id]
 
 
 def _flashing(snapshot: Snapshot) -> IntArray:

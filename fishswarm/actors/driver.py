@@ -172,8 +172,6 @@ class DriverStatistics:
         broadcasts: the fish's broadcasts passed to the link (all but its formation flags,
             which go by light).
         flags_seen: flashing neighbours handed to the fish as formation flags.
-        flags_let_go: formation flags a simulated channel delivered (a robot takes its
-            neighbours' flags with its cameras only).
         rejected: messages rejected (malformed, misaddressed).
     """
 
@@ -187,7 +185,6 @@ class DriverStatistics:
     deliveries: int
     broadcasts: int
     flags_seen: int
-    flags_let_go: int
     rejected: int
 
 
@@ -246,7 +243,6 @@ class Driver:
                 "deliveries",
                 "broadcasts",
                 "flags_seen",
-                "flags_let_go",
             ),
             0,
         )
@@ -607,11 +603,6 @@ class Driver:
 
     async def _pass_deliveries(self, deliveries: Inbox[tuple[str, bytes]], local: Bus) -> None:
         async for key, _, delivery in self._addressed(deliveries, Delivery, "receiver_id"):
-            if delivery.kind == "formation":
-                # A robot sees its neighbours' flags with its cameras; what a simulated
-                # channel shows of them is for the simulated fish.
-                self._counts["flags_let_go"] += 1
-                continue
             # A channel numbers deliveries by its world's ticks; the fish acts on one at the
             # driver's next perception, and waits for it under that perception's tick.
             local.put(key, encode(replace(delivery, tick=self._tick)))

@@ -606,19 +606,22 @@ class World:
             self._admit(self.tick if event.snapshot is None else event.snapshot)
             perceived = await self._compute(self.sim.sense)
             deferred: IntArray | None = None
+            lights: IntArray | None = None
             if event.snapshot is not None:
                 self.tick = event.snapshot
                 broadcasts = values_at(self._broadcasters, self._broadcasts, self.sim.ids)
                 # The channel delivers what the snapshot announces, and reports only then:
                 # the fish's broadcasts, and the flags of robots whose LEDs flash, which it
-                # shows the simulated fish that see them.
-                self._announced = int(broadcasts.sum()) + self._flashing_now()
+                # shows the simulated fish that see them. The lights go into the snapshot
+                # as they are now, even when it is sent later.
+                lights = self._lights_now()
+                self._announced = int(broadcasts.sum()) + self._flashing(lights)
                 if self._defers(event):
                     # Built, too, once the perceptions are out: nothing it shows changes
                     # before the fins are held (0.15 ms off the fish's wait at 1 000 fish).
                     deferred = broadcasts
                 else:
-                    self._send_snapshot(bus, event.time, perceived.counts, broadcasts)
+                    self._send_snapshot(bus, event.time, perceived.counts, broadcasts, lights)
                 if event.last or self._stop_requested:
                     return
             if not event.deciding:
@@ -630,7 +633,7 @@ class World:
                 # Stopped while paused (or in the moment the wait yields): the run ends at
                 # this snapshot, without asking the fish for one more tick.
                 if deferred is not None:
-                    self._send_snapshot(bus, event.time, perceived.counts, deferred)
+                    self._send_snapshot(bus, event.time, perceived.counts, deferred, lights)
                 return
             if realtime and trio.current_time() - tick_start > period:
                 tick_start = trio.current_time()  # after a pause: pace from now on
@@ -663,7 +666,7 @@ class World:
                 self._put(bus, key, encode(message))
             self._phase_times["perceptions"].append(time.perf_counter() - sending)
             if deferred is not None:
-                self._send_snapshot(bus, event.time, perceived.counts, deferred)
+                self._send_snapshot(bus, event.time, perceived.counts, deferred, lights)
             with self._stoppable():
                 if realtime:
                     tick_start += period
@@ -685,8 +688,16 @@ class World:
             scope.cancel()
         return scope
 
-    def _send_snapshot(self, bus: Bus, time: float, seen: IntArray, broadcasts: IntArray) -> None:
-        """Send the swarm as it is now: this tick's snapshot."""
+    def _send_snapshot(
+        self,
+        bus: Bus,
+        time: float,
+        seen: IntArray,
+        broadcasts: IntArray,
+        lights: IntArray | None,
+    ) -> None:
+        """Send the swarm as it is now: this tick's snapshot (``lights``: the fish's LEDs
+        as :meth:`_lights_now` told them when the tick's deliveries were announced)."""
         state = self.sim.state
         forming = self.scenario.behavior == "formation"
         snapshot = Snapshot(
@@ -701,7 +712,7 @@ class World:
             self.sim.effort,
             self._told(time) if forming else None,
             self.run_id,
-            self._lights_now(),
+            lights,
         )
         self._put(bus, self.keys.snapshot, encode(snapshot))
 
@@ -716,14 +727,15 @@ class World:
         # Only the lights of fish not in the world (yet): the snapshot says nothing.
         return None if (lights == STEADY).all() else lights
 
-    def _flashing_now(self) -> int:
-        """How many robots in the world flash their LEDs now (their fish hold their places
-        in a formation), for a channel to show the simulated fish; none without a channel,
-        and none in jitter mode, which delivers nothing."""
-        if not self._lights or not self.roster.channels or self.scenario.time_mode == "jitter":
+    def _flashing(self, lights: IntArray | None) -> int:
+        """How many robots flash their LEDs in ``lights`` (their fish hold their places in
+        a formation), for a channel to show the simulated fish that see them: none without
+        a channel, without simulated fish, or in jitter mode, which delivers nothing."""
+        if lights is None or not self.roster.channels or self.scenario.time_mode == "jitter":
             return 0
-        flashing = [fish for fish, light in self._lights.items() if light == FLASHING]
-        return int(among(self.sim.ids, np.array(flashing, dtype=np.int64)).sum())
+        if not (set(self.sim.ids.tolist()) - self.roster.robots):
+            return 0  # robots only: they see each other's flashes with their cameras
+        return int((lights == FLASHING).sum())
 
     def _told(self, time: float) -> str | None:
         """The formation the fish are told to take at ``time``: an operator's switch, else
@@ -732,9 +744,9 @@ class World:
 
     def _defers(self, event: Event) -> bool:
         """Whether this tick's snapshot can wait until the perceptions are out, so that it
-        is built, encoded and sent while the fish decide: not when the channel needs it first (it
-        announces broadcasts to deliver), when the run ends or pauses here, or when no fish
-        decide this tick."""
+        is built, encoded and sent while the fish decide: not when the channel needs it
+        first (it announces broadcasts or robots' flashes to deliver), when the run ends or
+        pauses here, or when no fish decide this tick."""
         return (
             not self._announced
             and event.deciding

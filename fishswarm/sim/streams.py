@@ -17,6 +17,8 @@ class Stream(enum.IntEnum):
     VISION = 2
     CHANNEL = 3
     JITTER = 4
+    LIGHT = 5
+    """The channel's losses of the robots' lights it shows simulated fish."""
 
 
 def stream(seed: int, role: Stream, member: int) -> np.random.Generator:

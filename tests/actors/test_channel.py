@@ -3,6 +3,7 @@ snapshot announces, whatever else arrives and in whatever order."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import re
 
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 import trio
 
-from fishswarm.actors.bus import MemoryBus
+from fishswarm.actors.bus import MemoryBus, open_token
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.inbox import Inbox
 from fishswarm.behaviors.formation import NO_HOPS, flag_by_light
@@ -430,27 +431,41 @@ def test_a_channel_apart_from_its_world_takes_its_flag_medium_and_its_sight(
 
 
 async def _robot_lights(
-    channel: Channel, lights: list[int], told: str | None = None
+    channel: Channel,
+    lights: list[int] | None,
+    told: str | None = None,
+    *,
+    robots: tuple[int, ...] = (2,),
+    signals: int = 0,
+    ticks: int = 1,
 ) -> tuple[list[int], list[Delivery]]:
-    """Fish 0, 1 and 2 in a row facing +x, nothing broadcast; the snapshot of tick 1 says
-    each fish's LEDs as ``lights`` (a robot's flash when its fish holds its place). The
-    tick's inbox counts and the deliveries."""
+    """Fish 0, 1 and 2 in a row facing +x, ``robots`` among them (their drivers' tokens
+    shown); the snapshots of ticks 1 to ``ticks`` say each fish's LEDs as ``lights`` (a
+    robot's flash when its fish holds its place) and announce ``signals`` broadcasts of
+    fish 0 at the tick before. The inbox counts of every tick, added up, and the
+    deliveries."""
     bus = MemoryBus()
     zeros = np.zeros(3, dtype=np.int64)
-    async with (
-        subscription(bus, KEYS.channel_report) as reports,
-        subscription(bus, KEYS.fish_inboxes()) as inboxes,
-        trio.open_nursery() as nursery,
-    ):
+    counts = np.zeros(3, dtype=np.int64)
+    async with contextlib.AsyncExitStack() as stack:
+        reports = await stack.enter_async_context(subscription(bus, KEYS.channel_report))
+        inboxes = await stack.enter_async_context(subscription(bus, KEYS.fish_inboxes()))
+        for robot in robots:
+            await stack.enter_async_context(open_token(bus, KEYS.alive("robot", robot)))
+        nursery = await stack.enter_async_context(trio.open_nursery())
         await nursery.start(channel.run, bus)
-        for tick in (0, 1):
+        for tick in range(ticks + 1):
             bus.put(KEYS.snapshot, encode(Snapshot(
-                tick, float(tick), IDS, ROW, np.zeros((3, 3)), np.zeros(3), zeros, zeros,
-                formation=told, lights=np.array(lights),
+                tick, float(tick), IDS, ROW, np.zeros((3, 3)), np.zeros(3), zeros,
+                np.array([signals, 0, 0]) if tick else zeros, formation=told,
+                lights=None if lights is None or not tick else np.array(lights),
             )))  # fmt: skip
-        counts = decode((await reports.receive())[1], ChannelReport).inbox_counts.tolist()
+            if tick:
+                counts += decode((await reports.receive())[1], ChannelReport).inbox_counts
+            for value in range(signals if tick < ticks else 0):
+                bus.put(KEYS.outbox(0), broadcast(0, tick, value))
         nursery.cancel_scope.cancel()
-    return counts, [decode(payload, Delivery) for _, payload in inboxes.drain()]
+    return counts.tolist(), [decode(payload, Delivery) for _, payload in inboxes.drain()]
 
 
 @pytest.mark.parametrize("told", [None, "triangle"])
@@ -486,3 +501,21 @@ def test_flashing_robots_mean_nothing_to_fish_that_heed_no_flags(scenario: Scena
     )
     assert counts == [0, 0, 0]
     assert deliveries == []
+
+
+def test_robots_are_shown_no_robots_flags_and_take_the_simulated_fishs_as_before() -> None:
+    """Fish 1 is a robot too: it sees robot 2 flash with its own cameras, so the channel
+    shows it nothing; a simulated fish's broadcasts still reach it (loss 0.5 here, and over
+    three ticks their receptions and losses are the same whether robot 2 flashes or not:
+    the robots' lights are lost by draws of their own)."""
+    scenario = Scenario(fish=3, behavior="formation", channel_loss=0.5, seed=4)
+    flashing = run_mock(
+        lambda: _robot_lights(Channel(scenario), [STEADY, STEADY, FLASHING], robots=(1, 2),
+                              signals=4, ticks=3)
+    )  # fmt: skip
+    steady = run_mock(
+        lambda: _robot_lights(Channel(scenario), None, robots=(1, 2), signals=4, ticks=3)
+    )
+    assert not any(d.kind == "formation" for d in flashing[1])
+    assert flashing == steady
+    assert 0 < steady[0][1] < 12  # fish 1 heard some of fish 0's signals, lost others

@@ -402,20 +402,27 @@ def test_the_snapshot_tells_the_leds_of_robots_whose_commands_say_they_flash_or_
     assert lights[:6] == [None, None, [STEADY, FLASHING], [STEADY, FLASHING], [STEADY, DARK], None]
 
 
-def test_a_simulated_fish_that_sees_a_flashing_robot_waits_for_its_flag() -> None:
+@pytest.mark.parametrize("robots", [(), (1,), (0, 1)])
+def test_a_simulated_fish_that_sees_a_flashing_robot_waits_for_its_flag(
+    robots: tuple[int, ...],
+) -> None:
     """Fish 0 simulated, fish 1 a robot whose fish holds its place (its command says its
     LEDs flash) and which fish 0 sees: the world announces the robot's light to the
     channel, waits for the channel's report, and tells fish 0 in its next perception that
     one delivery comes; the channel delivers it, a formation flag from where fish 0 sees
-    fish 1."""
+    fish 1. Whether the robot shows its driver's token or not; but when fish 0 is a robot
+    too (``robots`` (0, 1)) its cameras see the flashes, and nothing is announced."""
     scenario = Scenario(fish=2, behavior="formation", duration=5.0, seed=1, spawn_radius=0.3)
     keys = scenario.keys
     settings = WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0, turn_delay=0.0)
     snapshots: list[Snapshot] = []
+    reports: list[bytes] = []
 
-    async def main() -> tuple[list[int], list[Delivery]]:
+    async def main() -> tuple[list[int], list[Delivery], float]:
         bus = MemoryBus()
         bus.subscribe(keys.snapshot, lambda _, payload: snapshots.append(decode(payload, Snapshot)))
+        bus.subscribe(keys.channel_report, lambda _, payload: reports.append(payload))
+        started = trio.current_time()
         counts: list[int] = []
         async with (
             subscription(bus, keys.perception(0)) as first,
@@ -423,8 +430,11 @@ def test_a_simulated_fish_that_sees_a_flashing_robot_waits_for_its_flag() -> Non
             subscription(bus, keys.inbox(0)) as inbox,
             open_token(bus, keys.alive("fish", 0)),
             open_token(bus, keys.alive("fish", 1)),
+            contextlib.AsyncExitStack() as stack,
             trio.open_nursery() as nursery,
         ):
+            for robot in robots:
+                await stack.enter_async_context(open_token(bus, keys.alive("robot", robot)))
             await nursery.start(Channel(scenario).run, bus)
             nursery.start_soon(World(settings).run, bus)
             for _ in range(3):
@@ -432,12 +442,19 @@ def test_a_simulated_fish_that_sees_a_flashing_robot_waits_for_its_flag() -> Non
                 counts.append(perception.inbox_count)
                 bus.put(keys.command(0), encode(Command(0, perception.tick, np.zeros(4))))
                 tick = decode((await second.receive())[1], Perception).tick
-                robot = Command(1, tick, np.zeros(4), led=True, flashing=True)
-                bus.put(keys.command(1), encode(robot))
+                flashes = Command(1, tick, np.zeros(4), led=True, flashing=True)
+                bus.put(keys.command(1), encode(flashes))
             nursery.cancel_scope.cancel()
-        return counts, [decode(payload, Delivery) for _, payload in inbox.drain()]
+        delivered = [decode(payload, Delivery) for _, payload in inbox.drain()]
+        return counts, delivered, trio.current_time() - started
 
-    counts, deliveries = run_mock(main)
+    counts, deliveries, took = run_mock(main)
+    assert took < 1.0  # no wait for a channel report that does not come (6 s each)
+    if robots == (0, 1):
+        assert counts == [0, 0, 0] and deliveries == []
+        assert reports == []  # neither the world nor the channel had anything to do
+        return
+    assert len(reports) == 2  # ticks 1 and 2, where the robot flashed
     # The robot's first command (answering tick 0) makes its LEDs flash from tick 1 on.
     assert counts == [0, 1, 1]
     first = snapshots[1]
