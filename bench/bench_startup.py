@@ -8,7 +8,7 @@ would on its first tick, and then times ``launch_swarm`` from launch to the firs
 snapshot: what issue 14's start-up target counts.
 
 Usage:
-    python bench/bench_startup.py                          # 25 and 10 000 fish, 1 and 2 workers
+    python bench/bench_startup.py                          # 25 and 10 000 fish, 0-2 workers
     python bench/bench_startup.py --fish 25 --repeat 5
 
 Results and conditions are kept in docs/benchmarks.md.

@@ -42,7 +42,7 @@ from options import add_sizes
 
 from fishswarm.actors.bus import open_subscriber
 from fishswarm.actors.inbox import Inbox
-from fishswarm.actors.launcher import LaunchSettings, launch_swarm
+from fishswarm.actors.launcher import LaunchSettings, launch_swarm, where_fish_run
 from fishswarm.actors.observer import Progress
 from fishswarm.actors.session import SessionSettings, free_loopback_endpoint, open_session
 from fishswarm.actors.workers import WorkerSpec, start_worker, stop_worker
@@ -214,7 +214,7 @@ def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None
             [r[0] for r in rows],
             [r[3] * 1e3 for r in rows],
             "s--",
-            label=f"actor system, {_where_fish_run(procs)}",
+            label=f"actor system, {where_fish_run(procs)}",
         )
     axis.set(
         xscale="log",
@@ -236,13 +236,6 @@ def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None
     axis.legend()
     figure.savefig(path, dpi=120)
     plt.close(figure)
-
-
-def _where_fish_run(procs: int) -> str:
-    """``fish in the launcher's process``, ``1 worker``, ``2 workers``: a plot's label."""
-    if procs == 0:
-        return "fish in the launcher's process"
-    return f"{procs} worker{'s' if procs > 1 else ''}"
 
 
 def main() -> None:

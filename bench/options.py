@@ -23,5 +23,6 @@ def add_sizes(
             type=int,
             nargs="+",
             default=procs,
-            help=f"worker processes for each size (default: {' '.join(map(str, procs))})",
+            help="worker processes for each size, 0 for the fish in the launcher's process "
+            f"(default: {' '.join(map(str, procs))})",
         )

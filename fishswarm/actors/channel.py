@@ -29,7 +29,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import trio
-from numpy.typing import NDArray
 
 from fishswarm.actors.bus import Bus, open_alive_events, open_subscriber, open_token
 from fishswarm.actors.inbox import Inbox
@@ -47,11 +46,9 @@ from fishswarm.protocols.messages import (
     FormationFlag,
     Snapshot,
 )
-from fishswarm.sim.medium import one_bit, receptions
+from fishswarm.sim.medium import flashes_shown, one_bit, receptions
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.sim.streams import Stream, stream
-
-IntArray = NDArray[np.int64]
 
 log = logging.getLogger(__name__)
 
@@ -107,8 +104,7 @@ class Channel:
         """Broadcasts received, by tick and sender."""
         self._early: deque[tuple[str, bytes]] = deque()
         """Snapshots that came while the channel gathered an earlier one's broadcasts."""
-        self._rngs: dict[int, np.random.Generator] = {}
-        self._light_rngs: dict[int, np.random.Generator] = {}
+        self._rngs: dict[tuple[Stream, int], np.random.Generator] = {}
         self._robot_events: Inbox[tuple[str, bool]]
         self._robots: set[int] = set()
         """Robots up on the swarm (their drivers' tokens)."""
@@ -139,12 +135,14 @@ class Channel:
             task_status.started()
             while True:
                 snapshot = await self._next_snapshot()
+                self._take_robots()
                 if snapshot.tick == 0:
                     self._start_run()
                     if self._ask_world is not None:
                         await self._take_the_worlds_medium(self._ask_world)
                     continue
-                if int(snapshot.broadcasts.sum()) == 0 and not self._shows_lights(snapshot):
+                shown = flashes_shown(snapshot.lights, time_mode=self.scenario.time_mode)
+                if int(snapshot.broadcasts.sum()) == 0 and not shown:
                     self._settle(snapshot.tick - 1, {})  # nothing announced: nothing to wait for
                     continue
                 broadcasts = await self._gather(snapshot)
@@ -257,12 +255,13 @@ class Channel:
             sight=self.scenario.flag_sight,
         )
         deliveries = [(r, present[r.broadcast].kind, present[r.broadcast].values) for r in found]
-        flashing = _flashing(snapshot)
-        flag = self._light_flag(snapshot) if self._shows_lights(snapshot) else None
+        shown = flashes_shown(snapshot.lights, time_mode=self.scenario.time_mode)
+        flag = self._light_flag(snapshot) if shown else None
         if flag is not None:
             # Seen with the world's eyes, lost at the run's rate, with losses of their own:
             # the broadcasts' receptions and draws stay those of a run without robots.
-            robots = self._robots_now()
+            assert snapshot.lights is not None
+            flashing = snapshot.ids[snapshot.lights == FLASHING]
             seen = receptions(
                 snapshot.position,
                 snapshot.yaw,
@@ -272,8 +271,9 @@ class Channel:
                 rngs=[self._rng(int(i), Stream.LIGHT) for i in snapshot.ids.tolist()],
                 sight=self.scenario.vision(),
             )
-            shown = [r for r in seen if int(snapshot.ids[r.receiver]) not in robots]
-            deliveries += [(r, "formation", flag.values()) for r in shown]
+            # Robots see each other flash with their cameras.
+            to_fish = [r for r in seen if int(snapshot.ids[r.receiver]) not in self._robots]
+            deliveries += [(r, "formation", flag.values()) for r in to_fish]
         counts = np.zeros(snapshot.ids.size, dtype=np.int64)
         for reception, kind, values in deliveries:
             receiver_id = int(snapshot.ids[reception.receiver])
@@ -290,7 +290,6 @@ class Channel:
         that serves run after run gives each the losses its seed gives a run alone; what
         an earlier run left in the outbox is counted and let go."""
         self._rngs.clear()
-        self._light_rngs.clear()
         # A new run's first broadcasts are of ticks 0 to 2: anything later is the last run's.
         for old in [tick for tick in self._outbox if tick > 2]:
             self._let_go(old, f"a broadcast of tick {old}, of a run that has ended")
@@ -347,34 +346,15 @@ class Channel:
         assert self._params is not None
         return flag_seen_in_light(self._params, snapshot.formation)
 
-    def _shows_lights(self, snapshot: Snapshot) -> bool:
-        """Whether robots flash in the snapshot and simulated fish are there to be shown
-        (as the world announces it: robots see each other's flashes with their cameras)."""
-        if not _flashing(snapshot).size:
-            return False
-        return bool(set(snapshot.ids.tolist()) - self._robots_now())
-
-    def _robots_now(self) -> set[int]:
-        """The robots up on the swarm now, from their drivers' tokens."""
+    def _take_robots(self) -> None:
+        """Note the robots that came up or went since the last snapshot (their drivers'
+        tokens)."""
         for key, up in self._robot_events.drain():
-            try:
-                robot = fish_id_of(self.keys.parse_alive(key).member_id)
-            except ValueError:
-                continue  # not a robot's token (anyone may show a token): nobody to spare
+            robot = self.keys.robot_of(key)
             if robot is not None:
                 (self._robots.add if up else self._robots.discard)(robot)
-        return self._robots
 
     def _rng(self, fish_id: int, role: Stream = Stream.CHANNEL) -> np.random.Generator:
-        rngs = self._rngs if role == Stream.CHANNEL else self._light_rngs
-        if fish_id not in rngs:
-            rngs[fish_id] = stream(self.scenario.seed, role, fish_id)
-        return rngs[fish_id]
-
-
-def _flashing(snapshot: Snapshot) -> IntArray:
-    """The fish whose LEDs flash in the snapshot (robots whose fish hold their places)."""
-    if snapshot.lights is None:
-        return np.zeros(0, dtype=np.int64)
-    flashing: IntArray = snapshot.ids[snapshot.lights == FLASHING]
-    return flashing
+        if (role, fish_id) not in self._rngs:
+            self._rngs[role, fish_id] = stream(self.scenario.seed, role, fish_id)
+        return self._rngs[role, fish_id]

@@ -7,9 +7,10 @@ nothing of clocks or physics; it owns only its fish's memory, their safety watch
 their messages: the decision itself is :func:`fishswarm.behaviors.core.decide`.
 
 One actor serves one or more fish on one Bus: on a robot a single fish, in a worker process
-many. Each fish keeps its own liveliness token, memory, inbox and watchdog; what the fish
-share is the work. Perceptions that arrive together are decided in one batched call — the
-same result bit for bit as one call per fish (tested).
+or beside the world in ``fishswarm run``'s own process many. Each fish keeps its own
+liveliness token, memory, inbox and watchdog; what the fish share is the work. Perceptions
+that arrive together are decided in one batched call — the same result bit for bit as one
+call per fish (tested).
 
 Perceptions and commands travel either on each fish's own keys (``fish/<id>/perception``
 and ``fish/<id>/command``: what a robot does) or, for a *school*, as one

@@ -1,8 +1,10 @@
 """The trio side of every subscription: items pushed from any thread, received in trio.
 
-Zenoh calls subscriber callbacks on its own threads. A callback only appends to a deque and
-schedules at most one pending wake-up through the trio token (DESIGN §4: ~0.5 M msgs/s into
-trio; one ``run_sync_soon`` per message is 10–70× slower); the trio side waits on an Event.
+Zenoh calls subscriber callbacks on its own threads, or, for an inline subscriber
+(:class:`~fishswarm.actors.zenoh_bus.ZenohBus` ``inline``), inside a put from this process,
+on trio's own thread. A callback only appends to a deque and schedules at most one pending
+wake-up through the trio token (DESIGN §4: ~0.5 M msgs/s into trio; one ``run_sync_soon``
+per message is 10–70× slower); the trio side waits on an Event.
 """
 
 from __future__ import annotations

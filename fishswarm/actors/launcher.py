@@ -29,7 +29,6 @@ from fishswarm.actors.control import run_control
 from fishswarm.actors.fish import (
     PERCEPTION_TIMEOUT,
     Fish,
-    FishSettings,
     FishStatistics,
     fish_span,
 )
@@ -47,7 +46,6 @@ from fishswarm.actors.workers import (
 from fishswarm.actors.world import World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.protocols.jsontext import json_text
-from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.decision_kernels import prepare, with_compiled_decisions
 from fishswarm.sim.scenario import COMMAND_TIMEOUT, START_TIMEOUT, Scenario
 from fishswarm.study.experiment import ORBIT_SUMMARIES
@@ -110,18 +108,30 @@ class LaunchSettings:
 
     @property
     def worker_processes(self) -> int:
-        """The fish worker processes of the run: ``procs``, or the default for its fish."""
-        return default_procs(self.scenario.fish) if self.procs is None else self.procs
+        """The fish worker processes of the run: ``procs`` (at most one a fish), or the
+        default for its fish."""
+        if self.procs is None:
+            return default_procs(self.scenario.fish)
+        return min(self.procs, self.scenario.fish)
 
 
 IN_PROCESS_MAX_FISH = 2_000
-"""Up to this many fish a run keeps them in the launcher's process unless told otherwise.
-Measured on two cores (docs/benchmarks.md, twenty-eighth session), the fish there against
-one worker process: 25 fish 8-31 % shorter ticks in six interleaved pairs, 1 000 fish 0-14 %,
-and the first tick after 0.2-0.3 s instead of 0.7-1.4 s. At 10 000 fish, over four runs,
-two workers gave 0.70-0.85 of the batch engine's speed (mean 0.76), one 0.69-0.78 (0.73),
-the launcher's process 0.63-0.78 (0.71): the world's sending of large schools'
-perceptions in parts overlaps the workers' deciding."""
+"""Up to this many fish a run keeps them in the launcher's process unless told otherwise: a
+choice between the sizes measured, 1 000 fish (faster here) and 10 000 (faster with
+workers); between them it is not measured. Measured on two cores (docs/benchmarks.md,
+twenty-eighth session), the fish there against one worker process: 25 fish 8-31 % shorter
+ticks in six interleaved pairs, 1 000 fish 0-14 %, and the first tick after 0.2-0.3 s
+instead of 0.7-1.4 s. At 10 000 fish, over four runs, two workers gave 0.70-0.85 of the
+batch engine's speed (mean 0.76), one 0.69-0.78 (0.73), the launcher's process 0.63-0.78
+(0.71): the world's sending of large schools' perceptions in parts overlaps the workers'
+deciding."""
+
+
+def where_fish_run(procs: int) -> str:
+    """``the fish in the launcher's process``, ``1 worker process``, ``2 worker processes``."""
+    if procs == 0:
+        return "the fish in the launcher's process"
+    return f"{procs} worker process{'es' if procs > 1 else ''}"
 
 
 def default_procs(fish: int) -> int:
@@ -181,7 +191,8 @@ async def launch_swarm(
             mode="router",
             listen=[settings.listen],
             extra=router_extra,
-            shared_memory_pool_bytes=shared_memory_pool_bytes(scenario.fish),
+            # Shared memory carries large messages to other processes: none without workers.
+            shared_memory_pool_bytes=None if here else shared_memory_pool_bytes(scenario.fish),
         )
         # The router first: a run that cannot open it (the port is taken) fails before
         # it replaces the last run's recording and summary.
@@ -204,8 +215,8 @@ async def launch_swarm(
                     await nursery.start(channel.run, bus)
                     await nursery.start(run_control, session, world)
                     params = with_compiled_decisions(scenario.fish_params(), scenario.fish)
-                    for index, ids in enumerate(schools):
-                        spec = WorkerSpec(
+                    specs = [
+                        WorkerSpec(
                             index,
                             ids,
                             params,
@@ -215,19 +226,14 @@ async def launch_swarm(
                             log_level=settings.log_level,
                             session_extra=worker_extra.get(school_of(index), {}),
                         )
-                        workers.append(start_worker(spec))
+                        for index, ids in enumerate(schools or [everyone])
+                    ]
                     if here:
                         prepare(params)
-                        fish_here = Fish(
-                            FishSettings(
-                                everyone,
-                                params,
-                                KeySpace(scenario.swarm),
-                                perception_timeout=settings.perception_timeout,
-                                school=school_of(0),
-                            )
-                        )
+                        fish_here = specs[0].fish()
                         await nursery.start(_run_fish_here, fish_here, bus, died, world)
+                    else:
+                        workers += [start_worker(spec) for spec in specs]
                     if workers:
                         nursery.start_soon(_watch_workers, workers, died, world)
                     if settings.handle_signals:
@@ -452,7 +458,7 @@ def _summary(
     return {
         "status": status,
         "scenario": settings.scenario.to_dict(),
-        "procs": min(settings.worker_processes, settings.scenario.fish),
+        "procs": settings.worker_processes,
         "listen": settings.listen,
         "metrics": metrics,
         "formation": formation,

@@ -86,7 +86,7 @@ class Roster:
             (self.worlds.add if alive else self.worlds.discard)(key)
             return None
         if member.role == "robot":
-            robot = fish_id_of(member.member_id)
+            robot = self.keys.robot_of(key)
             if robot is not None:
                 (self.robots.add if alive else self.robots.discard)(robot)
             return None

@@ -583,12 +583,16 @@ def secure_run(
 ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
     """The session settings of a secured ``fishswarm run``: its router's (the folder's
     access control, extended with a rule set for each of the run's schools) and each
-    school's worker's (a certificate signed for this run into ``out``).
+    school's worker's (a certificate signed for this run into ``out``). Without schools
+    (the fish in the router's own process) the router's alone: nothing is signed, so the
+    authority's key need not be there.
 
     Raises:
         SecurityError: see :func:`session_security` and :func:`issue_for_run`.
     """
     router = session_security(folder, "router", router=True)
+    if not schools:
+        return router, {}
     issue_for_run(folder, [school_subject(school) for school in schools], out)
     extra = access_control([], keys, schools)
     access = router["access_control"]

@@ -66,6 +66,19 @@ class WorkerSpec:
         when each fish has its own keys."""
         return school_of(self.index) if self.schooled else None
 
+    def fish(self) -> Fish:
+        """The fish actor that serves this spec's fish (load the compiled decisions its
+        parameters name with :func:`~fishswarm.sim.decision_kernels.prepare` first)."""
+        return Fish(
+            FishSettings(
+                self.fish_ids,
+                self.params,
+                KeySpace(self.swarm),
+                perception_timeout=self.perception_timeout,
+                school=self.school,
+            )
+        )
+
     def describe(self) -> str:
         """``worker 1 (fish 13–24)``."""
         return f"worker {self.index} (fish {fish_span(self.fish_ids)})"
@@ -109,15 +122,7 @@ def worker_main(spec: WorkerSpec, connection: Connection) -> None:
 
 
 async def _serve(spec: WorkerSpec, connection: Connection) -> FishStatistics:
-    fish = Fish(
-        FishSettings(
-            spec.fish_ids,
-            spec.params,
-            KeySpace(spec.swarm),
-            perception_timeout=spec.perception_timeout,
-            school=spec.school,
-        )
-    )
+    fish = spec.fish()
     settings = SessionSettings(mode="client", connect=[spec.connect], extra=spec.session_extra)
     async with open_session(settings) as session, trio.open_nursery() as nursery:
         await nursery.start(fish.run, ZenohBus(session))

@@ -57,6 +57,7 @@ from fishswarm.protocols.messages import (
     WorldPulse,
 )
 from fishswarm.sim.clocks import Event
+from fishswarm.sim.medium import flashes_shown
 from fishswarm.sim.physics import WorldParams
 from fishswarm.sim.scenario import COMMAND_TIMEOUT, START_TIMEOUT, TURN_DELAY, Scenario
 from fishswarm.sim.tick import WorldSim
@@ -210,7 +211,7 @@ class World:
         """The fish that answered the last tick, ascending (who may have broadcast)."""
         self._broadcasts = np.zeros(0, dtype=np.int64)
         """How many broadcasts each of them sent (rows alike)."""
-        self._announced = 0
+        self._awaits_report = False
         self._lights: dict[int, int] = {}
         """The fish whose last command said their LEDs are dark or flash (robots), by id:
         an index into LIGHTS; the others' are steady."""
@@ -615,7 +616,7 @@ class World:
                 # shows the simulated fish that see them. The lights go into the snapshot
                 # as they are now, even when it is sent later.
                 lights = self._lights_now()
-                self._announced = int(broadcasts.sum()) + self._flashing(lights)
+                self._awaits_report = bool(broadcasts.any()) or self._shows_flashes(lights)
                 if self._defers(event):
                     # Built, too, once the perceptions are out: nothing it shows changes
                     # before the fins are held (0.15 ms off the fish's wait at 1 000 fish).
@@ -727,15 +728,16 @@ class World:
         # Only the lights of fish not in the world (yet): the snapshot says nothing.
         return None if (lights == STEADY).all() else lights
 
-    def _flashing(self, lights: IntArray | None) -> int:
-        """How many robots flash their LEDs in ``lights`` (their fish hold their places in
-        a formation), for a channel to show the simulated fish that see them: none without
-        a channel, without simulated fish, or in jitter mode, which delivers nothing."""
-        if lights is None or not self.roster.channels or self.scenario.time_mode == "jitter":
-            return 0
-        if not (set(self.sim.ids.tolist()) - self.roster.robots):
-            return 0  # robots only: they see each other's flashes with their cameras
-        return int((lights == FLASHING).sum())
+    def _shows_flashes(self, lights: IntArray | None) -> bool:
+        """Whether a channel shows robots' flashes in ``lights`` (their fish hold their
+        places in a formation) to simulated fish this tick, so that the world waits for
+        its report: not without a channel, without simulated fish (robots see each other
+        flash with their cameras), or in jitter mode, which delivers nothing."""
+        if not flashes_shown(lights, time_mode=self.scenario.time_mode):
+            return False
+        if not self.roster.channels:
+            return False
+        return bool(set(self.sim.ids.tolist()) - self.roster.robots)
 
     def _told(self, time: float) -> str | None:
         """The formation the fish are told to take at ``time``: an operator's switch, else
@@ -748,7 +750,7 @@ class World:
         first (it announces broadcasts or robots' flashes to deliver), when the run ends or
         pauses here, or when no fish decide this tick."""
         return (
-            not self._announced
+            not self._awaits_report
             and event.deciding
             and not event.last
             and not self._stop_requested
@@ -778,7 +780,7 @@ class World:
     async def _inbox_counts(self, event: Event) -> np.ndarray:
         """How many deliveries each fish in the world waits for at this event."""
         counts = np.zeros(self.sim.ids.size, dtype=np.int64)
-        if event.snapshot in (None, 0) or not self._announced:
+        if event.snapshot in (None, 0) or not self._awaits_report:
             return counts
         if not self.roster.channels:
             log.warning("broadcasts at tick %d but no channel is running: not delivered", self.tick)

@@ -61,10 +61,10 @@ class ZenohBus:
             def callback(sample: zenoh.Sample) -> None:
                 on_sample(key_expr, sample.payload.to_bytes())
 
-        if self._inline:
-            # Run inside a put from trio, a callback may be where Ctrl-C lands; zenoh would
-            # swallow the KeyboardInterrupt (and the sample): trio is to deliver it instead.
-            callback = trio.lowlevel.enable_ki_protection(callback)
+        # Run inline, inside a put from trio, a callback may be where Ctrl-C lands; zenoh
+        # would swallow the KeyboardInterrupt (and the sample): trio is to deliver it
+        # instead. (On Zenoh's own threads, where Ctrl-C never lands, this changes nothing.)
+        callback = trio.lowlevel.enable_ki_protection(callback)
         handler = zenoh.handlers.Callback(callback, indirect=not self._inline)
         subscriber: Declared = self.session.declare_subscriber(key_expr, handler)
         return subscriber

@@ -333,8 +333,9 @@ def build_parser() -> argparse.ArgumentParser:
     run = commands.add_parser(
         "run",
         help="run a whole simulated swarm with one command",
-        description="Start a router, the world, the channel and an observer, spawn the fish "
-        "over worker processes, run the scenario, and write a recording and a summary.",
+        description="Start a router, the world, the channel and an observer, run the fish "
+        "beside them (up to 2000 fish) or over worker processes, run the scenario, and write "
+        "a recording and a summary.",
     )
     _add_scenario_flags(run, list(_SCENARIO_FLAGS))
     run.add_argument(

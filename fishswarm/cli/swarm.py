@@ -25,6 +25,7 @@ from fishswarm.actors.launcher import (
     WorkerFailed,
     launch_swarm,
     shared_memory_pool_bytes,
+    where_fish_run,
 )
 from fishswarm.actors.observer import WORLD_END_SETTLE, Observer, Progress
 from fishswarm.actors.security import (
@@ -159,14 +160,6 @@ def _warn_if_crowded(command: str, scenario: Scenario) -> None:
         print(f"fishswarm {command}: warning: {crowded}", file=sys.stderr)
 
 
-def _where_fish_run(procs: int, fish: int) -> str:
-    """``the fish in this process`` or ``2 worker processes``."""
-    if procs == 0:
-        return "the fish in this process"
-    workers = min(procs, fish)
-    return f"{workers} worker process{'es' if workers > 1 else ''}"
-
-
 def run(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm run``."""
     if args.procs is not None and args.procs < 0:
@@ -198,7 +191,7 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
     print(
         f"fishswarm: {scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
         f"{1 / scenario.control_period:g} Hz, seed {scenario.seed}, "
-        f"{_where_fish_run(settings.worker_processes, scenario.fish)}, listening on "
+        f"{where_fish_run(settings.worker_processes)}, listening on "
         f"{settings.listen}",
         file=sys.stderr,
     )

@@ -192,6 +192,15 @@ class KeySpace:
             return Member(parts[3], parts[4], parts[5] if len(parts) == 6 else None)
         raise ValueError(f"{key!r} is not a liveliness token of swarm {self.swarm!r}")
 
+    def robot_of(self, key: str) -> int | None:
+        """The robot a liveliness token stands for (its driver's ``alive/robot/<id>``), or
+        None for any other token, or one that names no robot id."""
+        try:
+            member = self.parse_alive(key)
+        except ValueError:
+            return None
+        return fish_id_of(member.member_id) if member.role == "robot" else None
+
     def every_school(self, kind: str) -> str:
         """Key expression matching one kind of school key (``perceptions``, ``commands``,
         ``about``) of every school."""

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from fishswarm.behaviors.core import Heard, Inbox, Outbox, inbox_of
 from fishswarm.behaviors.formation import FORMATION_KIND, flag_by_light
 from fishswarm.bluebot.vision import Vision, perceive, to_body
-from fishswarm.protocols.messages import FormationFlag
+from fishswarm.protocols.messages import FLASHING, FormationFlag
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -99,6 +99,14 @@ def seeing(position: FloatArray, yaw: FloatArray, *, vision: Vision) -> BoolArra
     viewers, rows = np.nonzero(perceived.mask)
     seen[viewers, perceived.index[viewers, rows]] = True
     return seen
+
+
+def flashes_shown(lights: IntArray | None, *, time_mode: str) -> bool:
+    """Whether a snapshot's ``lights`` (DARK, STEADY or FLASHING per fish; None: all
+    steady) hold robots' flashes for the channel to show simulated fish: any flash, unless
+    the run is in jitter mode, which delivers nothing. The world then waits for the
+    channel's report, and the channel reports, whoever is there to be shown."""
+    return lights is not None and time_mode != "jitter" and bool((lights == FLASHING).any())
 
 
 def one_bit(kind: int, values: IntArray) -> IntArray | None:

@@ -3,7 +3,7 @@
 An engine turns a scenario into its recorded run: the in-process batch engine
 (:func:`simulate_on_batch_engine`) or the actor system
 (``fishswarm.actors.runs.simulate_on_actors``:
-router, world, channel, observer and a worker process over Zenoh on 127.0.0.1), which gives
+router, world, channel, observer and the fish over Zenoh on 127.0.0.1), which gives
 the same trajectories bit for bit (tested). The command line picks the engine; this module
 does not know the actors. Runs are spread over processes started with ``spawn``, one per
 core by default. Ctrl-C stops a sweep between runs (the runs in progress finish, the others

@@ -564,3 +564,19 @@ def test_secure_init_always_names_this_machine_for_the_router(tmp_path: Path) ->
         with pytest.raises(SystemExit) as refused:
             main(["secure", "init", str(tmp_path / "r"), *argv])
         assert refused.value.code == 2
+
+
+def test_a_secured_run_without_workers_needs_no_authority_key(
+    secure_dir: Path, tmp_path: Path
+) -> None:
+    # On the router's machine the authority's key may have been put away: a run whose
+    # fish live in the router's own process signs no certificate, one with workers does.
+    from fishswarm.actors.security import AUTHORITY, secure_run
+
+    folder = tmp_path / "keyless"
+    shutil.copytree(secure_dir, folder)
+    (folder / f"{AUTHORITY}.key").unlink()
+    router, workers = secure_run(folder, KEYS, {}, tmp_path / "signed")
+    assert workers == {} and router["access_control"]["rules"]
+    with pytest.raises(SecurityError, match="authority's key"):
+        secure_run(folder, KEYS, {"worker-0": [0, 1]}, tmp_path / "signed")

@@ -417,11 +417,14 @@ def test_a_simulated_fish_that_sees_a_flashing_robot_waits_for_its_flag(
     settings = WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0, turn_delay=0.0)
     snapshots: list[Snapshot] = []
     reports: list[bytes] = []
+    order: list[str] = []
 
     async def main() -> tuple[list[int], list[Delivery], float]:
         bus = MemoryBus()
         bus.subscribe(keys.snapshot, lambda _, payload: snapshots.append(decode(payload, Snapshot)))
         bus.subscribe(keys.channel_report, lambda _, payload: reports.append(payload))
+        bus.subscribe(keys.snapshot, lambda _, payload: order.append("snapshot"))
+        bus.subscribe(keys.perception(0), lambda _, payload: order.append("perception"))
         started = trio.current_time()
         counts: list[int] = []
         async with (
@@ -450,11 +453,15 @@ def test_a_simulated_fish_that_sees_a_flashing_robot_waits_for_its_flag(
 
     counts, deliveries, took = run_mock(main)
     assert took < 1.0  # no wait for a channel report that does not come (6 s each)
+    assert len(reports) == 2  # ticks 1 and 2, where the robot flashed
+    # Tick 1: a world that waits for the channel sends its snapshot before the
+    # perceptions; one of robots only sends it while they decide.
+    tick_1 = order[2:4]
     if robots == (0, 1):
         assert counts == [0, 0, 0] and deliveries == []
-        assert reports == []  # neither the world nor the channel had anything to do
+        assert tick_1 == ["perception", "snapshot"]
         return
-    assert len(reports) == 2  # ticks 1 and 2, where the robot flashed
+    assert tick_1 == ["snapshot", "perception"]
     # The robot's first command (answering tick 0) makes its LEDs flash from tick 1 on.
     assert counts == [0, 1, 1]
     first = snapshots[1]
