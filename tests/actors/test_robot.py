@@ -8,7 +8,8 @@ import dataclasses
 import json
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import AsyncIterator, Iterator
+from contextlib import asynccontextmanager
 from pathlib import Path
 
 import pytest
@@ -16,6 +17,7 @@ import trio
 
 pytest.importorskip("gpiozero.pins.mock")
 
+from fishswarm.actors.bus import Bus
 from fishswarm.actors.driver import Driver, DriverSettings
 from fishswarm.actors.mock_robot import BodyFins
 from fishswarm.actors.robot import (
@@ -324,36 +326,30 @@ def test_two_mock_robots_in_a_formation_flag_to_each_other_by_light(
     named: set[int] = set()
 
     async def main() -> tuple[tuple[int, int], float]:
-        async with trio.open_nursery() as nursery:
-            robots: list[Driver] = [
-                await nursery.start(run_robot, settings(robot_id, endpoint, "formation"))
-                for robot_id in (0, 1)
-            ]
-            async with open_client_bus(endpoint, 5.0) as base:
+        async with two_formation_robots(endpoint) as (robots, base):
 
-                def take(key: str, payload: bytes) -> None:
-                    snapshot = decode(payload, Snapshot)
-                    if snapshot.lights is not None:
-                        named.update(snapshot.ids[snapshot.lights == FLASHING].tolist())
+            def take(key: str, payload: bytes) -> None:
+                snapshot = decode(payload, Snapshot)
+                if snapshot.lights is not None:
+                    named.update(snapshot.ids[snapshot.lights == FLASHING].tolist())
 
-                base.subscribe(KEYS.snapshot, take)
-                # One robot flashes while the other has been handed flags by light.
-                took = await until(
-                    lambda: (
-                        any(
-                            flashing(a) and b.statistics().flags_seen > 0
-                            for a, b in (robots, robots[::-1])
-                        )
-                        and named
-                    ),
-                    timeout=60,
-                )
-                flasher, seer = next(
-                    (a.settings.robot_id, b.settings.robot_id)
-                    for a, b in (robots, robots[::-1])
-                    if flashing(a) and b.statistics().flags_seen > 0
-                )
-            nursery.cancel_scope.cancel()
+            base.subscribe(KEYS.snapshot, take)
+            # One robot flashes while the other has been handed flags by light.
+            took = await until(
+                lambda: (
+                    any(
+                        flashing(a) and b.statistics().flags_seen > 0
+                        for a, b in (robots, robots[::-1])
+                    )
+                    and named
+                ),
+                timeout=60,
+            )
+            flasher, seer = next(
+                (a.settings.robot_id, b.settings.robot_id)
+                for a, b in (robots, robots[::-1])
+                if flashing(a) and b.statistics().flags_seen > 0
+            )
         return (flasher, seer), took
 
     (flasher, seer), took = run_trio(main, timeout=120)
@@ -390,33 +386,39 @@ def test_a_simulated_fish_among_mock_robots_is_shown_a_flashing_robots_flag(
         return flag.slot == -1 and flag.sequence == 0
 
     async def main() -> None:
-        async with trio.open_nursery() as nursery:
-            robots: list[Driver] = [
-                await nursery.start(run_robot, settings(robot_id, endpoint, "formation"))
-                for robot_id in (0, 1)
-            ]
-            async with open_client_bus(endpoint, 5.0) as base:
+        async with two_formation_robots(endpoint) as (robots, base):
 
-                def take(key: str, payload: bytes) -> None:
-                    delivery = decode(payload, Delivery)
-                    if delivery.kind == "formation":
-                        flags[delivery.receiver_id].append(
-                            FormationFlag.from_values(delivery.values)
-                        )
+            def take(key: str, payload: bytes) -> None:
+                delivery = decode(payload, Delivery)
+                if delivery.kind == "formation":
+                    flags[delivery.receiver_id].append(FormationFlag.from_values(delivery.values))
 
-                for fish in flags:
-                    base.subscribe(KEYS.inbox(fish), take)
-                await until(
-                    lambda: any(map(by_light, flags[2])) and any(map(flashing, robots)),
-                    timeout=90,
-                )
-            nursery.cancel_scope.cancel()
+            for fish in flags:
+                base.subscribe(KEYS.inbox(fish), take)
+            await until(
+                lambda: any(map(by_light, flags[2])) and any(map(flashing, robots)),
+                timeout=90,
+            )
 
     run_trio(main, timeout=150)
     flag = next(flag for flag in flags[2] if by_light(flag))
     assert flag.joined and flag.hops == NO_HOPS and flag.shape == FORMATION_SHAPES.index("pyramid")
     to_robots = flags[0] + flags[1]
     assert to_robots and not any(map(by_light, to_robots))
+
+
+@asynccontextmanager
+async def two_formation_robots(endpoint: str) -> AsyncIterator[tuple[list[Driver], Bus]]:
+    """Mock robots 0 and 1 in a formation on ``endpoint``, and a Bus of the base station's
+    on it; the robots stop when the block ends."""
+    async with trio.open_nursery() as nursery:
+        robots: list[Driver] = [
+            await nursery.start(run_robot, settings(robot_id, endpoint, "formation"))
+            for robot_id in (0, 1)
+        ]
+        async with open_client_bus(endpoint, 5.0) as base:
+            yield robots, base
+        nursery.cancel_scope.cancel()
 
 
 def flashing(driver: Driver) -> bool:
