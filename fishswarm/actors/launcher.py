@@ -119,12 +119,12 @@ IN_PROCESS_MAX_FISH = 2_000
 """Up to this many fish a run keeps them in the launcher's process unless told otherwise: a
 choice between the sizes measured, 1 000 fish (faster here) and 10 000 (faster with
 workers); between them it is not measured. Measured on two cores (docs/benchmarks.md,
-twenty-eighth session), the fish there against one worker process: 25 fish 8-31 % shorter
-ticks in six interleaved pairs, 1 000 fish 0-14 %, and the first tick after 0.2-0.3 s
-instead of 0.7-1.4 s. At 10 000 fish, over four runs, two workers gave 0.70-0.85 of the
-batch engine's speed (mean 0.76), one 0.69-0.78 (0.73), the launcher's process 0.63-0.78
-(0.71): the world's sending of large schools' perceptions in parts overlaps the workers'
-deciding."""
+twenty-eighth session), the fish there against one worker process: 25 fish 5-31 % shorter
+ticks in eight interleaved pairs, 1 000 fish from 11 % longer to 14 % shorter (within the
+spread of runs), and the first tick after 0.2-0.3 s instead of 0.7-1.4 s. At 10 000 fish,
+over four runs, two workers gave 0.70-0.85 of the batch engine's speed (mean 0.76), one
+0.69-0.78 (0.73), the launcher's process 0.63-0.78 (0.71): the world's sending of large
+schools' perceptions in parts overlaps the workers' deciding."""
 
 
 def where_fish_run(procs: int) -> str:
@@ -191,7 +191,8 @@ async def launch_swarm(
             mode="router",
             listen=[settings.listen],
             extra=router_extra,
-            # Shared memory carries large messages to other processes: none without workers.
+            # Shared memory carries large messages to other processes: without workers, only
+            # to observers on this machine, for whom Zenoh's default pool does.
             shared_memory_pool_bytes=None if here else shared_memory_pool_bytes(scenario.fish),
         )
         # The router first: a run that cannot open it (the port is taken) fails before

@@ -344,7 +344,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="fish worker processes; 0 runs the fish in this process, beside the world, "
         "still over Zenoh (default: 0 up to 2000 fish, 2 beyond). Measured on two cores "
-        "against one worker: 25 fish 8-31 %% shorter ticks, 1000 fish 0-14 %%, the first "
+        "against one worker: 25 fish 5-31 %% shorter ticks, 1000 fish about even, the first "
         "tick after 0.2 s instead of 0.7 s; at 10 000 fish two workers are a little faster "
         "(the world sends their perceptions in parts while they decide). Workers keep the "
         "fish apart from the world: a fish that crashes its process leaves the world "
