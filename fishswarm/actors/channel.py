@@ -25,7 +25,7 @@ from __future__ import annotations
 import logging
 from collections import defaultdict, deque
 from collections.abc import Awaitable, Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import trio
@@ -46,7 +46,7 @@ from fishswarm.protocols.messages import (
     FormationFlag,
     Snapshot,
 )
-from fishswarm.sim.medium import flashes_shown, one_bit, receptions
+from fishswarm.sim.medium import flashes_shown, receptions, travelling
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.sim.streams import Stream, stream
 
@@ -146,7 +146,7 @@ class Channel:
                     self._settle(snapshot.tick - 1, {})  # nothing announced: nothing to wait for
                     continue
                 broadcasts = await self._gather(snapshot)
-                self._deliver(bus, snapshot, broadcasts)
+                self._deliver(bus, snapshot, broadcasts, shown)
 
     async def _next_snapshot(self) -> Snapshot:
         while True:
@@ -237,25 +237,32 @@ class Channel:
                 )  # fmt: skip
         return chosen
 
-    def _deliver(self, bus: Bus, snapshot: Snapshot, broadcasts: list[Broadcast]) -> None:
+    def _deliver(
+        self, bus: Bus, snapshot: Snapshot, broadcasts: list[Broadcast], shown: bool
+    ) -> None:
+        """Deliver the broadcasts, and with ``shown`` the robots' flashes, then report."""
         index_of = {int(i): n for n, i in enumerate(snapshot.ids.tolist())}
         present = [b for b in broadcasts if b.sender_id in index_of]
-        if self.scenario.one_bit_flags:
-            # By light or beacon, only "I hold my place" travels, and it says nothing else.
-            said = [(b, one_bit(BROADCAST_KINDS.index(b.kind), b.values)) for b in present]
-            present = [replace(b, values=values) for b, values in said if values is not None]
+        # By light or beacon, only "I hold my place" travels, and it says nothing else.
+        travels = [
+            (present[n], values)
+            for n, values in travelling(
+                [BROADCAST_KINDS.index(b.kind) for b in present],
+                [b.values for b in present],
+                one_bit_flags=self.scenario.one_bit_flags,
+            )
+        ]
         rngs = [self._rng(int(i)) for i in snapshot.ids.tolist()]
         found = receptions(
             snapshot.position,
             snapshot.yaw,
-            [index_of[b.sender_id] for b in present],
+            [index_of[b.sender_id] for b, _ in travels],
             channel_range=self.scenario.channel_range,
             loss=self.scenario.channel_loss,
             rngs=rngs,
             sight=self.scenario.flag_sight,
         )
-        deliveries = [(r, present[r.broadcast].kind, present[r.broadcast].values) for r in found]
-        shown = flashes_shown(snapshot.lights, time_mode=self.scenario.time_mode)
+        deliveries = [(r, travels[r.broadcast][0].kind, travels[r.broadcast][1]) for r in found]
         flag = self._light_flag(snapshot) if shown else None
         if flag is not None:
             # Seen with the world's eyes, lost at the run's rate, with losses of their own:

@@ -132,6 +132,8 @@ class Observer:
         """The run of the snapshots taken so far (None before the first)."""
         self._later_runs = 0
         """How many runs' snapshots have begun after the first's."""
+        self._left_run: int | None = None
+        """The run whose world left last."""
         self._ended_runs: deque[int] = deque(maxlen=ENDED_RUNS_KEPT)
         """Runs that have given way to a later one, latest last."""
         self._pulsing: deque[int] = deque(maxlen=ENDED_RUNS_KEPT)
@@ -211,38 +213,44 @@ class Observer:
         while self._last_tick < tick:
             await self._tick_reached.wait()
 
-    def world_said_ended(self) -> bool | None:
+    def world_said_ended(self, run: int | None = None) -> bool | None:
         """Whether the world of the run watched said its run is over — at its end, or when
         it was stopped or failed — by its last pulse: True; it pulsed but did not say so (it
         died, or the router was lost): False; no pulse of it came through, so this cannot
         be told (a secured router whose access control predates the pulse's reaching
-        observers): None."""
-        run = self.current_run
+        observers): None. ``run``: the run of that world (None: the run watched now)."""
+        if run is None:
+            run = self.current_run
         if run in self._said_ended:
             return True
         return False if run in self._pulsing else None
 
-    async def wait_for_world_left(self) -> None:
-        """Wait until the world of the run watched leaves the swarm (its liveliness token
-        gone, or a later run begun); its last snapshots may still be on their way."""
-        await self._world_left.wait()
-
-    async def wait_for_world_end(self, *, settle: float = WORLD_END_SETTLE) -> None:
+    async def wait_for_world_end(
+        self,
+        *,
+        settle: float = WORLD_END_SETTLE,
+        on_left: Callable[[], None] | None = None,
+    ) -> int | None:
         """Wait until the world leaves the swarm and its last snapshots are in (bound it with
-        a timeout).
+        a timeout); the run of that world (None: no snapshot of it came).
 
         The world's snapshots travel apart from its liveliness token, and the last of them
-        may arrive just after the token is gone (seen under load): once the world has left,
-        this waits until no snapshot has come for ``settle`` seconds, or until the snapshots
-        of a later run begin (which ends the run waited for, too)."""
+        may arrive just after the token is gone (seen under load): once the world has left
+        (its token gone, or a later run begun; ``on_left`` is called then), this waits until
+        no snapshot has come for ``settle`` seconds, or until the snapshots of a later run
+        begin (which ends the run waited for, too)."""
         later_runs = self._later_runs
         await self._world_left.wait()
+        run = self._left_run
+        if on_left is not None:
+            on_left()
         while self._later_runs == later_runs:
             arrived = self._tick_reached
             with trio.move_on_after(settle) as quiet:
                 await arrived.wait()
             if quiet.cancelled_caught:
-                return
+                return run
+        return run
 
     def _on_pulse(self, key: str, payload: bytes) -> None:
         pulse = self._intake.decode(key, payload, WorldPulse)
@@ -272,6 +280,7 @@ class Observer:
         # that of an earlier run, whose leaving may come after the next run's first snapshot.
         watched = self.current_run in (None, run_id_of(member.member_id))
         if member.role == "world" and not alive and watched:
+            self._left_run = self.current_run
             self._world_left.set()
 
     def _start_run(self, run: int) -> None:
@@ -283,6 +292,7 @@ class Observer:
         self._ended_runs.append(earlier)
         self._later_runs += 1
         self._last_tick = -1
+        self._left_run = earlier
         self._world_left.set()  # the earlier run is over (worlds take turns): wake its waiters
         self._world_left = trio.Event()
         self._orbit_tracker = None if self.orbit is None else OrbitTracker(self.orbit)

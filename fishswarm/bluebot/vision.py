@@ -8,6 +8,7 @@ coincident fish are handled: nothing divides by a zero distance.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -49,6 +50,10 @@ class Vision:
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"vision {name} must be a finite non-negative number, got {value}")
+
+    def exact(self) -> Vision:
+        """This vision without its position noise: who sees whom, and where they truly are."""
+        return dataclasses.replace(self, noise=0.0)
 
 
 def to_body(vectors: FloatArray, yaw: FloatArray) -> FloatArray:

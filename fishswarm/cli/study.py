@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import math
 import sys
 import time
@@ -391,7 +390,7 @@ def _vision_of(settings: dict[str, Any]) -> Vision:
         ran = Scenario.as_recorded(settings)
     except ConfigError:
         return Vision()
-    return dataclasses.replace(ran.vision(), noise=0.0)
+    return ran.vision().exact()
 
 
 def _animated_formation(recording: Recording) -> dict[str, Any]:

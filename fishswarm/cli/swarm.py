@@ -557,15 +557,17 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                         waiting.cancel_scope.cancel()
 
                     async def wait_for_world_end() -> None:
-                        await observer.wait_for_world_left()
-                        # A world's token is gone for everyone who loses the router too.
-                        router = reaches_router(session)
-                        await observer.wait_for_world_end()
-                        said = observer.world_said_ended()
-                        if said is False or (said is None and not router):
+                        # A world's token is gone for everyone who loses the router too:
+                        # whether it is still there is noted the moment the world leaves.
+                        router: list[bool] = []
+                        run = await observer.wait_for_world_end(
+                            on_left=lambda: router.append(reaches_router(session))
+                        )
+                        said = observer.world_said_ended(run)
+                        if said is False or (said is None and not router[0]):
                             unfinished.append(
                                 "lost the router at " + args.connect
-                                if not (router and reaches_router(session))
+                                if not (router[0] and reaches_router(session))
                                 else "the world left"
                             )
 

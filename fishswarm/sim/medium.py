@@ -15,7 +15,6 @@ channel's range, whether it sees the sender or not.
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -94,7 +93,7 @@ def seeing(position: FloatArray, yaw: FloatArray, *, vision: Vision) -> BoolArra
     """Which fish sees which: (N, N), row the viewer, column the fish seen (range, blind
     spot and occlusion of ``vision``; its position noise, which moves no one out of sight,
     left out)."""
-    perceived = perceive(position, yaw, vision=dataclasses.replace(vision, noise=0.0))
+    perceived = perceive(position, yaw, vision=vision.exact())
     seen = np.zeros((position.shape[0], position.shape[0]), dtype=np.bool_)
     viewers, rows = np.nonzero(perceived.mask)
     seen[viewers, perceived.index[viewers, rows]] = True
@@ -107,6 +106,18 @@ def flashes_shown(lights: IntArray | None, *, time_mode: str) -> bool:
     the run is in jitter mode, which delivers nothing. The world then waits for the
     channel's report, and the channel reports, whoever is there to be shown."""
     return lights is not None and time_mode != "jitter" and bool((lights == FLASHING).any())
+
+
+def travelling(
+    kinds: Sequence[int], values: Sequence[IntArray], *, one_bit_flags: bool
+) -> list[tuple[int, IntArray]]:
+    """Which of some broadcasts (their kinds and numbers) travel, and what each says, in
+    order: (position among them, numbers). All, as sent; with ``one_bit_flags`` only the
+    formation flags of fish that hold their place, reduced to that (:func:`one_bit`)."""
+    if not one_bit_flags:
+        return list(enumerate(values))
+    said = [one_bit(kind, numbers) for kind, numbers in zip(kinds, values, strict=True)]
+    return [(n, numbers) for n, numbers in enumerate(said) if numbers is not None]
 
 
 def one_bit(kind: int, values: IntArray) -> IntArray | None:
@@ -140,10 +151,13 @@ def deliver(
     broadcasts reach the fish that see their sender (:func:`receptions`); with
     ``one_bit_flags`` only formation flags of fish that hold their place travel, reduced to that.
     """
-    sent = {int(row): outbox.values[row] for row in np.flatnonzero(outbox.mask)}
-    if one_bit_flags:
-        said = {row: one_bit(int(outbox.kind[row]), values) for row, values in sent.items()}
-        sent = {row: values for row, values in said.items() if values is not None}
+    rows = np.flatnonzero(outbox.mask).tolist()
+    said = travelling(
+        [int(outbox.kind[row]) for row in rows],
+        [outbox.values[row] for row in rows],
+        one_bit_flags=one_bit_flags,
+    )
+    sent = {rows[n]: values for n, values in said}
     senders = list(sent)
     heard: list[list[Heard]] = [[] for _ in range(position.shape[0])]
     for reception in receptions(

@@ -18,8 +18,6 @@ Everything order-dependent goes in fish-id order; each fish has its own random s
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 from numpy.typing import NDArray
 
@@ -69,7 +67,7 @@ class WorldSim:
         self._vision_rngs: dict[int, np.random.Generator] = {}
         self.sight = SightCounts()
         """With camera vision: its detections against the geometric model's, so far."""
-        self._exact_vision = dataclasses.replace(params.vision, noise=0.0)
+        self._exact_vision = params.vision.exact()
         """What the fish could see, without the geometric model's noise (scoring only)."""
         self._departed: dict[int, tuple[State, float]] = {}
 
