@@ -284,6 +284,10 @@ class Fish:
                 batch: list[Event] = []
                 with trio.move_on_at(self._next_deadline()):
                     batch.append(await events.receive())
+                # Let the tasks woken with this fish go first: in the launcher's process the
+                # observer then hands a large school's metrics to its thread, which runs
+                # beside this decision instead of beside the world's next physics.
+                await trio.lowlevel.checkpoint()
                 batch += events.drain()
                 for index, kind, key, payload in batch:
                     if kind == PERCEPTION:

@@ -10,7 +10,7 @@ import logging
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import trio
 
@@ -32,7 +32,12 @@ from fishswarm.study.metrics import (
 from fishswarm.study.recording import Recorder
 from fishswarm.study.scene import Scene, Stage, scene_message, scene_of, stage_of
 
+if TYPE_CHECKING:
+    import outcome
+
 log = logging.getLogger(__name__)
+
+T = TypeVar("T")
 
 
 WORLD_END_SETTLE = 1.0
@@ -323,9 +328,9 @@ class Observer:
             return
         measure = (snapshot.position, snapshot.neighbors_seen, snapshot.effort)
         if snapshot.ids.size >= OFFLOAD_FISH:
-            # Thousands of fish: the distances take a tenth of a second; in a thread, the
-            # world's tick (in this process) goes on meanwhile.
-            metrics = await trio.to_thread.run_sync(swarm_metrics, *measure)
+            # Hundreds of fish or more: the distances take a millisecond or more; in a
+            # thread, the world's tick (in this process) goes on meanwhile.
+            metrics = await _in_thread_at_once(lambda: swarm_metrics(*measure))
         else:
             metrics = swarm_metrics(*measure)
         formations = self.formations
@@ -362,3 +367,27 @@ class Observer:
         self._tick_reached = trio.Event()
         if self.on_progress is not None:
             self.on_progress(progress)
+
+
+async def _in_thread_at_once(function: Callable[[], T]) -> T:
+    """What ``function()`` returns, run in a thread started at once and waited for even
+    when cancelled (as :func:`trio.to_thread.run_sync` waits for a thread it has started).
+
+    ``trio.to_thread.run_sync`` passes a schedule point before it starts its thread. In the
+    launcher's process the fish, woken in the same step of the world, would then decide
+    first, and a large school's metrics would run beside the world's next physics, whose
+    compiled kernels wait for the core the metrics hold (1 000 fish: a tick 0.3–1.5 ms
+    longer, `docs/benchmarks.md`).
+    """
+    token = trio.lowlevel.current_trio_token()
+    done = trio.Event()
+    result: list[outcome.Outcome[T]] = []
+
+    def deliver(value: outcome.Outcome[T]) -> None:
+        result.append(value)
+        token.run_sync_soon(done.set)  # the run goes on: its observer waits for this
+
+    trio.lowlevel.start_thread_soon(function, deliver, name="fishswarm observer metrics")
+    with trio.CancelScope(shield=True):
+        await done.wait()
+    return result[0].unwrap()

@@ -8,16 +8,16 @@ parallel kernels in :mod:`fishswarm.sim.kernels` take theirs, and would wait for
 Each returns what the numpy or scipy reference in :mod:`fishswarm.study.metrics` returns:
 the same distances bit for bit on x86-64 (the same arithmetic in the same order; where a C
 compiler fuses multiply-adds, as on aarch64, scipy's may differ in the last bit), and for
-the mean over all pairs the same mean within rounding. numba is imported when a kernel is first
-asked for.
+the mean over all pairs the same mean within rounding. The loops themselves are in
+:mod:`fishswarm.study.distance_loops`, which imports numba: it is imported when a kernel is
+first asked for.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
-from typing import Any
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,16 +28,6 @@ FloatArray = NDArray[np.float64]
 FISH_PER_COLUMN = 2.0
 """How many fish the nearest-neighbour search's columns hold on average: a fish's nearest
 other is then most often in its own column or the eight around it."""
-CROWDED_COLUMN = 64
-"""A column holding more fish than this sends the nearest-neighbour search to scipy's k-d
-tree: the columns are sized from the school's whole footprint, so one straggler far off (or
-fish stacked in one place) leaves the rest in a few columns, where the search would compare
-every fish with every other (10 000 fish and one straggler: 80 ms against the tree's 10)."""
-COLUMNS_PER_FISH = 64
-"""The search gives up for the k-d tree once it has looked into this many columns a fish on
-average (a fish looks into 9 or 25 in a school spread over a tank): fish stacked over one
-another, columns much narrower than the distances between them, would otherwise search
-ring after ring (10 000 fish stacked with 1 nm of sideways jitter: 360 ms)."""
 
 
 def mean_pairwise_distance(position: FloatArray) -> float:
@@ -52,7 +42,7 @@ def mean_pairwise_distance(position: FloatArray) -> float:
         return 0.0
     x, y, z = np.ascontiguousarray(position.T, dtype=np.float64)
     pairs = count * (count - 1) / 2
-    return float(_pairwise_total()(x, y, z) / pairs)
+    return float(_loops().total_all(x, y, z) / pairs)
 
 
 def pair_distances(
@@ -67,7 +57,18 @@ def pair_distances(
         ValueError: ``first`` and ``second`` are not integer lists of one length.
         IndexError: a pair names a fish that is not there.
     """
-    count = position.shape[0]
+    first, second = _checked_pairs(position.shape[0], first, second)
+    x, y, z = np.ascontiguousarray(position.T, dtype=np.float64)
+    distance = np.empty(first.shape[0])
+    _loops().pairs_all(x, y, z, first, second, distance)
+    return distance
+
+
+def _checked_pairs(
+    count: int, first: NDArray[np.intp], second: NDArray[np.intp]
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The pair lists as the kernels take them, after checking that they are two integer
+    lists of one length naming fish among ``count``."""
     for indices in (first, second):
         if indices.ndim != 1 or indices.shape != first.shape or indices.dtype.kind not in "iu":
             raise ValueError(
@@ -77,17 +78,10 @@ def pair_distances(
     for indices in (first, second):
         if indices.size and (int(indices.min()) < 0 or int(indices.max()) >= count):
             raise IndexError(f"pairs name fish outside 0…{count - 1}")
-    x, y, z = np.ascontiguousarray(position.T, dtype=np.float64)
-    distance = np.empty(first.shape[0])
-    _pairs()(
-        x,
-        y,
-        z,
+    return (
         np.ascontiguousarray(first, dtype=np.intp),
         np.ascontiguousarray(second, dtype=np.intp),
-        distance,
     )
-    return distance
 
 
 def nearest_distances(position: FloatArray) -> FloatArray:
@@ -98,8 +92,58 @@ def nearest_distances(position: FloatArray) -> FloatArray:
     :data:`FISH_PER_COLUMN` to a column; each fish searches rings of columns around its own,
     outwards, until the next ring lies farther than the nearest fish found (at 10 000 fish
     over a tank 2 ms against scipy's 8). A school the columns cannot split
-    (:data:`CROWDED_COLUMN`, :data:`COLUMNS_PER_FISH`) goes to scipy's k-d tree, with the
+    (:data:`~fishswarm.study.distance_loops.CROWDED_COLUMN`,
+    :data:`~fishswarm.study.distance_loops.COLUMNS_PER_FISH`) goes to scipy's k-d tree, with the
     same result.
+
+    Raises:
+        ValueError: fewer than two fish, or a position that is not finite.
+    """
+    points, columns = _columns_of(position)
+    nearest = np.empty(points.shape[0])
+    if not _loops().nearest_all(points, *columns, nearest):
+        return _tree_nearest(points)
+    return nearest
+
+
+def school_distances(
+    position: FloatArray,
+    pairs: tuple[NDArray[np.intp], NDArray[np.intp]] | None = None,
+) -> tuple[float, FloatArray]:
+    """The mean distance between the fish of ``position`` (N, 3), N ≥ 2 — over all pairs,
+    or over the listed ``pairs`` (two index lists) — and each fish's distance (N,) to its
+    nearest other, m: what :func:`mean_pairwise_distance` (or the mean of
+    :func:`pair_distances`) and :func:`nearest_distances` return, bit for bit.
+
+    Both in one compiled call that holds no GIL. The observer measures in a thread beside
+    the fish's decisions, and every return to Python between two kernels waits for the GIL
+    that the event loop holds: at 1 000 fish, three calls stretched a millisecond's work
+    over 1.6–1.9 ms, into the world's next physics.
+
+    Raises:
+        ValueError: fewer than two fish, a position that is not finite, or pairs that are
+            not two integer lists of one length.
+        IndexError: a pair names a fish that is not there.
+    """
+    points, columns = _columns_of(position)
+    count = points.shape[0]
+    if pairs is None:
+        first = second = np.zeros(0, dtype=np.intp)
+    else:
+        first, second = _checked_pairs(count, *pairs)
+    x, y, z = np.ascontiguousarray(points.T)
+    distance = np.empty(first.shape[0])
+    nearest = np.empty(count)
+    total, found = _loops().together(
+        x, y, z, pairs is None, first, second, distance, points, *columns, nearest
+    )
+    mean = total / (count * (count - 1) / 2) if pairs is None else float(distance.mean())
+    return mean, nearest if found else _tree_nearest(points)
+
+
+def _columns_of(position: FloatArray) -> tuple[FloatArray, tuple[float, float, float, int, int]]:
+    """The positions as the nearest-neighbour search takes them, and its columns: the
+    lower corner (x, y) of the school's footprint, a column's side, columns and rows.
 
     Raises:
         ValueError: fewer than two fish, or a position that is not finite.
@@ -119,134 +163,20 @@ def nearest_distances(position: FloatArray) -> FloatArray:
     side = max(math.sqrt(FISH_PER_COLUMN * area / count), span / count, 1e-12)
     columns = int(extent[0] // side) + 1
     rows = int(extent[1] // side) + 1
-    nearest = np.empty(count)
-    if not _nearest()(points, float(low[0]), float(low[1]), side, columns, rows, nearest):
-        tree_distance: FloatArray = cKDTree(points).query(points, k=2)[0]
-        return np.ascontiguousarray(tree_distance[:, 1])
-    return nearest
+    return points, (float(low[0]), float(low[1]), side, columns, rows)
+
+
+def _tree_nearest(points: FloatArray) -> FloatArray:
+    """Each fish's nearest other from scipy's k-d tree, for schools the columns cannot
+    split."""
+    tree_distance: FloatArray = cKDTree(points).query(points, k=2)[0]
+    return np.ascontiguousarray(tree_distance[:, 1])
 
 
 @functools.cache
-def _pairwise_total() -> Callable[..., float]:
-    """The summed distance over all pairs, on one core (compiled on first use, cached)."""
-    import numba
+def _loops() -> ModuleType:
+    """The compiled loops (numba is imported, and the loops loaded or compiled, on the
+    first call)."""
+    from fishswarm.study import distance_loops
 
-    # Reassociation lets the inner sum run eight pairs at a time (AVX-512) or four; the
-    # order is then the compiler's, fixed for a machine, so a run stays deterministic.
-    @numba.njit(cache=True, nogil=True, fastmath={"reassoc"})
-    def total_all(x: Any, y: Any, z: Any) -> float:
-        count = x.shape[0]
-        total = 0.0
-        for fish in range(count - 1):
-            fx, fy, fz = x[fish], y[fish], z[fish]
-            row = 0.0
-            for other in range(fish + 1, count):
-                dx = x[other] - fx
-                dy = y[other] - fy
-                dz = z[other] - fz
-                row += math.sqrt(dx * dx + dy * dy + dz * dz)
-            total += row
-        return total
-
-    return total_all
-
-
-@functools.cache
-def _pairs() -> Callable[..., None]:
-    """The distances of listed pairs, on one core (compiled on first use, cached)."""
-    import numba
-
-    @numba.njit(cache=True, nogil=True)
-    def pairs_all(x: Any, y: Any, z: Any, first: Any, second: Any, distance: Any) -> None:
-        for pair in range(first.shape[0]):
-            one, other = first[pair], second[pair]
-            dx = x[one] - x[other]
-            dy = y[one] - y[other]
-            dz = z[one] - z[other]
-            distance[pair] = math.sqrt(dx * dx + dy * dy + dz * dz)
-
-    return pairs_all
-
-
-@functools.cache
-def _nearest() -> Callable[..., bool]:
-    """The nearest-neighbour search over rings of columns, on one core (compiled on first
-    use, cached)."""
-    import numba
-
-    @numba.njit(cache=True, nogil=True)
-    def nearest_all(
-        points: Any,
-        low_x: float,
-        low_y: float,
-        side: float,
-        columns: int,
-        rows: int,
-        nearest: Any,
-    ) -> bool:
-        count = points.shape[0]
-        # File the fish column by column (a counting sort): the fish of column b are the
-        # slots start[b] to start[b + 1] of `filed`, read together.
-        column_of = np.empty(count, dtype=np.int64)
-        row_of = np.empty(count, dtype=np.int64)
-        start = np.zeros(columns * rows + 1, dtype=np.int64)
-        for fish in range(count):
-            column = min(int((points[fish, 0] - low_x) / side), columns - 1)
-            row = min(int((points[fish, 1] - low_y) / side), rows - 1)
-            column_of[fish], row_of[fish] = column, row
-            start[row * columns + column + 1] += 1
-        if start.max() > CROWDED_COLUMN:
-            return False  # nothing searched: the caller asks the k-d tree
-        for bucket in range(columns * rows):
-            start[bucket + 1] += start[bucket]
-        filled = start[:-1].copy()
-        filed = np.empty((count, 3))
-        slot_of = np.empty(count, dtype=np.int64)
-        for fish in range(count):
-            bucket = row_of[fish] * columns + column_of[fish]
-            slot = filled[bucket]
-            filled[bucket] += 1
-            filed[slot, 0], filed[slot, 1], filed[slot, 2] = (
-                points[fish, 0],
-                points[fish, 1],
-                points[fish, 2],
-            )
-            slot_of[fish] = slot
-        widest = max(columns, rows)
-        budget = COLUMNS_PER_FISH * count
-        for fish in range(count):
-            home_column, home_row, own = column_of[fish], row_of[fish], slot_of[fish]
-            squared = math.inf
-            ring = 0
-            while ring <= widest:
-                # The columns exactly `ring` columns away (Chebyshev) from the fish's own.
-                for row in range(max(home_row - ring, 0), min(home_row + ring + 1, rows)):
-                    edge = row == home_row - ring or row == home_row + ring
-                    step = 1 if edge else 2 * ring
-                    column = home_column - ring
-                    while column <= home_column + ring:
-                        if 0 <= column < columns:
-                            budget -= 1
-                            bucket = row * columns + column
-                            for other in range(start[bucket], start[bucket + 1]):
-                                if other == own:
-                                    continue
-                                dx = points[fish, 0] - filed[other, 0]
-                                dy = points[fish, 1] - filed[other, 1]
-                                dz = points[fish, 2] - filed[other, 2]
-                                gap = dx * dx + dy * dy + dz * dz
-                                if gap < squared:
-                                    squared = gap
-                        column += step
-                # Fish in the next ring are at least `ring` whole columns away (less a
-                # hair: filing a fish into its column rounds).
-                reach = ring * side * (1.0 - 1e-9)
-                if squared <= reach * reach:
-                    break
-                if budget < 0:
-                    return False  # the columns are too narrow for this school
-                ring += 1
-            nearest[fish] = math.sqrt(squared)
-        return True
-
-    return nearest_all
+    return distance_loops

@@ -107,8 +107,8 @@ def pairwise_distance(position: FloatArray) -> float:
     if count < 2:
         return 0.0
     compiled = kernels.compiles(count)
-    if count * (count - 1) // 2 > EXACT_PAIRS_MAX:
-        first, second = _sampled_pairs(count)
+    if (pairs := _pairs_measured(count)) is not None:
+        first, second = pairs
         if compiled:
             return float(distance_kernels.pair_distances(position, first, second).mean())
         # Coordinate by coordinate: taking from one contiguous column is five times as
@@ -121,6 +121,12 @@ def pairwise_distance(position: FloatArray) -> float:
     if compiled:
         return distance_kernels.mean_pairwise_distance(position)
     return float(pdist(position).mean())
+
+
+def _pairs_measured(count: int) -> tuple[NDArray[np.intp], NDArray[np.intp]] | None:
+    """The pairs the mean pairwise distance of ``count`` fish is taken over: None for all
+    of them, else :func:`_sampled_pairs`."""
+    return _sampled_pairs(count) if count * (count - 1) // 2 > EXACT_PAIRS_MAX else None
 
 
 @functools.lru_cache(maxsize=4)
@@ -153,16 +159,28 @@ def effort_spread(effort: FloatArray) -> float:
     return float(effort.max()) / mean if mean > 0 else 1.0
 
 
+def _pairwise_and_nearest(position: FloatArray) -> tuple[float, float]:
+    """:func:`pairwise_distance` and :func:`nearest_neighbor_distance`, m; for a compiled
+    swarm in one call to the kernels, which hold no GIL throughout (the observer's thread
+    then needs it only before and after)."""
+    count = position.shape[0]
+    if count < 2 or not kernels.compiles(count):
+        return pairwise_distance(position), nearest_neighbor_distance(position)
+    pairwise, nearest = distance_kernels.school_distances(position, _pairs_measured(count))
+    return pairwise, float(nearest.mean())
+
+
 def swarm_metrics(
     position: FloatArray, neighbors_seen: NDArray[np.int64], effort: FloatArray | None = None
 ) -> dict[str, float]:
     """All metrics of one snapshot: the three distances (m), mean neighbours seen and, when
     the fish's efforts are known, the school's effort (gain-weighted fin beats) and its
     spread (the most a fish spent over the mean)."""
+    pairwise, nearest = _pairwise_and_nearest(position)
     metrics = {
         "centroid_distance": centroid_distance(position),
-        "pairwise_distance": pairwise_distance(position),
-        "nearest_neighbor_distance": nearest_neighbor_distance(position),
+        "pairwise_distance": pairwise,
+        "nearest_neighbor_distance": nearest,
         "neighbors_seen": float(neighbors_seen.mean()) if neighbors_seen.size else 0.0,
     }
     if effort is not None and effort.size:

@@ -8,6 +8,7 @@ import logging
 import numpy as np
 import pytest
 import trio
+import trio.testing
 
 from fishswarm import __version__
 from fishswarm.actors.bus import MemoryBus
@@ -209,6 +210,38 @@ def test_school_answers_a_batch_as_each_fish_would_alone() -> None:
     assert answer.led.tolist() == [True, True]
     assert statistics.rejected == 1  # the batch naming fish 7, which the school lacks
     assert statistics.perceptions == 2 and statistics.commands == 2
+
+
+def test_tasks_woken_with_a_fish_run_before_it_decides() -> None:
+    # In the launcher's process one step of the world wakes the fish and the observer: the
+    # observer must hand a large school's metrics to its thread before the fish's decision
+    # holds the event loop (trio runs the tasks woken together in either order).
+    settings = FishSettings((3,), Scenario().fish_params(), KEYS)
+
+    async def main() -> list[str]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        order: list[str] = []
+        bus.subscribe(KEYS.command(3), lambda key, payload: order.append("command"))
+        async with trio.open_nursery() as nursery:
+            await nursery.start(fish.run, bus)
+            # Woken as the observer is: by an inbox, right after the fish's perception.
+            snapshots = Inbox[int]()
+
+            async def other() -> None:
+                async for _ in snapshots:
+                    order.append("other")
+
+            nursery.start_soon(other)
+            for tick in range(1, 21):
+                await trio.testing.wait_all_tasks_blocked()
+                bus.put(KEYS.perception(3), _perception(3, tick))
+                snapshots.push(tick)
+            await trio.testing.wait_all_tasks_blocked()
+            nursery.cancel_scope.cancel()
+        return order
+
+    assert run_mock(main) == ["other", "command"] * 20
 
 
 def test_fish_waits_for_announced_deliveries_then_broadcasts_before_its_command() -> None:

@@ -4,17 +4,23 @@ wait for a tick."""
 from __future__ import annotations
 
 import json
+import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import pytest
 import trio
+import trio.testing
 from mcap.reader import make_reader
 
 from fishswarm.actors.bus import MemoryBus
-from fishswarm.actors.observer import Observer
+from fishswarm.actors.observer import Observer, _in_thread_at_once
+from fishswarm.actors.world import OFFLOAD_FISH
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import Snapshot, WorldPulse
+from fishswarm.study.metrics import swarm_metrics
 from tests.conftest import run_mock
 
 KEYS = KeySpace()
@@ -449,3 +455,80 @@ def test_an_observer_tells_a_run_its_world_ended_from_one_whose_world_vanished()
     vanished = [WorldPulse(0, 3, "running"), WorldPulse(9, 7, "ended")]
     assert run_mock(lambda: main(vanished)) == (False, 1)
     assert run_mock(lambda: main([])) == (None, 1)  # no pulse came through: cannot tell
+
+
+def test_a_large_schools_metrics_are_measured_in_a_thread_as_swarm_metrics_measures_them() -> None:
+    rng = np.random.default_rng(8)
+    count = OFFLOAD_FISH + 100
+    position = rng.uniform(0.0, 2.0, (count, 3))
+    seen = rng.integers(0, 5, count)
+    ones = np.ones(count)
+    message = Snapshot(0, 0.0, np.arange(count), position, np.zeros((count, 3)), ones, seen, seen)
+
+    async def main() -> Observer:
+        bus = MemoryBus()
+        observer = Observer(KEYS)
+        with trio.fail_after(30):  # real time: the distances are compiled on first use
+            async with trio.open_nursery() as nursery:
+                await nursery.start(observer.run, bus)
+                bus.put(KEYS.snapshot, encode(message))
+                await observer.wait_for_tick(0)
+                nursery.cancel_scope.cancel()
+        return observer
+
+    observer = trio.run(main)
+    assert observer.history[0].metrics == swarm_metrics(position, seen, message.effort)
+
+
+def test_a_thread_started_at_once_starts_before_a_task_scheduled_with_it_runs(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # In the launcher's process a task scheduled with the observer is the fish, about to
+    # decide: trio.to_thread.run_sync passes a schedule point first, and the fish went first.
+    order: list[str] = []
+    start_thread_soon = trio.lowlevel.start_thread_soon
+
+    def recorded(*arguments: Any, **options: Any) -> None:
+        order.append("thread")
+        start_thread_soon(*arguments, **options)
+
+    monkeypatch.setattr(trio.lowlevel, "start_thread_soon", recorded)
+
+    async def other() -> None:
+        order.append("other")
+
+    async def main() -> int:
+        async with trio.open_nursery() as nursery:
+            nursery.start_soon(other)
+            return await _in_thread_at_once(lambda: 7)
+
+    assert trio.run(main) == 7
+    assert order == ["thread", "other"]
+
+
+def test_a_thread_started_at_once_is_waited_for_when_cancelled_and_passes_on_errors() -> None:
+    release = threading.Event()
+
+    def measure() -> float:
+        release.wait(10.0)  # bounded: the test releases it as soon as the caller waits
+        return 1.5
+
+    def fail() -> float:
+        raise ValueError("no distances for these positions")
+
+    async def main() -> tuple[float, bool]:
+        async with trio.open_nursery() as nursery:
+
+            async def release_when_waiting() -> None:
+                await trio.testing.wait_all_tasks_blocked()
+                release.set()
+
+            nursery.start_soon(release_when_waiting)
+            with trio.CancelScope() as scope:
+                scope.cancel()  # before it starts: the thread still runs, and is waited for
+                value = await _in_thread_at_once(measure)
+        with pytest.raises(ValueError, match="no distances"):
+            await _in_thread_at_once(fail)
+        return value, release.is_set()
+
+    assert trio.run(main) == (1.5, True)

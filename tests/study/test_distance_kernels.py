@@ -16,6 +16,7 @@ from fishswarm.study.metrics import (
     _sampled_pairs,
     nearest_neighbor_distance,
     pairwise_distance,
+    swarm_metrics,
 )
 
 pytest.importorskip("numba")
@@ -173,3 +174,43 @@ def test_a_school_the_columns_cannot_split_goes_to_the_k_d_tree(
     stacked = np.c_[rng.uniform(0, 1e-9, (1000, 2)), np.linspace(0.0, 1.0, 1000)]
     np.testing.assert_array_equal(distance_kernels.nearest_distances(stacked), _kd_nearest(stacked))
     assert asked == [1001, 1000]
+
+
+def test_the_distances_in_one_call_are_those_of_the_kernels_one_by_one() -> None:
+    rng = np.random.default_rng(12)
+    # Spread over a tank (all pairs), a school of 3 000 (sampled pairs), and a school with
+    # a straggler 100 m off, whose nearest neighbours come from the k-d tree.
+    spread = np.c_[rng.uniform(0, 3, (1000, 2)), rng.uniform(0, 1.2, 1000)]
+    large = rng.uniform(0.0, 80.0, (3000, 3))
+    straggling = np.r_[rng.normal(0.0, 0.3, (1000, 3)), [[100.0, 100.0, 0.5]]]
+    for position in (spread, straggling, spread[:2]):
+        mean, nearest = distance_kernels.school_distances(position)
+        assert mean == distance_kernels.mean_pairwise_distance(position)
+        np.testing.assert_array_equal(nearest, distance_kernels.nearest_distances(position))
+    pairs = _sampled_pairs(3000)
+    mean, nearest = distance_kernels.school_distances(large, pairs)
+    assert mean == float(distance_kernels.pair_distances(large, *pairs).mean())
+    np.testing.assert_array_equal(nearest, distance_kernels.nearest_distances(large))
+    # Drawn on paper: a 3-4-5 triangle, its pairs 5, 4 and 3 m apart.
+    triangle = np.array([[0.0, 0.0, 0.0], [3.0, 4.0, 0.0], [3.0, 0.0, 0.0]])
+    mean, nearest = distance_kernels.school_distances(triangle)
+    assert mean == pytest.approx(4.0, rel=1e-15)
+    np.testing.assert_array_equal(nearest, [3.0, 4.0, 3.0])
+
+
+def test_the_distances_in_one_call_refuse_what_the_kernels_refuse() -> None:
+    with pytest.raises(ValueError, match="two fish"):
+        distance_kernels.school_distances(np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="finite"):
+        distance_kernels.school_distances(np.array([[0.0, 0.0, 0.0], [np.inf, 0.0, 0.0]]))
+    with pytest.raises(IndexError, match="outside"):
+        distance_kernels.school_distances(np.zeros((2, 3)), (np.array([0]), np.array([2])))
+
+
+def test_the_swarm_metrics_of_a_compiled_school_are_its_distances_one_by_one() -> None:
+    rng = np.random.default_rng(13)
+    for count in (kernels.COMPILED_MIN_FISH, 2100):  # 2 100 fish: sampled pairs
+        position = np.c_[rng.uniform(0, 5, (count, 2)), rng.uniform(0, 1.2, count)]
+        metrics = swarm_metrics(position, np.zeros(count, dtype=np.int64))
+        assert metrics["pairwise_distance"] == pairwise_distance(position)
+        assert metrics["nearest_neighbor_distance"] == nearest_neighbor_distance(position)
