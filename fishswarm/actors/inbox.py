@@ -9,6 +9,7 @@ per message is 10–70× slower); the trio side waits on an Event.
 
 from __future__ import annotations
 
+import threading
 from collections import deque
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -31,6 +32,7 @@ class Inbox(Generic[T]):
     def __init__(self) -> None:
         self._items: deque[T] = deque()
         self._token = trio.lowlevel.current_trio_token()
+        self._trio_thread = threading.get_ident()
         self._wake_pending = False
         self._event = trio.Event()
         self._closed = False
@@ -38,6 +40,11 @@ class Inbox(Generic[T]):
     def push(self, item: T) -> None:
         """Append an item and wake the receiver (thread-safe, never blocks)."""
         self._items.append(item)
+        if threading.get_ident() == self._trio_thread:
+            # An inline put by a task of this run: wake the receiver directly, without the
+            # trip through trio's wake-up socket that a push from another thread needs.
+            self._event.set()
+            return
         if not self._wake_pending:
             self._wake_pending = True
             try:
@@ -75,7 +82,9 @@ class Inbox(Generic[T]):
             return items
 
     async def receive(self) -> T:
-        """Wait for and return the next item."""
+        """Wait for and return the next item (a cancelled receiver gets none, even when
+        items wait)."""
+        await trio.lowlevel.checkpoint_if_cancelled()
         while not self._items:
             self._event = trio.Event()
             await self._event.wait()

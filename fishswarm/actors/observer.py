@@ -6,6 +6,7 @@ disturbing the run: an observer only listens.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from collections import deque
 from collections.abc import Callable
@@ -370,22 +371,28 @@ class Observer:
 
 
 async def _in_thread_at_once(function: Callable[[], T]) -> T:
-    """What ``function()`` returns, run in a thread started at once and waited for even
-    when cancelled (as :func:`trio.to_thread.run_sync` waits for a thread it has started).
+    """What ``function()`` returns, run in a thread started at once; once started, waited
+    for even when cancelled (as :func:`trio.to_thread.run_sync` waits for its thread).
 
     ``trio.to_thread.run_sync`` passes a schedule point before it starts its thread. In the
     launcher's process the fish, woken in the same step of the world, would then decide
     first, and a large school's metrics would run beside the world's next physics, whose
-    compiled kernels wait for the core the metrics hold (1 000 fish: a tick 0.3–1.5 ms
-    longer, `docs/benchmarks.md`).
+    compiled kernels wait for the core the metrics hold (1 000 fish: the whole tick
+    1.0–1.7 ms longer, `docs/benchmarks.md`).
+
+    Raises:
+        trio.Cancelled: the caller was cancelled before the thread started.
     """
+    await trio.lowlevel.checkpoint_if_cancelled()  # a cancelled observer measures no more
     token = trio.lowlevel.current_trio_token()
     done = trio.Event()
     result: list[outcome.Outcome[T]] = []
 
     def deliver(value: outcome.Outcome[T]) -> None:
         result.append(value)
-        token.run_sync_soon(done.set)  # the run goes on: its observer waits for this
+        # A Ctrl-C between the start and the wait can end the run first; then nobody waits.
+        with contextlib.suppress(trio.RunFinishedError):
+            token.run_sync_soon(done.set)
 
     trio.lowlevel.start_thread_soon(function, deliver, name="fishswarm observer metrics")
     with trio.CancelScope(shield=True):

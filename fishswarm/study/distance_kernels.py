@@ -118,7 +118,7 @@ def school_distances(
     Both in one compiled call that holds no GIL. The observer measures in a thread beside
     the fish's decisions, and every return to Python between two kernels waits for the GIL
     that the event loop holds: at 1 000 fish, three calls stretched a millisecond's work
-    over 1.6–1.9 ms, into the world's next physics.
+    over 1.3–1.8 ms, into the world's next physics.
 
     Raises:
         ValueError: fewer than two fish, a position that is not finite, or pairs that are
@@ -134,7 +134,7 @@ def school_distances(
     x, y, z = np.ascontiguousarray(points.T)
     distance = np.empty(first.shape[0])
     nearest = np.empty(count)
-    total, found = _loops().together(
+    total, found = _loops().pairs_and_nearest(
         x, y, z, pairs is None, first, second, distance, points, *columns, nearest
     )
     mean = total / (count * (count - 1) / 2) if pairs is None else float(distance.mean())

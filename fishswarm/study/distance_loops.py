@@ -68,6 +68,10 @@ def nearest_all(
     rows: int,
     nearest: Any,
 ) -> bool:
+    """Each fish's distance to its nearest other into ``nearest`` (N,), m, searching rings of
+    columns (of ``side``, from the corner ``low_x``, ``low_y``; ``columns`` × ``rows``)
+    outwards from its own; False, with ``nearest`` unfinished, when the columns cannot
+    split the school (:data:`CROWDED_COLUMN`, :data:`COLUMNS_PER_FISH`)."""
     count = points.shape[0]
     # File the fish column by column (a counting sort): the fish of column b are the
     # slots start[b] to start[b + 1] of `filed`, read together.
@@ -135,7 +139,7 @@ def nearest_all(
 
 
 @numba.njit(cache=True, nogil=True)
-def together(
+def pairs_and_nearest(
     x: Any,
     y: Any,
     z: Any,
@@ -151,6 +155,9 @@ def together(
     rows: int,
     nearest: Any,
 ) -> tuple[float, bool]:
+    """The summed distance over all pairs (``every_pair``; else 0, and the listed pairs'
+    distances into ``distance``), and whether the nearest-neighbour search filled
+    ``nearest`` (see :func:`nearest_all`)."""
     total = 0.0
     if every_pair:
         total = total_all(x, y, z)

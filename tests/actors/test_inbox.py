@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import sys
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from types import SimpleNamespace
 
 import pytest
 import trio
+import trio.testing
 
 from fishswarm.actors.inbox import Inbox
 
@@ -50,3 +52,56 @@ def test_everything_pushed_from_another_thread_is_received_in_order(
 
     trio.run(main)
     assert len(received) == count and received == list(range(count))
+
+
+def test_a_push_from_the_trio_thread_wakes_the_receiver_without_the_wake_up_socket(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # An inline put (the fish in the launcher's process) pushes on trio's own thread: the
+    # receiver is woken directly. A push from any other thread goes through the token.
+    async def main() -> tuple[list[str], list[int]]:
+        inbox: Inbox[str] = Inbox()
+        scheduled: list[int] = []
+        token = trio.lowlevel.current_trio_token()
+        run_sync_soon = token.run_sync_soon
+
+        def counted(function: Callable[[], object]) -> None:
+            scheduled.append(threading.get_ident())
+            run_sync_soon(function)
+
+        monkeypatch.setattr(inbox, "_token", SimpleNamespace(run_sync_soon=counted))
+        got: list[str] = []
+        async with trio.open_nursery() as nursery:
+
+            async def receive(count: int) -> None:
+                for _ in range(count):
+                    got.append(await inbox.receive())
+
+            nursery.start_soon(receive, 3)
+            await trio.testing.wait_all_tasks_blocked()
+            inbox.push("inline")
+            await trio.testing.wait_all_tasks_blocked()
+            assert got == ["inline"] and scheduled == []
+            await trio.to_thread.run_sync(inbox.push, "from a thread")
+            await trio.testing.wait_all_tasks_blocked()
+            inbox.push("inline again")
+        return got, scheduled
+
+    got, scheduled = trio.run(main)
+    assert got == ["inline", "from a thread", "inline again"]
+    assert len(scheduled) == 1 and scheduled[0] != threading.get_ident()
+
+
+def test_a_receiver_with_items_waiting_still_sees_a_cancellation() -> None:
+    async def main() -> tuple[bool, list[int]]:
+        inbox: Inbox[int] = Inbox()
+        for item in range(3):
+            inbox.push(item)
+        got: list[int] = []
+        with trio.CancelScope() as scope:
+            got.append(await inbox.receive())
+            scope.cancel()
+            got.append(await inbox.receive())
+        return scope.cancelled_caught, got
+
+    assert trio.run(main) == (True, [0])

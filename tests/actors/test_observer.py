@@ -15,6 +15,7 @@ import trio.testing
 from mcap.reader import make_reader
 
 from fishswarm.actors.bus import MemoryBus
+from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.observer import Observer, _in_thread_at_once
 from fishswarm.actors.world import OFFLOAD_FISH
 from fishswarm.protocols.codec import encode
@@ -508,27 +509,84 @@ def test_a_thread_started_at_once_starts_before_a_task_scheduled_with_it_runs(
 
 def test_a_thread_started_at_once_is_waited_for_when_cancelled_and_passes_on_errors() -> None:
     release = threading.Event()
+    started: list[str] = []
 
     def measure() -> float:
-        release.wait(10.0)  # bounded: the test releases it as soon as the caller waits
+        started.append("measure")
+        release.wait(10.0)  # bounded: the test releases it once the caller is cancelled
         return 1.5
 
     def fail() -> float:
         raise ValueError("no distances for these positions")
 
-    async def main() -> tuple[float, bool]:
+    async def main() -> tuple[bool, float | None, bool]:
+        # Cancelled before it starts: no thread, trio.Cancelled.
+        with trio.CancelScope() as before:
+            before.cancel()
+            await _in_thread_at_once(measure)
+        value = None
         async with trio.open_nursery() as nursery:
+            with trio.CancelScope() as during:
 
-            async def release_when_waiting() -> None:
-                await trio.testing.wait_all_tasks_blocked()
-                release.set()
+                async def cancel_then_release() -> None:
+                    await trio.testing.wait_all_tasks_blocked()
+                    during.cancel()
+                    await trio.testing.wait_all_tasks_blocked()
+                    release.set()
 
-            nursery.start_soon(release_when_waiting)
-            with trio.CancelScope() as scope:
-                scope.cancel()  # before it starts: the thread still runs, and is waited for
-                value = await _in_thread_at_once(measure)
+                nursery.start_soon(cancel_then_release)
+                value = await _in_thread_at_once(measure)  # cancelled while it waits
         with pytest.raises(ValueError, match="no distances"):
             await _in_thread_at_once(fail)
-        return value, release.is_set()
+        return before.cancelled_caught, value, during.cancelled_caught
 
-    assert trio.run(main) == (1.5, True)
+    assert trio.run(main) == (True, 1.5, False)
+    assert started == ["measure"]
+
+
+def test_an_observer_starts_measuring_a_large_school_before_a_task_woken_with_it_runs(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The fish in the launcher's process, woken by the world's put with the observer, let it
+    # go first (one checkpoint); the observer must then start its thread before yielding.
+    order: list[str] = []
+    start_thread_soon = trio.lowlevel.start_thread_soon
+
+    def recorded(*arguments: Any, **options: Any) -> None:
+        order.append("metrics")
+        start_thread_soon(*arguments, **options)
+
+    monkeypatch.setattr(trio.lowlevel, "start_thread_soon", recorded)
+    count = OFFLOAD_FISH
+    position = np.random.default_rng(3).uniform(0.0, 2.0, (count, 3))
+    zeros, counts = np.zeros((count, 3)), np.zeros(count, dtype=np.int64)
+
+    async def main() -> Observer:
+        bus = MemoryBus()
+        observer = Observer(KEYS)
+        fish = Inbox[int]()
+
+        async def decide() -> None:
+            async for _ in fish:
+                await trio.lowlevel.checkpoint()
+                order.append("decision")
+
+        with trio.fail_after(30):  # real time: the distances are compiled on first use
+            async with trio.open_nursery() as nursery:
+                await nursery.start(observer.run, bus)
+                nursery.start_soon(decide)
+                for tick in range(10):
+                    snapshot = Snapshot(
+                        tick, float(tick), np.arange(count), position, zeros, np.zeros(count),
+                        counts, counts,
+                    )  # fmt: skip
+                    await trio.testing.wait_all_tasks_blocked()
+                    bus.put(KEYS.snapshot, encode(snapshot))
+                    fish.push(tick)
+                    await observer.wait_for_tick(tick)
+                nursery.cancel_scope.cancel()
+        return observer
+
+    observer = trio.run(main)
+    assert order == ["metrics", "decision"] * 10
+    assert len(observer.history) == 10
