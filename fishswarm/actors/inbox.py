@@ -2,9 +2,11 @@
 
 Zenoh calls subscriber callbacks on its own threads, or, for an inline subscriber
 (:class:`~fishswarm.actors.zenoh_bus.ZenohBus` ``inline``), inside a put from this process,
-on trio's own thread. A callback only appends to a deque and schedules at most one pending
-wake-up through the trio token (DESIGN §4: ~0.5 M msgs/s into trio; one ``run_sync_soon``
-per message is 10–70× slower); the trio side waits on an Event.
+on trio's own thread. A callback only appends to a deque and wakes the receiver: from
+another thread by at most one pending wake-up through the trio token (DESIGN §4: ~0.5 M
+msgs/s into trio; one ``run_sync_soon`` per message is 10–70× slower), on trio's own
+thread directly (no trip through trio's wake-up socket: the fish in the launcher's process
+pass four or five messages a tick this way). The trio side waits on an Event.
 """
 
 from __future__ import annotations
