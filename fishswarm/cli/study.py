@@ -242,18 +242,15 @@ def _formations_of(recording: Recording) -> list[FormationTarget] | None:
 
 def _switches_of(recording: Recording) -> list[tuple[float, str]]:
     """When the shape a recorded formation's fish were told to take changed, s, and to
-    which: as the snapshots name it, or (recorded before they did) the scenario's switch."""
-    from fishswarm.behaviors.formation import DEFAULT_SHAPE
+    which (:meth:`FormationTargets.shape_told
+    <fishswarm.study.metrics.FormationTargets.shape_told>`); none for other runs."""
+    from fishswarm.study.metrics import FormationTargets
 
-    ran = Scenario.as_recorded(recording.scenario)
+    targets = FormationTargets.of(Scenario.as_recorded(recording.scenario))
+    if targets is None:
+        return []
     # A shape told is compared as a shape: an order for the configured one changes nothing.
-    told = [
-        snapshot.formation
-        or (ran.switch_formation if snapshot.time >= ran.switch_at else None)
-        or ran.formation
-        or DEFAULT_SHAPE
-        for snapshot in recording.snapshots
-    ]
+    told = [targets.shape_told(s.formation, s.time) for s in recording.snapshots]
     return [
         (snapshot.time, shape)
         for before, shape, snapshot in zip(told, told[1:], recording.snapshots[1:], strict=False)

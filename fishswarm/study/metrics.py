@@ -507,10 +507,15 @@ class FormationTargets:
         return cls(params, WorldParams.of(scenario).formation_at)
 
     def told(self, formation: str | None, time: float) -> FormationTarget:
-        """The target of the shape the fish were told to take at ``time``, s: ``formation``
-        as a snapshot names it, or where it names none (recorded before snapshots did, or
-        a batch engine's run) the scenario's own switch."""
-        return self.at(formation or self._schedule(time))
+        """The target of the shape the fish were told to take at ``time``, s (see
+        :meth:`shape_told`)."""
+        return self.at(self.shape_told(formation, time))
+
+    def shape_told(self, formation: str | None, time: float) -> str:
+        """The shape the fish were told to take at ``time``, s: ``formation`` as a snapshot
+        names it, or where it names none (recorded before snapshots did, or a batch
+        engine's run) the scenario's own switch, or else its configured shape."""
+        return formation or self._schedule(time) or self._params.shape
 
     def at(self, shape: str | None) -> FormationTarget:
         """The target of ``shape`` (None: the configured one)."""
