@@ -481,20 +481,26 @@ def test_a_large_schools_metrics_are_measured_in_a_thread_as_swarm_metrics_measu
     assert observer.history[0].metrics == swarm_metrics(position, seen, message.effort)
 
 
-def test_a_thread_started_at_once_starts_before_a_task_scheduled_with_it_runs(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    # In the launcher's process a task scheduled with the observer is the fish, about to
-    # decide: trio.to_thread.run_sync passes a schedule point first, and the fish went first.
-    order: list[str] = []
+@pytest.fixture
+def order(monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """What happened, in order: "thread" whenever trio.lowlevel.start_thread_soon starts
+    one (tests add their own entries)."""
+    happened: list[str] = []
     start_thread_soon = trio.lowlevel.start_thread_soon
 
     def recorded(*arguments: Any, **options: Any) -> None:
-        order.append("thread")
+        happened.append("thread")
         start_thread_soon(*arguments, **options)
 
     monkeypatch.setattr(trio.lowlevel, "start_thread_soon", recorded)
+    return happened
 
+
+def test_a_thread_started_at_once_starts_before_a_task_scheduled_with_it_runs(
+    order: list[str],
+) -> None:
+    # In the launcher's process a task scheduled with the observer is the fish, about to
+    # decide: trio.to_thread.run_sync passes a schedule point first, and the fish went first.
     async def other() -> None:
         order.append("other")
 
@@ -545,18 +551,10 @@ def test_a_thread_started_at_once_is_waited_for_when_cancelled_and_passes_on_err
 
 
 def test_an_observer_starts_measuring_a_large_school_before_a_task_woken_with_it_runs(
-    monkeypatch: pytest.MonkeyPatch,
+    order: list[str],
 ) -> None:
     # The fish in the launcher's process, woken by the world's put with the observer, let it
     # go first (one checkpoint); the observer must then start its thread before yielding.
-    order: list[str] = []
-    start_thread_soon = trio.lowlevel.start_thread_soon
-
-    def recorded(*arguments: Any, **options: Any) -> None:
-        order.append("metrics")
-        start_thread_soon(*arguments, **options)
-
-    monkeypatch.setattr(trio.lowlevel, "start_thread_soon", recorded)
     count = OFFLOAD_FISH
     position = np.random.default_rng(3).uniform(0.0, 2.0, (count, 3))
     zeros, counts = np.zeros((count, 3)), np.zeros(count, dtype=np.int64)
@@ -588,5 +586,5 @@ def test_an_observer_starts_measuring_a_large_school_before_a_task_woken_with_it
         return observer
 
     observer = trio.run(main)
-    assert order == ["metrics", "decision"] * 10
+    assert order == ["thread", "decision"] * 10
     assert len(observer.history) == 10
