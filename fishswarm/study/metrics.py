@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
-from scipy.spatial.distance import pdist
+from scipy.spatial.distance import pdist, squareform
 
 from fishswarm.behaviors.formation import FormationParams
 from fishswarm.bluebot.parameters import BODY_LENGTH
@@ -160,11 +160,22 @@ def effort_spread(effort: FloatArray) -> float:
 
 
 def _pairwise_and_nearest(position: FloatArray) -> tuple[float, float]:
-    """:func:`pairwise_distance` and :func:`nearest_neighbor_distance`, m; for a compiled
-    swarm in one call to the kernels, which hold no GIL throughout (the observer's thread
-    then needs it only before and after)."""
+    """:func:`pairwise_distance` and :func:`nearest_neighbor_distance`, m, the same bits.
+
+    A small swarm's both come from one set of pairwise distances (the nearest neighbour as
+    the least of a fish's row: 25 fish, 23 µs against 49 with a k-d tree, which the observer
+    spends on every snapshot); a compiled swarm's from one call to the kernels, which hold
+    no GIL throughout (the observer's thread then needs it only before and after).
+    """
     count = position.shape[0]
-    if count < 2 or not kernels.compiles(count):
+    if count < 2:
+        return 0.0, 0.0
+    if count < kernels.COMPILED_MIN_FISH:
+        distances = pdist(position)
+        square = squareform(distances)
+        np.fill_diagonal(square, np.inf)
+        return float(distances.mean()), float(square.min(axis=1).mean())
+    if not kernels.compiles(count):
         return pairwise_distance(position), nearest_neighbor_distance(position)
     pairwise, nearest = distance_kernels.school_distances(position, _pairs_measured(count))
     return pairwise, float(nearest.mean())

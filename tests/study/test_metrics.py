@@ -34,6 +34,9 @@ SQUARE = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
 def test_pairwise_and_nearest_on_a_square() -> None:
     assert pairwise_distance(SQUARE) == pytest.approx((4 + 2 * math.sqrt(2)) / 6)
     assert nearest_neighbor_distance(SQUARE) == pytest.approx(1.0)
+    metrics = swarm_metrics(SQUARE, np.zeros(4, dtype=np.int64))
+    assert metrics["nearest_neighbor_distance"] == 1.0
+    assert metrics["pairwise_distance"] == pytest.approx((4 + 2 * math.sqrt(2)) / 6, rel=1e-15)
 
 
 @settings(max_examples=200, deadline=None)
@@ -51,6 +54,24 @@ def test_centroid_distance_is_numpys_norm_to_the_bit(position: np.ndarray) -> No
     before = position.copy()
     assert centroid_distance(position) == by_norm
     np.testing.assert_array_equal(position, before)  # the positions are left alone
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    arrays(
+        np.float64,
+        st.tuples(st.integers(2, 60), st.just(3)),
+        elements=st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False),
+    )
+)
+def test_a_small_swarms_metrics_are_its_distances_one_by_one_to_the_bit(
+    position: np.ndarray,
+) -> None:
+    # From one set of pairwise distances, as the k-d tree finds each nearest neighbour;
+    # coincident fish (hypothesis repeats values) included.
+    metrics = swarm_metrics(position, np.zeros(position.shape[0], dtype=np.int64))
+    assert metrics["pairwise_distance"] == pairwise_distance(position)
+    assert metrics["nearest_neighbor_distance"] == nearest_neighbor_distance(position)
 
 
 def test_centroid_of_the_others_on_a_square() -> None:
