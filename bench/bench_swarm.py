@@ -13,9 +13,12 @@ whole tick loop's average, first ticks included), the time from launch to the fi
 snapshot (what issue 14's start-up target counts), start-up (launch to the end of the run,
 less the tick loop: processes, sessions, tokens, and teardown too), and the ratios issue 14
 sets targets for: the actor tick over (batch tick + one echo) at 25 fish, over the batch
-tick alone at 1 000, and the batch engine's speed as a share at 10 000. Then the perception
-→ command round trip of one fish actor on its own keys (as on a robot) in a worker process,
-timed from a plain Zenoh session and from a trio task.
+tick alone at 1 000, and the batch engine's speed as a share at 10 000. A second table says
+where each actor tick goes: the world's physics and vision beside the batch engine's own
+(the same steps, so a gap between them is the other work on the two cores), the
+perceptions sent, and the fish's answer (perceptions out to the last command in). Then the
+perception → command round trip of one fish actor on its own keys (as on a robot) in a
+worker process, timed from a plain Zenoh session and from a trio task.
 
 Usage:
     python bench/bench_swarm.py                    # everything, prints Markdown tables
@@ -33,6 +36,9 @@ import platform
 import statistics
 import threading
 import time
+from collections.abc import Callable
+from typing import Any
+from unittest.mock import patch
 
 import numpy as np
 import trio
@@ -53,6 +59,7 @@ from fishswarm.sim import kernels
 from fishswarm.sim.allocator import tune_allocator
 from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.tick import WorldSim
 
 DURATION = {25: 600.0, 100: 120.0, 1000: 300.0, 10_000: 40.0}
 WARM_UP_TICKS = 4
@@ -91,6 +98,8 @@ def swarm_row(fish: int, procs: int) -> dict[str, float]:
         "steps_per_second": fish / steady,
         "real_time_factor": scenario.control_period / steady,
         "seen": summary["metrics"]["neighbors_seen"]["final"],
+        **{f"world_{name}": value for name, value in summary["world_time"].items()},
+        "answer": summary["answer_time"]["median"],
     }
 
 
@@ -196,6 +205,30 @@ def batch_tick(fish: int) -> tuple[float, float]:
     return (time.perf_counter() - started - start_up) / (scenario.ticks - 1), start_up
 
 
+def batch_phases(fish: int) -> dict[str, float]:
+    """The median seconds of the batch engine's physics and vision on the scenario of
+    :func:`swarm_row` (the world's own steps, each call timed, first tick left out), to set
+    beside the same steps in the actor system's summary."""
+    scenario = Scenario.crowded(fish, duration=BATCH_DURATION.get(fish, 30.0), seed=1)
+    steps: dict[str, list[float]] = {"physics": [], "vision": []}
+
+    def timed(name: str, step: Callable[[WorldSim], Any]) -> Callable[[WorldSim], Any]:
+        def timed_step(world: WorldSim) -> Any:
+            started = time.perf_counter()
+            result = step(world)
+            steps[name].append(time.perf_counter() - started)
+            return result
+
+        return timed_step
+
+    with (
+        patch.object(WorldSim, "next_event", timed("physics", WorldSim.next_event)),
+        patch.object(WorldSim, "sense", timed("vision", WorldSim.sense)),
+    ):
+        simulate_batch(scenario)
+    return {name: statistics.median(times[1:]) for name, times in steps.items()}
+
+
 def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None:
     """Tick time against fish count, log-log: the batch engine and the actor system with
     each number of workers, from rows (fish, workers, batch s, actors s)."""
@@ -267,12 +300,15 @@ def main() -> None:
         "| to first tick s | start-up s | real-time factor |"
     )
     print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    phases: list[tuple[int, int, dict[str, float], dict[str, float]]] = []
     for fish in args.fish:
         batch, _ = batch_tick(fish)
+        batch_steps = batch_phases(fish)
         for procs in args.procs:
             row = swarm_row(fish, procs)
             tick = row["tick"]
             measured.append((fish, procs, batch, tick))
+            phases.append((fish, procs, batch_steps, row))
             print(
                 f"| {fish} | {procs} | {batch * 1e3:.1f} | {tick * 1e3:.1f} | "
                 f"{row['loop_tick'] * 1e3:.1f} | "
@@ -282,6 +318,24 @@ def main() -> None:
                 f"{row['real_time_factor']:.1f}× |",
                 flush=True,
             )
+    print()
+    print(
+        "Where the actor system's tick goes (medians, ms; the batch engine's own physics and "
+        "vision beside them; the fish's answer counts from the perceptions sent to the last "
+        "command taken):\n"
+    )
+    print(
+        "| fish | workers | physics: batch, actors | vision: batch, actors "
+        "| perceptions out | the fish's answer |"
+    )
+    print("|---:|---:|---:|---:|---:|---:|")
+    for fish, procs, steps, row in phases:
+        print(
+            f"| {fish} | {procs} | {steps['physics'] * 1e3:.2f}, "
+            f"{row['world_physics'] * 1e3:.2f} | {steps['vision'] * 1e3:.2f}, "
+            f"{row['world_vision'] * 1e3:.2f} | {row['world_perceptions'] * 1e3:.2f} | "
+            f"{row['answer'] * 1e3:.2f} |"
+        )
     if args.plot:
         plot_ticks(measured, args.plot)
     if args.round_trips:
