@@ -378,7 +378,7 @@ async def _in_thread_at_once(function: Callable[[], T]) -> T:
     launcher's process the fish, woken in the same step of the world, would then decide
     first, and a large school's metrics would run beside the world's next physics, whose
     compiled kernels wait for the core the metrics hold (1 000 fish: the whole tick
-    1.0–1.7 ms longer, `docs/benchmarks.md`).
+    1.0–1.7 ms longer than with the metrics left out, `docs/benchmarks.md`).
 
     Raises:
         trio.Cancelled: the caller was cancelled before the thread started.

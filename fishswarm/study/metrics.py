@@ -171,6 +171,8 @@ def _pairwise_and_nearest(position: FloatArray) -> tuple[float, float]:
     if count < 2:
         return 0.0, 0.0
     if count < kernels.COMPILED_MIN_FISH:
+        if not np.isfinite(position).all():  # as the k-d tree and the kernels refuse them
+            raise ValueError("positions must be finite")
         distances = pdist(position)
         square = squareform(distances)
         np.fill_diagonal(square, np.inf)

@@ -348,3 +348,26 @@ def test_the_observer_aligns_a_school_as_well_as_many_more_starts_would() -> Non
     best = align(school, target.slots[:6], starts=48).rms
     assert align(school, target.slots[:6], starts=5).rms > best + 1e-3
     assert target.metrics(school)["shape_error"] == pytest.approx(best, abs=1e-9)
+
+
+def test_the_shape_told_is_the_snapshots_else_the_scenarios_switch_else_its_own() -> None:
+    from fishswarm.behaviors.formation import DEFAULT_SHAPE
+    from fishswarm.study.metrics import FormationTargets
+
+    switching = Scenario(behavior="formation", fish=6, switch_formation="column", switch_at=1.5)
+    targets = FormationTargets.of(switching)
+    assert targets is not None
+    assert targets.shape_told(None, 1.0) == DEFAULT_SHAPE  # before the switch
+    assert targets.shape_told(None, 1.5) == "column"
+    assert targets.shape_told("diamond", 3.0) == "diamond"  # an operator's order, named
+    column = FormationTargets.of(Scenario(behavior="formation", fish=6, formation="column"))
+    assert column is not None and column.shape_told(None, 0.0) == "column"
+    assert column.told(None, 0.0) is column.at("column")
+    assert FormationTargets.of(Scenario()) is None  # not a formation run
+
+
+def test_a_small_swarms_metrics_refuse_positions_that_are_not_finite() -> None:
+    position = SQUARE.copy()
+    position[2, 1] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        swarm_metrics(position, np.zeros(4, dtype=np.int64))
