@@ -27,6 +27,13 @@ from fishswarm.study.metrics import (
     swarm_metrics,
 )
 
+SCHOOLS = arrays(
+    np.float64,
+    st.tuples(st.integers(2, 60), st.just(3)),
+    elements=st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False),
+)
+"""Positions (N, 3) of 2 to 60 fish, m, coincident fish included (hypothesis repeats values)."""
+
 # A unit square: 4 pairs at 1 m and 2 at √2 m; every nearest neighbour at 1 m.
 SQUARE = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
 
@@ -40,13 +47,7 @@ def test_pairwise_and_nearest_on_a_square() -> None:
 
 
 @settings(max_examples=200, deadline=None)
-@given(
-    arrays(
-        np.float64,
-        st.tuples(st.integers(2, 40), st.just(3)),
-        elements=st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False),
-    )
-)
+@given(SCHOOLS)
 def test_centroid_distance_is_numpys_norm_to_the_bit(position: np.ndarray) -> None:
     count = position.shape[0]
     others = (position.sum(axis=0)[None, :] - position) / (count - 1)
@@ -57,13 +58,7 @@ def test_centroid_distance_is_numpys_norm_to_the_bit(position: np.ndarray) -> No
 
 
 @settings(max_examples=200, deadline=None)
-@given(
-    arrays(
-        np.float64,
-        st.tuples(st.integers(2, 60), st.just(3)),
-        elements=st.floats(-1e3, 1e3, allow_nan=False, allow_infinity=False),
-    )
-)
+@given(SCHOOLS)
 def test_a_small_swarms_metrics_are_its_distances_one_by_one_to_the_bit(
     position: np.ndarray,
 ) -> None:
