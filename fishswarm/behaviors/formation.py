@@ -303,7 +303,7 @@ def flag_seen_in_light(params: FishParams, told: str | None) -> FormationFlag | 
         return None
     if not steering.flags:
         return None
-    # All light takes of the fish's own flag is its shape and orientation.
+    # All that light carries of the fish's own flag: its shape and orientation.
     shape = FORMATION_SHAPES.index(steering.shape)
     own = FormationFlag(shape, -1, False, NO_HOPS, _heading_mdeg(steering.orientation), 0)
     return flag_by_light(own)

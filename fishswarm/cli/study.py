@@ -22,7 +22,7 @@ from fishswarm.sim.scenario import (
 
 if TYPE_CHECKING:
     from fishswarm.bluebot.vision import Vision
-    from fishswarm.study.metrics import FormationTarget, OrbitTarget
+    from fishswarm.study.metrics import FormationTarget, FormationTargets, OrbitTarget
     from fishswarm.study.recording import Recording
     from fishswarm.study.sweep import Engine
 
@@ -228,6 +228,35 @@ def _formations_of(recording: Recording) -> list[FormationTarget] | None:
     """The target of each snapshot of a recorded formation run: the shape the snapshot says
     the fish were told to take, or (recorded before snapshots said) the scenario's own
     switch. None for other runs, and for recordings that do not say what ran."""
+    told = _shapes_told(recording)
+    if told is None:
+        return None
+    targets, shapes = told
+    return [targets.at(shape) for shape in shapes]
+
+
+def _switches_of(recording: Recording) -> list[tuple[float, str]]:
+    """When the shape a recorded formation's fish were told to take changed, s, and to
+    which; none for other runs."""
+    told = _shapes_told(recording)
+    if told is None:
+        return []
+    _, shapes = told
+    # A shape told is compared as a shape: an order for the configured one changes nothing.
+    return [
+        (snapshot.time, shape)
+        for before, shape, snapshot in zip(
+            shapes, shapes[1:], recording.snapshots[1:], strict=False
+        )
+        if shape != before
+    ]
+
+
+def _shapes_told(recording: Recording) -> tuple[FormationTargets, list[str]] | None:
+    """A recorded formation run's targets and the shape its fish were told to take at each
+    snapshot (:meth:`FormationTargets.shape_told
+    <fishswarm.study.metrics.FormationTargets.shape_told>`); None for other runs, and for
+    recordings that do not say what ran."""
     from fishswarm.study.metrics import FormationTargets
 
     try:
@@ -237,25 +266,7 @@ def _formations_of(recording: Recording) -> list[FormationTarget] | None:
     targets = FormationTargets.of(ran)
     if targets is None:
         return None
-    return [targets.told(snapshot.formation, snapshot.time) for snapshot in recording.snapshots]
-
-
-def _switches_of(recording: Recording) -> list[tuple[float, str]]:
-    """When the shape a recorded formation's fish were told to take changed, s, and to
-    which (:meth:`FormationTargets.shape_told
-    <fishswarm.study.metrics.FormationTargets.shape_told>`); none for other runs."""
-    from fishswarm.study.metrics import FormationTargets
-
-    targets = FormationTargets.of(Scenario.as_recorded(recording.scenario))
-    if targets is None:
-        return []
-    # A shape told is compared as a shape: an order for the configured one changes nothing.
-    told = [targets.shape_told(s.formation, s.time) for s in recording.snapshots]
-    return [
-        (snapshot.time, shape)
-        for before, shape, snapshot in zip(told, told[1:], recording.snapshots[1:], strict=False)
-        if shape != before
-    ]
+    return targets, [targets.shape_told(s.formation, s.time) for s in recording.snapshots]
 
 
 def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
