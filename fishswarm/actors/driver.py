@@ -430,7 +430,9 @@ class Driver:
         self._unannounced = 0
         self._tick += 1
         self._counts["perceptions"] += 1
-        local.put(self.settings.keys.perception(self.settings.robot_id), encode(message))
+        local.put(
+            self.settings.keys.perception(self.settings.robot_id), encode(message, reuse=True)
+        )
 
     # Acting -----------------------------------------------------------------------------
 

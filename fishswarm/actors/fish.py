@@ -569,7 +569,7 @@ class Fish:
                 decision.led[order],
                 broadcasts[order],
             )
-            bus.put(keys.school_commands(school), encode(batch))
+            bus.put(keys.school_commands(school), encode(batch, reuse=True))
             return
         for n, row in enumerate(rows.tolist()):
             fish_id = self.settings.fish_ids[row]
@@ -580,7 +580,7 @@ class Fish:
                 led=bool(decision.led[n]),
                 broadcasts=int(broadcasts[n]),
             )
-            bus.put(keys.command(fish_id), encode(command))
+            bus.put(keys.command(fish_id), encode(command, reuse=True))
 
 
 def _inbox(ready: list[_Pending], mail: list[list[list[Delivery]]]) -> HeardInbox:

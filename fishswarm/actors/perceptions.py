@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -168,7 +168,12 @@ class _Stacked:
     def of(cls, perceived: Perceived) -> _Stacked:
         """Stack what each fish sees (once a tick, for every batch of it)."""
         rows = stack_rows(perceived.neighbors, perceived.mask)
-        rows.setflags(write=False)
+        # Read-only down to the new array it views: a batch built from it can then be
+        # handed to a reader in this process as it is (``encode``'s ``reuse``).
+        viewed: np.ndarray[Any, Any] | None = rows
+        while isinstance(viewed, np.ndarray):
+            viewed.setflags(write=False)
+            viewed = viewed.base
         counts = perceived.counts
         starts = np.zeros(counts.size + 1, dtype=np.intp)
         np.cumsum(counts, out=starts[1:])

@@ -664,7 +664,7 @@ class World:
                 formation=self._told(event.time),
                 rows=rows,
             ):
-                self._put(bus, key, encode(message))
+                self._put(bus, key, encode(message, reuse=True))
             self._phase_times["perceptions"].append(time.perf_counter() - sending)
             if deferred is not None:
                 self._send_snapshot(bus, event.time, perceived.counts, deferred, lights)
@@ -715,7 +715,7 @@ class World:
             self.run_id,
             lights,
         )
-        self._put(bus, self.keys.snapshot, encode(snapshot))
+        self._put(bus, self.keys.snapshot, encode(snapshot, reuse=True))
 
     def _lights_now(self) -> IntArray | None:
         """Each fish's LEDs, as a snapshot tells them (None: all steady)."""

@@ -5,6 +5,14 @@ Numpy arrays travel as msgpack extension type 1: a header of one byte for the dt
 (0 = little-endian float64, 1 = int64, 2 = bool), one byte for the number of dimensions and a
 little-endian uint32 per dimension, then the raw little-endian bytes — a copy of memory, not
 a list of Python numbers (DESIGN.md §4: ``tolist()`` is 100× slower).
+
+Actors of one process talk through Zenoh like any others, and each reader decodes what it
+gets. A sender whose readers are mostly in its own process (the world's tick, with the fish,
+the observer and the channel beside it; a robot's driver and its fish actor) encodes with
+``reuse=True``: a decode in this process of those very bytes then returns the message
+already built, frozen and validated when it was, instead of decoding it again (as ROS 2's
+intra-process communication hands a message over without serializing it). Any other bytes,
+from anywhere, are decoded and validated in full.
 """
 
 from __future__ import annotations
@@ -25,11 +33,19 @@ from fishswarm.protocols.messages import (
 )
 
 MAX_MESSAGE_BYTES = 16 * 1024 * 1024
+REUSED_PER_TYPE = 4
+"""How many messages of each type encoded with ``reuse=True`` this process keeps, last
+first (one tick's messages of a type: its snapshot, its perception batch or the parts of a
+large one)."""
 _ARRAY_EXT = 1
 _DTYPES = (np.dtype("<f8"), np.dtype("<i8"), np.dtype("|b1"))
 _CODES = {dtype: code for code, dtype in enumerate(_DTYPES)}
 
 M = TypeVar("M", bound=Message)
+
+_reused: dict[type[Message], tuple[tuple[bytes, Message], ...]] = {}
+"""The messages last encoded with ``reuse=True``, by type, each beside its bytes. Replaced,
+never changed in place: a thread that reads it meanwhile sees the old or the new entries."""
 
 
 class MessageError(ValueError):
@@ -78,14 +94,54 @@ def _ext_hook(code: int, data: bytes) -> np.ndarray[Any, Any]:
     return np.frombuffer(data, dtype=dtype, offset=offset).reshape(shape)
 
 
-def encode(message: Message) -> bytes:
-    """Encode a message to bytes for the wire."""
+def encode(message: Message, *, reuse: bool = False) -> bytes:
+    """Encode a message to bytes for the wire.
+
+    Args:
+        message: the message.
+        reuse: keep the message, so that :func:`decode` in this process returns it for these
+            bytes (its readers are mostly here). Kept only when it decodes to itself: its
+            fields plain numbers, texts and arrays nobody can change.
+    """
+    fields = fields_of(message)
     packed: bytes = msgpack.packb(
-        {"v": SCHEMA_VERSION, "t": message.type_name, "f": fields_of(message)},
+        {"v": SCHEMA_VERSION, "t": message.type_name, "f": fields},
         default=_default,
         use_bin_type=True,
     )
+    if reuse and all(map(_decodes_to_itself, fields.values())):
+        kind = type(message)
+        _reused[kind] = ((packed, message), *_reused.get(kind, ())[: REUSED_PER_TYPE - 1])
     return packed
+
+
+def _decodes_to_itself(value: object) -> bool:
+    """Whether a field's value comes back from the wire as it is: a number, text or None of
+    the type msgpack decodes it to, or an array of the codec's dtypes that neither it nor
+    any array it views into can be written to (then nobody can change it after encoding)."""
+    if type(value) in (int, float, str, bool) or value is None:
+        return True
+    if type(value) is not np.ndarray or value.dtype not in _CODES:
+        return False
+    array: np.ndarray[Any, Any] = value
+    while not array.flags.writeable:
+        base = array.base
+        if base is None or isinstance(base, bytes):
+            return True
+        if not isinstance(base, np.ndarray):
+            return False
+        array = base
+    return False
+
+
+def _reused_message(payload: bytes | bytearray | memoryview, expected: type[M]) -> M | None:
+    """The message encoded here with ``reuse=True`` as exactly ``payload``, if kept."""
+    if type(payload) is not bytes:
+        return None
+    for kept, message in _reused.get(expected, ()):
+        if len(kept) == len(payload) and kept == payload:
+            return message  # type: ignore[return-value]
+    return None
 
 
 def decode(payload: bytes | bytearray | memoryview, expected: type[M] | None = None) -> M:
@@ -96,13 +152,16 @@ def decode(payload: bytes | bytearray | memoryview, expected: type[M] | None = N
         expected: the message type this key carries; anything else is rejected.
 
     Returns:
-        The message, validated on construction.
+        The message, validated on construction: the very message encoded with
+        ``reuse=True`` in this process, when ``payload`` is its bytes and ``expected`` its type.
 
     Raises:
         MessageError: the payload is not a valid message of the expected type, with the reason.
     """
     if len(payload) > MAX_MESSAGE_BYTES:
         raise MessageError(f"message of {len(payload)} bytes exceeds {MAX_MESSAGE_BYTES}")
+    if expected is not None and (reused := _reused_message(payload, expected)) is not None:
+        return reused
     try:
         raw = msgpack.unpackb(
             payload, ext_hook=_ext_hook, raw=False, strict_map_key=True, use_list=True

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from fishswarm.actors.perceptions import Schools, perception_messages
 from fishswarm.bluebot.vision import Perceived
+from fishswarm.protocols import codec, decode, encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import Perception, PerceptionBatch
 
@@ -264,3 +265,28 @@ def test_landmark_rows_count_toward_a_batchs_limit() -> None:
 def test_a_batch_carries_at_most_row_limit_fish_even_when_they_see_nothing() -> None:
     assert _school_of_three(landmark_rows=0, row_limit=2) == [[0, 1], [2]]
     assert _school_of_three(landmark_rows=0, row_limit=1) == [[0], [1], [2]]
+
+
+def test_a_ticks_batches_are_handed_as_they_are_to_readers_in_this_process() -> None:
+    # School a (fish 0, 2, 4) takes its rows out of the stacked ones, a copy; school b
+    # (fish 5, 6, consecutive) a view of them. Fish 1 and 3 have keys of their own.
+    keys = KeySpace()
+    ids = np.arange(7)
+    messages = perception_messages(
+        keys,
+        ids=ids,
+        schools=Schools.of(ids, {0: "a", 2: "a", 4: "a", 5: "b", 6: "b"}),
+        depth=np.zeros(7),
+        perceived=_perceived([[[float(i), 0.0, 0.0]] for i in range(7)], width=1),
+        landmarks=_perceived([[] for _ in range(7)], width=1),
+        inbox_counts=np.zeros(7, dtype=np.int64),
+        tick=2,
+        time=2.0,
+    )
+    assert len(messages) == 4  # fish 1 and 3 alone, then the batches of a and b
+    try:
+        for _, message in messages:
+            payload = bytes(bytearray(encode(message, reuse=True)))
+            assert decode(payload, type(message)) is message
+    finally:
+        codec._reused.clear()
