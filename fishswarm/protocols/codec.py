@@ -40,6 +40,7 @@ large one)."""
 _ARRAY_EXT = 1
 _DTYPES = (np.dtype("<f8"), np.dtype("<i8"), np.dtype("|b1"))
 _CODES = {dtype: code for code, dtype in enumerate(_DTYPES)}
+_HEADERS = tuple(struct.Struct(f"<BB{ndim}I") for ndim in range(3))
 
 M = TypeVar("M", bound=Message)
 
@@ -54,11 +55,14 @@ class MessageError(ValueError):
 
 def _default(value: object) -> object:
     if isinstance(value, np.ndarray):
-        code = _CODES.get(value.dtype.newbyteorder("<") if value.dtype.kind != "b" else value.dtype)
+        code = _CODES.get(value.dtype)  # the usual case: already one of the wire's dtypes
+        if code is None:
+            swapped = value.dtype.newbyteorder("<") if value.dtype.kind != "b" else value.dtype
+            code = _CODES.get(swapped)
         if code is None or value.ndim > 2:
             raise TypeError(f"cannot encode an array of dtype {value.dtype} and {value.ndim} dims")
         array = np.ascontiguousarray(value, dtype=_DTYPES[code])
-        header = struct.pack(f"<BB{array.ndim}I", code, array.ndim, *array.shape)
+        header = _HEADERS[array.ndim].pack(code, array.ndim, *array.shape)
         # The header joined straight to the array's memory: through tobytes() a large array
         # is copied twice (0.48 ms against 0.013 ms for 0.5 MB, a 1 000-fish perception).
         return msgpack.ExtType(_ARRAY_EXT, header + array.reshape(-1).data.cast("B"))

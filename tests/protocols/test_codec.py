@@ -16,7 +16,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from fishswarm.protocols import MessageError, decode, encode
+from fishswarm.protocols import MessageError, codec, decode, encode
 from fishswarm.protocols.checks import MAX_ROWS
 from fishswarm.protocols.messages import (
     DARK,
@@ -672,3 +672,18 @@ def test_which_leds_flash_stays_off_the_wire_until_a_robot_flashes() -> None:
         dataclasses.replace(quiet, flags_seen=-1)
     with pytest.raises(TypeError, match="flashing must be a bool or None"):
         dataclasses.replace(quiet, flashing=1)  # type: ignore[arg-type]
+
+
+def test_arrays_of_the_other_byte_order_go_on_the_wire_little_endian() -> None:
+    # A message's own arrays are native after its checks; the codec's hook still takes any.
+    big = np.array([1.5, -2.0, 3.25], dtype=">f8")
+    ext = codec._default(big)
+    assert isinstance(ext, msgpack.ExtType)
+    assert struct.unpack("<BBI", ext.data[:6]) == (0, 1, 3)  # float64, one dimension of 3
+    assert ext.data[6:] == np.array([1.5, -2.0, 3.25], dtype="<f8").tobytes()
+    np.testing.assert_array_equal(codec._ext_hook(ext.code, ext.data), big)
+    swapped_ints = codec._default(np.array([[3], [4]], dtype=">i8"))
+    assert isinstance(swapped_ints, msgpack.ExtType)
+    np.testing.assert_array_equal(codec._ext_hook(swapped_ints.code, swapped_ints.data), [[3], [4]])
+    with pytest.raises(TypeError, match="cannot encode an array of dtype int32"):
+        codec._default(np.array([1], dtype=np.int32))
