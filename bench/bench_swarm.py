@@ -24,6 +24,7 @@ Usage:
     python bench/bench_swarm.py                    # everything, prints Markdown tables
     python bench/bench_swarm.py --fish 25 1000     # some sizes only
     python bench/bench_swarm.py --round-trips 0    # skip the latency part
+    python bench/bench_swarm.py --rounds 3         # each size three times: median and range
 
 Results and conditions are kept in docs/benchmarks.md.
 """
@@ -34,6 +35,7 @@ import argparse
 import os
 import platform
 import statistics
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -229,6 +231,29 @@ def batch_phases(fish: int) -> dict[str, float]:
     return {name: statistics.median(times[1:]) for name, times in steps.items()}
 
 
+def median_round(
+    rounds: list[tuple[float, dict[str, float]]], echo: float
+) -> tuple[float, dict[str, float], dict[str, tuple[float, float]]]:
+    """Of rounds of (batch engine tick, actor row) of one size, each measured in turn: the
+    round whose actors / batch ratio is the median (the lower of the two middle ones for an
+    even count), and each ratio's range over the rounds — ``echo`` (actors / (batch + echo)),
+    ``batch`` (actors / batch) and ``share`` (batch / actors)."""
+    ordered = sorted(rounds, key=lambda measured: measured[1]["tick"] / measured[0])
+    batch, row = ordered[(len(ordered) - 1) // 2]
+    ratios = {
+        "echo": [row["tick"] / (batch + echo) for batch, row in rounds],
+        "batch": [row["tick"] / batch for batch, row in rounds],
+        "share": [batch / row["tick"] for batch, row in rounds],
+    }
+    return batch, row, {name: (min(values), max(values)) for name, values in ratios.items()}
+
+
+def _with_range(ratio: float, spread: tuple[float, float]) -> str:
+    """A ratio, and the range it took over the rounds when there were several."""
+    low, high = spread
+    return f"{ratio:.2f}" if low == high else f"{ratio:.2f} ({low:.2f}–{high:.2f})"
+
+
 def plot_ticks(measured: list[tuple[int, int, float, float]], path: str) -> None:
     """Tick time against fish count, log-log: the batch engine and the actor system with
     each number of workers, from rows (fish, workers, batch s, actors s)."""
@@ -281,8 +306,18 @@ def main() -> None:
         help="one fish actor's perception-to-command round trips to time at the end "
         "(default 2000; 0 skips this part)",
     )
+    parser.add_argument(
+        "--rounds",
+        type=int,
+        default=1,
+        help="time every size this many times, the batch engine and the actor system in turn, "
+        "and report the round with the median ratio and the range of the ratios (the "
+        "machine's speed moves within minutes; default 1)",
+    )
     parser.add_argument("--plot", help="also draw tick time against fish count to this file")
     args = parser.parse_args()
+    if args.rounds < 1:
+        parser.error(f"--rounds must be 1 or more, got {args.rounds}")
     # As the fishswarm command and its workers do: the batch engine and the launcher run here.
     tuned = tune_allocator()
     measured: list[tuple[int, int, float, float]] = []
@@ -302,17 +337,34 @@ def main() -> None:
     print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     phases: list[tuple[int, int, dict[str, float], dict[str, float]]] = []
     for fish in args.fish:
-        batch, _ = batch_tick(fish)
         batch_steps = batch_phases(fish)
+        rounds: dict[int, list[tuple[float, dict[str, float]]]] = {n: [] for n in args.procs}
+        for number in range(1, args.rounds + 1):
+            batch, _ = batch_tick(fish)
+            for procs in args.procs:
+                rounds[procs].append((batch, swarm_row(fish, procs)))
+            if args.rounds > 1:
+                ticks = ", ".join(
+                    f"{rounds[procs][-1][1]['tick'] * 1e3:.1f}" for procs in args.procs
+                )
+                workers = ", ".join(map(str, args.procs))
+                print(
+                    f"({fish} fish, round {number} of {args.rounds}: batch engine "
+                    f"{batch * 1e3:.1f} ms, actors {ticks} ms with {workers} workers)",
+                    file=sys.stderr,
+                    flush=True,
+                )
         for procs in args.procs:
-            row = swarm_row(fish, procs)
+            batch, row, spread = median_round(rounds[procs], echo)
             tick = row["tick"]
             measured.append((fish, procs, batch, tick))
             phases.append((fish, procs, batch_steps, row))
             print(
                 f"| {fish} | {procs} | {batch * 1e3:.1f} | {tick * 1e3:.1f} | "
                 f"{row['loop_tick'] * 1e3:.1f} | "
-                f"{tick / (batch + echo):.2f} | {tick / batch:.2f} | {batch / tick:.2f} | "
+                f"{_with_range(tick / (batch + echo), spread['echo'])} | "
+                f"{_with_range(tick / batch, spread['batch'])} | "
+                f"{_with_range(batch / tick, spread['share'])} | "
                 f"{row['steps_per_second']:,.0f} | {row['first_tick']:.2f} | "
                 f"{row['start_up']:.1f} | "
                 f"{row['real_time_factor']:.1f}× |",

@@ -78,3 +78,21 @@ def test_the_swarm_benchmark_times_the_batch_engines_steps(
     phases = module.batch_phases(5)
     assert set(phases) == {"physics", "vision"}
     assert all(0.0 < seconds < 1.0 for seconds in phases.values())
+
+
+def test_the_swarm_benchmark_reports_the_round_of_the_median_ratio_and_the_range(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    module = _load(ROOT / "bench" / "bench_swarm.py", monkeypatch)
+    # Three rounds of (batch tick, actor tick), s: actors / batch 2.0, 1.5 and 3.0.
+    rounds = [(0.002, {"tick": 0.004}), (0.002, {"tick": 0.003}), (0.001, {"tick": 0.003})]
+    batch, row, spread = module.median_round(rounds, 0.0005)
+    assert (batch, row["tick"]) == (0.002, 0.004)  # the median of 1.5, 2.0, 3.0
+    assert spread["batch"] == (1.5, 3.0)
+    assert spread["echo"] == pytest.approx((0.003 / 0.0025, 0.003 / 0.0015))
+    assert spread["share"] == pytest.approx((1 / 3, 2 / 3))
+    # Of two rounds, the lower: actors / batch 1.5 before 2.0.
+    batch, row, _ = module.median_round(rounds[:2], 0.0005)
+    assert row["tick"] == 0.003
+    assert module._with_range(1.5, (1.5, 1.5)) == "1.50"
+    assert module._with_range(2.0, (1.5, 3.0)) == "2.00 (1.50–3.00)"
