@@ -234,10 +234,12 @@ def batch_phases(fish: int) -> dict[str, float]:
 def median_round(
     rounds: list[tuple[float, dict[str, float]]], echo: float
 ) -> tuple[float, dict[str, float], dict[str, tuple[float, float]]]:
-    """Of rounds of (batch engine tick, actor row) of one size, each measured in turn: the
-    round whose actors / batch ratio is the median (the lower of the two middle ones for an
-    even count), and each ratio's range over the rounds — ``echo`` (actors / (batch + echo)),
-    ``batch`` (actors / batch) and ``share`` (batch / actors)."""
+    """The round of the median actors / batch ratio, and each ratio's range over the rounds.
+
+    ``rounds`` holds (batch engine tick, actor row) for one size, each pair measured in
+    turn; of an even count the lower of the two middle rounds is taken. The ranges:
+    ``echo`` (actors / (batch + echo)), ``batch`` (actors / batch) and ``share``
+    (batch / actors)."""
     ordered = sorted(rounds, key=lambda measured: measured[1]["tick"] / measured[0])
     batch, row = ordered[(len(ordered) - 1) // 2]
     ratios = {
@@ -318,6 +320,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.rounds < 1:
         parser.error(f"--rounds must be 1 or more, got {args.rounds}")
+    args.procs = list(dict.fromkeys(args.procs))  # each set-up once, however often named
     # As the fishswarm command and its workers do: the batch engine and the launcher run here.
     tuned = tune_allocator()
     measured: list[tuple[int, int, float, float]] = []
@@ -338,14 +341,14 @@ def main() -> None:
     phases: list[tuple[int, int, dict[str, float], dict[str, float]]] = []
     for fish in args.fish:
         batch_steps = batch_phases(fish)
-        rounds: dict[int, list[tuple[float, dict[str, float]]]] = {n: [] for n in args.procs}
+        timed: dict[int, list[tuple[float, dict[str, float]]]] = {n: [] for n in args.procs}
         for number in range(1, args.rounds + 1):
             batch, _ = batch_tick(fish)
             for procs in args.procs:
-                rounds[procs].append((batch, swarm_row(fish, procs)))
+                timed[procs].append((batch, swarm_row(fish, procs)))
             if args.rounds > 1:
                 ticks = ", ".join(
-                    f"{rounds[procs][-1][1]['tick'] * 1e3:.1f}" for procs in args.procs
+                    f"{timed[procs][-1][1]['tick'] * 1e3:.1f}" for procs in args.procs
                 )
                 workers = ", ".join(map(str, args.procs))
                 print(
@@ -355,7 +358,7 @@ def main() -> None:
                     flush=True,
                 )
         for procs in args.procs:
-            batch, row, spread = median_round(rounds[procs], echo)
+            batch, row, spread = median_round(timed[procs], echo)
             tick = row["tick"]
             measured.append((fish, procs, batch, tick))
             phases.append((fish, procs, batch_steps, row))

@@ -168,8 +168,9 @@ class _Stacked:
     def of(cls, perceived: Perceived) -> _Stacked:
         """Stack what each fish sees (once a tick, for every batch of it)."""
         rows = stack_rows(perceived.neighbors, perceived.mask)
-        # Read-only down to the new array it views: a batch built from it can then be
-        # handed to a reader in this process as it is (``encode``'s ``reuse``).
+        # Read-only down to the memory it views (stack_rows's own, new): a batch then takes
+        # its fish's rows as they are, and can be handed to a reader in this process as it
+        # is (``encode``'s ``reuse``).
         viewed: np.ndarray[Any, Any] | None = rows
         while isinstance(viewed, np.ndarray):
             viewed.setflags(write=False)

@@ -53,6 +53,7 @@ from fishswarm.protocols.messages import (
     ControlReply,
     ControlRequest,
     FishAbout,
+    PerceptionBatch,
     Snapshot,
     WorldPulse,
 )
@@ -664,7 +665,9 @@ class World:
                 formation=self._told(event.time),
                 rows=rows,
             ):
-                self._put(bus, key, encode(message, reuse=True))
+                # A batch's readers may be here (the fish in the launcher's process); a fish
+                # on its own keys (a robot, a `fishswarm fish` process) is elsewhere.
+                self._put(bus, key, encode(message, reuse=isinstance(message, PerceptionBatch)))
             self._phase_times["perceptions"].append(time.perf_counter() - sending)
             if deferred is not None:
                 self._send_snapshot(bus, event.time, perceived.counts, deferred, lights)

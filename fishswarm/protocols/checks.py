@@ -2,12 +2,15 @@
 arrays of a dtype and shape, ascending ids, counts that add up.
 
 Each raises TypeError or ValueError with what is wrong; the codec turns either into its one
-error type. Arrays are stored read-only, so a message never changes after construction.
+error type. Arrays are stored read-only, and so is all memory they view: a message never
+changes after construction. An array the checks copy sits on a bytes object, as a decoded
+one does, which nobody can make writable again.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,6 +29,32 @@ BoolArray = NDArray[np.bool_]
 
 def _set(obj: object, name: str, value: object) -> None:
     object.__setattr__(obj, name, value)
+
+
+def unchangeable(array: np.ndarray[Any, Any]) -> bool:
+    """Whether nothing writes to ``array``: it is read-only, and so is every array it views,
+    down to memory that an array owns or that a bytes object holds.
+
+    (Whoever holds a read-only array that owns its memory could set it writable again, as
+    a frozen dataclass can be changed through ``object.__setattr__``: a message's promise
+    not to change is one its holders keep. Memory a bytes object holds, numpy lets nobody
+    write to.)"""
+    viewed: object = array
+    while isinstance(viewed, np.ndarray):
+        if viewed.flags.writeable:
+            return False
+        if viewed.base is None:
+            return bool(viewed.flags.owndata)
+        viewed = viewed.base
+    return isinstance(viewed, bytes)
+
+
+def frozen(array: np.ndarray[Any, Any], dtype: type[np.generic]) -> np.ndarray[Any, Any]:
+    """A copy of ``array`` as ``dtype`` (native byte order, C order) that nothing can write
+    to: its memory is a bytes object."""
+    native = np.dtype(dtype)
+    contiguous = np.ascontiguousarray(array, dtype=native)
+    return np.frombuffer(contiguous.tobytes(), dtype=native).reshape(contiguous.shape)
 
 
 def check_int(name: str, value: object, low: int = 0, high: int = MAX_TICK) -> None:
@@ -80,11 +109,11 @@ def check_array(
         raise ValueError(f"{name} must have {rows} rows, got {array.shape[0]}")
     if array.shape[0] > MAX_ROWS:
         raise ValueError(f"{name} has {array.shape[0]} rows, more than the limit {MAX_ROWS}")
-    # Arrays decoded from the wire are read-only already and need no copy; anything the caller
-    # could still change is copied, so that a message never changes after construction.
-    if array.dtype != dtype or array.flags.writeable:
-        array = np.array(array, dtype=dtype, copy=True)
-        array.setflags(write=False)
+    # Arrays decoded from the wire sit on their bytes already and need no copy; anything the
+    # caller could still change, or of an equal dtype of another name (longlong for int64,
+    # another byte order), is copied, so that a message never changes after construction.
+    if array.dtype is not np.dtype(dtype) or not unchangeable(array):
+        array = frozen(array, dtype)
     if dtype is np.float64 and not np.isfinite(array).all():
         raise ValueError(f"{name} must hold finite numbers only")
     _set(obj, name, array)

@@ -24,7 +24,7 @@ from typing import Any, TypeVar
 import msgpack
 import numpy as np
 
-from fishswarm.protocols.checks import MAX_ROWS
+from fishswarm.protocols.checks import MAX_ROWS, unchangeable
 from fishswarm.protocols.messages import (
     MESSAGE_TYPES,
     SCHEMA_VERSION,
@@ -35,8 +35,8 @@ from fishswarm.protocols.messages import (
 MAX_MESSAGE_BYTES = 16 * 1024 * 1024
 REUSED_PER_TYPE = 4
 """How many messages of each type encoded with ``reuse=True`` this process keeps, last
-first (one tick's messages of a type: its snapshot, its perception batch or the parts of a
-large one)."""
+first: enough for a tick's snapshot, perception batch (or the parts of a large one) and
+command batch, or for a robot's one perception and one command a tick."""
 _ARRAY_EXT = 1
 _DTYPES = (np.dtype("<f8"), np.dtype("<i8"), np.dtype("|b1"))
 _CODES = {dtype: code for code, dtype in enumerate(_DTYPES)}
@@ -45,8 +45,10 @@ _HEADERS = tuple(struct.Struct(f"<BB{ndim}I") for ndim in range(3))
 M = TypeVar("M", bound=Message)
 
 _reused: dict[type[Message], tuple[tuple[bytes, Message], ...]] = {}
-"""The messages last encoded with ``reuse=True``, by type, each beside its bytes. Replaced,
-never changed in place: a thread that reads it meanwhile sees the old or the new entries."""
+"""The messages last encoded with ``reuse=True``, by type, each beside its bytes. A type's
+entries are replaced by a new tuple, never changed in place: a thread that reads them
+meanwhile sees the old or the new ones (two threads encoding one type at once may drop an
+entry, which only costs a full decode)."""
 
 
 class MessageError(ValueError):
@@ -105,7 +107,7 @@ def encode(message: Message, *, reuse: bool = False) -> bytes:
         message: the message.
         reuse: keep the message, so that :func:`decode` in this process returns it for these
             bytes (its readers are mostly here). Kept only when it decodes to itself: its
-            fields plain numbers, texts and arrays nobody can change.
+            fields plain numbers, texts and arrays nothing can write to.
     """
     fields = fields_of(message)
     packed: bytes = msgpack.packb(
@@ -121,21 +123,17 @@ def encode(message: Message, *, reuse: bool = False) -> bytes:
 
 def _decodes_to_itself(value: object) -> bool:
     """Whether a field's value comes back from the wire as it is: a number, text or None of
-    the type msgpack decodes it to, or an array of the codec's dtypes that neither it nor
-    any array it views into can be written to (then nobody can change it after encoding)."""
+    the very type msgpack decodes it to (not a NumPy number), or a C-ordered array of one
+    of the wire's dtypes (by name, too: not longlong for int64) that nothing can write to,
+    so that it stays what was encoded (as every array a message's checks store is)."""
     if type(value) in (int, float, str, bool) or value is None:
         return True
-    if type(value) is not np.ndarray or value.dtype not in _CODES:
-        return False
-    array: np.ndarray[Any, Any] = value
-    while not array.flags.writeable:
-        base = array.base
-        if base is None or isinstance(base, bytes):
-            return True
-        if not isinstance(base, np.ndarray):
-            return False
-        array = base
-    return False
+    return (
+        type(value) is np.ndarray
+        and any(value.dtype is wire for wire in _DTYPES)
+        and value.flags.c_contiguous
+        and unchangeable(value)
+    )
 
 
 def _reused_message(payload: bytes | bytearray | memoryview, expected: type[M]) -> M | None:

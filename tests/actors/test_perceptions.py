@@ -268,25 +268,37 @@ def test_a_batch_carries_at_most_row_limit_fish_even_when_they_see_nothing() -> 
 
 
 def test_a_ticks_batches_are_handed_as_they_are_to_readers_in_this_process() -> None:
-    # School a (fish 0, 2, 4) takes its rows out of the stacked ones, a copy; school b
-    # (fish 5, 6, consecutive) a view of them. Fish 1 and 3 have keys of their own.
+    # School a (fish 0, 2, 4) takes its rows out of the stacked ones, a copy; schools b
+    # (fish 5, 6) and c (fish 7, 8), consecutive, views of them, which their batches keep
+    # without a copy of their own. Fish 1 and 3 have keys of their own.
     keys = KeySpace()
-    ids = np.arange(7)
+    ids = np.arange(9)
     messages = perception_messages(
         keys,
         ids=ids,
-        schools=Schools.of(ids, {0: "a", 2: "a", 4: "a", 5: "b", 6: "b"}),
-        depth=np.zeros(7),
-        perceived=_perceived([[[float(i), 0.0, 0.0]] for i in range(7)], width=1),
-        landmarks=_perceived([[] for _ in range(7)], width=1),
-        inbox_counts=np.zeros(7, dtype=np.int64),
+        schools=Schools.of(ids, {0: "a", 2: "a", 4: "a", 5: "b", 6: "b", 7: "c", 8: "c"}),
+        depth=np.zeros(9),
+        perceived=_perceived([[[float(i), 0.0, 0.0]] for i in range(9)], width=1),
+        landmarks=_perceived([[] for _ in range(9)], width=1),
+        inbox_counts=np.zeros(9, dtype=np.int64),
         tick=2,
         time=2.0,
     )
-    assert len(messages) == 4  # fish 1 and 3 alone, then the batches of a and b
+    assert len(messages) == 5  # fish 1 and 3 alone, then the batches of a, b and c
+    b, c = (message for _, message in messages[3:])
+    assert isinstance(b, PerceptionBatch) and isinstance(c, PerceptionBatch)
+    assert _memory_of(b.neighbors) is _memory_of(c.neighbors)
+    np.testing.assert_array_equal(c.neighbors, [[7.0, 0, 0], [8.0, 0, 0]])
     try:
         for _, message in messages:
             payload = bytes(bytearray(encode(message, reuse=True)))
             assert decode(payload, type(message)) is message
     finally:
         codec._reused.clear()
+
+
+def _memory_of(array: np.ndarray) -> object:
+    """The array or object whose memory ``array`` views, at the end of its bases."""
+    while isinstance(array.base, np.ndarray):
+        array = array.base
+    return array

@@ -4,6 +4,7 @@ and the same trajectories as the batch engine."""
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import logging
 import time
@@ -23,6 +24,7 @@ from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.observer import Observer
 from fishswarm.actors.world import StartTimeout, World, WorldSettings
 from fishswarm.bluebot.vision import to_body
+from fishswarm.protocols import codec
 from fishswarm.protocols.codec import decode, encode
 from fishswarm.protocols.messages import (
     DARK,
@@ -36,6 +38,7 @@ from fishswarm.protocols.messages import (
     Delivery,
     FishAbout,
     FormationFlag,
+    Message,
     Perception,
     PerceptionBatch,
     Snapshot,
@@ -150,6 +153,33 @@ def test_the_actors_give_the_batch_engines_trajectory(changes: dict[str, object]
     if switched is not None:
         assert snapshots[-1].formation == switched
     assert {s.run for s in snapshots} == {world.run_id}  # as its perceptions carry it
+
+
+def test_a_tick_in_one_process_hands_its_messages_over_instead_of_decoding_them(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # One school beside the world and the channel, as in the launcher's process: the
+    # school's perception batches, its command batches and the snapshots the channel reads
+    # are the messages their senders built.
+    handed: collections.Counter[tuple[str, bool]] = collections.Counter()
+    look_up = codec._reused_message
+
+    def counted(payload: bytes, expected: type[Message]) -> Message | None:
+        message = look_up(payload, expected)
+        handed[expected.__name__, message is not None] += 1
+        return message
+
+    monkeypatch.setattr(codec, "_reused_message", counted)
+    scenario = Scenario(fish=6, duration=4.0, seed=2, behavior="aggregation")
+    world, snapshots = run_mock(lambda: _swarm(scenario, schools=1))
+    assert world.state_name == "finished" and world.lost == []
+    ticks = len(snapshots)
+    assert handed["PerceptionBatch", True] == ticks - 1  # the last snapshot asks for nothing
+    assert handed["CommandBatch", True] == ticks - 1
+    assert handed["Snapshot", True] >= ticks  # the channel's (and this test's own reading)
+    assert handed["PerceptionBatch", False] == handed["CommandBatch", False] == 0
+    reference = simulate_batch(scenario)
+    np.testing.assert_array_equal(np.array([s.position for s in snapshots]), reference.position)
 
 
 def test_schools_whose_perceptions_come_in_parts_decide_as_with_one_batch(

@@ -39,6 +39,36 @@ def test_a_message_keeps_its_arrays_whatever_the_caller_does_with_its_own() -> N
         perception.neighbors[0, 0] = 9.0
 
 
+def test_a_message_keeps_its_arrays_from_memory_the_caller_can_still_change() -> None:
+    memory = np.array([[1.0, 2.0, 3.0]])
+    view = memory[:]
+    view.setflags(write=False)  # read-only itself, but a view of what the caller may write
+    perception = Perception(0, 0, 0.0, 0.0, view, np.zeros((0, 3)))
+    memory[0, 0] = 9.0
+    assert perception.neighbors.tolist() == [[1.0, 2.0, 3.0]]
+
+
+def test_nobody_can_make_an_array_the_checks_copied_writable_again() -> None:
+    perception = Perception(0, 0, 0.0, 0.0, np.array([[1.0, 2.0, 3.0]]), np.zeros((0, 3)))
+    for array in (perception.neighbors, perception.neighbors[:1], perception.landmarks):
+        with pytest.raises(ValueError, match="WRITEABLE"):
+            array.setflags(write=True)
+
+
+def test_a_read_only_array_that_owns_its_memory_is_kept_as_it_is() -> None:
+    owned = np.array([[1.0, 2.0, 3.0]])
+    owned.setflags(write=False)  # a promise its holder keeps: no copy
+    assert Perception(0, 0, 0.0, 0.0, owned, np.zeros((0, 3))).neighbors is owned
+
+
+def test_an_array_of_an_equal_dtype_of_another_name_is_stored_as_the_messages_own() -> None:
+    ids = np.array([2, 3], dtype=np.longlong)  # equal to int64, but not int64 by name
+    batch = CommandBatch(1, ids, np.zeros((2, 4)), np.ones(2, dtype=bool), np.zeros(2, int))
+    assert batch.ids.dtype is np.dtype(np.int64)
+    assert type(batch.ids[0]) is np.int64
+    assert batch.ids.tolist() == [2, 3]
+
+
 def test_an_empty_list_may_stand_for_no_booleans_and_no_integers() -> None:
     # An empty list has no dtype to tell a boolean or integer array from another
     # (np.asarray makes it float64): empty is empty, whatever its dtype.

@@ -46,8 +46,13 @@ def _snapshot(tick: int = 5, position: np.ndarray | None = None) -> Snapshot:
 
 
 def _decoded_in_full(payload: bytes, kind: type[Message]) -> Message:
-    """What decoding the bytes gives (a bytearray is never looked up among the kept)."""
-    return decode(bytearray(payload), kind)
+    """What decoding the bytes gives, with nothing kept to hand over instead."""
+    kept = dict(codec._reused)
+    codec._reused.clear()
+    try:
+        return decode(payload, kind)
+    finally:
+        codec._reused.update(kept)
 
 
 def _assert_alike(kept: Message, decoded: Message) -> None:
@@ -68,7 +73,19 @@ def test_a_reader_of_the_very_bytes_gets_the_message_itself() -> None:
     received = bytes(bytearray(payload))  # a copy, as a subscriber gets from Zenoh
     assert received is not payload
     assert decode(received, Snapshot) is snapshot
-    _assert_alike(snapshot, _decoded_in_full(payload, Snapshot))
+    decoded = _decoded_in_full(payload, Snapshot)
+    assert decoded is not snapshot
+    _assert_alike(snapshot, decoded)
+    assert decode(received, Snapshot) is snapshot  # still kept after the full decode
+
+
+def test_only_bytes_are_looked_up() -> None:
+    snapshot = _snapshot()
+    payload = encode(snapshot, reuse=True)
+    for other in (bytearray(payload), memoryview(payload)):
+        decoded = decode(other, Snapshot)
+        assert decoded is not snapshot
+        assert decoded == snapshot
 
 
 def test_without_reuse_every_reader_decodes_its_own() -> None:
@@ -101,34 +118,78 @@ def test_bytes_beyond_the_size_limit_are_refused_even_when_kept(
         decode(payload, Snapshot)
 
 
-def test_an_array_that_views_a_writable_one_is_not_kept() -> None:
+def test_a_message_built_from_arrays_others_can_change_is_kept_with_its_own_copy() -> None:
     buffer = np.arange(9.0)
     view = buffer.reshape(3, 3)
     view.setflags(write=False)  # read-only itself, but its memory can still change
     snapshot = _snapshot(position=view)
-    assert snapshot.position.base is not None  # taken as it is, without a copy
     payload = encode(snapshot, reuse=True)
-    buffer[0] = 100.0  # what the reader must not see: the bytes say 0
-    decoded = decode(payload, Snapshot)
-    assert decoded is not snapshot
-    assert decoded.position[0, 0] == 0.0
+    buffer[0] = 100.0  # nothing the message or a reader of it sees: the bytes say 0
+    assert decode(payload, Snapshot) is snapshot
+    assert snapshot.position[0, 0] == 0.0
+    with pytest.raises(ValueError, match="WRITEABLE"):
+        snapshot.position.setflags(write=True)  # a reader cannot change it for the others
 
 
-def test_an_array_read_only_down_to_its_memory_is_kept() -> None:
-    buffer = np.arange(9.0)
-    view = buffer.reshape(3, 3)
+def _view_of_writable() -> np.ndarray:
+    view = np.arange(6.0).reshape(2, 3)
     view.setflags(write=False)
-    buffer.setflags(write=False)
-    snapshot = _snapshot(position=view)
-    assert decode(encode(snapshot, reuse=True), Snapshot) is snapshot
+    return view
+
+
+def _owned_read_only() -> np.ndarray:
+    owned = np.arange(6.0)
+    owned.setflags(write=False)  # kept read-only by whoever holds it, as a message's arrays
+    return owned
+
+
+def _on_a_bytearray() -> np.ndarray:
+    array = np.frombuffer(bytearray(48), dtype=np.float64)
+    array.setflags(write=False)  # the bytearray itself can still change
+    return array
+
+
+def _on_bytes(dtype: str = "<f8") -> np.ndarray:
+    return np.frombuffer(bytes(48), dtype=dtype)
+
+
+@pytest.mark.parametrize(
+    ("value", "kept"),
+    [
+        (5, True),
+        (5.0, True),
+        ("column", True),
+        (None, True),
+        (True, True),
+        (np.int64(5), False),  # decodes to int
+        (np.float64(5.0), False),  # a float, but decodes to a plain one
+        (_on_bytes(), True),
+        (_on_bytes().reshape(2, 3)[:, 1:], False),  # not C-ordered, as no decoded array is
+        (_on_bytes("<i8"), True),
+        (_on_bytes("<q"), False),  # longlong: equal to int64, but not by name
+        (_on_bytes(">f8"), False),
+        (_view_of_writable(), False),
+        (_owned_read_only(), True),
+        (_owned_read_only()[::2], False),  # not C-ordered
+        (_on_a_bytearray(), False),
+        (np.frombuffer(memoryview(bytes(48)), dtype=np.float64), False),
+        ((1, 2), False),
+        ({"fish": 25}, False),
+    ],
+)
+def test_what_decodes_to_itself(value: object, kept: bool) -> None:
+    assert codec._decodes_to_itself(value) is kept
 
 
 def test_a_message_with_numpy_numbers_is_decoded_to_python_ones() -> None:
-    snapshot = _snapshot(tick=np.int64(5))  # type: ignore[arg-type]
-    payload = encode(snapshot, reuse=True)
-    decoded = decode(payload, Snapshot)
-    assert decoded is not snapshot
-    assert type(decoded.tick) is int
+    for snapshot in (
+        _snapshot(tick=np.int64(5)),  # type: ignore[arg-type]
+        dataclasses.replace(_snapshot(), time=np.float64(5.0)),
+    ):
+        payload = encode(snapshot, reuse=True)
+        decoded = decode(payload, Snapshot)
+        assert decoded is not snapshot
+        assert (type(decoded.tick), type(decoded.time)) == (int, float)
 
 
 def test_a_message_with_a_map_is_decoded() -> None:
