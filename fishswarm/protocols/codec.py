@@ -124,8 +124,8 @@ def encode(message: Message, *, reuse: bool = False) -> bytes:
 def _decodes_to_itself(value: object) -> bool:
     """Whether a field's value comes back from the wire as it is: a number, text or None of
     the very type msgpack decodes it to (not a NumPy number), or a C-ordered array of one
-    of the wire's dtypes (by name, too: not longlong for int64) that nothing can write to,
-    so that it stays what was encoded (as every array a message's checks store is)."""
+    of the wire's dtypes (by name, too: not longlong for int64) that nothing writes to, so
+    that it stays what was encoded."""
     if type(value) in (int, float, str, bool) or value is None:
         return True
     return (
