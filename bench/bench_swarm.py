@@ -339,6 +339,30 @@ def main() -> None:
     )
     print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     phases: list[tuple[int, int, dict[str, float], dict[str, float]]] = []
+
+    def report(
+        fish: int,
+        procs: int,
+        steps: dict[str, float],
+        rounds: list[tuple[float, dict[str, float]]],
+    ) -> None:
+        """Print the row of one set-up, from its rounds (``steps``: the batch engine's)."""
+        batch, row, spread = median_round(rounds, echo)
+        tick = row["tick"]
+        measured.append((fish, procs, batch, tick))
+        phases.append((fish, procs, steps, row))
+        print(
+            f"| {fish} | {procs} | {batch * 1e3:.1f} | {tick * 1e3:.1f} | "
+            f"{row['loop_tick'] * 1e3:.1f} | "
+            f"{_with_range(tick / (batch + echo), spread['echo'])} | "
+            f"{_with_range(tick / batch, spread['batch'])} | "
+            f"{_with_range(batch / tick, spread['share'])} | "
+            f"{row['steps_per_second']:,.0f} | {row['first_tick']:.2f} | "
+            f"{row['start_up']:.1f} | "
+            f"{row['real_time_factor']:.1f}× |",
+            flush=True,
+        )
+
     for fish in args.fish:
         batch_steps = batch_phases(fish)
         timed: dict[int, list[tuple[float, dict[str, float]]]] = {n: [] for n in args.procs}
@@ -346,6 +370,8 @@ def main() -> None:
             batch, _ = batch_tick(fish)
             for procs in args.procs:
                 timed[procs].append((batch, swarm_row(fish, procs)))
+                if args.rounds == 1:  # each row as soon as it is measured
+                    report(fish, procs, batch_steps, timed[procs])
             if args.rounds > 1:
                 ticks = ", ".join(
                     f"{timed[procs][-1][1]['tick'] * 1e3:.1f}" for procs in args.procs
@@ -357,22 +383,9 @@ def main() -> None:
                     file=sys.stderr,
                     flush=True,
                 )
-        for procs in args.procs:
-            batch, row, spread = median_round(timed[procs], echo)
-            tick = row["tick"]
-            measured.append((fish, procs, batch, tick))
-            phases.append((fish, procs, batch_steps, row))
-            print(
-                f"| {fish} | {procs} | {batch * 1e3:.1f} | {tick * 1e3:.1f} | "
-                f"{row['loop_tick'] * 1e3:.1f} | "
-                f"{_with_range(tick / (batch + echo), spread['echo'])} | "
-                f"{_with_range(tick / batch, spread['batch'])} | "
-                f"{_with_range(batch / tick, spread['share'])} | "
-                f"{row['steps_per_second']:,.0f} | {row['first_tick']:.2f} | "
-                f"{row['start_up']:.1f} | "
-                f"{row['real_time_factor']:.1f}× |",
-                flush=True,
-            )
+        if args.rounds > 1:
+            for procs in args.procs:
+                report(fish, procs, batch_steps, timed[procs])
     print()
     print(
         "Where the actor system's tick goes (medians, ms; the batch engine's own physics and "
