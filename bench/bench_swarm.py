@@ -242,12 +242,18 @@ def median_round(
     (batch / actors)."""
     ordered = sorted(rounds, key=lambda measured: measured[1]["tick"] / measured[0])
     batch, row = ordered[(len(ordered) - 1) // 2]
-    ratios = {
-        "echo": [row["tick"] / (batch + echo) for batch, row in rounds],
-        "batch": [row["tick"] / batch for batch, row in rounds],
-        "share": [batch / row["tick"] for batch, row in rounds],
-    }
-    return batch, row, {name: (min(values), max(values)) for name, values in ratios.items()}
+    each = [ratios_of(batch, row["tick"], echo) for batch, row in rounds]
+    return (
+        batch,
+        row,
+        {name: (min(r[name] for r in each), max(r[name] for r in each)) for name in each[0]},
+    )
+
+
+def ratios_of(batch: float, tick: float, echo: float) -> dict[str, float]:
+    """Issue 14's ratios of an actor tick to a batch engine tick, both s: ``echo`` (actors /
+    (batch + echo)), ``batch`` (actors / batch) and ``share`` (batch / actors)."""
+    return {"echo": tick / (batch + echo), "batch": tick / batch, "share": batch / tick}
 
 
 def _with_range(ratio: float, spread: tuple[float, float]) -> str:
@@ -349,14 +355,13 @@ def main() -> None:
         """Print the row of one set-up, from its rounds (``steps``: the batch engine's)."""
         batch, row, spread = median_round(rounds, echo)
         tick = row["tick"]
+        ratios = ratios_of(batch, tick, echo)
         measured.append((fish, procs, batch, tick))
         phases.append((fish, procs, steps, row))
         print(
             f"| {fish} | {procs} | {batch * 1e3:.1f} | {tick * 1e3:.1f} | "
             f"{row['loop_tick'] * 1e3:.1f} | "
-            f"{_with_range(tick / (batch + echo), spread['echo'])} | "
-            f"{_with_range(tick / batch, spread['batch'])} | "
-            f"{_with_range(batch / tick, spread['share'])} | "
+            f"{' | '.join(_with_range(ratios[name], spread[name]) for name in ratios)} | "
             f"{row['steps_per_second']:,.0f} | {row['first_tick']:.2f} | "
             f"{row['start_up']:.1f} | "
             f"{row['real_time_factor']:.1f}× |",

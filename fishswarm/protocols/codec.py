@@ -141,7 +141,7 @@ def _reused_message(payload: bytes | bytearray | memoryview, expected: type[M]) 
     if type(payload) is not bytes:
         return None
     for kept, message in _reused.get(expected, ()):
-        if len(kept) == len(payload) and kept == payload:
+        if kept == payload:  # bytes compare their lengths first
             return message  # type: ignore[return-value]
     return None
 
