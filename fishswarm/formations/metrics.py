@@ -94,10 +94,11 @@ class Alignment:
     """A target shape moved onto a school by the best rigid motion and assignment.
 
     Attributes:
-        slots: (N, 3) where each of the target's slots lands (in the target's order), in the
-            school's frame, m.
-        slot_of: (N,) the slot each fish is assigned to (an index into the target's rows).
-        gaps: (N,) each fish's distance from its slot, m.
+        slots: (S, 3) where each of the target's S slots lands (in the target's order), in
+            the school's frame, m.
+        slot_of: (N,) the slot each fish is assigned to (an index into the target's rows;
+            −1 for a fish left without one when there are more fish than slots).
+        gaps: (N,) each fish's distance from its slot, m (infinite without one).
     """
 
     slots: FloatArray
@@ -106,32 +107,38 @@ class Alignment:
 
     @property
     def rms(self) -> float:
-        """The RMS distance of the fish from their slots, m."""
-        return float(np.sqrt(np.mean(self.gaps**2))) if self.gaps.size else 0.0
+        """The RMS distance of the fish that have a slot from their slots, m."""
+        placed = self.gaps[self.slot_of >= 0]
+        return float(np.sqrt(np.mean(placed**2))) if placed.size else 0.0
 
     def joined(self, tolerance: float) -> BoolArray:
-        """(N,) which fish are within ``tolerance`` of their slot."""
+        """(N,) which fish are within ``tolerance`` of their slot (never one without)."""
         result: BoolArray = self.gaps <= tolerance
         return result
 
 
 def align(position: FloatArray, target: FloatArray, *, starts: int = 12) -> Alignment:
-    """The best rigid motion (no mirror) and assignment of N slots to N fish.
+    """The best rigid motion (no mirror) and assignment of S slots to N ≥ S fish.
 
     The alignment is iterated (assign by the Hungarian method, then turn and shift by
-    Kabsch) from ``starts`` turns about the vertical; the smallest RMS distance wins.
+    Kabsch) from ``starts`` turns about the vertical; the smallest RMS distance wins. With
+    more fish than slots (a fish that joined a school whose map was made for fewer), the
+    slots go to the S fish that fit them best and the others have none.
 
     Args:
         position: (N, 3) the fish, m.
-        target: (N, 3) the target shape in any frame, m.
+        target: (S, 3) the target shape in any frame, m.
         starts: starting turns about the vertical tried.
 
     Raises:
-        ValueError: as many fish as slots are needed.
+        ValueError: fewer fish than slots, or no slot.
     """
-    count = position.shape[0]
-    if count != target.shape[0]:
-        raise ValueError(f"{count} fish against a target of {target.shape[0]} slots")
+    count, places = position.shape[0], target.shape[0]
+    if places == 0 or count < places:
+        raise ValueError(
+            f"{count} fish against a target of {places} slots: a target needs a slot, "
+            "and a fish for each"
+        )
     if count == 1:
         return Alignment(position.copy(), np.zeros(1, dtype=np.int64), np.zeros(1))
     best: Alignment | None = None
@@ -148,8 +155,11 @@ def align(position: FloatArray, target: FloatArray, *, starts: int = 12) -> Alig
                 break
             moved = aligned
         rows, columns = linear_sum_assignment(cdist(position, moved))
-        gaps = np.linalg.norm(position[rows] - moved[columns], axis=1)
-        candidate = Alignment(moved, columns.astype(np.int64), gaps)
+        slot_of = np.full(count, -1, dtype=np.int64)
+        slot_of[rows] = columns
+        gaps = np.full(count, np.inf)
+        gaps[rows] = np.linalg.norm(position[rows] - moved[columns], axis=1)
+        candidate = Alignment(moved, slot_of, gaps)
         if best is None or candidate.rms < best.rms:
             best = candidate
     assert best is not None
@@ -159,12 +169,13 @@ def align(position: FloatArray, target: FloatArray, *, starts: int = 12) -> Alig
 def shape_error(
     position: FloatArray, target: FloatArray, *, tolerance: float, starts: int = 12
 ) -> tuple[float, float]:
-    """RMS distance of N fish from N slots after the best rigid motion and assignment
-    (:func:`align`), and the fraction of fish then within ``tolerance`` of their slot.
+    """RMS distance of N fish from S ≤ N slots after the best rigid motion and assignment
+    (:func:`align`; over the fish that have a slot), and the fraction of the N fish then
+    within ``tolerance`` of their slot.
 
     Args:
         position: (N, 3) the fish, m.
-        target: (N, 3) the target shape in any frame, m.
+        target: (S, 3) the target shape in any frame, m.
         tolerance: a fish this close to its slot has joined, m.
         starts: starting turns about the vertical tried.
     """
@@ -238,8 +249,9 @@ def local_shape_error(
 
 def shape_summary(fit: Alignment | Completion, tolerance: float) -> tuple[float, float]:
     """A school's fit to its formation in two numbers: the RMS error, m (a global map's
-    alignment, :func:`align`; for a local shape, :func:`local_shape_errors`, the mean of the
-    fish's RMS errors), and the fraction of fish that have joined."""
+    alignment, :func:`align`, over the fish that have a slot; for a local shape,
+    :func:`local_shape_errors`, the mean of the fish's RMS errors), and the fraction of
+    fish that have joined (of all of them: a fish without a slot has not)."""
     if isinstance(fit, Alignment):
         return fit.rms, float(np.mean(fit.joined(tolerance)))
     if fit.rms.size == 0 or np.isnan(fit.rms).all():

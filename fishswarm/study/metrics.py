@@ -356,7 +356,8 @@ class FormationTarget:
     """The shape a formation run is measured against.
 
     Attributes:
-        slots: (N, 3) the target map in its own frame, m; None for a local shape.
+        slots: (S, 3) the target map in its own frame, m (made for the run's fish; fish
+            that join later may outnumber it); None for a local shape.
         spacing: distance between neighbouring places, m.
         tolerance: a fish this close to its slot has joined, m.
         local_shape: the local shape measured around every fish (None for a global map).
@@ -374,7 +375,8 @@ class FormationTarget:
 
     def _fit(self, position: FloatArray) -> Alignment | Completion:
         """The school (N, 3) fitted to the target: a global map's alignment to its first N
-        slots, or how each fish completes its local shape. The last snapshot's is kept: an
+        slots (all of them, when fish joined a school whose map was made for fewer), or how
+        each fish completes its local shape. The last snapshot's is kept: an
         observer asks for the metrics and the roles of each snapshot, one fit serves both."""
         key = position.tobytes()
         fit = self._last.get(key)
@@ -398,15 +400,11 @@ class FormationTarget:
     def metrics(self, position: FloatArray) -> dict[str, float]:
         """The formation metrics of one snapshot. A global map: the school against its
         first N slots, and the study's fitness against those slots where the alignment
-        lays them. A local shape: every fish's group (it and its nearest neighbours)
+        lays them (more fish than slots: the fish that fit them best hold them, the others
+        count as not joined). A local shape: every fish's group (it and its nearest neighbours)
         against the ideal shape, errors averaged over fish; joined when within tolerance."""
-        count = position.shape[0]
-        if count == 0:
+        if position.shape[0] == 0:
             return dict.fromkeys(FORMATION_METRIC_NAMES, math.nan)
-        if self.local_shape is None:
-            assert self.slots is not None
-            if self.slots.shape[0] < count:
-                return dict.fromkeys(FORMATION_METRIC_NAMES, math.nan)
         fit = self._fit(position)
         rms, joined = shape_summary(fit, self.tolerance)
         fitness = math.nan
@@ -443,8 +441,7 @@ class FormationTarget:
                 None,
                 shape_edges(local, self.tolerance, position=position, spacing=self.spacing),
             )
-        assert self.slots is not None
-        if self.slots.shape[0] < count or count == 0:
+        if count == 0:
             return FormationRoles(
                 np.zeros(count, dtype=np.bool_), np.zeros(count, dtype=np.bool_), None
             )
@@ -464,8 +461,9 @@ class FormationRoles:
         joined: (N,) fish within the tolerance of their place.
         leader: (N,) the fish furthest along a global map's orientation (none for a local
             shape).
-        slots: (N, 3) the map's slots laid onto the school by the best rigid motion, m (None
-            for a local shape).
+        slots: (S, 3) the map's slots laid onto the school by the best rigid motion, m (None
+            for a local shape): one for each fish, or fewer when more fish came than the map
+            was made for.
         edges: (E, 2) bonds of completed local shapes: pairs of fish (indices) about a
             spacing apart in a shape they complete together (a star's centre and an arm,
             not two arms); none for a global map.

@@ -78,8 +78,29 @@ def test_alignment_lays_a_drawn_triangle_onto_fish_that_hold_it_turned_and_shuff
     fit = align(off, target)
     assert 0.0 < fit.rms < 0.1 / math.sqrt(3) + 1e-12
     assert fit.joined(0.1).all() and not fit.joined(1e-6).all()
-    with pytest.raises(ValueError, match="3 fish against a target of 2 slots"):
-        align(fish, target[:2])
+    with pytest.raises(ValueError, match="2 fish against a target of 3 slots"):
+        align(fish[:2], target)
+    with pytest.raises(ValueError, match="3 fish against a target of 0 slots"):
+        align(fish, target[:0])
+
+
+def test_more_fish_than_slots_leaves_the_fish_that_fit_worst_without_one() -> None:
+    from fishswarm.formations.metrics import align
+
+    # Two slots 1 m apart on x; two fish hold them shifted to (5, 5, 0), a third is 21 m
+    # off: the slots go to the two, the third has none (and has not joined).
+    target = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    fish = np.array([[20.0, 20, 0], [5.0, 5, 0], [6.0, 5, 0]])
+    fit = align(fish, target)
+    assert fit.slot_of.tolist() == [-1, 0, 1]
+    np.testing.assert_allclose(fit.slots, fish[1:], atol=1e-9)
+    assert fit.gaps[0] == math.inf
+    np.testing.assert_allclose(fit.gaps[1:], 0.0, atol=1e-9)
+    assert fit.rms == pytest.approx(0.0, abs=1e-9)  # over the fish that have a slot
+    assert fit.joined(0.1).tolist() == [False, True, True]
+    # shape_error: the RMS of the placed fish, the joined share of all three.
+    error, joined = shape_error(fish, target, tolerance=0.1)
+    assert error == pytest.approx(0.0, abs=1e-9) and joined == pytest.approx(2 / 3)
 
 
 def test_a_mirror_image_of_a_chiral_map_is_not_the_same_formation() -> None:

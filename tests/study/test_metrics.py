@@ -289,6 +289,29 @@ def test_formation_roles_as_an_observer_sees_them() -> None:
     assert local.joined.all() and not local.leader.any() and local.slots is None
 
 
+def test_a_fish_that_joins_a_formation_made_for_fewer_counts_as_not_joined() -> None:
+    from fishswarm.study.metrics import FormationTarget
+
+    # A map of three slots 1 m apart on a line (a run of three fish); a fourth fish joins
+    # and waits 3 m aside while the three hold the line. Before, any school larger than
+    # its map had NaN for every metric from the join on.
+    target = FormationTarget(np.array([[-1.0, 0, 0], [0, 0, 0], [1, 0, 0]]), 1.0, 0.2)
+    centre = np.array([2.0, 1.5, 0.5])
+    line = np.array([[-1.0, 0, 0], [0, 0, 0], [1, 0, 0]]) + centre
+    school = np.vstack([line, centre + np.array([0.0, 3.0, 0.0])])
+    metrics = target.metrics(school)
+    assert metrics["shape_error"] == pytest.approx(0.0, abs=1e-9)
+    assert metrics["joined_fraction"] == 0.75
+    # The study's fitness: the three on their slots score 0; the fourth's nearest free
+    # slot is none (all three are taken), so it scores the tolerance.
+    assert metrics["fitness"] == pytest.approx(0.2)
+    assert metrics["collisions"] == 0.0
+    roles = target.roles(school)
+    assert roles.joined.tolist() == [True, True, True, False]
+    assert roles.slots is not None
+    np.testing.assert_allclose(roles.slots, line, atol=1e-9)
+
+
 def test_the_pairwise_distance_of_a_huge_swarm_is_estimated_closely_and_repeatably() -> None:
     from fishswarm.study.metrics import EXACT_PAIRS_MAX, pairwise_distance
 
