@@ -307,7 +307,7 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
         series = [tracker.metrics(s.ids, s.position, s.time) for s in recording.snapshots]
         metrics |= {name: np.array([m[name] for m in series]) for name in ORBIT_METRIC_NAMES}
     title = (
-        f"{settings.get('fish', '?')} fish, {settings.get('behavior', '?')}, "
+        f"{_fish_recorded(arrays['ids'])}, {settings.get('behavior', '?')}, "
         f"seed {settings.get('seed', '?')} ({args.recording.name})"
     )
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -331,6 +331,12 @@ def _rounded_up(value: float, digits: int = 3) -> float:
     # Less a hair, so that a value already on the grid (0.002 as 200.00000000000003 units)
     # is not pushed a step up.
     return float(f"{math.ceil(value / unit - 1e-9) * unit:.{digits}g}")
+
+
+def _fish_recorded(ids: np.ndarray) -> str:
+    """How many fish a recording holds, for a title: every fish it saw, those that joined
+    later (a robot, a fish started by hand) too, not the run's configured count."""
+    return f"{ids.size} fish"
 
 
 def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
@@ -376,7 +382,7 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
             viewer=args.fish,
             out=args.out,
             fps=args.fps,
-            title=f"{settings.get('fish', '?')} fish, {settings.get('behavior', '?')}",
+            title=f"{_fish_recorded(arrays['ids'])}, {settings.get('behavior', '?')}",
             on_frame=show,
             **_animated_formation(recording),
         )

@@ -47,6 +47,38 @@ def test_animate_draws_an_observers_recording_into_a_new_folder(tmp_path: Path) 
     assert out.read_bytes()[:6] in (b"GIF87a", b"GIF89a")
 
 
+def test_a_plots_title_counts_the_fish_recorded_not_those_configured(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A run configured for 2 fish, which fish 10 (a robot, say) joins at tick 2: the
+    # recording holds 3 fish, and the title says so.
+    pytest.importorskip("matplotlib")
+    from fishswarm.study import figures
+
+    path = tmp_path / "joined.mcap"
+    with open_recorder(path, {"fish": 2, "behavior": "dispersion", "seed": 7}) as recorder:
+        for tick in range(4):
+            ids = np.array([0, 1, 10] if tick >= 2 else [0, 1])
+            position = np.full((ids.size, 3), 0.5) + 0.1 * np.arange(ids.size)[:, None]
+            count = ids.size
+            snapshot = Snapshot(
+                tick, float(tick), ids, position, np.zeros((count, 3)), np.zeros(count),
+                np.full(count, count - 1), np.zeros(count, dtype=np.int64),
+            )  # fmt: skip
+            recorder.snapshot(float(tick), encode(snapshot))
+            recorder.metrics(float(tick), swarm_metrics(position, snapshot.neighbors_seen))
+    titles: list[str] = []
+    drawn = figures.figure_of_run
+
+    def figure_of_run(*args: Any, title: str, **kwargs: Any) -> Any:
+        titles.append(title)
+        return drawn(*args, title=title, **kwargs)
+
+    monkeypatch.setattr(figures, "figure_of_run", figure_of_run)
+    assert main(["plot", str(path), "--out", str(tmp_path / "tracks.png")]) == 0
+    assert titles == ["3 fish, dispersion, seed 7 (joined.mcap)"]
+
+
 @pytest.mark.slow
 def test_an_animation_plays_at_the_speed_asked_for(tmp_path: Path) -> None:
     # 12 s of run at 6× should play for 2 s (and one frame more, the last). At 15 fps a GIF
