@@ -75,6 +75,10 @@ CPU_TEMPERATURE = Path("/sys/class/thermal/thermal_zone0/temp")
 """Where Linux on a Raspberry Pi reports the SoC's temperature, in m°C."""
 
 
+class HardwareError(RuntimeError):
+    """The robot's hardware could not be opened (a library missing, a device not answering)."""
+
+
 class SensorUnavailable(RuntimeError):
     """A camera frame or depth reading could not be had this period (the driver skips it)."""
 

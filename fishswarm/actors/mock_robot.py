@@ -29,7 +29,7 @@ import trio
 from numpy.typing import NDArray
 
 from fishswarm.actors.bus import Bus, open_subscriber, open_token
-from fishswarm.actors.driver import Hardware, SensorUnavailable
+from fishswarm.actors.driver import Hardware, HardwareError, SensorUnavailable
 from fishswarm.actors.inbox import open_subscription
 from fishswarm.actors.intake import Intake
 from fishswarm.bluebot.fisheye import Fisheye
@@ -302,12 +302,15 @@ def open_mock_hardware(
             each period): how long a snapshot stays fresh follows from it.
         seed: the seed of its cameras' sensor noise.
         pin_factory: gpiozero's pin factory (None: a fresh ``MockFactory``).
+
+    Raises:
+        HardwareError: gpiozero is not installed (no pin factory given).
     """
     if pin_factory is None:
         try:
             from gpiozero.pins.mock import MockFactory
         except ImportError as error:
-            raise ImportError(
+            raise HardwareError(
                 "a mock robot runs on gpiozero's mock pins: pip install 'fishswarm[robot]'"
             ) from error
         pin_factory = MockFactory()

@@ -27,7 +27,7 @@ import trio
 import zenoh
 
 from fishswarm.actors.bus import Bus, MemoryBus, open_alive_events
-from fishswarm.actors.driver import Driver, DriverSettings, Hardware
+from fishswarm.actors.driver import Driver, DriverSettings, Hardware, HardwareError
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.inbox import Inbox, open_subscription
 from fishswarm.actors.intake import Intake
@@ -98,10 +98,6 @@ class RobotSettings:
             self.driver.keys,
             perception_timeout=self.perception_timeout,
         )
-
-
-class HardwareError(RuntimeError):
-    """The robot's hardware could not be opened (a library missing, a device not answering)."""
 
 
 @contextlib.contextmanager

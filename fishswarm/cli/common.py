@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import trio
 
-from fishswarm.actors.robot import HardwareError
+from fishswarm.actors.driver import HardwareError
 from fishswarm.actors.security import SecurityError, session_security
 from fishswarm.actors.session import ConnectError, SessionSettings, check_endpoint
 from fishswarm.sim.scenario import ConfigError

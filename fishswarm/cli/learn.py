@@ -6,15 +6,20 @@ import argparse
 import sys
 from typing import Any
 
-from fishswarm.cli.common import prepare_folder
+from fishswarm.cli.common import UserError, prepare_folder
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.progress import ProgressLine, bar
 
 
 def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm learn``."""
+    try:
+        from fishswarm.learning.coevolution import LearningSettings
+    except ModuleNotFoundError as error:
+        if error.name != "cma":
+            raise
+        raise UserError("Turing learning needs pycma: pip install -e '.[learn]'") from None
     from fishswarm.learning.arena import Arena
-    from fishswarm.learning.coevolution import LearningSettings
     from fishswarm.learning.session import LearningError, learn
 
     named = {

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fishswarm.cli.common import prepare_file, prepare_folder, read_recording_for
+from fishswarm.cli.common import UserError, prepare_file, prepare_folder, read_recording_for
 from fishswarm.sim.scenario import (
     PROFILES,
     STUDY_CODE_SWITCHES,
@@ -319,7 +319,7 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
         )  # fmt: skip
         figure.savefig(out, dpi=110)
     except FiguresUnavailable as error:
-        raise ConfigError(str(error)) from None
+        raise UserError(str(error)) from None
     print(f"wrote {out}", file=sys.stderr)
     return 0
 
@@ -341,7 +341,12 @@ def _fish_recorded(ids: np.ndarray) -> str:
 
 def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm animate RECORDING --out FILE``."""
-    from fishswarm.study.animation import AnimationError, frame_duration, resample
+    from fishswarm.study.animation import (
+        AnimationError,
+        AnimationUnavailable,
+        frame_duration,
+        resample,
+    )
     from fishswarm.study.animation import animate as make_animation
     from fishswarm.study.progress import ProgressLine, bar
 
@@ -386,6 +391,8 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
             on_frame=show,
             **_animated_formation(recording),
         )
+    except AnimationUnavailable as error:
+        raise UserError(str(error)) from None
     except AnimationError as error:
         raise ConfigError(str(error)) from None
     print(f"wrote {args.out} ({frames.t.size} frames)", file=sys.stderr)

@@ -37,6 +37,10 @@ class AnimationError(ValueError):
     """An animation cannot be made (format, missing tools, nothing to draw)."""
 
 
+class AnimationUnavailable(AnimationError):
+    """A package the animation needs is not installed (the message says which)."""
+
+
 @dataclass(frozen=True)
 class Frames:
     """The run resampled for animation.
@@ -364,7 +368,7 @@ def _matplotlib() -> tuple[Any, Any]:
     try:
         import matplotlib
     except ImportError:
-        raise AnimationError("animations need matplotlib: pip install -e '.[viz]'") from None
+        raise AnimationUnavailable("animations need matplotlib: pip install -e '.[viz]'") from None
     matplotlib.use("Agg")
     import matplotlib.animation as animation
     import matplotlib.pyplot as plt
@@ -378,7 +382,7 @@ def _writer(animation: Any, out: Path, fps: int) -> Any:
     try:
         import imageio_ffmpeg
     except ImportError:
-        raise AnimationError(
+        raise AnimationUnavailable(
             "MP4 needs ffmpeg: pip install -e '.[viz]' (brings imageio-ffmpeg), or write a .gif"
         ) from None
     import matplotlib

@@ -1,5 +1,6 @@
-"""A robot or a fresh machine installs the core only (no cma, no matplotlib): the swarm must
-still run and every command's --help must work."""
+"""A robot or a fresh machine installs the core only (no cma, no matplotlib, no gpiozero):
+the swarm must still run, every command's --help must work, and a command that needs an
+extra says which to install (exit 1, no traceback)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ pytestmark = pytest.mark.integration
 # Blocks the extras as if they were not installed: importing them raises ImportError.
 WITHOUT_EXTRAS = (
     "import sys\n"
-    "for name in ('cma', 'matplotlib', 'imageio_ffmpeg', 'hypothesis', 'rerun'):\n"
+    "for name in ('cma', 'matplotlib', 'imageio_ffmpeg', 'hypothesis', 'rerun', 'gpiozero'):\n"
     "    sys.modules[name] = None\n"
     "from fishswarm.cli import main\n"
     "sys.exit(main(sys.argv[1:]))\n"
@@ -86,8 +87,28 @@ def test_pictures_without_matplotlib_say_how_to_get_it(tmp_path: Path) -> None:
     )
     assert made.returncode == 0, made.stderr
     result = _core("plot", str(record))
-    assert result.returncode == 2
+    assert result.returncode == 1 and "Traceback" not in result.stderr
     assert "pictures need matplotlib: pip install -e '.[viz]'" in result.stderr
+    result = _core("animate", str(record), "--out", str(tmp_path / "r.gif"))
+    assert result.returncode == 1 and "Traceback" not in result.stderr
+    assert "animations need matplotlib: pip install -e '.[viz]'" in result.stderr
+
+
+def test_learning_without_pycma_says_how_to_get_it(tmp_path: Path) -> None:
+    result = _core("learn", "--generations", "1", "--out", str(tmp_path / "learned"))
+    assert result.returncode == 1 and "Traceback" not in result.stderr
+    assert "Turing learning needs pycma: pip install -e '.[learn]'" in result.stderr
+
+
+def test_a_mock_robot_without_gpiozero_says_how_to_get_it() -> None:
+    # Its pins are gpiozero's mock pins: it fails before it looks for the router.
+    result = _core(
+        "robot", "--id", "3", "--hardware", "mock", "--connect", f"tcp/127.0.0.1:{free_port()}"
+    )
+    assert result.returncode == 1 and "Traceback" not in result.stderr
+    assert "a mock robot runs on gpiozero's mock pins: pip install 'fishswarm[robot]'" in (
+        result.stderr
+    )
 
 
 def test_an_experiment_without_matplotlib_writes_its_tables(tmp_path: Path) -> None:
