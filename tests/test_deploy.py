@@ -16,6 +16,7 @@ import pytest
 import zenoh
 
 from fishswarm.cli.parsers import build_parser
+from tests.conftest import free_port
 
 pytestmark = pytest.mark.integration
 
@@ -24,11 +25,15 @@ BIN = Path(sys.executable).parent
 ROLE = DEPLOY / "roles" / "fishswarm"
 
 
-def ansible(tool: str, *args: str, cwd: Path = DEPLOY) -> subprocess.CompletedProcess[str]:
+def ansible(
+    tool: str, *args: str, cwd: Path = DEPLOY, roles: Path | None = None
+) -> subprocess.CompletedProcess[str]:
     executable = BIN / tool
     if not executable.exists():
         pytest.fail(f"{tool} is missing: pip install -e '.[dev]' installs it")
     environment = {**os.environ, "ANSIBLE_NOCOLOR": "1", "NO_COLOR": "1"}
+    if roles is not None:
+        environment["ANSIBLE_ROLES_PATH"] = str(roles)
     return subprocess.run(
         [str(executable), *args],
         cwd=cwd,
@@ -312,3 +317,63 @@ def test_the_robot_runs_on_the_packages_the_role_installs(tmp_path: Path, wheel:
         capture_output=True, text=True, timeout=60, check=True,
     )  # fmt: skip
     assert versions.stdout.split() == ["1.24.2", "0.22.0"]
+
+
+INSTALL_ONLY = """- name: Install fishswarm as the role does, into the test's folder
+  hosts: robots
+  gather_facts: true
+  tasks:
+    - name: The role's install steps
+      ansible.builtin.include_role:
+        name: fishswarm
+        tasks_from: install
+"""
+
+
+@pytest.mark.slow
+def test_a_mock_robot_runs_from_what_the_role_installs(tmp_path: Path, wheel: Path) -> None:
+    # The role's own install steps, run for real (not in check mode) into a folder of the
+    # test's, on a machine whose Python has no site packages to lend: all a mock robot
+    # needs must come from what the role installs. Before, it installed only Zenoh and the
+    # wheel without its dependencies, and the robot's service failed on 'import trio'.
+    from tests.test_robot_imports import BLOCKED, COMMANDS, DRIVE
+
+    home = tmp_path / "opt"
+    path = inventory(
+        tmp_path,
+        wheel,
+        fish_id=3,
+        fishswarm_home=str(home),
+        fishswarm_python=getattr(sys, "_base_executable", sys.executable),
+        fishswarm_system_site_packages=False,
+    )
+    playbook = tmp_path / "install.yml"
+    playbook.write_text(INSTALL_ONLY)
+    result = ansible(
+        "ansible-playbook", "-i", str(path), str(playbook), cwd=tmp_path,
+        roles=DEPLOY / "roles",
+    )  # fmt: skip
+    if result.returncode and any(sign in result.stdout for sign in OFFLINE):
+        pytest.skip(f"pip cannot reach its package index here: {result.stdout[-300:]}")
+    assert result.returncode == 0, result.stdout + result.stderr
+    python = str(home / "venv" / "bin" / "python")
+    driven = subprocess.run(
+        [python, "-c", f"BLOCKED = {BLOCKED!r}\n" + DRIVE],
+        capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
+    )  # fmt: skip
+    assert driven.returncode == 0, driven.stderr
+    perceptions, commands, _ = driven.stdout.split()
+    assert int(perceptions) >= 4 and int(commands) >= 4
+    # The robot's command as its service runs it: the mock pins open, then it looks for a
+    # router (none here) and says so.
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    argvs = [["robot", "--id", "3", "--hardware", "mock", "--connect", endpoint,
+              "--connect-timeout", "0.5"]]  # fmt: skip
+    program = f"BLOCKED = {BLOCKED!r}\nARGVS = {argvs!r}\n" + COMMANDS
+    ran = subprocess.run(
+        [python, "-W", "ignore", "-c", program],
+        capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
+    )  # fmt: skip
+    assert ran.returncode == 0, ran.stderr
+    assert ran.stdout.split()[-1:] == ["1"]
+    assert "cannot open a client session" in ran.stderr and "Traceback" not in ran.stderr
