@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import dataclasses
+import functools
 import json
 import signal
 import sys
@@ -492,9 +493,17 @@ ROUTER_CHECK_EVERY = 0.5
 """How often a client command looks whether it still reaches its router, s."""
 
 
-async def _say_when_the_router_goes(session: zenoh.Session, command: str, endpoint: str) -> None:
+async def _say_when_the_router_goes(
+    session: zenoh.Session,
+    command: str,
+    endpoint: str,
+    *,
+    expected: Callable[[], bool] = lambda: False,
+) -> None:
     """Say when this client loses its router, and when it has it again: everything it talks
-    to goes through the router (a world's fish are lost with it, one by one)."""
+    to goes through the router (a world's fish are lost with it, one by one). Not when
+    ``expected()`` says the router was to go: an observer's run has ended, and a
+    ``fishswarm run``'s router ends with it."""
     up = True
     while True:
         await trio.sleep(ROUTER_CHECK_EVERY)
@@ -502,6 +511,8 @@ async def _say_when_the_router_goes(session: zenoh.Session, command: str, endpoi
         if now == up:
             continue
         up = now
+        if not up and expected():
+            continue
         if up:
             print(f"fishswarm {command}: the router at {endpoint} is back", file=sys.stderr)
         else:
@@ -548,7 +559,15 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                 await nursery.start(observer.run, ZenohBus(session))
                 print(f"observing swarm {args.swarm!r} on {args.connect}", file=sys.stderr)
                 nursery.start_soon(_say_if_nothing_comes, observer, args.swarm)
-                nursery.start_soon(_say_when_the_router_goes, session, "observe", args.connect)
+                nursery.start_soon(
+                    functools.partial(
+                        _say_when_the_router_goes,
+                        session,
+                        "observe",
+                        args.connect,
+                        expected=lambda: observer.world_said_ended() is True,
+                    )
+                )
                 # Until the snapshot of --ticks, or the end of the run (the world leaves).
                 async with trio.open_nursery() as waiting:
 

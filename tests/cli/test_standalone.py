@@ -271,6 +271,26 @@ def test_a_world_says_when_it_loses_its_router_and_when_the_router_is_back() -> 
 
 
 @pytest.mark.slow
+def test_an_observer_of_a_run_that_ends_does_not_say_it_lost_the_router(tmp_path: Path) -> None:
+    """`fishswarm run` is the router too: at the run's end it goes, while the observer
+    still waits for the run's last snapshots. That is the run ending, not a lost router
+    (the observer said so at the end of every run before)."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    with started_commands() as start:
+        run = start("run", "--fish", "2", "--duration", "3", "--time", "realtime",
+                    "--period", "0.5", "--quiet", "--listen", endpoint,
+                    "--record", str(tmp_path / "run.mcap"),
+                    "--summary", str(tmp_path / "run.json"))  # fmt: skip
+        wait_for_port(port)
+        observer = start("observe", "--connect", endpoint)
+        _, said = observer.communicate(timeout=60)
+        assert observer.returncode == 0, said
+        assert "observed ticks" in said and "lost the router" not in said, said
+        assert run.wait(timeout=30) == 0
+
+
+@pytest.mark.slow
 def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_own_run(
     tmp_path: Path,
 ) -> None:
