@@ -73,6 +73,8 @@ IntArray = NDArray[np.int64]
 
 MISSING_NOTE_EVERY = 10.0
 """How often a world waiting for its fish says which are not up yet, s."""
+PULSE_PERIOD = 1.0
+"""How often a world says it is alive while a run goes on, s (its default)."""
 OFFLOAD_AFTER = 0.25
 """A simulation step whose last run took longer than this (s) runs in a worker thread: worth
 it only when the world would otherwise be deaf for long (and under a test's MockClock, whose
@@ -130,7 +132,7 @@ class WorldSettings:
     channel_timeout: float = OUTBOX_TIMEOUT + 1.0
     admit_delay: float = 0.1
     turn_delay: float = TURN_DELAY
-    pulse_period: float = 1.0
+    pulse_period: float = PULSE_PERIOD
     vouched_only: bool = False
 
     def __post_init__(self) -> None:

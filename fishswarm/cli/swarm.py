@@ -40,7 +40,7 @@ from fishswarm.actors.security import (
     router_names,
 )
 from fishswarm.actors.session import SessionSettings, open_session, reaches_router
-from fishswarm.actors.world import StartTimeout, World, WorldSettings
+from fishswarm.actors.world import PULSE_PERIOD, StartTimeout, World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus, query
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.cli.common import USER_ERRORS as COMMON_ERRORS
@@ -161,6 +161,25 @@ def _warn_if_crowded(command: str, scenario: Scenario) -> None:
         print(f"fishswarm {command}: warning: {crowded}", file=sys.stderr)
 
 
+def _watchdog_warning(timeout: float, scenario: Scenario) -> str | None:
+    """What is wrong with a fish watchdog that would stop the fins between two signs of
+    life of the world (None: nothing): its pulse comes every PULSE_PERIOD, and in real
+    time (or jitter) a perception every control period; in lockstep a slow tick may leave
+    only the pulse. Such a run ends 'degraded', which a test of the watchdog may want."""
+    gap = PULSE_PERIOD
+    why = f"its pulse comes every {PULSE_PERIOD:g} s"
+    if scenario.time_mode != "lockstep" and scenario.control_period < PULSE_PERIOD:
+        gap = scenario.control_period
+        why = f"a perception comes every control period, {gap:g} s"
+    if timeout > gap:
+        return None
+    return (
+        f"--perception-timeout {timeout:g} will stop the fins between two signs of life of the "
+        f"world ({why}), and the run will end 'degraded' (exit 4): give more than {gap:g} s, "
+        f"e.g. --perception-timeout {2 * gap:g}"
+    )
+
+
 def run(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm run``."""
     if args.procs is not None and args.procs < 0:
@@ -173,6 +192,8 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
             f"--perception-timeout must be a positive number of seconds, got "
             f"{args.perception_timeout:g}"
         )
+    if (warning := _watchdog_warning(args.perception_timeout, scenario)) is not None:
+        print(f"fishswarm run: warning: {warning}", file=sys.stderr)
     scenario.fish_params()  # reads a replica model now: a bad one is a usage error, not a crash
     prepare_file(args.record, "--record", example="runs/latest.mcap")
     prepare_file(args.summary, "--summary", example="runs/latest.json")

@@ -317,6 +317,12 @@ def test_a_run_in_which_the_watchdog_stopped_fish_says_so_and_exits_4(tmp_path: 
         timeout=60,
     )
     assert result.returncode == 4, result.stderr
+    # Said at the start too: such a watchdog cannot but fire.
+    assert (
+        "fishswarm run: warning: --perception-timeout 0.3 will stop the fins between two signs "
+        "of life of the world (its pulse comes every 1 s), and the run will end 'degraded' "
+        "(exit 4): give more than 1 s, e.g. --perception-timeout 2"
+    ) in result.stderr
     assert "status: degraded — fish were stopped" in result.stderr
     written = json.loads(summary.read_text())
     assert written["status"] == "degraded" and written["fish"]["watchdog_stops"] >= 2
@@ -919,3 +925,21 @@ def test_a_standalone_worlds_turn_delay_comes_from_its_command_line(
         with pytest.raises(Made):
             main(["world", "--fish", "2", *words])
         assert made.pop().turn_delay == delay
+
+
+def test_a_watchdog_shorter_than_the_worlds_signs_of_life_is_warned_of() -> None:
+    from fishswarm.cli.swarm import _watchdog_warning
+    from fishswarm.sim.scenario import Scenario
+
+    # The world pulses every second; in real time at 2 Hz a perception comes every 0.5 s.
+    fast = Scenario(time_mode="realtime", control_period=0.5)
+    assert _watchdog_warning(0.6, fast) is None
+    warning = _watchdog_warning(0.5, fast)
+    assert warning is not None and "a perception comes every control period, 0.5 s" in warning
+    assert "e.g. --perception-timeout 1" in warning
+    # At 0.5 Hz, or in lockstep (a slow tick may leave only the pulse): the pulse's second.
+    for scenario in (Scenario(time_mode="realtime", control_period=2.0), Scenario()):
+        warning = _watchdog_warning(1.0, scenario)
+        assert warning is not None and "its pulse comes every 1 s" in warning
+        assert _watchdog_warning(1.5, scenario) is None
+    assert _watchdog_warning(5.0, Scenario()) is None  # the default watchdog
