@@ -45,6 +45,10 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
     # Resuming, the checkpoint's settings rule (what is given is only compared with them):
     # a value checked against a fresh run's defaults could be refused wrongly (a radius
     # start of an unbounded run against bounded radii).
+    if args.resume and args.force:
+        raise ConfigError(
+            "--resume continues the learning run in --out and --force starts it over: give one"
+        )
     settings = None
     if not args.resume:
         try:

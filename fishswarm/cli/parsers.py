@@ -298,9 +298,46 @@ def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -
             group.add_argument(flag, dest=name, type=kind, default=None, help=text)
 
 
+_APPLIES_WHEN: dict[str, tuple[str, tuple[str, ...], str]] = {
+    "formation": ("behavior", ("formation",), "--behavior formation"),
+    "spacing": ("behavior", ("formation",), "--behavior formation"),
+    "flags": ("behavior", ("formation",), "--behavior formation"),
+    "flag_medium": ("behavior", ("formation",), "--behavior formation"),
+    "rotate_effort": ("behavior", ("formation",), "--behavior formation"),
+    "model": ("behavior", ("replica",), "--behavior replica"),
+    "orbit_radius": (
+        "behavior",
+        ("orbit", "milling", "waltz"),
+        "--behavior orbit, milling or waltz",
+    ),
+    "jitter": ("time_mode", ("jitter",), "--time jitter"),
+    "spawn_radius": ("spawn_region", ("ball",), "--spawn ball"),
+}
+"""Scenario flags that mean something only beside another setting: (that setting, the
+values it must have, the flag that gives one of them)."""
+
+
+def _refuse_inapplicable(given: dict[str, Any], scenario: Scenario) -> None:
+    """Refuse a scenario flag given on the command line that this scenario would ignore
+    (``--formation`` in a dispersion run, say), rather than run without it unsaid.
+
+    Raises:
+        ConfigError: naming the flag and what it needs.
+    """
+    for name, (setting, values, needed) in _APPLIES_WHEN.items():
+        if given.get(name) is None or getattr(scenario, setting) in values:
+            continue
+        flag = _SCENARIO_FLAGS[name][0]
+        shown = _SCENARIO_FLAGS[setting][0]
+        raise ConfigError(
+            f"{flag} applies only with {needed}, and this {shown} is "
+            f"{getattr(scenario, setting)}: add {needed}, or leave {flag} out"
+        )
+
+
 def scenario_from(args: argparse.Namespace) -> Scenario:
     """The scenario a command's arguments describe: its --config file, if any, with the
-    scenario flags given on top."""
+    scenario flags given on top (a flag that it would ignore is refused)."""
     path = getattr(args, "config", None)
     table = scenario_table(path) if path else {}
     base = Scenario.from_mapping(table, source=str(path)) if path else Scenario()
@@ -310,6 +347,7 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
         scenario = base.with_settings(overrides, controller_chosen="controller" in table)
     except TypeError as error:
         raise ConfigError(str(error)) from None
+    _refuse_inapplicable(overrides, scenario)
     # Only commands that run a scenario to its end take --duration.
     return scenario.check_duration() if hasattr(args, "duration") else scenario
 

@@ -148,6 +148,17 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["run", "--listen", "localhost"], "write PROTOCOL/HOST:PORT"),
         (["run", "--procs", "-1"], "--procs must be 0 (the fish in this process) or more"),
         (["run", "--perception-timeout", "0"], "--perception-timeout must be a positive number"),
+        (
+            ["run", "--formation", "diamond"],
+            "--formation applies only with --behavior formation, and this --behavior is "
+            "dispersion: add --behavior formation, or leave --formation out",
+        ),
+        (["fish", "--id", "1", "--no-flags"], "--no-flags applies only with --behavior formation"),
+        (["run", "--jitter", "0.1"], "--jitter applies only with --time jitter, and this --time"),
+        (["run", "--spawn", "tank", "--spawn-radius", "1"], "--spawn-radius applies only with"),
+        (["run", "--behavior", "waltz", "--model", __file__], "--model applies only with --beh"),
+        (["world", "--orbit-radius", "0.3"], "--orbit-radius applies only with --behavior orbit"),
+        (["learn", "--resume", "--force"], "--resume continues the learning run in --out and"),
         (["run", "--fish", "many"], "invalid int value"),
         (["export", "nowhere.mcap"], "say what to write"),
         (["run", "--vision", "sonar"], "vision_model must be one of geometric, camera"),
