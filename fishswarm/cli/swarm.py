@@ -38,6 +38,7 @@ from fishswarm.actors.security import (
     observer_subject,
     robot_subject,
     router_names,
+    session_security,
 )
 from fishswarm.actors.session import SessionSettings, open_session, reaches_router
 from fishswarm.actors.world import PULSE_PERIOD, StartTimeout, World, WorldSettings
@@ -210,6 +211,11 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         secure=args.secure,
     )
     check_secured_endpoint(settings.listen, flag="--listen", secured=args.secure is not None)
+    if args.secure is not None:  # what the router needs is said before the run is announced
+        try:
+            session_security(args.secure, "router", router=True)
+        except SecurityError as error:
+            raise UserError(str(error)) from None
     print(
         f"fishswarm: {scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
         f"{1 / scenario.control_period:g} Hz, seed {scenario.seed}, "

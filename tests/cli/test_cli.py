@@ -954,3 +954,14 @@ def test_a_watchdog_shorter_than_the_worlds_signs_of_life_is_warned_of() -> None
         assert warning is not None and "its pulse comes every 1 s" in warning
         assert _watchdog_warning(1.5, scenario) is None
     assert _watchdog_warning(5.0, Scenario()) is None  # the default watchdog
+
+
+def test_a_secured_run_without_its_certificates_says_so_before_it_starts(tmp_path: Path) -> None:
+    empty = tmp_path / "keys"
+    empty.mkdir()
+    outputs = ["--record", str(tmp_path / "r.mcap"), "--summary", str(tmp_path / "s.json")]
+    listen = f"tls/127.0.0.1:{free_port()}"
+    result = _run("run", "--secure", str(empty), "--listen", listen, "--quiet", *outputs)
+    assert result.returncode == 1 and "Traceback" not in result.stderr
+    assert f"{empty}/ca.pem is missing: no certificate for 'router'" in result.stderr
+    assert "listening on" not in result.stderr  # the run was not announced
