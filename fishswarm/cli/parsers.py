@@ -51,6 +51,23 @@ class _Parser(argparse.ArgumentParser):
                 setattr(parsed, name, SECURE_ENDPOINT if secured else DEFAULT_ENDPOINT)
         return parsed, rest
 
+    def parse_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> argparse.Namespace:
+        parsed, rest = self.parse_known_args(args, namespace)
+        misplaced = [word for word in rest if word.split("=")[0] in ("--log-level", "--version")]
+        if misplaced:
+            # The options of fishswarm itself, given after a command's name: say where they go.
+            option = misplaced[0].split("=")[0]
+            command = getattr(parsed, "command", None) or "COMMAND"
+            self.error(
+                f"{option} is an option of fishswarm itself: give it before the command, e.g. "
+                f"fishswarm {option}{' INFO' if option == '--log-level' else ''} {command} …"
+            )
+        if rest:
+            self.error(f"unrecognized arguments: {' '.join(rest)}")
+        return parsed
+
 
 def seconds(text: str) -> float:
     """A duration, s: a finite number, not negative (an argparse type)."""

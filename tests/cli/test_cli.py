@@ -159,6 +159,12 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["run", "--behavior", "waltz", "--model", __file__], "--model applies only with --beh"),
         (["world", "--orbit-radius", "0.3"], "--orbit-radius applies only with --behavior orbit"),
         (["learn", "--resume", "--force"], "--resume continues the learning run in --out and"),
+        (
+            ["run", "--fish", "2", "--log-level", "INFO"],
+            "--log-level is an option of fishswarm itself: give it before the command, e.g. "
+            "fishswarm --log-level INFO run",
+        ),
+        (["run", "--bogus"], "unrecognized arguments: --bogus"),
         (["run", "--fish", "many"], "invalid int value"),
         (["export", "nowhere.mcap"], "say what to write"),
         (["run", "--vision", "sonar"], "vision_model must be one of geometric, camera"),
