@@ -74,7 +74,10 @@ def add_parsers(commands: Any) -> None:
         "--jobs", type=int, help="runs at a time in separate processes (default: one per core)"
     )
     experiment.add_argument(
-        "--out", type=Path, help="output folder (default runs/experiments/NAME)"
+        "--out",
+        type=Path,
+        help="output folder (default runs/experiments/NAME; for an experiment given as a file, "
+        "the file's name without .toml, so that an edited copy keeps its own results)",
     )
     experiment.add_argument("--quiet", action="store_true", help="no progress lines")
 
@@ -126,6 +129,14 @@ def engine_named(name: str) -> Engine:
     return simulate_on_batch_engine
 
 
+def _results_name(asked: str, name: str) -> str:
+    """The folder an experiment's results go to, under runs/experiments: a shipped
+    experiment's ``name``; an experiment given as a file, that file's stem (a copy of a
+    shipped one, edited, keeps its ``name`` but must not write over the original's)."""
+    path = Path(asked)
+    return path.stem if path.suffix == ".toml" or path.exists() else name
+
+
 def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm experiment NAME``."""
     from fishswarm.study.experiment import find
@@ -144,7 +155,7 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
         study_code=args.study_code,
         profile=args.profile,
     )
-    out = args.out or Path("runs/experiments") / chosen.name
+    out = args.out or Path("runs/experiments") / _results_name(args.name, chosen.name)
     prepare_folder(out, "--out")
     total = len(chosen.runs())
     groups = f" for {' and '.join(chosen.group_names)}" if chosen.groups else ""

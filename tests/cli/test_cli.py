@@ -971,3 +971,14 @@ def test_a_secured_run_without_its_certificates_says_so_before_it_starts(tmp_pat
     assert result.returncode == 1 and "Traceback" not in result.stderr
     assert f"{empty}/ca.pem is missing: no certificate for 'router'" in result.stderr
     assert "listening on" not in result.stderr  # the run was not announced
+
+
+def test_an_edited_copy_of_an_experiment_keeps_its_own_results(tmp_path: Path) -> None:
+    from fishswarm.cli.study import _results_name
+
+    shipped = Path(__file__).parents[2] / "experiments" / "orbit.toml"
+    copy = tmp_path / "my.toml"
+    copy.write_text(shipped.read_text())  # the same name = "orbit" inside
+    assert _results_name("orbit", "orbit") == "orbit"
+    assert _results_name(str(shipped), "orbit") == "orbit"
+    assert _results_name(str(copy), "orbit") == "my"
