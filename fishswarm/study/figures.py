@@ -281,7 +281,7 @@ def _formation_panels(
         )  # fmt: skip
     else:
         key.append(Line2D([], [], color=ROLE_COLOURS["joined"], label="shape completed"))
-    overhead.legend(handles=key, fontsize=7, loc="lower right", framealpha=0.8)
+    overhead.legend(handles=key, fontsize=7, loc="best", framealpha=0.8)
     error = figure.add_subplot(grid[0, 1])
     error.plot(t, metrics["shape_error"], color="tab:blue")
     error.axhline(formation.tolerance, color="red", linestyle="--", linewidth=0.8,
