@@ -374,8 +374,13 @@ class Fish:
         fresh = rows[self._run[rows] != run]
         if fresh.size:
             self._start_run(fresh, run)
-        if (self._last_tick[rows] >= pending.tick).any() or self._busy[rows].any():
+        if (self._last_tick[rows] >= pending.tick).any():
             self._intake.refuse(key, "stale", f"tick {pending.tick} repeated or out of order")
+            return
+        if self._busy[rows].any():
+            self._intake.refuse(
+                key, "stale", f"tick {pending.tick} came while an earlier tick waits for its mail"
+            )
             return
         self._counts["perceptions"] += rows.size
         self._last_seen[rows] = trio.current_time()
@@ -392,6 +397,11 @@ class Fish:
                 self._counts["runs"] += 1
                 log.info("fish %s: a new run (%d) starts", fish_span(self._ids[rows].tolist()), run)
             self._latest_run = run
+        # A fish in its first run keeps what it was delivered before its first perception:
+        # joining a run under way, it hears its first tick's deliveries before the world
+        # (which waits for the channel's report) sends it that tick. A fish that was in an
+        # earlier run drops that run's mail.
+        earlier = rows[self._run[rows] >= 0]
         self._run[rows] = run
         self._unannounced.append((rows, run))
         self._last_tick[rows] = -1
@@ -401,7 +411,7 @@ class Fish:
         for pending in dropped:
             self._busy[pending.rows] = False
         self._pending = [p for p in self._pending if not np.isin(p.rows, rows).any()]
-        for row in rows.tolist():
+        for row in earlier.tolist():
             self._mail[row] = []
         self._params = self.settings.params  # a new run starts as configured
         fresh = FishMemory.fresh(self._params, rows.size)

@@ -307,6 +307,35 @@ def test_fish_waits_for_announced_deliveries_then_broadcasts_before_its_command(
     assert statistics.broadcasts == 2
 
 
+def test_a_fish_that_joins_a_run_keeps_the_deliveries_that_came_before_its_perception() -> None:
+    # A fish that joins a run under way (a robot, a fish started by hand) may hear its
+    # first tick's deliveries before its first perception: the world sends perceptions
+    # only once the channel has delivered. Before, starting the run threw that mail away
+    # and the fish waited the whole inbox timeout (here 5 s) for it, missing ticks.
+    params = Scenario(behavior=registered().name).fish_params()
+    settings = FishSettings((4,), params, KEYS, inbox_timeout=5.0)
+
+    async def main() -> tuple[float, Command, FishStatistics]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        async with subscription(bus, KEYS.command(4)) as commands, trio.open_nursery() as nursery:
+            await nursery.start(fish.run, bus)
+            await trio.sleep(1.0)
+            delivery = Delivery(4, 3, "signal", np.array([3]), np.array([0.2, 0.1, 0.0]))
+            bus.put(KEYS.inbox(4), encode(delivery))
+            bus.put(KEYS.perception(4), _perception(4, 3, inbox_count=1, run=2))
+            with trio.fail_after(10.0):
+                _, payload = await commands.receive()
+            answered = trio.current_time()
+            nursery.cancel_scope.cancel()
+        return answered, decode(payload, Command), fish.statistics()
+
+    answered, command, statistics = run_mock(main)
+    assert answered == 1.0  # at once, not at the inbox timeout
+    assert command.tick == 3 and command.led is True  # it heard the signal
+    assert statistics.deliveries == 1 and statistics.deliveries_missed == 0
+
+
 def test_a_new_run_starts_the_fish_afresh() -> None:
     settings = FishSettings((1,), Scenario().fish_params(), KEYS)
 
