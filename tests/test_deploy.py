@@ -270,13 +270,39 @@ installs with apt."""
 OFFLINE = ("NewConnectionError", "Temporary failure in name resolution", "Network is unreachable")
 
 
+def _assert_the_robot_drives(python: str, folder: Path) -> None:
+    """The driver and the fish actor run on mock pins in ``python``'s environment, with none
+    of the base station's packages importable."""
+    from tests.test_robot_imports import BLOCKED, DRIVE
+
+    driven = subprocess.run(
+        [python, "-c", f"BLOCKED = {BLOCKED!r}\n" + DRIVE],
+        capture_output=True, text=True, timeout=120, check=False, cwd=folder,
+    )  # fmt: skip
+    assert driven.returncode == 0, driven.stderr
+    perceptions, commands, scipy_loaded = driven.stdout.split()
+    assert int(perceptions) >= 4 and int(commands) >= 4 and scipy_loaded == "False"
+
+
+def _robot_commands(
+    python: str, argvs: list[list[str]], folder: Path
+) -> subprocess.CompletedProcess[str]:
+    """fishswarm's commands ``argvs`` run in ``python``'s environment, the base station's
+    packages blocked; stdout ends with their exit codes."""
+    from tests.test_robot_imports import BLOCKED, COMMANDS
+
+    program = f"BLOCKED = {BLOCKED!r}\nARGVS = {argvs!r}\n" + COMMANDS
+    return subprocess.run(
+        [python, "-W", "ignore", "-c", program],
+        capture_output=True, text=True, timeout=120, check=False, cwd=folder,
+    )  # fmt: skip
+
+
 @pytest.mark.slow
 def test_the_robot_runs_on_the_packages_the_role_installs(tmp_path: Path, wheel: Path) -> None:
     # The venv the role makes on a robot, with pip's copies of bookworm's packages standing
     # in for apt's, what the role asks pip for, and the wheel without its dependencies.
     import yaml
-
-    from tests.test_robot_imports import BLOCKED, COMMANDS, DRIVE
 
     defaults = yaml.safe_load((ROLE / "defaults" / "main.yml").read_text())
     venv = tmp_path / "venv"
@@ -296,19 +322,9 @@ def test_the_robot_runs_on_the_packages_the_role_installs(tmp_path: Path, wheel:
     pip("--no-deps", str(wheel))
     # The driver and the fish actor on mock pins, and the robot's commands, with none of
     # the base station's packages importable.
-    driven = subprocess.run(
-        [python, "-c", f"BLOCKED = {BLOCKED!r}\n" + DRIVE],
-        capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
-    )  # fmt: skip
-    assert driven.returncode == 0, driven.stderr
-    perceptions, commands, scipy_loaded = driven.stdout.split()
-    assert int(perceptions) >= 4 and int(commands) >= 4 and scipy_loaded == "False"
+    _assert_the_robot_drives(python, tmp_path)
     argvs = [["robot", "--help"], ["robot", "--id", "3", "--hardware", "bluebot"]]
-    program = f"BLOCKED = {BLOCKED!r}\nARGVS = {argvs!r}\n" + COMMANDS
-    ran = subprocess.run(
-        [python, "-W", "ignore", "-c", program],
-        capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
-    )  # fmt: skip
+    ran = _robot_commands(python, argvs, tmp_path)
     assert ran.returncode == 0, ran.stderr
     assert ran.stdout.split()[-2:] == ["0", "1"]
     assert "cannot open the BlueBot's hardware" in ran.stderr
@@ -336,8 +352,6 @@ def test_a_mock_robot_runs_from_what_the_role_installs(tmp_path: Path, wheel: Pa
     # test's, on a machine whose Python has no site packages to lend: all a mock robot
     # needs must come from what the role installs. Before, it installed only Zenoh and the
     # wheel without its dependencies, and the robot's service failed on 'import trio'.
-    from tests.test_robot_imports import BLOCKED, COMMANDS, DRIVE
-
     home = tmp_path / "opt"
     path = inventory(
         tmp_path,
@@ -357,23 +371,13 @@ def test_a_mock_robot_runs_from_what_the_role_installs(tmp_path: Path, wheel: Pa
         pytest.skip(f"pip cannot reach its package index here: {result.stdout[-300:]}")
     assert result.returncode == 0, result.stdout + result.stderr
     python = str(home / "venv" / "bin" / "python")
-    driven = subprocess.run(
-        [python, "-c", f"BLOCKED = {BLOCKED!r}\n" + DRIVE],
-        capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
-    )  # fmt: skip
-    assert driven.returncode == 0, driven.stderr
-    perceptions, commands, _ = driven.stdout.split()
-    assert int(perceptions) >= 4 and int(commands) >= 4
+    _assert_the_robot_drives(python, tmp_path)
     # The robot's command as its service runs it: the mock pins open, then it looks for a
     # router (none here) and says so.
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     argvs = [["robot", "--id", "3", "--hardware", "mock", "--connect", endpoint,
               "--connect-timeout", "0.5"]]  # fmt: skip
-    program = f"BLOCKED = {BLOCKED!r}\nARGVS = {argvs!r}\n" + COMMANDS
-    ran = subprocess.run(
-        [python, "-W", "ignore", "-c", program],
-        capture_output=True, text=True, timeout=120, check=False, cwd=tmp_path,
-    )  # fmt: skip
+    ran = _robot_commands(python, argvs, tmp_path)
     assert ran.returncode == 0, ran.stderr
     assert ran.stdout.split()[-1:] == ["1"]
     assert "cannot open a client session" in ran.stderr and "Traceback" not in ran.stderr
