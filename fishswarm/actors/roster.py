@@ -72,6 +72,13 @@ class Roster:
         """Per command key, the fish whose commands come on it, ascending (built on demand)."""
         self._schools: tuple[NDArray[np.int64], Schools] | None = None
         """The last numbering of schools and the ids it numbers (until a school changes)."""
+        self._token_of: dict[int, str] = {}
+        """The liveliness token that speaks for each fish up now."""
+        self._spare_tokens: dict[int, list[str]] = {}
+        """Tokens of a fish id already spoken for, oldest first: a second process started
+        with a taken id (ignored while the first is up: it would take the fish from its
+        school), or a restarted one whose token came before the old one's went (it takes
+        over then)."""
 
     def on_alive(self, key: str, alive: bool, now: float) -> int | None:
         """A liveliness token came or went; the fish that left, if one did."""
@@ -101,26 +108,65 @@ class Roster:
         if member.role != "fish" or fish_id is None:
             return None
         if not alive:
-            self.alive.discard(fish_id)
-            return fish_id
+            return self._gone(fish_id, key, now)
+        current = self._token_of.get(fish_id)
+        # A fish lost (silent) may be taken over at once by a process that came up for it.
+        if current is not None and current != key and fish_id in self.alive:
+            spares = self._spare_tokens.setdefault(fish_id, [])
+            if key not in spares:
+                spares.append(key)
+                log.warning(
+                    "fish %d came up again (%s) while %s speaks for it: ignored while that one "
+                    "is up; give each fish process its own ids",
+                    fish_id,
+                    key,
+                    current,
+                )
+            return None
+        self._speaks_for(fish_id, key, member.school, now)
+        return None
+
+    def _gone(self, fish_id: int, key: str, now: float) -> int | None:
+        """Token ``key`` of ``fish_id`` went: the fish left, unless another token of it is
+        up (a spare goes unsaid; the speaking one's place goes to the oldest spare)."""
+        spares = self._spare_tokens.get(fish_id, [])
+        if key in spares:
+            spares.remove(key)
+            return None
+        if self._token_of.get(fish_id) != key:
+            return None  # a token that never spoke for the fish (not a valid school)
+        del self._token_of[fish_id]
+        while spares:
+            spare = spares.pop(0)
+            member = self.keys.parse_alive(spare)
+            if self._speaks_for(fish_id, spare, member.school, now):
+                log.warning("fish %d: %s speaks for it now", fish_id, spare)
+                return None
+        self.alive.discard(fish_id)
+        return fish_id
+
+    def _speaks_for(self, fish_id: int, key: str, school: str | None, now: float) -> bool:
+        """Whether token ``key`` (of ``school``) speaks for ``fish_id`` from now on, its
+        commands subscribed; not when no key can name its school."""
         try:
-            if member.school is None:
+            if school is None:
                 command_key, kind = self.keys.command(fish_id), "command"
             else:
-                command_key, kind = self.keys.school_commands(member.school), "batch"
+                command_key, kind = self.keys.school_commands(school), "batch"
         except ValueError:  # a token naming a school that no key can name: not a fish of ours
             log.warning("ignored the liveliness token %s: not a valid school name", key)
-            return None
+            return False
+        self._token_of[fish_id] = key
         self.alive.add(fish_id)
-        if self.school_of.get(fish_id, ()) != member.school:
-            self.school_of[fish_id] = member.school
+        if self.school_of.get(fish_id, ()) != school:
+            self.school_of[fish_id] = school
             self._schools = None
         if self.command_key.get(fish_id) != command_key:
             self.command_key[fish_id] = command_key
             self._senders.clear()
         if command_key not in self._subscriptions:
             self._subscriptions[command_key] = (self._subscribe(command_key, kind), now)
-        return None
+        return True
 
     def schools(self, ids: NDArray[np.int64]) -> Schools:
         """The schools of the fish ``ids`` (the world's, as it is now), numbered once for as

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
+import pytest
 
 from fishswarm.actors.bus import Declared
 from fishswarm.actors.roster import Roster
@@ -40,7 +43,9 @@ def test_a_fish_in_another_school_or_new_ids_renumber() -> None:
         roster.on_alive(keys.alive("fish", fish_id, school), True, now=0.0)
     ids = np.array([0, 1])
     assert roster.schools(ids).number.tolist() == [1, 0]
-    # Fish 0 comes back in school a: the world's ids are the same array, the numbering not.
+    # Fish 0 leaves school b and comes back in school a: the world's ids are the same array,
+    # the numbering not.
+    assert roster.on_alive(keys.alive("fish", 0, "b"), False, now=0.5) == 0
     roster.on_alive(keys.alive("fish", 0, "a"), True, now=1.0)
     assert roster.schools(ids).names == ("a",)
     assert roster.schools(ids).number.tolist() == [0, 0]
@@ -50,15 +55,54 @@ def test_a_fish_in_another_school_or_new_ids_renumber() -> None:
     assert roster.schools(grown).number.tolist() == [0, 0, -1]
 
 
-def test_a_fish_that_moves_to_another_school_sends_on_its_new_key_only() -> None:
+def test_a_fish_that_moves_to_another_school_sends_on_its_new_key_once_the_old_one_goes(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
     keys, roster = KeySpace(), _roster()
     roster.on_alive(keys.alive("fish", 0, "a"), True, now=0.0)
     roster.on_alive(keys.alive("fish", 1, "a"), True, now=0.0)
     school_a, school_b = keys.school_commands("a"), keys.school_commands("b")
     assert roster.all_on(school_a, np.array([0, 1]))
-    roster.on_alive(keys.alive("fish", 1, "b"), True, now=1.0)
+    # Fish 1 comes up in school b (a restart, or a second process given its id) while its
+    # token in school a is up: school a keeps it, and the world hears of the second one.
+    with caplog.at_level(logging.WARNING, logger="fishswarm.actors.roster"):
+        assert roster.on_alive(keys.alive("fish", 1, "b"), True, now=1.0) is None
+    assert "fish 1 came up again" in caplog.text
+    assert roster.all_on(school_a, np.array([0, 1]))
+    # School a's token of fish 1 goes: school b's takes over, and no fish is lost.
+    assert roster.on_alive(keys.alive("fish", 1, "a"), False, now=2.0) is None
     assert not roster.all_on(school_a, np.array([0, 1]))
     assert roster.all_on(school_a, np.array([0])) and roster.all_on(school_b, np.array([1]))
+    assert roster.alive == {0, 1}
+
+
+def test_a_second_process_with_a_taken_id_leaves_without_taking_the_fish_along() -> None:
+    # A run's own fish 2 in school worker-0, and a `fishswarm fish --id 2` started by mistake,
+    # which comes and goes: the run's fish 2 stays, in its school, and is not lost.
+    keys, roster = KeySpace(), _roster()
+    for fish_id in range(4):
+        roster.on_alive(keys.alive("fish", fish_id, "worker-0"), True, now=0.0)
+    school = keys.school_commands("worker-0")
+    roster.on_alive(keys.alive("fish", 2), True, now=1.0)
+    assert roster.all_on(school, np.arange(4))
+    assert roster.on_alive(keys.alive("fish", 2), False, now=2.0) is None
+    assert roster.all_on(school, np.arange(4)) and roster.alive == {0, 1, 2, 3}
+    # The school's own token of fish 2 going is the fish leaving.
+    assert roster.on_alive(keys.alive("fish", 2, "worker-0"), False, now=3.0) == 2
+    assert roster.alive == {0, 1, 3}
+
+
+def test_a_lost_fish_is_taken_over_at_once_by_a_process_that_comes_up_for_it() -> None:
+    # Fish 4's process hangs (its token stays up, its commands stop): the world loses it; a
+    # new process for fish 4 in another school speaks for it from then on.
+    keys, roster = KeySpace(), _roster()
+    roster.on_alive(keys.alive("fish", 4, "old"), True, now=0.0)
+    assert roster.mark_lost(4, 3, "silent")
+    roster.on_alive(keys.alive("fish", 4, "new"), True, now=5.0)
+    assert roster.alive == {4} and roster.all_on(keys.school_commands("new"), np.array([4]))
+    # The hung process's token going at last loses nothing.
+    assert roster.on_alive(keys.alive("fish", 4, "old"), False, now=9.0) is None
+    assert roster.alive == {4}
 
 
 def test_channels_are_counted_up_and_down_by_their_tokens() -> None:
