@@ -485,7 +485,7 @@ def _summary(
             "joined_fish": len(world.joined),
             "late_commands": world.late_commands,
             "deliveries": channel_stats.delivered,
-            "broadcasts": fish_totals.get("broadcasts", 0),
+            "broadcasts": world_stats.broadcasts,
         },
         "vision": world.sim.sight.summary() if world.params.cameras is not None else None,
         "lost": [{"id": f.fish_id, "tick": f.tick, "reason": f.reason} for f in world.lost],

@@ -159,6 +159,8 @@ class WorldStatistics:
             90th percentile over the ticks every fish answered, s (0 before any tick; a tick
             in which a fish timed out is left out, its fish counted as lost); the network's
             latency shows here.
+        broadcasts: outbox messages the fish in the world said they sent, from the commands
+            it held (every fish: those that joined later and robots too).
         physics_time_median, vision_time_median, perceptions_time_median: where the world's
             time goes: the median wall time of its steps — moving the fish to the next tick
             (lockstep; to the next event in jitter mode: physics), seeing for them (vision),
@@ -180,6 +182,7 @@ class WorldStatistics:
     physics_time_median: float = 0.0
     vision_time_median: float = 0.0
     perceptions_time_median: float = 0.0
+    broadcasts: int = 0
 
     @property
     def rejected_total(self) -> int:
@@ -239,6 +242,7 @@ class World:
         Zenoh's threads read as queries arrive (see :mod:`fishswarm.actors.control`)."""
         self._stop_requested = False
         self._messages_out = 0
+        self._broadcasts_sent = 0
         self._current = TickCommands()
         self.mismatched: set[int] = set()
         """Fish that said they run another behaviour, version or rules than this world's."""
@@ -290,6 +294,7 @@ class World:
             physics_time_median=_quantile(self._phase_times["physics"], 0.5),
             vision_time_median=_quantile(self._phase_times["vision"], 0.5),
             perceptions_time_median=_quantile(self._phase_times["perceptions"], 0.5),
+            broadcasts=self._broadcasts_sent,
         )
 
     async def run(
@@ -770,6 +775,7 @@ class World:
             held &= ~among(self._leaving_ids(), current.ids)
         answered = current.ids[held]
         self.sim.hold(answered, current.fins[held])
+        self._broadcasts_sent += int(current.broadcasts[held].sum())
         if self.scenario.time_mode == "jitter":
             return  # broadcasts are not delivered in jitter mode: nothing to announce
         self._broadcasters, self._broadcasts = answered, current.broadcasts[held]

@@ -706,6 +706,37 @@ def test_a_late_fish_joins_at_a_later_tick() -> None:
     assert counts[joined_tick:] == [4] * (9 - joined_tick)  # in the snapshot it joined at
 
 
+def test_the_broadcasts_of_a_fish_that_joined_are_counted_too() -> None:
+    # Every fish of the tests' signal behaviour broadcasts at every decision; the world
+    # counts what the commands it holds say, a late fish's too (the launcher's summary
+    # once counted only its own fish's).
+    from tests.behaviors.signal_behavior import registered
+
+    scenario = Scenario(fish=3, duration=6.0, seed=4, behavior=registered().name)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2), admit_delay=0.0))
+        observer = Observer(keys)
+        params = scenario.fish_params()
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(Channel(scenario).run, bus)
+            await nursery.start(Fish(FishSettings((0, 1, 2), params, keys, school="t")).run, bus)
+            nursery.start_soon(world.run, bus)
+            await observer.wait_for_tick(2)
+            await nursery.start(Fish(FishSettings((9,), params, keys)).run, bus)
+            await observer.wait_for_tick(6)
+            nursery.cancel_scope.cancel()
+        return world
+
+    world = run_mock(main)
+    joined = world.joined[0][1]
+    # Decisions at ticks 0–5: three fish at each, fish 9 from the tick it joined at.
+    assert world.statistics().broadcasts == 3 * 6 + (6 - joined)
+
+
 Ask = Callable[[str], None]
 
 
