@@ -114,6 +114,9 @@ class Channel:
         self._delivered = 0
         self._missing = 0
         self._last_tick = 0
+        self._first_tick: int | None = None
+        """The first tick of the run this channel has seen a snapshot of (0: the whole run;
+        later: it came up while the run went on)."""
 
     def statistics(self) -> ChannelStatistics:
         """The channel's counters so far."""
@@ -136,6 +139,8 @@ class Channel:
             while True:
                 snapshot = await self._next_snapshot()
                 self._take_robots()
+                if self._first_tick is None or snapshot.tick == 0:
+                    self._first_tick = snapshot.tick
                 if snapshot.tick == 0:
                     self._start_run()
                     if self._ask_world is not None:
@@ -195,7 +200,10 @@ class Channel:
         }
         kept = self._outbox[sent_tick]
         remaining = sum(max(0, n - len(kept.get(fish, []))) for fish, n in wanted.items())
-        with trio.move_on_after(self.outbox_timeout):
+        # Come up while the run went on, the channel may have missed the broadcasts its first
+        # snapshot announces (sent before it listened): waiting for them would hold the world.
+        patience = 0.0 if snapshot.tick == self._first_tick else self.outbox_timeout
+        with trio.move_on_after(patience):
             while remaining > 0:
                 kind, key, payload = await self._events.receive()
                 if kind == "snapshot":
