@@ -243,6 +243,7 @@ class World:
         self._stop_requested = False
         self._messages_out = 0
         self._broadcasts_sent = 0
+        self._said_no_channel = False
         self._current = TickCommands()
         self.mismatched: set[int] = set()
         """Fish that said they run another behaviour, version or rules than this world's."""
@@ -794,8 +795,15 @@ class World:
         if event.snapshot in (None, 0) or not self._awaits_report:
             return counts
         if not self.roster.channels:
-            log.warning("broadcasts at tick %d but no channel is running: not delivered", self.tick)
+            if not self._said_no_channel:  # once until a channel comes: not every tick
+                log.warning(
+                    "broadcasts at tick %d but no channel is running: not delivered until one "
+                    "comes up (fishswarm channel)",
+                    self.tick,
+                )
+                self._said_no_channel = True
             return counts
+        self._said_no_channel = False
         with trio.move_on_after(self.settings.channel_timeout):
             while self._report is None or self._report.tick != self.tick:
                 self._handle(await self._events.receive())

@@ -737,6 +737,31 @@ def test_the_broadcasts_of_a_fish_that_joined_are_counted_too() -> None:
     assert world.statistics().broadcasts == 3 * 6 + (6 - joined)
 
 
+def test_broadcasts_without_a_channel_are_warned_of_once(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    from tests.behaviors.signal_behavior import registered
+
+    scenario = Scenario(fish=2, duration=5.0, seed=4, behavior=registered().name)
+
+    async def main() -> None:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0))
+        observer = Observer(scenario.keys)
+        params = scenario.fish_params()
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(Fish(FishSettings((0, 1), params, scenario.keys)).run, bus)
+            nursery.start_soon(world.run, bus)
+            await observer.wait_for_tick(5)
+            nursery.cancel_scope.cancel()
+
+    with caplog.at_level(logging.WARNING, logger="fishswarm.actors.world"):
+        run_mock(main)
+    # Broadcasts at ticks 1-4, no channel: said once, not at every tick.
+    assert caplog.text.count("no channel is running") == 1
+
+
 Ask = Callable[[str], None]
 
 
