@@ -124,7 +124,10 @@ ticks in eight interleaved pairs, 1 000 fish from 11 % longer to 14 % shorter (w
 spread of runs), and the first tick after 0.2-0.3 s instead of 0.7-1.4 s. At 10 000 fish,
 over four runs, two workers gave 0.70-0.85 of the batch engine's speed (mean 0.76), one
 0.69-0.78 (0.73), the launcher's process 0.63-0.78 (0.71): the world's sending of large
-schools' perceptions in parts overlaps the workers' deciding."""
+schools' perceptions in parts overlaps the workers' deciding. Since the twenty-ninth
+session's changes the launcher's process has often been ahead at 10 000 fish (thirty-first
+session: shorter in 7 of 9 interleaved pairs, 46.6-72.7 ms a tick against 50.4-72.3): no
+longer a clear choice either way; two workers stay the default beyond 2 000 fish."""
 
 
 def where_fish_run(procs: int) -> str:

@@ -400,8 +400,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="fish worker processes; 0 runs the fish in this process, beside the world, "
         "still over Zenoh (default: 0 up to 2000 fish, 2 beyond). Measured on two cores "
         "against one worker: 25 fish 5-31 %% shorter ticks, 1000 fish about even, the first "
-        "tick after 0.2 s instead of 0.7 s; at 10 000 fish two workers are a little faster "
-        "(the world sends their perceptions in parts while they decide). Workers keep the "
+        "tick after 0.2 s instead of 0.7 s; at 10 000 fish neither is clearly faster (runs "
+        "of either way gave 0.6-0.85 of the batch engine's speed). Workers keep the "
         "fish apart from the world: a fish that crashes its process leaves the world "
         "running. docs/benchmarks.md",
     )
