@@ -373,7 +373,7 @@ class Fish:
             return
         fresh = rows[self._run[rows] != run]
         if fresh.size:
-            self._start_run(fresh, run)
+            self._start_run(fresh, run, pending.tick)
         if (self._last_tick[rows] >= pending.tick).any():
             self._intake.refuse(key, "stale", f"tick {pending.tick} repeated or out of order")
             return
@@ -390,17 +390,19 @@ class Fish:
         self._busy[rows] = True
         self._pending.append(pending)
 
-    def _start_run(self, rows: Rows, run: int) -> None:
-        """These fish start a new run of the world: ticks from the start, memory fresh."""
+    def _start_run(self, rows: Rows, run: int, tick: int) -> None:
+        """These fish start a new run of the world at ``tick``: memory fresh."""
         if run != self._latest_run:
             if self._latest_run >= 0:
                 self._counts["runs"] += 1
                 log.info("fish %s: a new run (%d) starts", fish_span(self._ids[rows].tolist()), run)
             self._latest_run = run
-        # A fish in its first run keeps what it was delivered before its first perception:
-        # joining a run under way, it hears its first tick's deliveries before the world
-        # (which waits for the channel's report) sends it that tick. A fish that was in an
-        # earlier run drops that run's mail.
+        # A fish in its first run keeps what it was delivered for this tick and the next
+        # before its first perception: joining a run under way, it hears its first tick's
+        # deliveries before the world (which waits for the channel's report) sends it that
+        # tick. Anything else (heard while another process spoke for its id) and the mail of
+        # a fish's earlier run are dropped: deliveries do not name their run.
+        first = rows[self._run[rows] < 0]
         earlier = rows[self._run[rows] >= 0]
         self._run[rows] = run
         self._unannounced.append((rows, run))
@@ -413,6 +415,8 @@ class Fish:
         self._pending = [p for p in self._pending if not np.isin(p.rows, rows).any()]
         for row in earlier.tolist():
             self._mail[row] = []
+        for row in first.tolist():
+            self._mail[row] = [d for d in self._mail[row] if tick <= d.tick <= tick + 1]
         self._params = self.settings.params  # a new run starts as configured
         fresh = FishMemory.fresh(self._params, rows.size)
         self._memory = put_rows(self._memory, rows, fresh)

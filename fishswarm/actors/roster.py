@@ -5,6 +5,10 @@ Membership comes from liveliness tokens. A fish that comes up gets a command sub
 (its own key, or its school's) and is admitted at the first event at least ``admit_delay``
 after that subscription was declared (through a router, a subscription takes a moment to
 reach the publishers). A fish whose token goes, or that misses a command deadline, is lost.
+One token speaks for a fish at a time: another that comes up for a fish id already spoken
+for (a second process given that id, or a restart before the old token went) waits as a
+spare, and takes the fish over when the first goes or the fish is lost; the fish then
+leaves the world and comes back at a later tick.
 """
 
 from __future__ import annotations
@@ -74,6 +78,9 @@ class Roster:
         """The last numbering of schools and the ids it numbers (until a school changes)."""
         self._token_of: dict[int, str] = {}
         """The liveliness token that speaks for each fish up now."""
+        self._handed_over: set[int] = set()
+        """Fish whose token went while a spare took them over: their loss keeps them alive,
+        to come back (until they are admitted again)."""
         self._spare_tokens: dict[int, list[str]] = {}
         """Tokens of a fish id already spoken for, oldest first: a second process started
         with a taken id (ignored while the first is up: it would take the fish from its
@@ -136,14 +143,23 @@ class Roster:
         if self._token_of.get(fish_id) != key:
             return None  # a token that never spoke for the fish (not a valid school)
         del self._token_of[fish_id]
+        # The fish leaves the world either way (this tick's perception went to the process
+        # that left); a spare that takes it over brings it back at a later tick.
+        if self._hand_over(fish_id, now):
+            self._handed_over.add(fish_id)
+        else:
+            self.alive.discard(fish_id)
+        return fish_id
+
+    def _hand_over(self, fish_id: int, now: float) -> bool:
+        """Whether the oldest spare token of ``fish_id`` that can speaks for it now."""
+        spares = self._spare_tokens.get(fish_id, [])
         while spares:
             spare = spares.pop(0)
-            member = self.keys.parse_alive(spare)
-            if self._speaks_for(fish_id, spare, member.school, now):
+            if self._speaks_for(fish_id, spare, self.keys.parse_alive(spare).school, now):
                 log.warning("fish %d: %s speaks for it now", fish_id, spare)
-                return None
-        self.alive.discard(fish_id)
-        return fish_id
+                return True
+        return False
 
     def _speaks_for(self, fish_id: int, key: str, school: str | None, now: float) -> bool:
         """Whether token ``key`` (of ``school``) speaks for ``fish_id`` from now on, its
@@ -187,19 +203,29 @@ class Roster:
 
     def ready(self, present: set[int], now: float, admit_delay: float) -> list[int]:
         """Live fish not yet in the world whose commands have been subscribed long enough."""
-        return sorted(
+        ready = sorted(
             fish_id
             for fish_id in self.alive - present
             if self._subscriptions[self.command_key[fish_id]][1] <= now - admit_delay
         )
+        self._handed_over.difference_update(ready)
+        return ready
 
-    def mark_lost(self, fish_id: int, tick: int, reason: str) -> bool:
-        """Record a fish as lost at ``tick`` (once per tick); whether it is news."""
+    def mark_lost(self, fish_id: int, tick: int, reason: str, now: float = 0.0) -> bool:
+        """Record a fish as lost at ``tick`` (once per tick); whether it is news. ``now``:
+        the world's clock, s, when a spare takes the fish over (its subscription's start)."""
         if any(f.fish_id == fish_id and f.tick == tick for f in self.lost):
             return False
         log.warning("fish %d lost at tick %d: %s", fish_id, tick, reason)
         self.lost.append(LostFish(fish_id, tick, reason))
-        self.alive.discard(fish_id)
+        # A process that took the fish over (or a spare that can now: the lost one hangs
+        # with its token up) brings it back at a later tick.
+        if fish_id in self._handed_over:
+            self._handed_over.discard(fish_id)
+        elif fish_id in self._token_of and self._hand_over(fish_id, now):
+            pass
+        else:
+            self.alive.discard(fish_id)
         return True
 
     def close(self) -> None:

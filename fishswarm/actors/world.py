@@ -962,7 +962,7 @@ class World:
 
     def _lose(self, fish_id: int, reason: str) -> None:
         self._lights.pop(fish_id, None)
-        if self.roster.mark_lost(fish_id, self.tick, reason):
+        if self.roster.mark_lost(fish_id, self.tick, reason, trio.current_time()):
             self._leaving.add(fish_id)
         self._current.give_up(fish_id)
 

@@ -165,11 +165,12 @@ def _warn_if_crowded(command: str, scenario: Scenario) -> None:
 def _watchdog_warning(timeout: float, scenario: Scenario) -> str | None:
     """What is wrong with a fish watchdog that would stop the fins between two signs of
     life of the world (None: nothing): its pulse comes every PULSE_PERIOD, and in real
-    time (or jitter) a perception every control period; in lockstep a slow tick may leave
-    only the pulse. Such a run ends 'degraded', which a test of the watchdog may want."""
+    time a perception every control period; in lockstep or jitter (not paced by the wall
+    clock) a slow tick may leave only the pulse. Such a run ends 'degraded', which a test
+    of the watchdog may want."""
     gap = PULSE_PERIOD
     why = f"its pulse comes every {PULSE_PERIOD:g} s"
-    if scenario.time_mode != "lockstep" and scenario.control_period < PULSE_PERIOD:
+    if scenario.time_mode == "realtime" and scenario.control_period < PULSE_PERIOD:
         gap = scenario.control_period
         why = f"a perception comes every control period, {gap:g} s"
     if timeout > gap:
@@ -535,11 +536,9 @@ async def _say_when_the_router_goes(
     while True:
         await trio.sleep(ROUTER_CHECK_EVERY)
         now = reaches_router(session)
-        if now == up:
-            continue
+        if now == up or (not now and expected()):
+            continue  # an expected loss is not news, nor the router's return after it
         up = now
-        if not up and expected():
-            continue
         if up:
             print(f"fishswarm {command}: the router at {endpoint} is back", file=sys.stderr)
         else:

@@ -336,6 +336,36 @@ def test_a_fish_that_joins_a_run_keeps_the_deliveries_that_came_before_its_perce
     assert statistics.deliveries == 1 and statistics.deliveries_missed == 0
 
 
+def test_a_fish_in_its_first_run_drops_mail_of_other_ticks_it_heard_before() -> None:
+    # Mail for tick 9, heard while no run had reached this fish (another process spoke for
+    # its id, say), is no mail of the run it joins at tick 3: at tick 9 the fish waits for
+    # the delivery announced then, and decides without it at the timeout.
+    params = Scenario(behavior=registered().name).fish_params()
+    settings = FishSettings((4,), params, KEYS, inbox_timeout=5.0, perception_timeout=20.0)
+
+    def delivery(tick: int) -> bytes:
+        return encode(Delivery(4, tick, "signal", np.array([3]), np.array([0.2, 0.1, 0.0])))
+
+    async def main() -> list[tuple[float, Command]]:
+        bus = MemoryBus()
+        answers: list[tuple[float, Command]] = []
+        async with subscription(bus, KEYS.command(4)) as commands, trio.open_nursery() as nursery:
+            await nursery.start(Fish(settings).run, bus)
+            bus.put(KEYS.inbox(4), delivery(9))
+            bus.put(KEYS.inbox(4), delivery(3))
+            for tick in (3, 9):
+                bus.put(KEYS.perception(4), _perception(4, tick, inbox_count=1, run=2))
+                with trio.fail_after(10.0):
+                    _, payload = await commands.receive()
+                answers.append((trio.current_time(), decode(payload, Command)))
+            nursery.cancel_scope.cancel()
+        return answers
+
+    (first_at, first), (later_at, later) = run_mock(main)
+    assert first_at == 0.0 and first.tick == 3 and first.led is True
+    assert later_at == 5.0 and later.tick == 9 and later.led is False
+
+
 def test_a_new_run_starts_the_fish_afresh() -> None:
     settings = FishSettings((1,), Scenario().fish_params(), KEYS)
 

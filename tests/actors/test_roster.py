@@ -69,11 +69,14 @@ def test_a_fish_that_moves_to_another_school_sends_on_its_new_key_once_the_old_o
         assert roster.on_alive(keys.alive("fish", 1, "b"), True, now=1.0) is None
     assert "fish 1 came up again" in caplog.text
     assert roster.all_on(school_a, np.array([0, 1]))
-    # School a's token of fish 1 goes: school b's takes over, and no fish is lost.
-    assert roster.on_alive(keys.alive("fish", 1, "a"), False, now=2.0) is None
+    # School a's token of fish 1 goes: the fish leaves the world (this tick's perception
+    # went to school a), and school b's token takes it over, to bring it back.
+    assert roster.on_alive(keys.alive("fish", 1, "a"), False, now=2.0) == 1
+    assert roster.mark_lost(1, 7, "left", now=2.0)  # as the world loses it
     assert not roster.all_on(school_a, np.array([0, 1]))
     assert roster.all_on(school_a, np.array([0])) and roster.all_on(school_b, np.array([1]))
     assert roster.alive == {0, 1}
+    assert roster.ready({0}, now=3.0, admit_delay=0.1) == [1]  # it comes back
 
 
 def test_a_second_process_with_a_taken_id_leaves_without_taking_the_fish_along() -> None:
@@ -90,6 +93,20 @@ def test_a_second_process_with_a_taken_id_leaves_without_taking_the_fish_along()
     # The school's own token of fish 2 going is the fish leaving.
     assert roster.on_alive(keys.alive("fish", 2, "worker-0"), False, now=3.0) == 2
     assert roster.alive == {0, 1, 3}
+
+
+def test_a_spare_takes_over_a_fish_lost_while_its_process_hangs() -> None:
+    # Fish 4's second process comes up while the first still answers (a spare); then the
+    # first hangs, its token up: the world loses fish 4, and the spare brings it back.
+    keys, roster = KeySpace(), _roster()
+    roster.on_alive(keys.alive("fish", 4, "old"), True, now=0.0)
+    roster.on_alive(keys.alive("fish", 4, "new"), True, now=1.0)
+    assert roster.mark_lost(4, 3, "no command within 10 s", now=12.0)
+    assert roster.alive == {4} and roster.all_on(keys.school_commands("new"), np.array([4]))
+    assert roster.ready(set(), now=13.0, admit_delay=0.1) == [4]
+    # Without a spare, a lost fish stays out.
+    roster.on_alive(keys.alive("fish", 5), True, now=0.0)
+    assert roster.mark_lost(5, 3, "silent", now=12.0) and 5 not in roster.alive
 
 
 def test_a_lost_fish_is_taken_over_at_once_by_a_process_that_comes_up_for_it() -> None:

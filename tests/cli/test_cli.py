@@ -960,6 +960,8 @@ def test_a_watchdog_shorter_than_the_worlds_signs_of_life_is_warned_of() -> None
         assert warning is not None and "its pulse comes every 1 s" in warning
         assert _watchdog_warning(1.5, scenario) is None
     assert _watchdog_warning(5.0, Scenario()) is None  # the default watchdog
+    # Jitter is not paced by the wall clock: only the pulse is sure to come.
+    assert _watchdog_warning(0.6, Scenario(time_mode="jitter", control_period=0.5)) is not None
 
 
 def test_a_secured_run_without_its_certificates_says_so_before_it_starts(tmp_path: Path) -> None:
