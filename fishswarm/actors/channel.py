@@ -53,6 +53,10 @@ from fishswarm.sim.streams import Stream, stream
 log = logging.getLogger(__name__)
 
 
+FIRST_SNAPSHOT_WAIT = 0.5
+"""Longest wait for the broadcasts that the first snapshot a channel sees announces, when
+that snapshot is not a run's first (the channel came up while the run went on), s: enough
+for broadcasts on their way, little against a tick."""
 OUTBOX_TIMEOUT = 5.0
 """How long the channel waits for the broadcasts a snapshot announces, s."""
 
@@ -201,8 +205,11 @@ class Channel:
         kept = self._outbox[sent_tick]
         remaining = sum(max(0, n - len(kept.get(fish, []))) for fish, n in wanted.items())
         # Come up while the run went on, the channel may have missed the broadcasts its first
-        # snapshot announces (sent before it listened): waiting for them would hold the world.
-        patience = 0.0 if snapshot.tick == self._first_tick else self.outbox_timeout
+        # snapshot announces (sent before it listened): waiting the whole timeout for them
+        # would hold the world; those still on their way come within a moment.
+        patience = self.outbox_timeout
+        if snapshot.tick == self._first_tick:
+            patience = min(patience, FIRST_SNAPSHOT_WAIT)
         with trio.move_on_after(patience):
             while remaining > 0:
                 kind, key, payload = await self._events.receive()
