@@ -222,9 +222,7 @@ class Roster:
         # with its token up) brings it back at a later tick.
         if fish_id in self._handed_over:
             self._handed_over.discard(fish_id)
-        elif fish_id in self._token_of and self._hand_over(fish_id, now):
-            pass
-        else:
+        elif fish_id not in self._token_of or not self._hand_over(fish_id, now):
             self.alive.discard(fish_id)
         return True
 
