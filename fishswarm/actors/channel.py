@@ -32,7 +32,7 @@ import trio
 
 from fishswarm.actors.bus import Bus, open_alive_events, open_subscriber, open_token
 from fishswarm.actors.inbox import Inbox
-from fishswarm.actors.intake import Intake
+from fishswarm.actors.intake import LOGGED_SENDERS, Intake
 from fishswarm.behaviors.core import FishParams
 from fishswarm.behaviors.formation import flag_seen_in_light
 from fishswarm.protocols.codec import encode
@@ -68,12 +68,17 @@ class ChannelStatistics:
     Attributes:
         delivered: deliveries made.
         missing_broadcasts: broadcasts announced in a snapshot that never arrived.
-        rejected: messages rejected.
+        rejected: messages rejected: malformed, misaddressed, of a tick long gone or not
+            yet come, or from a fish that sent more than it announced.
+        unannounced: valid broadcasts no snapshot announced, not delivered: their
+            sender's command came late or not at all (lost, left), or their run had
+            ended. An ordinary part of a real-time run, or of fish coming and going.
     """
 
     delivered: int
     missing_broadcasts: int
     rejected: int
+    unannounced: int = 0
 
 
 class Channel:
@@ -117,6 +122,9 @@ class Channel:
         """The scenario ``_params`` were read from."""
         self._delivered = 0
         self._missing = 0
+        self._unannounced = 0
+        self._unannounced_named: set[int] = set()
+        """Senders whose unannounced broadcasts have been logged."""
         self._last_tick = 0
         self._first_tick: int | None = None
         """The first tick of the run this channel has seen a snapshot of (0: the whole run;
@@ -124,7 +132,9 @@ class Channel:
 
     def statistics(self) -> ChannelStatistics:
         """The channel's counters so far."""
-        return ChannelStatistics(self._delivered, self._missing, self._intake.rejected_total)
+        return ChannelStatistics(
+            self._delivered, self._missing, self._intake.rejected_total, self._unannounced
+        )
 
     async def run(
         self, bus: Bus, *, task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED
@@ -237,18 +247,27 @@ class Channel:
 
     def _settle(self, sent_tick: int, wanted: dict[int, int]) -> list[Broadcast]:
         """Take the broadcasts of ``sent_tick`` out of the outbox: each sender's first
-        ``wanted`` of them, by sender; the rest, and any of older ticks, which no snapshot
-        announced, are counted as rejected."""
+        ``wanted`` of them, by sender. More from an announced sender than it announced are
+        rejected; those of a sender the snapshot does not announce, and any of older ticks,
+        are let go as unannounced."""
         for old in sorted(t for t in self._outbox if t < sent_tick):
             # Its snapshot never came (lost), or came before the broadcast did.
-            self._let_go(old, f"a broadcast of tick {old}, whose snapshot had gone by")
+            self._let_go(old, f"of tick {old}, whose snapshot had gone by")
         got = self._outbox.pop(sent_tick, {})
         chosen = [b for fish in sorted(wanted) for b in got.get(fish, [])[: wanted[fish]]]
         for fish, broadcasts in got.items():
-            for _ in range(len(broadcasts) - wanted.get(fish, 0)):
-                self._intake.reject(
-                    self.keys.outbox(fish), "unannounced",
-                    f"a broadcast of tick {sent_tick} that its snapshot does not announce",
+            if fish not in wanted:
+                for _ in broadcasts:
+                    self._let_go_one(
+                        fish,
+                        f"of tick {sent_tick}, which the snapshot of tick {sent_tick + 1} "
+                        "does not announce (its command came late or not at all)",
+                    )
+                continue
+            for _ in range(len(broadcasts) - wanted[fish]):
+                self._intake.refuse(
+                    self.keys.outbox(fish), "surplus",
+                    f"one broadcast of tick {sent_tick} more than its sender announced",
                 )  # fmt: skip
         return chosen
 
@@ -314,7 +333,7 @@ class Channel:
         self._rngs.clear()
         # A new run's first broadcasts are of ticks 0 to 2: anything later is the last run's.
         for old in [tick for tick in self._outbox if tick > 2]:
-            self._let_go(old, f"a broadcast of tick {old}, of a run that has ended")
+            self._let_go(old, f"of tick {old}, of a run that has ended")
 
     async def _take_the_worlds_medium(
         self, ask_world: Callable[[], Awaitable[Scenario | None]]
@@ -355,7 +374,22 @@ class Channel:
         """Count every broadcast of ``tick`` in the outbox as unannounced, and drop them."""
         for fish, broadcasts in self._outbox.pop(tick, {}).items():
             for _ in broadcasts:
-                self._intake.reject(self.keys.outbox(fish), "unannounced", reason)
+                self._let_go_one(fish, reason)
+
+    def _let_go_one(self, fish: int, reason: str) -> None:
+        """Count a valid broadcast of ``fish`` that no snapshot announced, and say so once
+        for each sender (of up to :data:`LOGGED_SENDERS`): a fish's late or lost command,
+        or a run's end, not a bad message."""
+        self._unannounced += 1
+        if fish in self._unannounced_named or len(self._unannounced_named) >= LOGGED_SENDERS:
+            return
+        self._unannounced_named.add(fish)
+        log.info(
+            "channel: a broadcast of fish %d %s, not delivered; further ones of this fish are "
+            "counted as unannounced broadcasts",
+            fish,
+            reason,
+        )
 
     def _light_flag(self, snapshot: Snapshot) -> FormationFlag | None:
         """The flag a simulated fish takes a flashing robot for, in the shape the snapshot

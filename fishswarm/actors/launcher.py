@@ -489,6 +489,7 @@ def _summary(
             "late_commands": world.late_commands,
             "deliveries": channel_stats.delivered,
             "broadcasts": world_stats.broadcasts,
+            "unannounced_broadcasts": channel_stats.unannounced,
         },
         "vision": world.sim.sight.summary() if world.params.cameras is not None else None,
         "lost": [{"id": f.fish_id, "tick": f.tick, "reason": f.reason} for f in world.lost],

@@ -361,7 +361,14 @@ def _summary_text(summary: dict[str, Any]) -> str:
     lines.append(
         f"  ticks {counts['ticks']}, messages {counts['messages']}, rejected {rejected}, "
         f"lost fish {counts['lost_fish']}, broadcasts {counts['broadcasts']}, "
-        f"deliveries {counts['deliveries']}, wall {summary['wall_time']:.2f} s"
+        f"deliveries {counts['deliveries']}"
+        + (
+            f" ({counts['unannounced_broadcasts']} broadcasts not delivered: sent with a late "
+            "or lost command)"
+            if counts.get("unannounced_broadcasts")
+            else ""
+        )
+        + f", wall {summary['wall_time']:.2f} s"
         + (f", {rtf:.{2 if rtf < 1 else 0}f}× real time" if rtf else "")
     )
     world_time = summary.get("world_time") or {}
@@ -511,7 +518,8 @@ def channel(args: argparse.Namespace, scenario: Scenario) -> int:
             print(
                 f"channel: {statistics.delivered} deliveries made, "
                 f"{statistics.missing_broadcasts} broadcasts announced but missing, "
-                f"{statistics.rejected} messages rejected by the channel",
+                f"{statistics.unannounced} broadcasts not delivered (sent with a late or "
+                f"lost command), {statistics.rejected} messages rejected by the channel",
                 file=sys.stderr,
             )
     return 0

@@ -432,6 +432,7 @@ def test_a_standalone_channel_takes_each_runs_loss_and_seed_from_its_world(
         assert channel.wait(timeout=15) == 130
         done = channel_lines.wait_for(
             r"^channel: (\d+) deliveries made, 0 broadcasts announced but missing, "
+            r"0 broadcasts not delivered \(sent with a late or lost command\), "
             r"0 messages rejected by the channel$"
         )
         assert int(done.group(1)) > 0
