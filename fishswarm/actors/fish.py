@@ -430,8 +430,8 @@ class Fish:
             self._say_about(bus, ids, 0)
 
     def _announce(self, bus: Bus) -> None:
-        """Tell the world what the fish that started a run run (behaviour, version, rules),
-        so that it can warn when that is not what its scenario says."""
+        """Tell the world what the fish that started a run run (behaviour, version, rules,
+        control period), so that it can warn when that is not what its scenario says."""
         for rows, run in self._unannounced:
             self._say_about(bus, np.sort(self._ids[rows]), run)
         self._unannounced = []
@@ -441,7 +441,7 @@ class Fish:
         params = self.settings.params
         about = FishAbout(
             np.asarray(ids, dtype=np.int64), params.behavior.name, __version__, run,
-            rules_of(params),
+            rules_of(params), params.control_period,
         )  # fmt: skip
         bus.put(self.settings.keys.about(int(ids[0]), self.settings.school), encode(about))
 

@@ -21,6 +21,7 @@ trajectories however the fish are spread over processes.
 from __future__ import annotations
 
 import logging
+import math
 import secrets
 import time
 from collections.abc import Callable
@@ -153,7 +154,8 @@ class WorldStatistics:
         joined_fish: fish that joined after the start.
         late_commands: realtime mode: commands that missed their tick.
         live_fish: fish in the world now.
-        mismatched_fish: fish that run another behaviour, version or rules than the world's.
+        mismatched_fish: fish that run another behaviour, version, rules or control period
+            than the world's.
         answer_time_median, answer_time_p90: lockstep and jitter modes: how long the fish
             took to answer a tick — perceptions out to the last command in — median and
             90th percentile over the ticks every fish answered, s (0 before any tick; a tick
@@ -867,7 +869,7 @@ class World:
 
     def _take_about(self, key: str, payload: bytes) -> None:
         """Note the fish vouched for; warn, once for each kind of difference, about fish
-        that run another behaviour, version or rules than this world's."""
+        that run another behaviour, version, rules or control period than this world's."""
         about = self.intake.decode(key, payload, FishAbout)
         if about is None:
             return
@@ -880,17 +882,12 @@ class World:
                 held = self._unvouched.pop((fish_id, school), None)
                 if held is not None:
                     self.roster.on_alive(held, True, trio.current_time())
-        if about.run == self.run_id:
-            ids = about.ids.tolist()
-        elif about.run == 0:
-            # What fish say as they come up, or as a world does: a robot's fish serves its
-            # driver's runs, never the world's, so it says what it runs only so.
-            expected = set(self.settings.expected_fish)
-            ids = [i for i in about.ids.tolist() if not expected or i in expected]
-        else:
+        # Run 0 is what fish say as they come up: a robot's fish serves its driver's runs,
+        # never the world's, so it says what it runs only so. Fish this world does not
+        # expect count too: they join its run (robots, a `fishswarm fish --id` by hand).
+        if about.run not in (0, self.run_id):
             return
-        if not ids:
-            return
+        ids = about.ids.tolist()
         differences = []
         if about.behavior != self.scenario.behavior:
             differences.append(
@@ -902,6 +899,12 @@ class World:
             differences.append(
                 f"follow the {about.rules!r} rules, but this world's scenario says "
                 f"{self._fish_rules!r} (--profile, --study-code)"
+            )
+        period = self.scenario.control_period
+        if about.control_period and not math.isclose(about.control_period, period):
+            differences.append(
+                f"decide every {about.control_period:g} s, but this world's scenario says "
+                f"{period:g} s (--period)"
             )
         if not differences:
             return

@@ -553,6 +553,8 @@ class FishAbout(Message):
         run: the run of the world they start.
         rules: ``paper``, or the study code's fish-side switches their decisions follow
             (e.g. ``lennard-jones,homing``).
+        control_period: the time between their decisions they were started with, s
+            (0: not said, by an older fishswarm).
     """
 
     type_name: ClassVar[str] = "fish_about"
@@ -561,6 +563,7 @@ class FishAbout(Message):
     version: str
     run: int = 0
     rules: str = "paper"
+    control_period: float = 0.0
 
     def __post_init__(self) -> None:
         check_array(self, "ids", np.int64, None)
@@ -571,6 +574,7 @@ class FishAbout(Message):
         check_text("version", self.version)
         check_int("run", self.run)
         check_text("rules", self.rules)
+        check_float("control_period", self.control_period, 0.0)
 
 
 @dataclass(frozen=True, eq=False)

@@ -244,6 +244,38 @@ def test_a_mock_robot_vouches_for_itself_and_joins_a_secured_swarm(
     assert ids == {0, 1, 2, 10}
 
 
+def test_a_world_names_a_robot_started_with_another_control_period(
+    tmp_path: Path, worlds: list[subprocess.Popen[str]]
+) -> None:
+    """A robot is no fish the world expects, yet it joins the run: one started to decide
+    every 0.4 s in a world of 0.2-s ticks is named in the world's log as it comes up."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    worlds.append(start_world(endpoint, tmp_path))
+    wait_for_port(port)
+    slower = Scenario(control_period=2 * PERIOD, behavior="dispersion")
+    robot = RobotSettings(
+        DriverSettings(12, "dispersion", KEYS, control_period=2 * PERIOD, command_timeout=1.0),
+        slower.fish_params(),
+        endpoint,
+        hardware="mock",
+        connect_timeout=10.0,
+    )
+
+    async def main() -> None:
+        async with trio.open_nursery() as nursery:
+            driver: Driver = await nursery.start(run_robot, robot)
+            await until(lambda: driver.state == "swimming", timeout=30)
+            await trio.sleep(0.5)
+            nursery.cancel_scope.cancel()
+
+    run_trio(main, timeout=90)
+    world = worlds[0]
+    world.terminate()
+    _, said = world.communicate(timeout=30)
+    assert "fish 12 decide every 0.4 s, but this world's scenario says 0.2 s (--period)" in said
+
+
 @pytest.mark.slow
 def test_fishswarm_formation_switches_robots_that_have_no_world_and_names_those_that_did_not(
     worlds: list[subprocess.Popen[str]],

@@ -1006,12 +1006,14 @@ def test_a_robots_fish_is_named_by_what_it_says_as_it_comes_up(
 ) -> None:
     """A robot's fish serves its driver's runs, never the world's: it says what it runs
     only as it comes up (run 0). Fish 1 says aggregation so, in a dispersion world: named
-    and counted. Fish 9, which this world does not expect, is not its business."""
+    and counted. Fish 9, a robot this world does not expect (it would join the run), says
+    it decides every 0.5 s in a world of 1-s ticks: named too. Fish 7 runs what the world
+    does, and fish 8 (an older fishswarm) does not say its period: neither is named."""
     scenario = Scenario(fish=2, duration=2.0, seed=1)
     keys = scenario.keys
 
-    def hello(fish_id: int) -> bytes:
-        return encode(FishAbout(np.array([fish_id]), "aggregation", __version__, 0))
+    def hello(fish_id: int, behavior: str, period: float) -> bytes:
+        return encode(FishAbout(np.array([fish_id]), behavior, __version__, 0, "paper", period))
 
     async def main() -> World:
         bus = MemoryBus()
@@ -1020,19 +1022,23 @@ def test_a_robots_fish_is_named_by_what_it_says_as_it_comes_up(
             fish = FishSettings((0, 1), scenario.fish_params(), keys, school="s")
             await nursery.start(Fish(fish).run, bus)
             await nursery.start(world.run, bus)
-            bus.put(keys.about(1), hello(1))
-            bus.put(keys.about(9), hello(9))
+            bus.put(keys.about(1), hello(1, "aggregation", 1.0))
+            bus.put(keys.about(9), hello(9, "dispersion", 0.5))
+            bus.put(keys.about(7), hello(7, "dispersion", 1.0))
+            bus.put(keys.about(8), hello(8, "dispersion", 0.0))
             await _until_state(world, "finished")
             nursery.cancel_scope.cancel()
         return world
 
     with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
         world = run_mock(main)
-    assert world.mismatched == {1}
+    assert world.mismatched == {1, 9}
     said = [r.getMessage() for r in caplog.records if "scenario says" in r.getMessage()]
     assert said == [
         "fish 1 run 'aggregation', but this world's scenario says 'dispersion' "
-        "(started with other settings?)"
+        "(started with other settings?)",
+        "fish 9 decide every 0.5 s, but this world's scenario says 1 s (--period) "
+        "(started with other settings?)",
     ]
 
 

@@ -87,6 +87,7 @@ EXAMPLES: list[Message] = [
     RobotOrder("stop"),
     FishAbout(np.array([0, 1, 2]), "dispersion", "0.1.0", 7),
     FishAbout(np.array([4]), "aggregation", "0.1.0", 2, "lennard-jones,homing"),
+    FishAbout(np.array([5, 6]), "formation", "0.1.0", 3, "paper", 0.5),
     RobotOrder("resume", np.array([2, 5])),
     RobotOrder("formation", np.array([], dtype=np.int64), "column"),
     RobotStatus(
@@ -444,6 +445,10 @@ def test_bad_messages_cannot_be_built() -> None:
         RobotOrder("explode")
     with pytest.raises(ValueError, match="at least one fish"):
         FishAbout(np.zeros(0, dtype=np.int64), "dispersion", "0.1.0")
+    with pytest.raises(ValueError, match=r"control_period must be in \[0.0, inf\]"):
+        FishAbout(np.array([1]), "dispersion", "0.1.0", 0, "paper", -1.0)
+    with pytest.raises(ValueError, match="control_period must be finite"):
+        FishAbout(np.array([1]), "dispersion", "0.1.0", 0, "paper", math.nan)
     with pytest.raises(ValueError, match="ascending"):
         RobotOrder("stop", np.array([3, 1]))
     with pytest.raises(ValueError, match="state must be one of"):
