@@ -318,7 +318,9 @@ class Channel:
         counts = np.zeros(snapshot.ids.size, dtype=np.int64)
         for reception, kind, values in deliveries:
             receiver_id = int(snapshot.ids[reception.receiver])
-            delivery = Delivery(receiver_id, snapshot.tick, kind, values, reception.sender_position)
+            delivery = Delivery(
+                receiver_id, snapshot.tick, kind, values, reception.sender_position, snapshot.run
+            )
             bus.put(self.keys.inbox(receiver_id), encode(delivery))
             counts[reception.receiver] += 1
         self._delivered += len(deliveries)

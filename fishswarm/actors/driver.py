@@ -416,7 +416,7 @@ class Driver:
             values = flag_by_light(self._own_flag).values()
             flashers = neighbors[flashing]
             for position in flashers:
-                flag = Delivery(robot_id, self._tick, "formation", values, position)
+                flag = Delivery(robot_id, self._tick, "formation", values, position, self._run_id)
                 local.put(self.settings.keys.inbox(robot_id), encode(flag))
             self._unannounced += len(flashers)
             self._counts["flags_seen"] += len(flashers)
@@ -609,9 +609,10 @@ class Driver:
 
     async def _pass_deliveries(self, deliveries: Inbox[tuple[str, bytes]], local: Bus) -> None:
         async for key, _, delivery in self._addressed(deliveries, Delivery, "receiver_id"):
-            # A channel numbers deliveries by its world's ticks; the fish acts on one at the
-            # driver's next perception, and waits for it under that perception's tick.
-            local.put(key, encode(replace(delivery, tick=self._tick)))
+            # A channel numbers deliveries by its world's ticks and run; the fish acts on one
+            # at the driver's next perception, and waits for it under that perception's tick
+            # and run.
+            local.put(key, encode(replace(delivery, tick=self._tick, run=self._run_id)))
             self._unannounced += 1
             self._counts["deliveries"] += 1
 

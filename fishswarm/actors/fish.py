@@ -361,6 +361,7 @@ class Fish:
             self._watched[ours] = False
             if pulse.run not in self._ended_runs:
                 self._ended_runs.append(pulse.run)
+                self._drop_mail_of(pulse.run)
         else:
             self._last_seen[ours & self._watched & ~self._stopped] = trio.current_time()
 
@@ -397,13 +398,13 @@ class Fish:
                 self._counts["runs"] += 1
                 log.info("fish %s: a new run (%d) starts", fish_span(self._ids[rows].tolist()), run)
             self._latest_run = run
-        # A fish in its first run keeps what it was delivered for this tick and the next
-        # before its first perception: joining a run under way, it hears its first tick's
-        # deliveries before the world (which waits for the channel's report) sends it that
-        # tick. Anything else (heard while another process spoke for its id) and the mail of
-        # a fish's earlier run are dropped: deliveries do not name their run.
-        first = rows[self._run[rows] < 0]
-        earlier = rows[self._run[rows] >= 0]
+        # Joining a run under way, a fish hears its first tick's deliveries before the world
+        # (which waits for the channel's report) sends it that tick: it keeps the mail of
+        # its new run from this tick on, and drops the rest (an earlier run's; another
+        # run's, heard while another process spoke for its id). Mail that names no run
+        # (from an older channel) is kept for this tick and the next, by a fish in its
+        # first run only.
+        first = set(rows[self._run[rows] < 0].tolist())
         self._run[rows] = run
         self._unannounced.append((rows, run))
         self._last_tick[rows] = -1
@@ -413,10 +414,14 @@ class Fish:
         for pending in dropped:
             self._busy[pending.rows] = False
         self._pending = [p for p in self._pending if not np.isin(p.rows, rows).any()]
-        for row in earlier.tolist():
-            self._mail[row] = []
-        for row in first.tolist():
-            self._mail[row] = [d for d in self._mail[row] if tick <= d.tick <= tick + 1]
+        for row in rows.tolist():
+            unnamed = row in first and self._mail[row]
+            self._mail[row] = [
+                d
+                for d in self._mail[row]
+                if (d.run == run and d.tick >= tick)
+                or (unnamed and d.run == 0 and tick <= d.tick <= tick + 1)
+            ]
         self._params = self.settings.params  # a new run starts as configured
         fresh = FishMemory.fresh(self._params, rows.size)
         self._memory = put_rows(self._memory, rows, fresh)
@@ -451,8 +456,13 @@ class Fish:
         )
         if delivery is None:
             return
+        if delivery.run in self._ended_runs:
+            self._intake.refuse(key, "stale", f"delivery of run {delivery.run}, which has ended")
+            return
         last = int(self._last_tick[index])
-        if delivery.tick <= last:
+        # Mail of another run (the fish's next, come before its first perception) is kept
+        # until that run starts for the fish or ends.
+        if delivery.run in (0, int(self._run[index])) and delivery.tick <= last:
             self._intake.refuse(key, "stale", f"delivery for tick {delivery.tick} after {last}")
             return
         # Deliveries wait for their perception; a fish that gets many more than any tick
@@ -473,16 +483,32 @@ class Fish:
             if any(self._mail.values()):  # nothing announced: what waits for this tick is stale
                 for row in rows:
                     if self._mail[row]:
-                        self._mail[row] = [d for d in self._mail[row] if d.tick > tick]
+                        self._mail[row] = self._mail_after(row, tick)
             return []
         wanted = pending.inbox_counts.tolist()
-        mail = [[d for d in self._mail[row] if d.tick == tick] for row in rows]
+        runs = self._run.tolist()
+        mail = [
+            [d for d in self._mail[row] if d.tick == tick and d.run in (0, runs[row])]
+            for row in rows
+        ]
         if now < pending.deadline and any(len(m) < w for m, w in zip(mail, wanted, strict=True)):
             return None
         for row, fish_mail, count in zip(rows, mail, wanted, strict=True):
             self._counts["deliveries_missed"] += max(0, count - len(fish_mail))
-            self._mail[row] = [d for d in self._mail[row] if d.tick > tick]
+            self._mail[row] = self._mail_after(row, tick)
         return [fish_mail[:count] for fish_mail, count in zip(mail, wanted, strict=True)]
+
+    def _mail_after(self, row: int, tick: int) -> list[Delivery]:
+        """The mail of fish ``row`` that is still to come once it has decided ``tick``: of
+        later ticks of its run, and of another run (which may start for it next)."""
+        run = int(self._run[row])
+        return [d for d in self._mail[row] if d.tick > tick or d.run not in (0, run)]
+
+    def _drop_mail_of(self, run: int) -> None:
+        """Let go the mail of a run that has ended."""
+        for row, mail in self._mail.items():
+            if any(d.run == run for d in mail):
+                self._mail[row] = [d for d in mail if d.run != run]
 
     def _decide(self, bus: Bus) -> None:
         """Decide for every fish whose perception is complete (or whose deliveries timed

@@ -314,6 +314,7 @@ class Delivery(Message):
         values: as in :class:`Broadcast`.
         sender_position: (3,) where the sender is, in the receiver's body frame, m (situated,
             like an LED signal: there is no sender id).
+        run: the run the tick is of, as the receiver's perceptions carry it (0: not told).
     """
 
     type_name: ClassVar[str] = "delivery"
@@ -322,12 +323,14 @@ class Delivery(Message):
     kind: str
     values: IntArray
     sender_position: FloatArray
+    run: int = 0
 
     def __post_init__(self) -> None:
         check_int("receiver_id", self.receiver_id)
         check_int("tick", self.tick)
         _check_broadcast(self)
         check_array(self, "sender_position", np.float64, None, rows=3)
+        check_int("run", self.run)
 
 
 @dataclass(frozen=True)

@@ -446,10 +446,10 @@ def test_broadcasts_go_out_and_deliveries_come_in_announced(hardware: Hardware) 
             await perceptions.receive()  # the first perception, at start
             broadcast = encode(Broadcast(ROBOT, 1, "signal", np.array([7])))
             local.put(KEYS.outbox(ROBOT), broadcast)
-            # A simulated channel numbers its deliveries by its world's ticks (here 57); the
-            # fish acts on it at the driver's next perception (tick 1), and waits for it
-            # under that perception's tick.
-            delivery = Delivery(ROBOT, 57, "signal", np.array([9]), np.array([0.3, 0.0, 0.0]))
+            # A simulated channel numbers its deliveries by its world's ticks (here 57) and
+            # run (here 5); the fish acts on it at the driver's next perception (tick 1), and
+            # waits for it under that perception's tick.
+            delivery = Delivery(ROBOT, 57, "signal", np.array([9]), np.array([0.3, 0.0, 0.0]), 5)
             # A simulated fish's formation flag, which reaches a robot only through the
             # channel (its cameras never see a simulated fish flash), passes as well.
             flag = FormationFlag(FORMATION_SHAPES.index("pyramid"), 2, True, 1, 0, 4)
@@ -460,11 +460,13 @@ def test_broadcasts_go_out_and_deliveries_come_in_announced(hardware: Hardware) 
             got = [(await incoming.receive())[1] for _ in range(2)]
             _, payload = await perceptions.receive()
             sent = [p for _, p in outgoing.drain()]
+            perception = decode(payload, Perception)
+            # ... and under its run, which the driver's perceptions carry (not the world's).
             assert [decode(p, Delivery) for p in got] == [
-                dataclasses.replace(delivery, tick=1),
-                dataclasses.replace(heard, tick=1),
+                dataclasses.replace(delivery, tick=1, run=perception.run),
+                dataclasses.replace(heard, tick=1, run=perception.run),
             ]
-            assert decode(payload, Perception).tick == 1
+            assert perception.tick == 1 and perception.run != 0
             nursery.cancel_scope.cancel()
         assert driver.statistics().rejected == 1
         return sent, decode(payload, Perception)

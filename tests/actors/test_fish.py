@@ -366,6 +366,77 @@ def test_a_fish_in_its_first_run_drops_mail_of_other_ticks_it_heard_before() -> 
     assert later_at == 5.0 and later.tick == 9 and later.led is False
 
 
+def test_a_fish_from_an_earlier_run_keeps_the_mail_of_the_run_it_joins() -> None:
+    # Fish 4 served run 2 to tick 1; run 5 is under way when it joins at tick 7, and its
+    # first tick's delivery comes before its first perception of run 5. Deliveries name
+    # their run: this one is kept (before, a fish with an earlier run dropped it all and
+    # waited the inbox timeout). Mail of run 9, another world's, is never served.
+    params = Scenario(behavior=registered().name).fish_params()
+    settings = FishSettings((4,), params, KEYS, inbox_timeout=5.0, perception_timeout=20.0)
+
+    def delivery(tick: int, run: int) -> bytes:
+        return encode(Delivery(4, tick, "signal", np.array([3]), np.array([0.2, 0.1, 0.0]), run))
+
+    async def main() -> tuple[list[tuple[float, Command]], FishStatistics]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        answers: list[tuple[float, Command]] = []
+        async with subscription(bus, KEYS.command(4)) as commands, trio.open_nursery() as nursery:
+            await nursery.start(fish.run, bus)
+
+            async def tick(tick: int, run: int, mail: int) -> None:
+                bus.put(KEYS.perception(4), _perception(4, tick, inbox_count=mail, run=run))
+                with trio.fail_after(10.0):
+                    _, payload = await commands.receive()
+                answers.append((trio.current_time(), decode(payload, Command)))
+
+            await tick(0, 2, 0)
+            await tick(1, 2, 0)
+            bus.put(KEYS.inbox(4), delivery(7, 9))
+            bus.put(KEYS.inbox(4), delivery(7, 5))
+            await tick(7, 5, 1)
+            # Run 9's mail for tick 8 comes, run 5's never does: decided at the timeout,
+            # having heard nothing.
+            bus.put(KEYS.inbox(4), delivery(8, 9))
+            await tick(8, 5, 1)
+            nursery.cancel_scope.cancel()
+        return answers, fish.statistics()
+
+    answers, statistics = run_mock(main)
+    (_, first), (_, second), (joined_at, joined), (late_at, late) = answers
+    assert (first.tick, second.tick) == (0, 1)
+    assert joined_at == 0.0 and joined.tick == 7 and joined.led is True
+    assert late_at == 5.0 and late.tick == 8 and late.led is False
+    assert statistics.deliveries == 1 and statistics.deliveries_missed == 1
+
+
+def test_mail_of_a_run_that_has_ended_is_let_go() -> None:
+    # Run 5 ends (the world's pulse says so): its mail, waiting or late, is never kept.
+    settings = FishSettings((4,), Scenario(behavior=registered().name).fish_params(), KEYS)
+
+    async def main() -> tuple[int, FishStatistics]:
+        bus = MemoryBus()
+        fish = Fish(settings)
+        async with subscription(bus, KEYS.command(4)) as commands, trio.open_nursery() as nursery:
+            await nursery.start(fish.run, bus)
+            bus.put(KEYS.perception(4), _perception(4, 0, run=5))
+            with trio.fail_after(10.0):
+                await commands.receive()
+            late = Delivery(4, 3, "signal", np.array([3]), np.array([0.2, 0.1, 0.0]), 5)
+            bus.put(KEYS.inbox(4), encode(late))
+            bus.put(KEYS.world_pulse, encode(WorldPulse(5, 0, "ended")))
+            await trio.sleep(0.1)
+            waiting = sum(len(mail) for mail in fish._mail.values())
+            bus.put(KEYS.inbox(4), encode(late))
+            await trio.sleep(0.1)
+            nursery.cancel_scope.cancel()
+        return waiting, fish.statistics()
+
+    waiting, statistics = run_mock(main)
+    assert waiting == 0
+    assert statistics.rejected == 1  # the one that came after the end
+
+
 def test_a_new_run_starts_the_fish_afresh() -> None:
     settings = FishSettings((1,), Scenario().fish_params(), KEYS)
 
