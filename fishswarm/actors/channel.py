@@ -60,6 +60,14 @@ for broadcasts on their way, little against a tick."""
 OUTBOX_TIMEOUT = 5.0
 """How long the channel waits for the broadcasts a snapshot announces, s."""
 
+FIRST_TICKS = 2
+"""A run's first broadcasts are of ticks 0 to this: those of a run the channel has not seen
+a snapshot of yet (a new world's, whose first snapshot is still on its way) are kept for
+it."""
+
+HELD_BROADCASTS_MAX = 100_000
+"""Most broadcasts of runs not yet seen the channel keeps: more are refused."""
+
 
 @dataclass(frozen=True)
 class ChannelStatistics:
@@ -126,6 +134,10 @@ class Channel:
         self._unannounced_named: set[int] = set()
         """Senders whose unannounced broadcasts have been logged."""
         self._last_tick = 0
+        self._run = 0
+        """The run of the last snapshot (0: none seen, or its world does not tell)."""
+        self._held: dict[int, list[Broadcast]] = {}
+        """Broadcasts of the first ticks of runs not yet seen, by run."""
         self._first_tick: int | None = None
         """The first tick of the run this channel has seen a snapshot of (0: the whole run;
         later: it came up while the run went on)."""
@@ -179,6 +191,9 @@ class Channel:
             snapshot = self._intake.decode(key, payload, Snapshot)
             if snapshot is not None:
                 self._last_tick = snapshot.tick
+                if snapshot.run != self._run:
+                    self._run = snapshot.run
+                    self._take_held()
                 return snapshot
 
     def _take_outbox(self, key: str, payload: bytes) -> Broadcast | None:
@@ -192,6 +207,9 @@ class Channel:
             key, payload, Broadcast, field="sender_id", owner=owner
         )
         if broadcast is None:
+            return None
+        if broadcast.run not in (0, self._run):
+            self._hold(key, broadcast)
             return None
         # Only broadcasts of the ticks about to be delivered are kept: anything else is
         # stale or forged, and would pile up.
@@ -328,14 +346,46 @@ class Channel:
             self.keys.channel_report, encode(ChannelReport(snapshot.tick, snapshot.ids, counts))
         )
 
+    def _hold(self, key: str, broadcast: Broadcast) -> None:
+        """Keep a broadcast of a run the channel has not seen a snapshot of, if it may be
+        one of that run's first: a new world's fish can broadcast before its first snapshot
+        reaches the channel."""
+        if broadcast.tick > FIRST_TICKS:
+            self._intake.refuse(key, "stale", f"broadcast of tick {broadcast.tick} of another run")
+        elif sum(map(len, self._held.values())) >= HELD_BROADCASTS_MAX:
+            self._intake.refuse(key, "flood", f"more than {HELD_BROADCASTS_MAX} held")
+        else:
+            self._held.setdefault(broadcast.run, []).append(broadcast)
+
     def _start_run(self) -> None:
         """A run starts (its first snapshot): the medium starts afresh, so that a channel
         that serves run after run gives each the losses its seed gives a run alone; what
         an earlier run left in the outbox is counted and let go."""
         self._rngs.clear()
-        # A new run's first broadcasts are of ticks 0 to 2: anything later is the last run's.
-        for old in [tick for tick in self._outbox if tick > 2]:
-            self._let_go(old, f"of tick {old}, of a run that has ended")
+        # A new run's first broadcasts are of ticks 0 to 2: anything later is the last
+        # run's, as is anything that names another run.
+        for tick in list(self._outbox):
+            if tick > FIRST_TICKS:
+                self._let_go(tick, f"of tick {tick}, of a run that has ended")
+                continue
+            for sender, sent in list(self._outbox[tick].items()):
+                ended = [b for b in sent if b.run not in (0, self._run)]
+                for _ in ended:
+                    self._let_go_one(sender, f"of tick {tick}, of a run that has ended")
+                if ended:
+                    self._outbox[tick][sender] = [b for b in sent if b.run in (0, self._run)]
+
+    def _take_held(self) -> None:
+        """The run of the snapshots changed: take what its fish sent before this snapshot
+        came, and let go what was held for other runs."""
+        for run, held in self._held.items():
+            for broadcast in held:
+                if run == self._run:
+                    sent = self._outbox[broadcast.tick]
+                    sent.setdefault(broadcast.sender_id, []).append(broadcast)
+                else:
+                    self._let_go_one(broadcast.sender_id, f"of run {run}, which never came")
+        self._held.clear()
 
     async def _take_the_worlds_medium(
         self, ask_world: Callable[[], Awaitable[Scenario | None]]

@@ -457,7 +457,8 @@ class Fish:
         if delivery is None:
             return
         if delivery.run in self._ended_runs:
-            self._intake.refuse(key, "stale", f"delivery of run {delivery.run}, which has ended")
+            # Ordinary: the channel delivers a run's last tick after its world has ended it.
+            self._intake.disregard()
             return
         last = int(self._last_tick[index])
         # Mail of another run (the fish's next, come before its first perception) is kept
@@ -589,8 +590,9 @@ class Fish:
         for row in np.flatnonzero(outbox.mask).tolist():
             fish_id = self.settings.fish_ids[int(rows[row])]
             message = Broadcast(
-                fish_id, tick, BROADCAST_KINDS[int(outbox.kind[row])], outbox.values[row]
-            )
+                fish_id, tick, BROADCAST_KINDS[int(outbox.kind[row])], outbox.values[row],
+                int(self._run[int(rows[row])]),
+            )  # fmt: skip
             bus.put(self.settings.keys.outbox(fish_id), encode(message))
             self._counts["broadcasts"] += 1
 

@@ -278,6 +278,7 @@ def _check_broadcast(message: Broadcast | Delivery) -> None:
         raise ValueError(f"values hold at most {BROADCAST_WIDTH} numbers")
     if message.kind == "formation":
         FormationFlag.from_values(message.values)
+    check_int("run", message.run)
 
 
 @dataclass(frozen=True, eq=False)
@@ -289,6 +290,7 @@ class Broadcast(Message):
         tick: the tick it was decided at.
         kind: what it says, one of :data:`BROADCAST_KINDS`.
         values: (≤ :data:`BROADCAST_WIDTH`,) its numbers, e.g. a formation flag's slot.
+        run: the run the tick is of, as the sender's perception carried it (0: not told).
     """
 
     type_name: ClassVar[str] = "broadcast"
@@ -296,6 +298,7 @@ class Broadcast(Message):
     tick: int
     kind: str
     values: IntArray
+    run: int = 0
 
     def __post_init__(self) -> None:
         check_int("sender_id", self.sender_id)
@@ -330,7 +333,6 @@ class Delivery(Message):
         check_int("tick", self.tick)
         _check_broadcast(self)
         check_array(self, "sender_position", np.float64, None, rows=3)
-        check_int("run", self.run)
 
 
 @dataclass(frozen=True)

@@ -37,18 +37,18 @@ IDS = np.array([0, 1, 2])
 POSITION = np.array([[0.5, 0.5, 0.5], [0.6, 0.5, 0.5], [0.7, 0.5, 0.5]])
 
 
-def snapshot(tick: int, broadcasts: list[int]) -> bytes:
+def snapshot(tick: int, broadcasts: list[int], run: int = 0) -> bytes:
     zeros = np.zeros(3, dtype=np.int64)
     return encode(
         Snapshot(
             tick, float(tick), IDS, POSITION, np.zeros((3, 3)), np.zeros(3), zeros,
-            np.array(broadcasts, dtype=np.int64),
+            np.array(broadcasts, dtype=np.int64), run=run,
         )
     )  # fmt: skip
 
 
-def broadcast(sender: int, tick: int, value: int) -> bytes:
-    return encode(Broadcast(sender, tick, "signal", np.array([value])))
+def broadcast(sender: int, tick: int, value: int, run: int = 0) -> bytes:
+    return encode(Broadcast(sender, tick, "signal", np.array([value]), run))
 
 
 def test_only_announced_broadcasts_are_delivered_however_they_arrive() -> None:
@@ -126,6 +126,46 @@ def test_broadcasts_a_snapshot_announces_none_of_are_counted_and_let_go(
         )
     ]
     assert channel.statistics().delivered == 0
+
+
+def test_a_new_runs_first_broadcasts_that_come_before_its_first_snapshot_are_delivered() -> None:
+    # Run 7 went to tick 15; a new world's run 8 starts, and its fish's broadcasts of tick
+    # 0 reach the channel before the run's first snapshot does (another path through the
+    # router). They name their run: kept for it, and delivered when announced (they were
+    # refused as stale against run 7's ticks, and the run went otherwise than its seed
+    # says). Run 9's, whose snapshots never come, are let go when run 8's first comes.
+    async def main() -> tuple[list[Delivery], Channel]:
+        bus = MemoryBus()
+        channel = Channel(SCENARIO)
+        async with (
+            subscription(bus, KEYS.channel_report) as reports,
+            subscription(bus, KEYS.fish_inboxes()) as inboxes,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(channel.run, bus)
+            for tick in range(16):
+                bus.put(KEYS.snapshot, snapshot(tick, [0, 0, 0], run=7))
+                await trio.sleep(0.01)
+            bus.put(KEYS.outbox(0), broadcast(0, 0, 4, run=8))
+            bus.put(KEYS.outbox(1), broadcast(1, 0, 5, run=9))
+            bus.put(KEYS.outbox(2), broadcast(2, 3, 6, run=8))  # no first tick: refused
+            await trio.sleep(0.01)
+            bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0], run=8))
+            await trio.sleep(0.01)
+            bus.put(KEYS.snapshot, snapshot(1, [1, 0, 0], run=8))
+            with trio.fail_after(10):
+                report = decode((await reports.receive())[1], ChannelReport)
+            nursery.cancel_scope.cancel()
+        assert report.tick == 1 and report.inbox_counts.tolist() == [0, 1, 1]
+        return [decode(payload, Delivery) for _, payload in inboxes.drain()], channel
+
+    deliveries, channel = run_mock(main)
+    assert sorted((d.receiver_id, d.tick, d.run, int(d.values[0])) for d in deliveries) == [
+        (1, 1, 8, 4), (2, 1, 8, 4),
+    ]  # fmt: skip
+    statistics = channel.statistics()
+    assert statistics.missing_broadcasts == 0
+    assert statistics.unannounced == 1 and statistics.rejected == 1
 
 
 Step = tuple[str, int, int, int | list[int]]
