@@ -54,7 +54,7 @@ from fishswarm.behaviors.core import (
 )
 from fishswarm.behaviors.core import Inbox as HeardInbox
 from fishswarm.behaviors.formation import apply_directive
-from fishswarm.behaviors.registry import rules_of
+from fishswarm.behaviors.registry import rules_of, settings_digest
 from fishswarm.bluebot.control import stop_fins
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
@@ -446,7 +446,7 @@ class Fish:
         params = self.settings.params
         about = FishAbout(
             np.asarray(ids, dtype=np.int64), params.behavior.name, __version__, run,
-            rules_of(params), params.control_period,
+            rules_of(params), params.control_period, settings_digest(params),
         )  # fmt: skip
         bus.put(self.settings.keys.about(int(ids[0]), self.settings.school), encode(about))
 

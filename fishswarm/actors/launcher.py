@@ -490,6 +490,7 @@ def _summary(
             "deliveries": channel_stats.delivered,
             "broadcasts": world_stats.broadcasts,
             "unannounced_broadcasts": channel_stats.unannounced,
+            "mismatched_fish": world_stats.mismatched_fish,
         },
         "vision": world.sim.sight.summary() if world.params.cameras is not None else None,
         "lost": [{"id": f.fish_id, "tick": f.tick, "reason": f.reason} for f in world.lost],

@@ -41,7 +41,7 @@ from fishswarm.actors.intake import Intake
 from fishswarm.actors.perceptions import perception_messages
 from fishswarm.actors.roster import LostFish, Roster
 from fishswarm.actors.tick_commands import TickCommands, among, values_at
-from fishswarm.behaviors.registry import rules_of
+from fishswarm.behaviors.registry import rules_of, settings_digest
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import fish_id_of, run_id_of
 from fishswarm.protocols.messages import (
@@ -154,8 +154,8 @@ class WorldStatistics:
         joined_fish: fish that joined after the start.
         late_commands: realtime mode: commands that missed their tick.
         live_fish: fish in the world now.
-        mismatched_fish: fish that run another behaviour, version, rules or control period
-            than the world's.
+        mismatched_fish: fish that run another behaviour, version, rules, control period
+            or decision parameters than the world's.
         answer_time_median, answer_time_p90: lockstep and jitter modes: how long the fish
             took to answer a tick — perceptions out to the last command in — median and
             90th percentile over the ticks every fish answered, s (0 before any tick; a tick
@@ -254,7 +254,9 @@ class World:
         self._unvouched: dict[tuple[int, str | None], str] = {}
         """With ``vouched_only``: live fish tokens not (yet) vouched for, held back from the
         roster until they are (a fish's token may come before its vouching)."""
-        self._fish_rules = rules_of(settings.scenario.fish_params())
+        fish_params = settings.scenario.fish_params()
+        self._fish_rules = rules_of(fish_params)
+        self._fish_settings = settings_digest(fish_params)
         """The rules this world's scenario says its fish decide by (FishAbout.rules)."""
         self._warned: set[str] = set()
         self._step_times: dict[str, float] = {}
@@ -905,6 +907,18 @@ class World:
             differences.append(
                 f"decide every {about.control_period:g} s, but this world's scenario says "
                 f"{period:g} s (--period)"
+            )
+        if about.settings and about.settings != self._fish_settings and not differences:
+            # Said only when nothing named above explains it.
+            behavior = self.scenario.behavior
+            hint = (
+                "a formation's map is made for --fish fish: give them the world's --config, "
+                "--fish included"
+                if behavior == "formation"
+                else "give them the world's --config and flags"
+            )
+            differences.append(
+                f"decide with other {behavior} parameters than this world's scenario ({hint})"
             )
         if not differences:
             return

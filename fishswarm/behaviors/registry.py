@@ -8,8 +8,12 @@ one process, passed to :func:`register`.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import dataclasses
+import hashlib
+from collections.abc import Iterator, Mapping
 from typing import Any
+
+import numpy as np
 
 from fishswarm.behaviors.core import Behavior, FishParams
 from fishswarm.behaviors.formation import FORMATION
@@ -92,3 +96,54 @@ def rules_of(params: FishParams) -> str:
         if on
     ]
     return ",".join(switches) or "paper"
+
+
+def settings_digest(params: FishParams) -> str:
+    """A short fingerprint of what a fish's decisions depend on beyond its behaviour's name
+    and control period: the behaviour's parameters (a formation's map and its size, the
+    spacing, a replica's model), the controller and its gains, the study-code switches.
+    Fish whose parameters are equal have one digest in any process (the compiled loops the
+    parameters may carry are left out); a fish actor tells it to the world, which warns of
+    fish started with other settings."""
+    canonical = "\n".join(
+        _canonical(
+            (
+                params.steering,
+                params.controller,
+                params.caudal_cap,
+                params.pid_gains,
+                params.right_when_ahead,
+            )
+        )
+    )
+    return hashlib.sha256(canonical.encode()).hexdigest()[:16]
+
+
+def _canonical(value: object) -> Iterator[str]:
+    """Lines that say ``value`` alike in every process: a dataclass by its fields, an array
+    by its type, shape and bytes, a number or text by its repr; a function (a compiled
+    loop) as None; any other object by its type alone (its repr holds an address)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        yield type(value).__qualname__
+        for field in dataclasses.fields(value):
+            yield field.name
+            yield from _canonical(getattr(value, field.name))
+    elif isinstance(value, np.ndarray):
+        digest = hashlib.sha256(np.ascontiguousarray(value).tobytes()).hexdigest()
+        yield f"array {value.dtype.str} {value.shape} {digest}"
+    elif isinstance(value, tuple | list):
+        yield f"{type(value).__name__} {len(value)}"
+        for item in value:
+            yield from _canonical(item)
+    elif isinstance(value, dict):
+        yield f"dict {len(value)}"
+        for key in sorted(value, key=repr):
+            yield repr(key)
+            yield from _canonical(value[key])
+    elif value is None or callable(value):
+        # A compiled loop decides as the numpy code it stands for: present or not, the same.
+        yield "None"
+    elif isinstance(value, bool | int | float | str | np.generic):
+        yield repr(value.item() if isinstance(value, np.generic) else value)
+    else:
+        yield type(value).__qualname__

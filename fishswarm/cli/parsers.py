@@ -148,7 +148,12 @@ SWITCH_ON = object()
 """The kind of a flag that turns a setting on (``bool``: one that turns it off)."""
 
 _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
-    "fish": ("--fish", int, f"number of fish (default {Scenario.fish})"),
+    "fish": (
+        "--fish",
+        int,
+        f"number of fish (default {Scenario.fish}); for 'fish' and 'robot', the swarm's, as "
+        "its world says: a formation's map has a slot for each",
+    ),
     "behavior": (
         "--behavior",
         str,
@@ -280,6 +285,7 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
 
 
 _FISH_FLAGS = (
+    "fish",
     "behavior",
     "target_distance",
     "controller",

@@ -560,6 +560,8 @@ class FishAbout(Message):
             (e.g. ``lennard-jones,homing``).
         control_period: the time between their decisions they were started with, s
             (0: not said, by an older fishswarm).
+        settings: a fingerprint of the rest of what their decisions depend on
+            (:func:`fishswarm.behaviors.registry.settings_digest`; empty: not said).
     """
 
     type_name: ClassVar[str] = "fish_about"
@@ -569,6 +571,7 @@ class FishAbout(Message):
     run: int = 0
     rules: str = "paper"
     control_period: float = 0.0
+    settings: str = ""
 
     def __post_init__(self) -> None:
         check_array(self, "ids", np.int64, None)
@@ -580,6 +583,8 @@ class FishAbout(Message):
         check_int("run", self.run)
         check_text("rules", self.rules)
         check_float("control_period", self.control_period, 0.0)
+        if self.settings:
+            check_text("settings", self.settings)
 
 
 @dataclass(frozen=True, eq=False)

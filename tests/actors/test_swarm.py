@@ -409,6 +409,7 @@ def test_broadcasts_cross_processes_and_are_counted_in_the_summary(
     counts = result.summary["counts"]
     assert counts["broadcasts"] == 6 * 5
     assert counts["unannounced_broadcasts"] == 0 and counts["rejected"]["channel"] == 0
+    assert counts["mismatched_fish"] == 0  # the workers' fish decide as the world's scenario
     # Each broadcast of ticks 0–3 reaches the 5 others at the next tick (all within 3 m);
     # tick 4's are delivered at the last snapshot, if the channel gets to it first.
     assert counts["deliveries"] in (4 * 6 * 5, 5 * 6 * 5)

@@ -1042,6 +1042,40 @@ def test_a_robots_fish_is_named_by_what_it_says_as_it_comes_up(
     ]
 
 
+def test_fish_whose_formation_map_is_made_for_another_school_are_named(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """The world runs 4 fish in a formation; fish 2 and 3 were started without --fish (or
+    with a file that says 15): their map has 15 slots. Behaviour, version, rules and period
+    agree, so only their settings' digest tells: named, with what to do. Fish 0 and 1 have
+    the world's settings: not named."""
+    scenario = Scenario(fish=4, behavior="formation", duration=2.0, seed=1)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2, 3)))
+        async with trio.open_nursery() as nursery:
+            ours = FishSettings((0, 1), scenario.fish_params(), keys, school="a")
+            theirs = FishSettings((2, 3), scenario.replace(fish=15).fish_params(), keys, school="b")
+            await nursery.start(Fish(ours).run, bus)
+            await nursery.start(Fish(theirs).run, bus)
+            await nursery.start(world.run, bus)
+            await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    assert world.mismatched == {2, 3}
+    said = [r.getMessage() for r in caplog.records if "scenario" in r.getMessage()]
+    assert said == [
+        "fish 2, 3 decide with other formation parameters than this world's scenario (a "
+        "formation's map is made for --fish fish: give them the world's --config, --fish "
+        "included) (started with other settings?)"
+    ]
+
+
 def test_fish_started_with_other_study_code_rules_are_named(
     caplog: pytest.LogCaptureFixture,
 ) -> None:

@@ -321,6 +321,36 @@ def test_the_rules_a_fish_reports_name_its_fish_side_study_code_switches() -> No
     assert rules_of(orbit) == "homing"
 
 
+def test_the_settings_digest_tells_decisions_apart_and_nothing_else(
+    model: Path, tmp_path: Path
+) -> None:
+    from fishswarm.behaviors.registry import settings_digest
+    from fishswarm.sim.decision_kernels import with_compiled_decisions
+    from fishswarm.sim.scenario import Scenario
+
+    def digest(**settings: object) -> str:
+        return settings_digest(Scenario(**settings).fish_params())  # type: ignore[arg-type]
+
+    formation = {"behavior": "formation", "fish": 8}
+    assert len(digest(**formation)) == 16
+    assert digest(**formation) == digest(**formation, seed=9, duration=5.0)  # not the fish's
+    for changed in ({"fish": 15}, {"spacing": 0.25}, {"formation": "column"}, {"flags": False},
+                    {"controller": "homing"}, {"profile": "study-code"}):  # fmt: skip
+        assert digest(**formation) != digest(**{**formation, **changed}), changed
+    # A large school's compiled Lennard-Jones loop decides as numpy does: one digest.
+    large = Scenario(fish=500).fish_params()
+    assert settings_digest(with_compiled_decisions(large, 500)) == settings_digest(large)
+    # A replica's model is part of its decisions: another model's weights, another digest.
+    other = tmp_path / "other.npz"
+    np.savez(other, weights=np.zeros(21), settings='{"behavior": "aggregation"}')
+    assert digest(behavior="replica", model=str(model)) == digest(
+        behavior="replica", model=str(model)
+    )
+    assert digest(behavior="replica", model=str(model)) != digest(
+        behavior="replica", model=str(other)
+    )
+
+
 def test_a_fish_counts_the_effort_of_the_fins_it_commanded() -> None:
     from fishswarm.bluebot.parameters import effort_rate
     from fishswarm.protocols.messages import FormationFlag
