@@ -8,6 +8,8 @@ the world. A request that is not a control request is rejected and counted by th
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import trio
 import zenoh
 
@@ -85,3 +87,29 @@ async def ask_scenario(
             f"world run this version of fishswarm, {__version__}?)"
         ) from None
     return Scenario.as_recorded(settings.scenario, source="the world's scenario")
+
+
+ASK_TIMEOUT = 2.0
+"""How long :func:`wait_for_scenario` waits for each of the world's answers, s."""
+ASK_EVERY = 0.2
+"""How long :func:`wait_for_scenario` waits before asking again when no world answered, s
+(a query no queryable matches comes back at once: asking often costs the router little)."""
+
+
+async def wait_for_scenario(
+    session: zenoh.Session, keys: KeySpace, *, on_waiting: Callable[[], None] | None = None
+) -> Scenario:
+    """The settings of the swarm's run, asking until its world answers; ``on_waiting`` is
+    called once if the first question goes unanswered (to say so).
+
+    Raises:
+        ConfigError: as :func:`ask_scenario`.
+    """
+    while True:
+        ran = await ask_scenario(session, keys, timeout=ASK_TIMEOUT)
+        if ran is not None:
+            return ran
+        if on_waiting is not None:
+            on_waiting()
+            on_waiting = None
+        await trio.sleep(ASK_EVERY)

@@ -635,9 +635,17 @@ def build_parser() -> argparse.ArgumentParser:
     observe.add_argument(
         "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
     )
-    observe.add_argument("--record", type=Path, help="MCAP recording to write")
     observe.add_argument(
-        "--ticks", type=tick_number, help="stop after the snapshot of this tick (0 or more)"
+        "--record",
+        type=Path,
+        help="MCAP recording to write, with the run's settings as its world tells them (so "
+        "plot, animate and view draw it as the run's own recording)",
+    )
+    observe.add_argument(
+        "--ticks",
+        type=tick_number,
+        help="stop after the snapshot of this tick (0 or more; the run's tick, not a count: "
+        "an observer that comes later stops at its first snapshot)",
     )
 
     view = commands.add_parser(

@@ -214,8 +214,8 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
 
 def _tank_of(settings: dict[str, Any], position: np.ndarray) -> list[float]:
-    """The recorded run's tank; for a recording that does not say (an observer's), the
-    study's tank, grown to hold every recorded position."""
+    """The recorded run's tank; for a recording that does not say (an observer's whose
+    world never told it), the study's tank, grown to hold every recorded position."""
     if "tank" in settings:
         return [float(v) for v in settings["tank"]]
     from fishswarm.bluebot.parameters import Tank
@@ -226,7 +226,7 @@ def _tank_of(settings: dict[str, Any], position: np.ndarray) -> list[float]:
 
 def _orbit_of(settings: dict[str, Any]) -> OrbitTarget | None:
     """The post and radius of a recorded orbit, milling or waltz run (None for other runs,
-    and for recordings that do not say what ran, such as an observer's)."""
+    and for recordings that do not say what ran: an observer's whose world never told it)."""
     from fishswarm.study.metrics import orbit_target_of
 
     try:
@@ -414,8 +414,8 @@ def _vision_of(settings: dict[str, Any]) -> Vision:
     """The geometric vision model the recorded run's fish saw with (range, blind spot,
     occlusion, the study code's Manhattan range), without noise: the fish's-eye view draws
     where the neighbours it sees are. A recording that does not say what ran (an
-    observer's) gets a BlueBot's; a run with camera vision, the geometric model of the
-    same settings."""
+    observer's whose world never told it) gets a BlueBot's; a run with camera vision, the
+    geometric model of the same settings."""
     from fishswarm.bluebot.vision import Vision
 
     try:

@@ -17,7 +17,7 @@ import trio
 import zenoh
 
 from fishswarm.actors.channel import Channel
-from fishswarm.actors.control import ask_scenario, run_control
+from fishswarm.actors.control import ask_scenario, run_control, wait_for_scenario
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.launcher import (
     EXIT_WORKER_DIED,
@@ -572,6 +572,15 @@ async def _say_if_nothing_comes(observer: Observer, swarm: str) -> None:
         )
 
 
+def say_waiting_for_world(command: str, keys: KeySpace, endpoint: str) -> None:
+    """Say that ``fishswarm COMMAND`` waits for a world to tell it what runs."""
+    print(
+        f"fishswarm {command}: waiting for the world of swarm {keys.swarm!r} on {endpoint} "
+        "(is a run going?)",
+        file=sys.stderr,
+    )
+
+
 def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm observe``: watch a swarm from anywhere."""
     keys = KeySpace(args.swarm)
@@ -589,9 +598,23 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                 else None
             )
             observer = Observer(keys, recorder=recorder, on_progress=show, observer_id="cli")
+
+            async def learn_the_run() -> None:
+                """Ask the world what runs (until it answers), then measure and record the
+                run as its own recording would: its scenario, its formation's metrics."""
+                try:
+                    ran = await wait_for_scenario(session, keys)
+                except ConfigError as error:
+                    print(f"fishswarm observe: warning: {error}", file=sys.stderr)
+                    return
+                observer.measure_as(ran)
+                if recorder is not None:
+                    recorder.scenario(ran.to_dict())
+
             async with trio.open_nursery() as nursery:
                 await nursery.start(observer.run, ZenohBus(session))
                 print(f"observing swarm {args.swarm!r} on {args.connect}", file=sys.stderr)
+                nursery.start_soon(learn_the_run)
                 nursery.start_soon(_say_if_nothing_comes, observer, args.swarm)
                 nursery.start_soon(
                     functools.partial(

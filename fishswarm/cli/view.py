@@ -10,16 +10,15 @@ import sys
 from pathlib import Path
 
 import trio
-import zenoh
 
-from fishswarm.actors.control import ask_scenario
+from fishswarm.actors.control import wait_for_scenario
 from fishswarm.actors.observer import Observer
 from fishswarm.actors.security import observer_subject
 from fishswarm.actors.session import open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.bluebot.parameters import Tank
 from fishswarm.cli.common import UserError, client_settings, read_recording_for
-from fishswarm.cli.swarm import _run_trio, view_settings, wait_for_ctrl_c
+from fishswarm.cli.swarm import _run_trio, say_waiting_for_world, view_settings, wait_for_ctrl_c
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.live_view import LiveView, open_live_view
@@ -27,12 +26,6 @@ from fishswarm.study.metrics import FormationTargets
 from fishswarm.study.recording import RecordingError
 from fishswarm.study.scene import Stage, scene_of, stage_of
 from fishswarm.study.view_settings import ViewError, ViewSettings
-
-ASK_TIMEOUT = 2.0
-"""How long the view waits for the world's answer, s."""
-ASK_EVERY = 0.2
-"""How long the view waits before asking again when no world answered, s (a query no
-queryable matches comes back at once: asking often costs the router little)."""
 
 NOT_METRICS = ("tick", "time", "fish")
 """Entries of a recorded metrics record that are not metrics."""
@@ -63,7 +56,7 @@ def _replay(path: Path, settings: ViewSettings) -> None:
     recording = read_recording_for(path, at_least=1, purpose="show")
     try:
         ran: Scenario | None = Scenario.as_recorded(recording.scenario, source=str(path))
-    except ConfigError:  # an observer's recording does not say what ran
+    except ConfigError:  # an observer's whose world never told it what ran
         ran = None
     targets = None if ran is None else FormationTargets.of(ran)
     stage = stage_of(ran) if ran is not None else Stage(Tank().size)
@@ -144,8 +137,12 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
                             asking.cancel_scope.cancel()
 
                         asking.start_soon(until_the_run_ends)
-                        ran = await _wait_for_world(
-                            session, keys, args.connect, say_waiting=number == 1
+                        ran = await wait_for_scenario(
+                            session,
+                            keys,
+                            on_waiting=(lambda: say_waiting_for_world("view", keys, args.connect))
+                            if number == 1
+                            else None,
                         )
                         asking.cancel_scope.cancel()
                     if runs.count != number:
@@ -179,23 +176,3 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
                     )
 
     _run_trio(main)
-
-
-async def _wait_for_world(
-    session: zenoh.Session, keys: KeySpace, endpoint: str, *, say_waiting: bool
-) -> Scenario:
-    """The scenario of the swarm's world, asking until a world answers (saying once that it
-    waits, if ``say_waiting``)."""
-    waiting = not say_waiting
-    while True:
-        ran = await ask_scenario(session, keys, timeout=ASK_TIMEOUT)
-        if ran is not None:
-            return ran
-        if not waiting:
-            print(
-                f"fishswarm view: waiting for the world of swarm {keys.swarm!r} on {endpoint} "
-                "(is a run going?)",
-                file=sys.stderr,
-            )
-            waiting = True
-        await trio.sleep(ASK_EVERY)

@@ -80,6 +80,11 @@ class Recorder:
         self._writer.add_message(self._channels[topic], stamp, data, stamp, self._sequence)
         self._sequence += 1
 
+    def scenario(self, settings: dict[str, Any]) -> None:
+        """Record the settings of the run, in place of those the recording was opened with
+        (an observer learns them from the world after it has begun to record)."""
+        self._writer.add_metadata("scenario", {"json": json.dumps(settings)})
+
     def snapshot(self, time: float, payload: bytes) -> None:
         """Record a snapshot payload as it came over the wire."""
         self._add(SNAPSHOT_TOPIC, time, payload)

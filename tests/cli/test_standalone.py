@@ -107,6 +107,8 @@ def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: P
     assert plotted.returncode == 0, plotted.stderr
     recording = read_recording(record)
     assert [s.tick for s in recording.snapshots][-1] == 6
+    # Up before the world, the observer asked it what runs, and recorded that.
+    assert recording.scenario["fish"] == 3 and recording.scenario["duration"] == 6
     assert recording.snapshots[-1].ids.tolist() == [0, 1, 2]
     assert any(e["role"] == "fish" for e in recording.events)
 
@@ -283,11 +285,14 @@ def test_an_observer_of_a_run_that_ends_does_not_say_it_lost_the_router(tmp_path
                     "--record", str(tmp_path / "run.mcap"),
                     "--summary", str(tmp_path / "run.json"))  # fmt: skip
         wait_for_port(port)
-        observer = start("observe", "--connect", endpoint)
+        observed = tmp_path / "observed.mcap"
+        observer = start("observe", "--connect", endpoint, "--record", str(observed))
         _, said = observer.communicate(timeout=60)
         assert observer.returncode == 0, said
         assert "observed ticks" in said and "lost the router" not in said, said
         assert run.wait(timeout=30) == 0
+    # The observer's recording says what ran, as the run's own does (it said nothing).
+    assert read_recording(observed).scenario == read_recording(tmp_path / "run.mcap").scenario
 
 
 @pytest.mark.slow
