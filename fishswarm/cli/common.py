@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -189,6 +189,35 @@ def prepare_file(path: Path | None, flag: str, *, example: str, suffix: str | No
             f"{flag} must name a {suffix} file, e.g. {flag} {example}; got {path.name}"
         )
     prepare_folder(path.parent, flag)
+
+
+def check_distinct_files(
+    written: Mapping[str, Path | None], *, read: Mapping[str, Path] | None = None
+) -> None:
+    """Refuse options that would write one file twice, or write over a file the command
+    reads, before any work is done (the later write would destroy the earlier).
+
+    Args:
+        written: each output option (e.g. ``--csv``) and its file (None: not asked for).
+        read: what the command reads (e.g. ``the recording``) and its file.
+
+    Raises:
+        ConfigError: which two name one file, and what to do.
+    """
+    seen: dict[Path, str] = {path.resolve(): what for what, path in (read or {}).items()}
+    for flag, path in written.items():
+        if path is None:
+            continue
+        where = path.resolve()
+        if where in seen:
+            other = seen[where]
+            reads = other in (read or {})
+            raise ConfigError(
+                f"{flag} {path} names the same file as "
+                + (f"{other}, which this command reads" if reads else other)
+                + f": give {flag} another file"
+            )
+        seen[where] = flag
 
 
 def prepare_folder(folder: Path, flag: str) -> None:

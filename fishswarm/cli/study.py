@@ -11,7 +11,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from fishswarm.cli.common import UserError, prepare_file, prepare_folder, read_recording_for
+from fishswarm.cli.common import (
+    UserError,
+    check_distinct_files,
+    prepare_file,
+    prepare_folder,
+    read_recording_for,
+)
 from fishswarm.sim.scenario import (
     PROFILES,
     STUDY_CODE_SWITCHES,
@@ -293,6 +299,7 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
     out = args.out or args.recording.with_suffix(".png")
     if out.suffix not in (".png", ".svg", ".pdf"):
         raise ConfigError(f"--out must end in .png, .svg or .pdf, got {out.name}")
+    check_distinct_files({"--out": out}, read={"the recording": args.recording})
     prepare_file(out, "--out", example="runs/latest.png")
     recording = read_recording_for(args.recording, at_least=1, purpose="draw")
     arrays = recording.arrays()
@@ -369,6 +376,7 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
         shown = frame_duration(args.out.suffix, args.fps)
     except AnimationError as error:
         raise ConfigError(f"--fps: {error}") from None
+    check_distinct_files({"--out": args.out}, read={"the recording": args.recording})
     prepare_file(args.out, "--out", example="runs/latest.gif")
     recording = read_recording_for(args.recording, at_least=2, purpose="animate")
     arrays = recording.arrays()

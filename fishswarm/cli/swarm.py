@@ -47,6 +47,7 @@ from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.cli.common import USER_ERRORS as COMMON_ERRORS
 from fishswarm.cli.common import (
     UserError,
+    check_distinct_files,
     check_secured_endpoint,
     client_settings,
     endpoint_of,
@@ -197,6 +198,7 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
     if (warning := _watchdog_warning(args.perception_timeout, scenario)) is not None:
         print(f"fishswarm run: warning: {warning}", file=sys.stderr)
     scenario.fish_params()  # reads a replica model now: a bad one is a usage error, not a crash
+    check_distinct_files({"--record": args.record, "--summary": args.summary})
     prepare_file(args.record, "--record", example="runs/latest.mcap")
     prepare_file(args.summary, "--summary", example="runs/latest.json")
     settings = LaunchSettings(
@@ -842,6 +844,9 @@ def export(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm export``."""
     if args.npz is None and args.csv is None:
         raise ConfigError("say what to write: --npz OUT.npz and/or --csv OUT.csv")
+    check_distinct_files(
+        {"--npz": args.npz, "--csv": args.csv}, read={"the recording": args.recording}
+    )
     prepare_file(args.npz, "--npz", example="runs/latest.npz", suffix=".npz")
     prepare_file(args.csv, "--csv", example="runs/latest.csv")
     recording = read_recording_for(args.recording, at_least=1, purpose="export")

@@ -15,8 +15,10 @@ its last whole chunk; reading such a file returns what it holds, marked incomple
 from __future__ import annotations
 
 import csv
+import fcntl
 import io
 import json
+import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -127,9 +129,26 @@ class _Flushing:
 
 @contextmanager
 def open_recorder(path: Path, scenario: dict[str, Any]) -> Iterator[Recorder]:
-    """Create ``path`` and record into it; the file is complete when the block ends."""
+    """Create ``path`` and record into it; the file is complete when the block ends. The
+    file is locked while it is written: another recorder of this machine refuses it.
+
+    Raises:
+        RecordingError: another process records into ``path`` (a run, a world or an
+            observer given the same ``--record``); the file is left as it is.
+    """
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("wb") as stream:
+    descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(descriptor)
+        raise RecordingError(
+            f"{path} is being recorded into by another process (a run, world or observer "
+            "given the same --record): give this one another file"
+        ) from None
+    # Emptied only once locked: a refused recorder must not destroy the other's recording.
+    os.ftruncate(descriptor, 0)
+    with os.fdopen(descriptor, "wb") as stream:
         recorder = Recorder(_Flushing(stream), scenario)
         try:
             yield recorder

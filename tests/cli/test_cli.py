@@ -207,6 +207,16 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["observe", "--name", ""], "observer name '' is not valid"),
         (["fish", "--id", "9" * 23], "is too large: fish ids go up to"),
         (["observe", "--ticks", "-1"], "'-1' is negative: ticks count from 0"),
+        (
+            ["run", "--record", "runs/same", "--summary", "runs/same"],
+            "--summary runs/same names the same file as --record: give --summary another file",
+        ),
+        (
+            ["export", "x.mcap", "--csv", "x.mcap"],
+            "--csv x.mcap names the same file as the recording, which this command reads",
+        ),
+        (["export", "x.mcap", "--npz", "o.npz", "--csv", "o.npz"], "the same file as --npz"),
+        (["plot", "x.png", "--out", "x.png"], "names the same file as the recording"),
         (["run", "--listen", "tls/127.0.0.1:7447"], "is a secured (tls/) endpoint: give --secure"),
         (["run", "--period", "100", "--duration", "200"], "control_period must be at most 60 s"),
         (["world", "--connect", "bogus"], "--connect: endpoint 'bogus'"),

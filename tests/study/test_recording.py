@@ -27,6 +27,40 @@ def _snapshot(tick: int, ids: list[int]) -> Snapshot:
     )
 
 
+def test_a_recording_in_progress_is_not_taken_by_a_second_recorder(tmp_path: Path) -> None:
+    # Two recorders given one file (an observer's --record, the run's own): the second is
+    # refused before it empties the file, and the first records on, whole.
+    path = tmp_path / "r.mcap"
+    with open_recorder(path, {"fish": 2}) as recorder:
+        recorder.snapshot(0.0, encode(_snapshot(0, [0, 1])))
+        refused = "is being recorded into by another process"
+        with pytest.raises(RecordingError, match=refused), open_recorder(path, {}):
+            pass  # pragma: no cover
+        recorder.snapshot(1.0, encode(_snapshot(1, [0, 1])))
+    recording = read_recording(path)
+    assert recording.complete and recording.scenario == {"fish": 2}
+    assert [s.tick for s in recording.snapshots] == [0, 1]
+    # Finished, the file is free: a new recording replaces it.
+    with open_recorder(path, {"fish": 3}):
+        pass
+    assert read_recording(path).scenario == {"fish": 3} and read_recording(path).snapshots == []
+
+
+def test_the_scenario_recorded_last_is_the_recordings(tmp_path: Path) -> None:
+    # An observer learns what runs after it has begun to record.
+    path = tmp_path / "r.mcap"
+    with open_recorder(path, {"observed": True}) as recorder:
+        recorder.snapshot(0.0, encode(_snapshot(0, [0, 1])))
+        recorder.scenario({"fish": 2, "behavior": "formation"})
+        recorder.snapshot(1.0, encode(_snapshot(1, [0, 1])))
+    assert read_recording(path).scenario == {"fish": 2, "behavior": "formation"}
+    # Cut short (the observer killed), it says so too.
+    whole = path.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(whole[: len(whole) - 200])
+    assert read_recording(cut).scenario == {"fish": 2, "behavior": "formation"}
+
+
 def test_round_trip_with_a_fish_that_joins_and_one_that_leaves(tmp_path: Path) -> None:
     path = tmp_path / "r.mcap"
     snapshots = [_snapshot(0, [0, 1]), _snapshot(1, [0, 1, 5]), _snapshot(2, [1, 5])]
