@@ -371,7 +371,12 @@ def _summary_text(summary: dict[str, Any]) -> str:
             else ""
         )
         + f", wall {summary['wall_time']:.2f} s"
-        + (f", {rtf:.{2 if rtf < 1 else 0}f}× real time" if rtf else "")
+        + (
+            f" (ticks {summary['loop_time']:.2f} s of it: {rtf:.{2 if rtf < 1 else 0}f}× real "
+            "time)"
+            if rtf
+            else ""
+        )
     )
     world_time = summary.get("world_time") or {}
     if world_time.get("physics"):

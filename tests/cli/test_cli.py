@@ -64,6 +64,12 @@ def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -
     assert data["scenario"]["fish"] == 6 and data["scenario"]["seed"] == 7
     assert data["counts"]["ticks"] == 4
     assert data["real_time_factor"] > 1
+    # The console's times agree with the summary's: the factor is of the ticks' time.
+    said = re.search(r"wall ([\d.]+) s \(ticks ([\d.]+) s of it: (\d+)× real time\)", result.stderr)
+    assert said is not None, result.stderr
+    assert float(said[1]) == pytest.approx(data["wall_time"], abs=0.006)
+    assert float(said[2]) == pytest.approx(data["loop_time"], abs=0.006)
+    assert int(said[3]) == round(data["real_time_factor"])
     # Where a tick went: each part of the world's a share of the loop, the fish's answer too.
     parts = data["world_time"]
     assert set(parts) == {"physics", "vision", "perceptions"}
