@@ -208,8 +208,8 @@ class Channel:
         )
         if broadcast is None:
             return None
-        if broadcast.run not in (0, self._run):
-            self._hold(key, broadcast)
+        if broadcast.run is not None and broadcast.run not in (0, self._run):
+            self._hold(key, broadcast, broadcast.run)
             return None
         # Only broadcasts of the ticks about to be delivered are kept: anything else is
         # stale or forged, and would pile up.
@@ -337,7 +337,12 @@ class Channel:
         for reception, kind, values in deliveries:
             receiver_id = int(snapshot.ids[reception.receiver])
             delivery = Delivery(
-                receiver_id, snapshot.tick, kind, values, reception.sender_position, snapshot.run
+                receiver_id,
+                snapshot.tick,
+                kind,
+                values,
+                reception.sender_position,
+                snapshot.run or None,
             )
             bus.put(self.keys.inbox(receiver_id), encode(delivery))
             counts[reception.receiver] += 1
@@ -346,16 +351,16 @@ class Channel:
             self.keys.channel_report, encode(ChannelReport(snapshot.tick, snapshot.ids, counts))
         )
 
-    def _hold(self, key: str, broadcast: Broadcast) -> None:
-        """Keep a broadcast of a run the channel has not seen a snapshot of, if it may be
-        one of that run's first: a new world's fish can broadcast before its first snapshot
-        reaches the channel."""
+    def _hold(self, key: str, broadcast: Broadcast, run: int) -> None:
+        """Keep a broadcast of ``run``, which the channel has not seen a snapshot of, if it
+        may be one of that run's first: a new world's fish can broadcast before its first
+        snapshot reaches the channel."""
         if broadcast.tick > FIRST_TICKS:
             self._intake.refuse(key, "stale", f"broadcast of tick {broadcast.tick} of another run")
         elif sum(map(len, self._held.values())) >= HELD_BROADCASTS_MAX:
             self._intake.refuse(key, "flood", f"more than {HELD_BROADCASTS_MAX} held")
         else:
-            self._held.setdefault(broadcast.run, []).append(broadcast)
+            self._held.setdefault(run, []).append(broadcast)
 
     def _start_run(self) -> None:
         """A run starts (its first snapshot): the medium starts afresh, so that a channel
@@ -369,11 +374,11 @@ class Channel:
                 self._let_go(tick, f"of tick {tick}, of a run that has ended")
                 continue
             for sender, sent in list(self._outbox[tick].items()):
-                ended = [b for b in sent if b.run not in (0, self._run)]
+                ended = [b for b in sent if b.run not in (None, 0, self._run)]
                 for _ in ended:
                     self._let_go_one(sender, f"of tick {tick}, of a run that has ended")
                 if ended:
-                    self._outbox[tick][sender] = [b for b in sent if b.run in (0, self._run)]
+                    self._outbox[tick][sender] = [b for b in sent if b.run in (None, 0, self._run)]
 
     def _take_held(self) -> None:
         """The run of the snapshots changed: take what its fish sent before this snapshot

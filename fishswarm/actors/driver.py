@@ -458,6 +458,20 @@ class Driver:
         async for _, _, command in self._addressed(commands, Command, "fish_id"):
             if self.state in ("stopped", "stranded"):
                 continue
+            if command.watchdog:
+                # Not a decision: the fish heard nothing of its world in time. The robot
+                # stops (and says so) until the fish decides again.
+                self._last_command = trio.current_time()
+                if self.state != "failsafe":
+                    self._stop("failsafe")
+                    self._counts["failsafe_stops"] += 1
+                    log.warning(
+                        "robot %d: its fish stopped the fins (no perception in time: is the "
+                        "world running, and the link up?)",
+                        self.settings.robot_id,
+                    )
+                self._wake()
+                continue
             self._set_fins(command.fins)
             self._lit = command.led
             if command.broadcasts == 0:

@@ -420,7 +420,7 @@ class Fish:
                 d
                 for d in self._mail[row]
                 if (d.run == run and d.tick >= tick)
-                or (unnamed and d.run == 0 and tick <= d.tick <= tick + 1)
+                or (unnamed and d.run is None and tick <= d.tick <= tick + 1)
             ]
         self._params = self.settings.params  # a new run starts as configured
         fresh = FishMemory.fresh(self._params, rows.size)
@@ -456,14 +456,14 @@ class Fish:
         )
         if delivery is None:
             return
-        if delivery.run in self._ended_runs:
+        if delivery.run is not None and delivery.run in self._ended_runs:
             # Ordinary: the channel delivers a run's last tick after its world has ended it.
             self._intake.disregard()
             return
         last = int(self._last_tick[index])
         # Mail of another run (the fish's next, come before its first perception) is kept
         # until that run starts for the fish or ends.
-        if delivery.run in (0, int(self._run[index])) and delivery.tick <= last:
+        if delivery.run in (None, int(self._run[index])) and delivery.tick <= last:
             self._intake.refuse(key, "stale", f"delivery for tick {delivery.tick} after {last}")
             return
         # Deliveries wait for their perception; a fish that gets many more than any tick
@@ -489,7 +489,7 @@ class Fish:
         wanted = pending.inbox_counts.tolist()
         runs = self._run.tolist()
         mail = [
-            [d for d in self._mail[row] if d.tick == tick and d.run in (0, runs[row])]
+            [d for d in self._mail[row] if d.tick == tick and d.run in (None, runs[row])]
             for row in rows
         ]
         if now < pending.deadline and any(len(m) < w for m, w in zip(mail, wanted, strict=True)):
@@ -503,7 +503,7 @@ class Fish:
         """The mail of fish ``row`` that is still to come once it has decided ``tick``: of
         later ticks of its run, and of another run (which may start for it next)."""
         run = int(self._run[row])
-        return [d for d in self._mail[row] if d.tick > tick or d.run not in (0, run)]
+        return [d for d in self._mail[row] if d.tick > tick or d.run not in (None, run)]
 
     def _drop_mail_of(self, run: int) -> None:
         """Let go the mail of a run that has ended."""
@@ -582,7 +582,7 @@ class Fish:
             tick = int(max(self._last_tick[late].max(), 0))
             count = late.size
             stop = Decision(stop_fins(count), np.zeros(count, dtype=np.bool_), Outbox.silent(count))
-            self._send(bus, late, tick, stop)
+            self._send(bus, late, tick, stop, watchdog=True)
 
     def _broadcast(self, bus: Bus, rows: Rows, tick: int, decision: Decision) -> None:
         """Each broadcasting fish's broadcast, on its own outbox key."""
@@ -596,9 +596,12 @@ class Fish:
             bus.put(self.settings.keys.outbox(fish_id), encode(message))
             self._counts["broadcasts"] += 1
 
-    def _send(self, bus: Bus, rows: Rows, tick: int, decision: Decision) -> None:
+    def _send(
+        self, bus: Bus, rows: Rows, tick: int, decision: Decision, *, watchdog: bool = False
+    ) -> None:
         """Commands of the fish at ``rows`` for ``tick``: one batch for a school, or one
-        command per fish on its own key."""
+        command per fish on its own key (``watchdog``: the watchdog's stop, which a
+        robot's driver reports as such)."""
         keys, school = self.settings.keys, self.settings.school
         self._counts["commands"] += rows.size
         broadcasts = decision.outbox.mask.astype(np.int64)
@@ -621,6 +624,7 @@ class Fish:
                 decision.fins[n],
                 led=bool(decision.led[n]),
                 broadcasts=int(broadcasts[n]),
+                watchdog=True if watchdog else None,
             )
             bus.put(keys.command(fish_id), encode(command, reuse=True))
 

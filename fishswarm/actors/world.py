@@ -903,12 +903,12 @@ class World:
                 f"{self._fish_rules!r} (--profile, --study-code)"
             )
         period = self.scenario.control_period
-        if about.control_period and not math.isclose(about.control_period, period):
+        if about.control_period is not None and not math.isclose(about.control_period, period):
             differences.append(
                 f"decide every {about.control_period:g} s, but this world's scenario says "
                 f"{period:g} s (--period)"
             )
-        if about.settings and about.settings != self._fish_settings and not differences:
+        if about.settings is not None and about.settings != self._fish_settings and not differences:
             # Said only when nothing named above explains it.
             behavior = self.scenario.behavior
             hint = (

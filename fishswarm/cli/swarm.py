@@ -372,8 +372,7 @@ def _summary_text(summary: dict[str, Any]) -> str:
         )
         + f", wall {summary['wall_time']:.2f} s"
         + (
-            f" (ticks {summary['loop_time']:.2f} s of it: {rtf:.{2 if rtf < 1 else 0}f}× real "
-            "time)"
+            f" (ticks {summary['loop_time']:.2f} s of it: {rtf:.{2 if rtf < 1 else 0}f}× real time)"
             if rtf
             else ""
         )

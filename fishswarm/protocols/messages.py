@@ -153,16 +153,19 @@ class Command(Message):
             world wait for exactly that many).
         flashing: a robot's LEDs flash — its formation flag by light (None: they do not;
             only a mock robot's body tells the world, so that other robots' cameras show it).
+        watchdog: True when the fish's safety watchdog turned the fins off (no perception
+            nor pulse of the world in time), not a decision (None: a decision).
     """
 
     type_name: ClassVar[str] = "command"
-    added_later: ClassVar[frozenset[str]] = frozenset({"flashing"})
+    added_later: ClassVar[frozenset[str]] = frozenset({"flashing", "watchdog"})
     fish_id: int
     tick: int
     fins: FloatArray
     led: bool = True
     broadcasts: int = 0
     flashing: bool | None = None
+    watchdog: bool | None = None
 
     def __post_init__(self) -> None:
         check_int("fish_id", self.fish_id)
@@ -175,6 +178,8 @@ class Command(Message):
         check_int("broadcasts", self.broadcasts, high=MAX_ROWS)
         if self.flashing is not None and not isinstance(self.flashing, bool):
             raise TypeError(f"flashing must be a bool or None, got {type(self.flashing).__name__}")
+        if self.watchdog is not None and self.watchdog is not True:
+            raise TypeError(f"watchdog must be True or None, got {self.watchdog!r}")
 
 
 @dataclass(frozen=True, eq=False)
@@ -278,7 +283,8 @@ def _check_broadcast(message: Broadcast | Delivery) -> None:
         raise ValueError(f"values hold at most {BROADCAST_WIDTH} numbers")
     if message.kind == "formation":
         FormationFlag.from_values(message.values)
-    check_int("run", message.run)
+    if message.run is not None:
+        check_int("run", message.run)
 
 
 @dataclass(frozen=True, eq=False)
@@ -290,15 +296,16 @@ class Broadcast(Message):
         tick: the tick it was decided at.
         kind: what it says, one of :data:`BROADCAST_KINDS`.
         values: (≤ :data:`BROADCAST_WIDTH`,) its numbers, e.g. a formation flag's slot.
-        run: the run the tick is of, as the sender's perception carried it (0: not told).
+        run: the run the tick is of, as the sender's perception carried it (None: not told).
     """
 
     type_name: ClassVar[str] = "broadcast"
+    added_later: ClassVar[frozenset[str]] = frozenset({"run"})
     sender_id: int
     tick: int
     kind: str
     values: IntArray
-    run: int = 0
+    run: int | None = None
 
     def __post_init__(self) -> None:
         check_int("sender_id", self.sender_id)
@@ -317,16 +324,17 @@ class Delivery(Message):
         values: as in :class:`Broadcast`.
         sender_position: (3,) where the sender is, in the receiver's body frame, m (situated,
             like an LED signal: there is no sender id).
-        run: the run the tick is of, as the receiver's perceptions carry it (0: not told).
+        run: the run the tick is of, as the receiver's perceptions carry it (None: not told).
     """
 
     type_name: ClassVar[str] = "delivery"
+    added_later: ClassVar[frozenset[str]] = frozenset({"run"})
     receiver_id: int
     tick: int
     kind: str
     values: IntArray
     sender_position: FloatArray
-    run: int = 0
+    run: int | None = None
 
     def __post_init__(self) -> None:
         check_int("receiver_id", self.receiver_id)
@@ -559,19 +567,20 @@ class FishAbout(Message):
         rules: ``paper``, or the study code's fish-side switches their decisions follow
             (e.g. ``lennard-jones,homing``).
         control_period: the time between their decisions they were started with, s
-            (0: not said, by an older fishswarm).
+            (None: not said, by an older fishswarm).
         settings: a fingerprint of the rest of what their decisions depend on
-            (:func:`fishswarm.behaviors.registry.settings_digest`; empty: not said).
+            (:func:`fishswarm.behaviors.registry.settings_digest`; None: not said).
     """
 
     type_name: ClassVar[str] = "fish_about"
+    added_later: ClassVar[frozenset[str]] = frozenset({"control_period", "settings"})
     ids: IntArray
     behavior: str
     version: str
     run: int = 0
     rules: str = "paper"
-    control_period: float = 0.0
-    settings: str = ""
+    control_period: float | None = None
+    settings: str | None = None
 
     def __post_init__(self) -> None:
         check_array(self, "ids", np.int64, None)
@@ -582,8 +591,9 @@ class FishAbout(Message):
         check_text("version", self.version)
         check_int("run", self.run)
         check_text("rules", self.rules)
-        check_float("control_period", self.control_period, 0.0)
-        if self.settings:
+        if self.control_period is not None:
+            check_float("control_period", self.control_period, 0.0)
+        if self.settings is not None:
             check_text("settings", self.settings)
 
 

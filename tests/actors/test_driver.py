@@ -5,6 +5,7 @@ loss, operators' orders and the bridge."""
 from __future__ import annotations
 
 import dataclasses
+import logging
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from contextlib import asynccontextmanager
 from typing import TypeVar
@@ -308,6 +309,47 @@ def test_an_operators_stop_turns_fins_and_leds_off_until_resumed(
             nursery.cancel_scope.cancel()
 
     run_mock(main)
+
+
+def test_a_stop_of_the_fishs_watchdog_is_reported_as_a_failsafe_not_as_swimming(
+    hardware: Hardware, caplog: pytest.LogCaptureFixture
+) -> None:
+    # The world has ended: the fish's watchdog turns the fins off. The robot said
+    # 'swimming' with its fins off until its own failsafe fired, and then logged a second
+    # stop; now it reports the failsafe at once, once, and swims at the next decision.
+    watchdog = encode(Command(ROBOT, 0, np.zeros(4), led=False, watchdog=True))
+
+    async def main() -> list[str]:
+        local, remote = MemoryBus(), MemoryBus()
+        driver = make_driver(hardware, [True], command_timeout=10.0)
+        states = []
+        async with trio.open_nursery() as nursery:
+            await nursery.start(driver.run, local, remote)
+            local.put(KEYS.command(ROBOT), command([1.0, 1.0, 0.0, 0.0]))
+            await trio.sleep(0.01)
+            states.append(driver.state)
+            local.put(KEYS.command(ROBOT), watchdog)
+            await trio.sleep(0.01)
+            states.append(driver.state)
+            assert hardware.fins.frequencies == (0.0, 0.0, 0.0, 0.0)  # type: ignore[attr-defined]
+            local.put(KEYS.command(ROBOT), watchdog)  # repeated: nothing new
+            await trio.sleep(30.0)  # past the driver's own command timeout
+            states.append(driver.state)
+            local.put(KEYS.command(ROBOT), command([1.0, 0.0, 0.0, 0.0]))
+            await trio.sleep(0.01)
+            states.append(driver.state)
+            nursery.cancel_scope.cancel()
+        assert driver.statistics().failsafe_stops == 1
+        return states
+
+    with caplog.at_level(logging.WARNING, "fishswarm"):
+        states = run_mock(main)
+    assert states == ["swimming", "failsafe", "failsafe", "swimming"]
+    said = [r.getMessage() for r in caplog.records if "fins" in r.getMessage()]
+    assert said == [
+        f"robot {ROBOT}: its fish stopped the fins (no perception in time: is the world "
+        "running, and the link up?)"
+    ]
 
 
 def test_a_resume_leaves_a_swimming_robot_swimming_under_its_failsafe(hardware: Hardware) -> None:

@@ -107,6 +107,8 @@ def test_watchdog_is_armed_by_a_perception_stops_the_fins_and_takes_the_worlds_p
     assert stop.tick == 1 and stop.fins.tolist() == [0.0, 0.0, 0.0, 0.0] and stop.led is False
     assert again.tick == 2 and again.fins.tolist() == [0.0, 0.0, 1.0, 0.0]
     assert last.tick == 2 and last.fins.tolist() == [0.0, 0.0, 0.0, 0.0]
+    # The watchdog's stops say so (a robot's driver reports them); decisions do not.
+    assert [c.watchdog for _, c in got[:4]] == [None, True, None, True]
     assert statistics.watchdog_stops == 2 and statistics.commands == 5
     assert statistics.perceptions == 3 and statistics.rejected == 1
 

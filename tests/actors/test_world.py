@@ -1012,7 +1012,7 @@ def test_a_robots_fish_is_named_by_what_it_says_as_it_comes_up(
     scenario = Scenario(fish=2, duration=2.0, seed=1)
     keys = scenario.keys
 
-    def hello(fish_id: int, behavior: str, period: float) -> bytes:
+    def hello(fish_id: int, behavior: str, period: float | None) -> bytes:
         return encode(FishAbout(np.array([fish_id]), behavior, __version__, 0, "paper", period))
 
     async def main() -> World:
@@ -1025,7 +1025,7 @@ def test_a_robots_fish_is_named_by_what_it_says_as_it_comes_up(
             bus.put(keys.about(1), hello(1, "aggregation", 1.0))
             bus.put(keys.about(9), hello(9, "dispersion", 0.5))
             bus.put(keys.about(7), hello(7, "dispersion", 1.0))
-            bus.put(keys.about(8), hello(8, "dispersion", 0.0))
+            bus.put(keys.about(8), hello(8, "dispersion", None))
             await _until_state(world, "finished")
             nursery.cancel_scope.cancel()
         return world

@@ -640,6 +640,18 @@ def test_fields_added_later_stay_off_the_wire_while_unset() -> None:
     assert "formation" not in wire_fields(status) and decode(encode(status)) == status
     ordered = RobotOrder("formation", formation="column")
     assert "formation" in wire_fields(ordered) and decode(encode(ordered)) == ordered
+    # The runs of broadcasts and deliveries, and what a fish says of its period and
+    # parameters, came later too.
+    sent = Broadcast(1, 2, "signal", np.array([3]))
+    assert wire_fields(sent) == {"sender_id", "tick", "kind", "values"}
+    named = Broadcast(1, 2, "signal", np.array([3]), 77)
+    assert "run" in wire_fields(named) and decode(encode(named), Broadcast).run == 77
+    heard = Delivery(1, 2, "signal", np.array([3]), np.zeros(3))
+    assert "run" not in wire_fields(heard) and decode(encode(heard)) == heard
+    about = FishAbout(np.array([4]), "formation", "0.1.0")
+    assert wire_fields(about) == {"ids", "behavior", "version", "run", "rules"}
+    told = FishAbout(np.array([4]), "formation", "0.1.0", 1, "paper", 0.5, "0123456789abcdef")
+    assert decode(encode(told), FishAbout) == told
 
 
 def test_which_leds_flash_stays_off_the_wire_until_a_robot_flashes() -> None:
