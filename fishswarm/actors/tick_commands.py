@@ -55,6 +55,12 @@ class TickCommands:
             return None
         return rows
 
+    def answered_before(self, fish_ids: IntArray) -> list[int]:
+        """Those of ``fish_ids`` that have answered this tick already, ascending."""
+        rows, found = _rows_of(self.ids, fish_ids)
+        twice: list[int] = np.sort(fish_ids[found & self.answered[rows]]).tolist()
+        return twice
+
     def take(self, rows: Rows, fins: FloatArray, broadcasts: ArrayLike) -> None:
         """The fish at ``rows`` (awaited, distinct) answered."""
         self.fins[rows] = fins

@@ -248,6 +248,8 @@ class World:
         self._said_no_channel = False
         self._current = TickCommands()
         self.mismatched: set[int] = set()
+        self._twins: set[int] = set()
+        """Fish that two processes answer for (warned of once)."""
         """Fish that said they run another behaviour, version or rules than this world's."""
         self.vouched: set[tuple[int, str | None]] = set()
         """(fish id, school or None) pairs vouched for on their own about keys."""
@@ -973,9 +975,30 @@ class World:
             return
         rows = current.rows_awaited(ids) if tick == current.tick else None
         if rows is None:
+            twice = current.answered_before(ids) if tick == current.tick else []
+            if twice:
+                self.intake.refuse(key, "duplicate", f"a second answer to tick {tick}")
+                self._warn_of_twins(twice, tick)
+                return
             self.intake.refuse(key, "stale", f"commands for tick {tick} at {current.tick}")
             return
         current.take(rows, fins, broadcasts)
+
+    def _warn_of_twins(self, fish_ids: list[int], tick: int) -> None:
+        """Say, once for each fish, that two processes answer for it: its first answer of
+        a tick counts, the other's moves nothing, and the run is not what either decided."""
+        new = [fish_id for fish_id in fish_ids if fish_id not in self._twins]
+        if not new:
+            return
+        self._twins.update(new)
+        log.warning(
+            "fish %s answered tick %d twice: two processes serve %s (robots, or 'fishswarm "
+            "fish', started with one --id?); the first answer of each tick counts: give each "
+            "process its own ids",
+            ids_text(new),
+            tick,
+            "it" if len(new) == 1 else "them",
+        )
 
     def _lose(self, fish_id: int, reason: str) -> None:
         self._lights.pop(fish_id, None)

@@ -584,7 +584,7 @@ def test_a_lost_robots_leds_are_forgotten() -> None:
 def test_a_schools_commands_are_taken_only_for_its_own_awaited_fish() -> None:
     # School "t" holds fish 0, 1 and 2; fish 3 is on its own keys. At tick 0 the school
     # sends a batch naming fish 3 (misaddressed), one for tick 1 (stale), fish 0 and 2
-    # (taken), fish 2 again (stale: answered already), then fish 1 (taken): the world
+    # (taken), fish 2 again (a duplicate: answered already), then fish 1 (taken): the world
     # moves on to tick 1 holding the fins of the batches it took, row by row.
     scenario = Scenario(fish=4, duration=1.0, seed=2, behavior="aggregation")
     keys = scenario.keys
@@ -632,7 +632,7 @@ def test_a_schools_commands_are_taken_only_for_its_own_awaited_fish() -> None:
         return world, decode(snapshots.drain()[-1][1], Snapshot)
 
     world, last = run_mock(main)
-    assert world.statistics().rejected == {"misaddressed": 1, "stale": 2}
+    assert world.statistics().rejected == {"misaddressed": 1, "stale": 1, "duplicate": 1}
     assert world.lost == []
     np.testing.assert_array_equal(world.sim.fins[:, 0], [0.2, 0.4, 0.6, 0.0])
     assert last.tick == 1
@@ -1073,6 +1073,38 @@ def test_fish_whose_formation_map_is_made_for_another_school_are_named(
         "fish 2, 3 decide with other formation parameters than this world's scenario (a "
         "formation's map is made for --fish fish: give them the world's --config, --fish "
         "included) (started with other settings?)"
+    ]
+
+
+def test_two_processes_answering_for_one_fish_are_named_once(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Two 'fishswarm fish --id 1' (or two robots given one id): both answer each of fish
+    1's ticks. The first answer counts; the world says once what is wrong and what to do
+    (it said only 'rejected a stale message', at every tick)."""
+    scenario = Scenario(fish=2, duration=4.0, seed=1)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
+        async with trio.open_nursery() as nursery:
+            for ids in ((0,), (1,), (1,)):
+                await nursery.start(Fish(FishSettings(ids, scenario.fish_params(), keys)).run, bus)
+            await nursery.start(world.run, bus)
+            await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    assert world.tick == 4
+    assert world.intake.rejected["duplicate"] == 4 and world.intake.rejected["stale"] == 0
+    said = [r.getMessage() for r in caplog.records if "twice" in r.getMessage()]
+    assert said == [
+        "fish 1 answered tick 0 twice: two processes serve it (robots, or 'fishswarm fish', "
+        "started with one --id?); the first answer of each tick counts: give each process "
+        "its own ids"
     ]
 
 
@@ -2289,7 +2321,7 @@ def test_realtime_answer_times_run_until_the_last_fish_of_the_tick_answered() ->
                 await trio.sleep(0.2)
                 bus.put(keys.command(0), command)
                 await trio.sleep(0.6)
-                bus.put(keys.command(0), command)  # again: stale, and no answer time
+                bus.put(keys.command(0), command)  # again: a duplicate, no answer time
 
     async def main() -> World:
         bus = MemoryBus()
@@ -2304,6 +2336,6 @@ def test_realtime_answer_times_run_until_the_last_fish_of_the_tick_answered() ->
     world = run_mock(main)
     statistics = world.statistics()
     assert statistics.late_commands == 0 and world.lost == []
-    assert statistics.rejected == {"stale": 4}
+    assert statistics.rejected == {"duplicate": 4}
     assert statistics.answer_time_median == pytest.approx(0.6)
     assert statistics.answer_time_p90 == pytest.approx(0.6)
