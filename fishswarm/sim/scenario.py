@@ -684,6 +684,13 @@ def scenario_table(path: Path) -> dict[str, Any]:
     table = data.get("scenario", data)
     if not isinstance(table, dict):
         raise ConfigError(f"{path}: [scenario] must be a table")
+    outside = sorted(name for name in data if name != "scenario") if table is not data else []
+    if outside:
+        raise ConfigError(
+            f"{path}: {', '.join(outside)} outside the [scenario] table would be ignored: "
+            "put every setting in [scenario] (or leave the table out and write them at the "
+            "top)"
+        )
     return table
 
 

@@ -437,6 +437,12 @@ class Experiment:
         table = data.get("experiment")
         if not isinstance(table, dict):
             raise ConfigError(f"{path}: needs an [experiment] table (name, parameter, values)")
+        stray = sorted(set(data) - {"experiment", "scenario", "study_code"})
+        if stray:
+            raise ConfigError(
+                f"{path}: {', '.join(stray)} would be ignored: an experiment file holds the "
+                "tables [experiment], [scenario] and [study_code] only"
+            )
         known = {"name", "title", "parameter", "label", "values", "seeds", "groups"}
         unknown = sorted(set(table) - known)
         if unknown:

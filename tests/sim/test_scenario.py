@@ -121,6 +121,22 @@ def test_settings_at_the_edge_of_their_range_are_allowed() -> None:
 
 
 @pytest.mark.parametrize(
+    ("text", "named"),
+    [
+        ("fish = 5\n[scenario]\nfish = 7\n", "fish outside the [scenario] table"),
+        ("[scenario]\nfish = 7\n[other]\nx = 1\n", "other outside the [scenario] table"),
+    ],
+)
+def test_settings_a_scenario_file_would_ignore_are_refused(
+    tmp_path: Path, text: str, named: str
+) -> None:
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    with pytest.raises(ConfigError, match=re.escape(f"s.toml: {named} would be ignored")):
+        Scenario.from_toml(path)
+
+
+@pytest.mark.parametrize(
     ("line", "message"),
     [
         ("fish = true", "fish must be a whole number, got True"),

@@ -97,6 +97,10 @@ def test_unknown_experiment_lists_the_known_ones() -> None:
             "experiment x: seeds must be at least 1",
         ),
         ("[experiment\n", "not valid TOML"),
+        (
+            '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\n[scenairo]\nfish = 3\n',
+            r"scenairo would be ignored: an experiment file holds the tables \[experiment\]",
+        ),
     ],
 )
 def test_bad_experiment_files_are_explained(tmp_path: Path, text: str, reason: str) -> None:
