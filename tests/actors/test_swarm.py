@@ -15,6 +15,7 @@ import pytest
 import trio
 
 from fishswarm.actors.launcher import (
+    EXIT_DEGRADED,
     EXIT_WORKER_DIED,
     LaunchSettings,
     RunResult,
@@ -235,6 +236,47 @@ def test_killed_worker_loses_its_fish_and_the_run_completes(endpoint: str, tmp_p
     assert "SIGKILL" in summary["workers_died"][0]
     assert result.history[-1].fish == 4
     assert summary["counts"]["lost_fish"] == 4
+
+
+def test_a_fish_lost_while_its_process_lives_on_degrades_the_run(endpoint: str) -> None:
+    # A fish of another process (a robot, a 'fishswarm fish' by hand) joins a real-time
+    # run and goes at tick 10: the run reaches its end without it. Its trajectory is not
+    # what its fish decided, and the summary says so (it said 'finished', exit 0).
+    from fishswarm.actors.fish import Fish, FishSettings
+
+    scenario = Scenario(fish=3, duration=3.0, control_period=0.1, time_mode="realtime", seed=1)
+    gone = trio.Event()
+
+    def progress(snapshot: Progress) -> None:
+        if snapshot.tick >= 10 and snapshot.fish == 4:
+            gone.set()
+
+    async def main() -> RunResult:
+        settings = LaunchSettings(scenario, listen=endpoint)
+        async with trio.open_nursery() as nursery:
+
+            async def visitor() -> None:
+                client = SessionSettings(mode="client", connect=[endpoint], connect_timeout=10)
+                fish = Fish(FishSettings((9,), scenario.fish_params(), scenario.keys))
+                async with open_session(client) as session, trio.open_nursery() as its:
+                    await its.start(fish.run, ZenohBus(session))
+                    await gone.wait()
+                    its.cancel_scope.cancel()
+
+            nursery.start_soon(visitor)
+            result = await launch_swarm(settings, on_progress=progress)
+            nursery.cancel_scope.cancel()
+            return result
+
+    result = run_trio(main, timeout=60)
+    assert result.exit_code == EXIT_DEGRADED
+    assert result.summary["status"] == "degraded"
+    assert [lost["id"] for lost in result.summary["lost"]] == [9]
+    assert not result.summary["workers_died"]
+    from fishswarm.cli.swarm import _summary_text
+
+    first = _summary_text(result.summary).splitlines()[0]
+    assert first.startswith("status: degraded — fish were lost on the way: 9 at tick "), first
 
 
 def test_fish_that_fail_in_the_launchers_process_are_lost_and_the_run_completes(
