@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import itertools
 import logging
 import math
 import os
@@ -205,17 +206,32 @@ class FleetEntry:
         status: its last status message (None: alive, but no status heard yet).
         alive: whether its liveliness token is up.
         last_seen: how long ago its last status arrived, s (None: never).
+        drivers: how many drivers report this id (told apart by when each started, from
+            their uptimes): more than one means processes were given one id.
     """
 
     robot_id: int
     status: RobotStatus | None
     alive: bool
     last_seen: float | None
+    drivers: int = 1
+
+
+DRIVERS_APART = 0.25
+"""Statuses of one id whose drivers started this far apart, s, come from two drivers (one
+driver's statuses agree on its start within the network's jitter)."""
+
+
+def _drivers(starts: list[float]) -> int:
+    """How many drivers the start times ``starts`` (s, on this clock) were reported by."""
+    ordered = sorted(starts)
+    return 1 + sum(b - a > DRIVERS_APART for a, b in itertools.pairwise(ordered))
 
 
 async def survey_fleet(bus: Bus, keys: KeySpace, *, listen: float) -> list[FleetEntry]:
     """The robots heard from within ``listen`` s: statuses and liveliness, by id."""
     statuses: dict[int, tuple[float, RobotStatus]] = {}
+    starts: dict[int, list[float]] = {}
     alive: set[int] = set()
     intake = Intake("fleet survey")
     tokens: Inbox[tuple[str, bool]] = Inbox()
@@ -227,7 +243,9 @@ async def survey_fleet(bus: Bus, keys: KeySpace, *, listen: float) -> list[Fleet
             async for key, payload in samples:
                 status = intake.decode(key, payload, RobotStatus)
                 if status is not None:
-                    statuses[status.robot_id] = (trio.current_time(), status)
+                    now = trio.current_time()
+                    statuses[status.robot_id] = (now, status)
+                    starts.setdefault(status.robot_id, []).append(now - status.uptime)
         for key, up in tokens.drain():
             try:
                 robot = fish_id_of(keys.parse_alive(key).member_id)
@@ -242,6 +260,7 @@ async def survey_fleet(bus: Bus, keys: KeySpace, *, listen: float) -> list[Fleet
             statuses[robot_id][1] if robot_id in statuses else None,
             robot_id in alive,
             now - statuses[robot_id][0] if robot_id in statuses else None,
+            _drivers(starts.get(robot_id, [])),
         )
         for robot_id in sorted(set(statuses) | alive)
     ]

@@ -92,6 +92,14 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
         print(json.dumps([_as_dict(entry) for entry in fleet], indent=2))
     else:
         print(fleet_table(fleet))
+    for entry in fleet:
+        if entry.drivers > 1:
+            print(
+                f"warning: {entry.drivers} drivers report robot {entry.robot_id} (robots or "
+                "processes started with one --id?): the line above is the last heard; give "
+                "each robot its own id",
+                file=sys.stderr,
+            )
     if sent is None:
         return 0
     if not fleet:
@@ -135,6 +143,7 @@ def _as_dict(entry: FleetEntry) -> dict[str, object]:
         "id": entry.robot_id,
         "alive": entry.alive,
         "last_seen": entry.last_seen,
+        "drivers": entry.drivers,
         "version": status.version if status else None,
         "behavior": status.behavior if status else None,
         "formation": status.formation if status else None,

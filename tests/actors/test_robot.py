@@ -149,6 +149,7 @@ def test_mock_robots_join_obey_a_stop_and_survive_losing_the_router(
                 rows = json.loads(listed.stdout)
                 assert [row["id"] for row in rows] == [10, 11]
                 assert {row["behavior"] for row in rows} == {"dispersion"}
+                assert [row["drivers"] for row in rows] == [1, 1]  # one process each
 
                 # An operator's stop reaches every robot: both report it.
                 async with subscription(base, KEYS.robot_statuses()) as statuses:

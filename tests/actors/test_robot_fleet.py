@@ -19,8 +19,8 @@ from tests.conftest import run_mock
 KEYS = KeySpace()
 
 
-def status(robot_id: int, state: str = "swimming") -> RobotStatus:
-    return RobotStatus(robot_id, "1.0", "dispersion", state, 0.3, np.zeros(4), True, None, 9.0)
+def status(robot_id: int, state: str = "swimming", uptime: float = 9.0) -> RobotStatus:
+    return RobotStatus(robot_id, "1.0", "dispersion", state, 0.3, np.zeros(4), True, None, uptime)
 
 
 def test_a_survey_hears_statuses_and_tokens_and_a_token_gone_is_not_alive() -> None:
@@ -54,6 +54,31 @@ def test_a_survey_hears_statuses_and_tokens_and_a_token_gone_is_not_alive() -> N
         (3, False, 1.5),
     ]
     assert fleet[0].status == status(1) and fleet[1].status == status(3, "failsafe")
+
+
+def test_a_survey_tells_two_drivers_of_one_robot_id_apart_by_when_they_started() -> None:
+    """Robot 5's driver reports every 0.5 s, up since 9 s before the survey; a second
+    process given id 5 reports too, up 3 s. Robot 6's one driver reports four times."""
+
+    async def main() -> list[FleetEntry]:
+        bus = MemoryBus()
+        async with trio.open_nursery() as nursery:
+
+            async def robots() -> None:
+                for step in range(4):
+                    at = 0.5 * step
+                    await trio.sleep_until(at)
+                    bus.put(KEYS.robot_status(5), encode(status(5, uptime=9.0 + at)))
+                    bus.put(KEYS.robot_status(6), encode(status(6, uptime=20.0 + at)))
+                    await trio.sleep(0.01)
+                    bus.put(KEYS.robot_status(5), encode(status(5, uptime=3.01 + at)))
+
+            nursery.start_soon(robots)
+            fleet = await survey_fleet(bus, KEYS, listen=2.0)
+        return fleet
+
+    fleet = run_mock(main)
+    assert [(e.robot_id, e.drivers) for e in fleet] == [(5, 2), (6, 1)]
 
 
 def test_an_order_is_unconfirmed_for_robots_not_heard_from_or_not_obeying() -> None:
