@@ -334,6 +334,7 @@ class Channel:
             to_fish = [r for r in seen if int(snapshot.ids[r.receiver]) not in self._robots]
             deliveries += [(r, "formation", flag.values()) for r in to_fish]
         counts = np.zeros(snapshot.ids.size, dtype=np.int64)
+        run = snapshot.run or None
         for reception, kind, values in deliveries:
             receiver_id = int(snapshot.ids[reception.receiver])
             delivery = Delivery(
@@ -342,7 +343,9 @@ class Channel:
                 kind,
                 values,
                 reception.sender_position,
-                snapshot.run or None,
+                # A robot's driver numbers its fish's mail by its own run: the world's is
+                # left off the wire, which a driver not yet upgraded still reads.
+                None if receiver_id in self._robots else run,
             )
             bus.put(self.keys.inbox(receiver_id), encode(delivery))
             counts[reception.receiver] += 1

@@ -570,10 +570,13 @@ class Driver:
     async def _pass_broadcasts(self, broadcasts: Inbox[tuple[str, bytes]], remote: Bus) -> None:
         """The fish's formation flag into light, its other broadcasts onto the link (flags
         travel between robots by light: on the link nothing takes them, and a simulated
-        channel, which numbers broadcasts by its world's ticks, would refuse them)."""
+        channel, which numbers broadcasts by its world's ticks, would refuse them). The
+        fish's run is the driver's, which means nothing on the link: it is left off."""
         async for key, payload, broadcast in self._addressed(broadcasts, Broadcast, "sender_id"):
             if broadcast.kind != "formation":
-                remote.put(key, payload)
+                remote.put(
+                    key, payload if broadcast.run is None else encode(replace(broadcast, run=None))
+                )
                 self._counts["broadcasts"] += 1
                 continue
             # A broadcast is checked on decoding: a formation broadcast's numbers are a flag.

@@ -513,6 +513,7 @@ async def _robot_lights(
     robots: tuple[int, ...] = (2,),
     signals: int = 0,
     ticks: int = 1,
+    run: int = 0,
 ) -> tuple[list[int], list[Delivery]]:
     """Fish 0, 1 and 2 in a row facing +x, ``robots`` among them (their drivers' tokens
     shown); the snapshots of ticks 1 to ``ticks`` say each fish's LEDs as ``lights`` (a
@@ -533,7 +534,7 @@ async def _robot_lights(
             bus.put(KEYS.snapshot, encode(Snapshot(
                 tick, float(tick), IDS, ROW, np.zeros((3, 3)), np.zeros(3), zeros,
                 np.array([signals, 0, 0]) if tick else zeros, formation=told,
-                lights=None if lights is None or not tick else np.array(lights),
+                lights=None if lights is None or not tick else np.array(lights), run=run,
             )))  # fmt: skip
             if tick:
                 counts += decode((await reports.receive())[1], ChannelReport).inbox_counts
@@ -586,11 +587,14 @@ def test_robots_are_shown_no_robots_flags_and_take_the_simulated_fishs_as_before
     scenario = Scenario(fish=3, behavior="formation", channel_loss=0.5, seed=4)
     flashing = run_mock(
         lambda: _robot_lights(Channel(scenario), [STEADY, STEADY, FLASHING], robots=(1, 2),
-                              signals=4, ticks=3)
+                              signals=4, ticks=3, run=7)
     )  # fmt: skip
     steady = run_mock(
-        lambda: _robot_lights(Channel(scenario), None, robots=(1, 2), signals=4, ticks=3)
+        lambda: _robot_lights(Channel(scenario), None, robots=(1, 2), signals=4, ticks=3, run=7)
     )
     assert not any(d.kind == "formation" for d in flashing[1])
     assert flashing == steady
+    # A robot's driver numbers its fish's mail by its own run: the world's stays off the
+    # wire (a driver not yet upgraded reads what it always read).
+    assert steady[1] and {d.run for d in steady[1]} == {None}
     assert 0 < steady[0][1] < 12  # fish 1 heard some of fish 0's signals, lost others

@@ -486,7 +486,8 @@ def test_broadcasts_go_out_and_deliveries_come_in_announced(hardware: Hardware) 
         ):
             await nursery.start(driver.run, local, remote)
             await perceptions.receive()  # the first perception, at start
-            broadcast = encode(Broadcast(ROBOT, 1, "signal", np.array([7])))
+            # The fish's broadcast names the driver's run, which means nothing on the link.
+            broadcast = encode(Broadcast(ROBOT, 1, "signal", np.array([7]), 12345))
             local.put(KEYS.outbox(ROBOT), broadcast)
             # A simulated channel numbers its deliveries by its world's ticks (here 57) and
             # run (here 5); the fish acts on it at the driver's next perception (tick 1), and
@@ -515,6 +516,7 @@ def test_broadcasts_go_out_and_deliveries_come_in_announced(hardware: Hardware) 
 
     sent, perception = run_mock(main)
     assert len(sent) == 1 and decode(sent[0], Broadcast).values.tolist() == [7]
+    assert decode(sent[0], Broadcast).run is None
     assert perception.inbox_count == 2
 
 
