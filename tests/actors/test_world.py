@@ -8,7 +8,7 @@ import collections
 import contextlib
 import logging
 import time
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable, Sequence
 from contextlib import asynccontextmanager
 from typing import Any, cast
 
@@ -1001,6 +1001,32 @@ def test_fish_that_run_another_behaviour_are_named_once_and_counted(
     )
 
 
+def _world_with_fish(
+    scenario: Scenario,
+    fish: Sequence[FishSettings],
+    *,
+    expected: tuple[int, ...],
+    said: Sequence[tuple[str, bytes]] = (),
+) -> World:
+    """A world that expects ``expected`` run to its end beside fish actors of ``fish`` on
+    the in-memory bus, with ``said`` put on the bus once all are up (what other fish say)."""
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=expected))
+        async with trio.open_nursery() as nursery:
+            for settings in fish:
+                await nursery.start(Fish(settings).run, bus)
+            await nursery.start(world.run, bus)
+            for key, payload in said:
+                bus.put(key, payload)
+            await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return world
+
+    return run_mock(main)
+
+
 def test_a_robots_fish_is_named_by_what_it_says_as_it_comes_up(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
@@ -1015,23 +1041,15 @@ def test_a_robots_fish_is_named_by_what_it_says_as_it_comes_up(
     def hello(fish_id: int, behavior: str, period: float | None) -> bytes:
         return encode(FishAbout(np.array([fish_id]), behavior, __version__, 0, "paper", period))
 
-    async def main() -> World:
-        bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
-        async with trio.open_nursery() as nursery:
-            fish = FishSettings((0, 1), scenario.fish_params(), keys, school="s")
-            await nursery.start(Fish(fish).run, bus)
-            await nursery.start(world.run, bus)
-            bus.put(keys.about(1), hello(1, "aggregation", 1.0))
-            bus.put(keys.about(9), hello(9, "dispersion", 0.5))
-            bus.put(keys.about(7), hello(7, "dispersion", 1.0))
-            bus.put(keys.about(8), hello(8, "dispersion", None))
-            await _until_state(world, "finished")
-            nursery.cancel_scope.cancel()
-        return world
-
+    ours = FishSettings((0, 1), scenario.fish_params(), keys, school="s")
+    hellos = [
+        (keys.about(1), hello(1, "aggregation", 1.0)),
+        (keys.about(9), hello(9, "dispersion", 0.5)),
+        (keys.about(7), hello(7, "dispersion", 1.0)),
+        (keys.about(8), hello(8, "dispersion", None)),
+    ]
     with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
-        world = run_mock(main)
+        world = _world_with_fish(scenario, [ours], expected=(0, 1), said=hellos)
     assert world.mismatched == {1, 9}
     said = [r.getMessage() for r in caplog.records if "scenario says" in r.getMessage()]
     assert said == [
@@ -1052,21 +1070,10 @@ def test_fish_whose_formation_map_is_made_for_another_school_are_named(
     scenario = Scenario(fish=4, behavior="formation", duration=2.0, seed=1)
     keys = scenario.keys
 
-    async def main() -> World:
-        bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2, 3)))
-        async with trio.open_nursery() as nursery:
-            ours = FishSettings((0, 1), scenario.fish_params(), keys, school="a")
-            theirs = FishSettings((2, 3), scenario.replace(fish=15).fish_params(), keys, school="b")
-            await nursery.start(Fish(ours).run, bus)
-            await nursery.start(Fish(theirs).run, bus)
-            await nursery.start(world.run, bus)
-            await _until_state(world, "finished")
-            nursery.cancel_scope.cancel()
-        return world
-
+    ours = FishSettings((0, 1), scenario.fish_params(), keys, school="a")
+    theirs = FishSettings((2, 3), scenario.replace(fish=15).fish_params(), keys, school="b")
     with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
-        world = run_mock(main)
+        world = _world_with_fish(scenario, [ours, theirs], expected=(0, 1, 2, 3))
     assert world.mismatched == {2, 3}
     said = [r.getMessage() for r in caplog.records if "scenario" in r.getMessage()]
     assert said == [
@@ -1085,19 +1092,9 @@ def test_two_processes_answering_for_one_fish_are_named_once(
     scenario = Scenario(fish=2, duration=4.0, seed=1)
     keys = scenario.keys
 
-    async def main() -> World:
-        bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
-        async with trio.open_nursery() as nursery:
-            for ids in ((0,), (1,), (1,)):
-                await nursery.start(Fish(FishSettings(ids, scenario.fish_params(), keys)).run, bus)
-            await nursery.start(world.run, bus)
-            await _until_state(world, "finished")
-            nursery.cancel_scope.cancel()
-        return world
-
+    fish = [FishSettings(ids, scenario.fish_params(), keys) for ids in ((0,), (1,), (1,))]
     with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
-        world = run_mock(main)
+        world = _world_with_fish(scenario, fish, expected=(0, 1))
     assert world.tick == 4
     assert world.intake.rejected["duplicate"] == 4 and world.intake.rejected["stale"] == 0
     said = [r.getMessage() for r in caplog.records if "twice" in r.getMessage()]
