@@ -18,6 +18,7 @@ from __future__ import annotations
 import atexit
 import logging
 import os
+import signal
 from pathlib import Path
 
 log = logging.getLogger(__name__)
@@ -99,5 +100,13 @@ def release_shared_memory_at_exit() -> None:
     often it is asked)."""
     global _registered
     if not _registered:
-        atexit.register(release_shared_memory)
+        atexit.register(_release_at_exit)
         _registered = True
+
+
+def _release_at_exit() -> None:
+    """:func:`release_shared_memory`, deaf to Ctrl-C: the process is ending already, and a
+    second Ctrl-C (GNU ``timeout`` sends two, so does an impatient hand) would otherwise
+    print a traceback from the middle of the release."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    release_shared_memory()

@@ -83,3 +83,45 @@ def test_a_run_leaves_no_shared_memory_behind(tmp_path: Path) -> None:
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert _orphans() - before == set()
+
+
+CHILD_THAT_EXITS_SLOWLY = """
+import sys, time
+from pathlib import Path
+from fishswarm.actors import shared_memory
+
+def slow(*args, **kwargs):
+    print("releasing", flush=True)
+    time.sleep(2.0)
+    return set()
+
+shared_memory.files_held_open = slow
+Path(sys.argv[1]).write_bytes(b"")  # a file of ours for the release to look at
+shared_memory.release_shared_memory_at_exit()
+"""
+
+
+@pytest.mark.skipif(not SHARED_MEMORY_FOLDER.is_dir(), reason="no /dev/shm here")
+def test_a_ctrl_c_while_the_release_runs_at_exit_prints_no_traceback() -> None:
+    # The release runs as the process exits; a second Ctrl-C then (GNU timeout sends two)
+    # printed a KeyboardInterrupt traceback from the atexit handler.
+    import signal
+
+    orphan = SHARED_MEMORY_FOLDER / f"fishswarm-test-{os.getpid()}.zenoh"
+    child = subprocess.Popen(
+        [sys.executable, "-c", CHILD_THAT_EXITS_SLOWLY, str(orphan)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert child.stdout is not None
+        assert child.stdout.readline() == "releasing\n"
+        child.send_signal(signal.SIGINT)
+        _, said = child.communicate(timeout=30)
+    finally:
+        if child.poll() is None:
+            child.kill()
+        orphan.unlink(missing_ok=True)
+    assert child.returncode == 0, said
+    assert "Traceback" not in said and "KeyboardInterrupt" not in said, said
