@@ -26,7 +26,14 @@ def simulate_on_actors(scenario: Scenario) -> Run:
     with tempfile.TemporaryDirectory(prefix="fishswarm-experiment-") as folder:
         record = Path(folder) / "run.mcap"
         settings = LaunchSettings(scenario, listen=endpoint, record=record)
-        result = trio.run(launch_swarm, settings)
+        try:
+            result = trio.run(launch_swarm, settings)
+        except BaseExceptionGroup as group:
+            # Ctrl-C reaches the run's tasks and comes out of trio in a group: the sweep
+            # (which keeps the runs done and writes them) knows a KeyboardInterrupt.
+            if group.subgroup(KeyboardInterrupt) is not None:
+                raise KeyboardInterrupt from None
+            raise
         if result.summary["status"] != "finished":
             raise RuntimeError(
                 f"run with seed {scenario.seed} ended {result.summary['status']} "

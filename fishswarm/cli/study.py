@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
+import signal
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -199,24 +202,46 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
                   file=sys.stderr)  # fmt: skip
             return 1 if failed else 130
         values = tuple(v for v in chosen.values if any(o.value == v for o in stop.outcomes))
-        write_report(
-            chosen.with_changes(values=values), stop.outcomes, out, engine=args.engine,
-            wall_time=time.perf_counter() - started, runs_total=stop.total,
-        )  # fmt: skip
-        print(
-            f"fishswarm: {how} after {len(stop.outcomes)} of {stop.total} runs; wrote "
-            f"what finished to {out} (marked incomplete in table.md and summary.json)",
-            file=sys.stderr,
-        )
+        with _interrupt_deferred():
+            write_report(
+                chosen.with_changes(values=values), stop.outcomes, out, engine=args.engine,
+                wall_time=time.perf_counter() - started, runs_total=stop.total,
+            )  # fmt: skip
+        if len(stop.outcomes) == stop.total:  # Ctrl-C as the last run ended: nothing lost
+            print(f"fishswarm: {how} as the last run ended: all {stop.total} runs done; "
+                  f"wrote them to {out}", file=sys.stderr)  # fmt: skip
+        else:
+            print(
+                f"fishswarm: {how} after {len(stop.outcomes)} of {stop.total} runs; wrote "
+                f"what finished to {out} (marked incomplete in table.md and summary.json)",
+                file=sys.stderr,
+            )
         return 1 if failed else 130
     wall_time = time.perf_counter() - started
-    paths = write_report(chosen, outcomes, out, engine=args.engine, wall_time=wall_time)
+    with _interrupt_deferred() as later:
+        paths = write_report(chosen, outcomes, out, engine=args.engine, wall_time=wall_time)
     print((out / "table.md").read_text(encoding="utf-8"))
     print(
         f"{total} runs in {wall_time:.1f} s; wrote {', '.join(p.name for p in paths)} to {out}",
         file=sys.stderr,
     )
+    if later:
+        print("fishswarm: interrupted while the report was written: finished it first",
+              file=sys.stderr)  # fmt: skip
+        return 130
     return 0
+
+
+@contextlib.contextmanager
+def _interrupt_deferred() -> Iterator[list[int]]:
+    """Hold Ctrl-C off while a report is written (a few seconds of tables and pictures),
+    so that it is whole; the list yielded holds the signals that came meanwhile."""
+    came: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda number, frame: came.append(number))
+    try:
+        yield came
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _tank_of(settings: dict[str, Any], position: np.ndarray) -> list[float]:
