@@ -10,6 +10,9 @@ from fishswarm.cli.common import UserError, prepare_folder
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.progress import ProgressLine, bar
 
+DEFAULT_GENERATIONS = 500
+"""Generations a new learning run goes to unless ``--generations`` says otherwise."""
+
 
 def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm learn``."""
@@ -20,6 +23,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             raise
         raise UserError("Turing learning needs pycma: pip install -e '.[learn]'") from None
     from fishswarm.learning.arena import Arena
+    from fishswarm.learning.checkpoint import checkpoint_target
     from fishswarm.learning.session import LearningError, learn
 
     named = {
@@ -61,7 +65,12 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             "--force starts over and replaces it, or give another --out"
         )
     prepare_folder(args.out, "--out")
-    every = max(1, args.generations // 50)
+    # A resumed run goes on to the generation it was started for, unless told otherwise.
+    told = checkpoint_target(args.out / "checkpoint.npz") if args.resume else None
+    generations = args.generations
+    if generations is None:
+        generations = told if told is not None else DEFAULT_GENERATIONS
+    every = max(1, generations // 50)
     output = ProgressLine()
 
     def started(run: Any, resumed: bool) -> None:
@@ -80,7 +89,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             f"{chosen.hall_of_fame}, soft weight {chosen.soft_weight:g}, virulence "
             f"{chosen.virulence:g}, {chosen.trials} start(s) a generation, {chosen.replica} "
             f"replicas; up to generation "
-            f"{args.generations}; output {args.out}",
+            f"{generations}; output {args.out}",
             file=sys.stderr,
         )
         if resumed:
@@ -91,12 +100,12 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
     def progress(run: Any, record: dict[str, float], seconds: float) -> None:
         done = run.generation
-        if args.quiet or (done % every and done != args.generations):
+        if args.quiet or (done % every and done != generations):
             return
-        left = (args.generations - done) * seconds
+        left = (generations - done) * seconds
         line = (
-            f"{bar(done, args.generations)} "
-            f"generation {done}/{args.generations}  models best {record['model_best']:.3f} "
+            f"{bar(done, generations)} "
+            f"generation {done}/{generations}  models best {record['model_best']:.3f} "
             f"mean {record['model_mean']:.3f}  classifiers best {record['classifier_best']:.3f} "
             f"mean {record['classifier_mean']:.3f}  {seconds:.2f} s/gen  ~{left / 60:.1f} min left"
         )
@@ -105,7 +114,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
     try:
         summary = learn(
             settings,
-            generations=args.generations,
+            generations=generations,
             out=args.out,
             checkpoint_every=args.checkpoint_every,
             resume=args.resume,

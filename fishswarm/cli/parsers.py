@@ -816,7 +816,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="bounded: radii folded back into [0, 300] units (a triangle wave of the genome, "
         "not clipped); unbounded: started in [-40, 300] and free (default bounded)",
     )
-    learn.add_argument("--generations", type=int, default=500, help="default %(default)s")
+    learn.add_argument(
+        "--generations",
+        type=int,
+        help="generations to reach, counting those done (default 500; with --resume, the "
+        "number the resumed run was started with)",
+    )
     learn.add_argument("--models", type=int, help="replica population (default 100)")
     learn.add_argument("--classifiers", type=int, help="classifier population (default 100)")
     learn.add_argument("--seed", type=int, help="master seed (default 0)")

@@ -37,14 +37,16 @@ class CheckpointError(ValueError):
     """A file is not a readable learning checkpoint; the message says why."""
 
 
-def save_checkpoint(run: Coevolution, path: Path) -> None:
-    """Write ``run`` to ``path`` atomically (a crash never leaves half a file)."""
+def save_checkpoint(run: Coevolution, path: Path, *, target: int | None = None) -> None:
+    """Write ``run`` to ``path`` atomically (a crash never leaves half a file), with the
+    generation it is to reach (``target``; None: not said), which a resumed run goes on to."""
     path.parent.mkdir(parents=True, exist_ok=True)
     meta = {
         "format": FORMAT,
         "settings": _settings_data(run.settings),
         "generation": run.generation,
         "history": run.history,
+        **({} if target is None else {"target": target}),
     }
     arrays: dict[str, np.ndarray] = {
         "meta": np.array(json.dumps(meta)),
@@ -104,6 +106,19 @@ def load_checkpoint(path: Path) -> Coevolution:
     except (KeyError, TypeError, ValueError) as error:
         raise CheckpointError(f"{path} is a damaged learning checkpoint: {error}") from None
     return run
+
+
+def checkpoint_target(path: Path) -> int | None:
+    """The generation the run in the checkpoint at ``path`` was to reach (None: the file
+    does not say — written before checkpoints did — or cannot be read, which
+    :func:`load_checkpoint` then explains)."""
+    try:
+        with path.open("rb") as stream, np.load(stream, allow_pickle=False) as data:
+            meta = json.loads(str(data["meta"]))
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+    target = meta.get("target") if isinstance(meta, dict) else None
+    return target if isinstance(target, int) and not isinstance(target, bool) else None
 
 
 def _rows(rows: list[np.ndarray]) -> np.ndarray:

@@ -120,6 +120,19 @@ def target_report(evaluation: Evaluation, arena: Arena) -> dict[str, Any]:
     }
 
 
+OUTPUTS = (
+    CHECKPOINT,
+    "history.csv",
+    "best_replica.npz",
+    "radii.md",
+    "summary.json",
+    "fitness.png",
+    "spacing_speed.png",
+    "trajectories.png",
+)
+"""Every file a learning run writes into its folder."""
+
+
 def learn(
     settings: LearningSettings | None,
     *,
@@ -167,6 +180,10 @@ def learn(
         raise LearningError("a new run needs its settings (None is for resuming only)")
     else:
         run = Coevolution(settings)
+        # A new run replaces an earlier one in ``out`` whole: interrupted, it must not
+        # leave that run's replica and summary beside its own checkpoint.
+        for name in OUTPUTS:
+            (out / name).unlink(missing_ok=True)
     if on_start is not None:
         on_start(run, resume)
     while run.generation < generations:
@@ -175,7 +192,7 @@ def learn(
         if on_generation is not None:
             on_generation(run, record, time.perf_counter() - started)
         if run.generation % checkpoint_every == 0 or run.generation == generations:
-            save_checkpoint(run, checkpoint)
+            save_checkpoint(run, checkpoint, target=generations)
     return write_results(run, out)
 
 

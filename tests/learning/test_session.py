@@ -7,6 +7,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -14,23 +15,14 @@ import pytest
 from fishswarm.learning.arena import Arena
 from fishswarm.learning.coevolution import LearningSettings
 from fishswarm.learning.replica_file import ReplicaFileError, load_replica
-from fishswarm.learning.session import LearningError, learn
+from fishswarm.learning.session import OUTPUTS, LearningError, learn
 
 
 def test_learn_writes_every_output(tmp_path: Path) -> None:
     settings = LearningSettings(models=6, classifiers=6, seed=2, inputs=("speed", "neighbors2"))
     summary = learn(settings, generations=3, out=tmp_path, checkpoint_every=2)
-    for name in (
-        "checkpoint.npz",
-        "history.csv",
-        "best_replica.npz",
-        "radii.md",
-        "summary.json",
-        "fitness.png",
-        "spacing_speed.png",
-        "trajectories.png",
-    ):
-        assert (tmp_path / name).exists(), name
+    # Exactly the outputs a new run clears first (OUTPUTS).
+    assert sorted(path.name for path in tmp_path.iterdir()) == sorted(OUTPUTS)
     assert summary["generations"] == 3
     assert len(summary["radii"]["mean"]) == 2
     assert (tmp_path / "history.csv").read_text().count("\n") == 4
@@ -274,3 +266,45 @@ def test_learning_again_into_a_finished_run_needs_resume_or_force(tmp_path: Path
     assert (tmp_path / "checkpoint.npz").read_bytes() == kept  # nothing lost
     assert learn("--seed", "5", "--force").returncode == 0
     assert (tmp_path / "checkpoint.npz").read_bytes() != kept
+
+
+class _Stop(Exception):
+    """Stands for Ctrl-C in the middle of a run."""
+
+
+def _stop_at(generation: int) -> Any:
+    def on_generation(run: Any, record: dict[str, float], seconds: float) -> None:
+        if run.generation == generation:
+            raise _Stop
+
+    return on_generation
+
+
+def test_a_new_run_clears_an_earlier_runs_outputs_before_it_starts(tmp_path: Path) -> None:
+    # --force over a finished run, interrupted before its first checkpoint: the folder held
+    # the old run's replica and summary beside nothing of the new one's, and 'run --model'
+    # took the old replica for the new.
+    for name in OUTPUTS:
+        (tmp_path / name).write_text("the earlier run's")
+    settings = LearningSettings(models=4, classifiers=4, seed=3)
+    with pytest.raises(_Stop):
+        learn(settings, generations=5, out=tmp_path, checkpoint_every=2, on_generation=_stop_at(1))
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_resumed_run_goes_on_to_the_generation_it_was_started_for(tmp_path: Path) -> None:
+    # Started for 4 generations and stopped after 2: '--resume' without '--generations'
+    # carried on to the default 500 instead.
+    from fishswarm.cli import main
+    from fishswarm.learning.checkpoint import checkpoint_target
+
+    settings = LearningSettings(models=4, classifiers=4, seed=3)
+    with pytest.raises(_Stop):
+        learn(settings, generations=4, out=tmp_path, checkpoint_every=1, on_generation=_stop_at(3))
+    assert checkpoint_target(tmp_path / "checkpoint.npz") == 4
+    assert main(["learn", "--out", str(tmp_path), "--resume", "--quiet"]) == 0
+    assert json.loads((tmp_path / "summary.json").read_text())["generations"] == 4
+    # Told otherwise, it goes on further, and says so for the next resume.
+    assert main(["learn", "--out", str(tmp_path), "--resume", "--generations", "5", "--quiet"]) == 0
+    assert checkpoint_target(tmp_path / "checkpoint.npz") == 5
+    assert checkpoint_target(tmp_path / "missing.npz") is None
