@@ -457,7 +457,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--view",
         action="store_true",
         help="serve a live 3-D view of the run in the browser (as 'fishswarm view' does; needs "
-        "pip install 'fishswarm[view]'); after the run it stays up until Ctrl-C",
+        "pip install 'fishswarm[view]'); after the run it stays up until Ctrl-C (a Ctrl-C "
+        "during the run ends both)",
     )
     _add_view_flags(run)
 

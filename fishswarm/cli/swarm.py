@@ -240,9 +240,10 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         on_scene = None if view is None else view.show
         result = _run_trio(lambda: launch_swarm(settings, on_progress=show, on_scene=on_scene))
         _report(result)
-        if view is not None:
+        if view is not None and result.summary["status"] != "interrupted":
             # The run is over: its exit code stands, whenever the Ctrl-C comes (even on the
-            # heels of the announcement, as a script's would).
+            # heels of the announcement, as a script's would). A Ctrl-C that interrupted
+            # the run ends the view too: one is enough.
             with contextlib.suppress(KeyboardInterrupt):
                 wait_for_ctrl_c("fishswarm run: the view stays up until Ctrl-C")
     return int(result.exit_code)

@@ -304,3 +304,26 @@ def test_a_run_serves_its_own_view_and_keeps_it_up_after_the_run(tmp_path: Path)
         assert process.wait(timeout=30) == 0  # the run's own exit code
     finally:
         _stop(process, lines)
+
+
+def test_a_ctrl_c_that_interrupts_a_run_with_a_view_ends_the_view_too(tmp_path: Path) -> None:
+    # The view stays up after a run that ended; one whose run was interrupted went on
+    # serving until a second Ctrl-C.
+    web, grpc = free_port(), free_port()
+    process = subprocess.Popen(
+        [*FISHSWARM, "run", "--fish", "3", "--duration", "600", "--time", "realtime",
+         "--quiet", "--view", "--web-port", str(web), "--grpc-port", str(grpc),
+         "--record", str(tmp_path / "r.mcap"), "--summary", str(tmp_path / "r.json"),
+         "--listen", f"tcp/127.0.0.1:{free_port()}"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    lines = Lines(process)
+    try:
+        lines.wait_for(rf"^open (http://localhost:{web}/\S+) in a browser to watch$")
+        wait_for_port(grpc)
+        time.sleep(1.0)  # a few ticks
+        process.send_signal(signal.SIGINT)
+        lines.wait_for("fishswarm run: interrupted; recording and summary hold the run so far")
+        assert process.wait(timeout=30) == 130  # it stayed up, serving the view
+    finally:
+        _stop(process, lines)
