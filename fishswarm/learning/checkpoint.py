@@ -20,6 +20,7 @@ import numpy as np
 
 from fishswarm.learning.arena import arena_from
 from fishswarm.learning.coevolution import Coevolution, Fitness, LearningSettings
+from fishswarm.learning.features import radii_count
 
 FORMAT = "fishswarm-learning-checkpoint/1"
 
@@ -135,5 +136,9 @@ def _settings_data(settings: LearningSettings) -> dict[str, Any]:
 def _settings_from(data: dict[str, Any]) -> LearningSettings:
     values = {**_BEFORE_THE_SETTING, **data}
     values["inputs"] = tuple(values["inputs"])
+    if radii_count(values["inputs"]) == 0:
+        # Saved by a version that took a start for radii these inputs never learn: it
+        # meant nothing then either.
+        values["radius_start"] = None
     values["arena"] = arena_from(values["arena"])
     return LearningSettings(**values)

@@ -134,6 +134,12 @@ class LearningSettings:
                 f"radius_start must lie in [{low:g}, {high:g}] for {self.radii} radii, "
                 f"got {self.radius_start:g}"
             )
+        if self.radius_start is not None and self.radius_count == 0:
+            raise ValueError(
+                f"radius_start {self.radius_start:g} sets where learned radii start, but the "
+                f"inputs {','.join(self.inputs)} learn none: give inputs that count "
+                "neighbours within learned radii (e.g. speed,neighbors2), or leave it out"
+            )
 
     @property
     def first_radius(self) -> float:

@@ -369,8 +369,11 @@ def test_several_starts_a_generation_judge_every_model_on_each(
 def test_classifier_radii_start_where_asked() -> None:
     # The same seed draws the same steps: only the radius genes' starting point moves,
     # by (30 - 150) / 100 before folding.
-    middle = Coevolution(LearningSettings(models=4, classifiers=4, seed=3))
-    short = Coevolution(LearningSettings(models=4, classifiers=4, seed=3, radius_start=30.0))
+    counted = ("speed", "neighbors2")  # inputs within two learned radii
+    middle = Coevolution(LearningSettings(models=4, classifiers=4, seed=3, inputs=counted))
+    short = Coevolution(
+        LearningSettings(models=4, classifiers=4, seed=3, inputs=counted, radius_start=30.0)
+    )
     middle.step()
     short.step()
     size = middle.settings.network_size
@@ -385,3 +388,6 @@ def test_classifier_radii_start_where_asked() -> None:
     assert LearningSettings(radii="unbounded").first_radius == 130.0
     with pytest.raises(ValueError, match=r"radius_start must lie in \[0, 300\]"):
         LearningSettings(radius_start=-5.0)
+    # The default inputs learn no radius: a start for one would be saved and mean nothing.
+    with pytest.raises(ValueError, match="the inputs speed,counts learn none"):
+        LearningSettings(radius_start=50.0)
