@@ -168,7 +168,8 @@ class DriverStatistics:
         perceptions: perceptions handed to the fish.
         frames_missed: periods without a usable camera frame or depth reading.
         commands: commands written to fins and LEDs.
-        failsafe_stops: times the fins stopped for lack of commands.
+        failsafe_stops: times the fins stopped for lack of commands, or because the fish's
+            own watchdog stopped them (no perception in time).
         link_losses: times the link to the base station went down.
         stranded_stops: times the fins stopped because the link stayed down too long.
         orders: operators' orders obeyed.

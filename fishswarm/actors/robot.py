@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import itertools
 import logging
 import math
 import os
@@ -217,15 +216,22 @@ class FleetEntry:
     drivers: int = 1
 
 
-DRIVERS_APART = 0.25
+DRIVERS_APART = 1.0
 """Statuses of one id whose drivers started this far apart, s, come from two drivers (one
-driver's statuses agree on its start within the network's jitter)."""
+driver's statuses agree on its start within the network's delays)."""
 
 
 def _drivers(starts: list[float]) -> int:
-    """How many drivers the start times ``starts`` (s, on this clock) were reported by."""
+    """How many drivers the start times ``starts`` (s, on this clock) were reported by:
+    groups of starts apart by more than :data:`DRIVERS_APART`, each of two statuses or
+    more (one status delayed on its way is no second driver); at least 1."""
     ordered = sorted(starts)
-    return 1 + sum(b - a > DRIVERS_APART for a, b in itertools.pairwise(ordered))
+    groups: list[int] = []
+    for index, start in enumerate(ordered):
+        if index == 0 or start - ordered[index - 1] > DRIVERS_APART:
+            groups.append(0)
+        groups[-1] += 1
+    return max(1, sum(size >= 2 for size in groups))
 
 
 async def survey_fleet(bus: Bus, keys: KeySpace, *, listen: float) -> list[FleetEntry]:

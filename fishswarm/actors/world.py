@@ -248,9 +248,10 @@ class World:
         self._said_no_channel = False
         self._current = TickCommands()
         self.mismatched: set[int] = set()
+        """Fish that said they run another behaviour, version, rules, control period or
+        decision parameters than this world's."""
         self._twins: set[int] = set()
         """Fish that two processes answer for (warned of once)."""
-        """Fish that said they run another behaviour, version or rules than this world's."""
         self.vouched: set[tuple[int, str | None]] = set()
         """(fish id, school or None) pairs vouched for on their own about keys."""
         self._unvouched: dict[tuple[int, str | None], str] = {}
@@ -258,8 +259,9 @@ class World:
         roster until they are (a fish's token may come before its vouching)."""
         fish_params = settings.scenario.fish_params()
         self._fish_rules = rules_of(fish_params)
-        self._fish_settings = settings_digest(fish_params)
         """The rules this world's scenario says its fish decide by (FishAbout.rules)."""
+        self._fish_settings = settings_digest(fish_params)
+        """The digest of its fish's decision parameters (FishAbout.settings)."""
         self._warned: set[str] = set()
         self._step_times: dict[str, float] = {}
         """How long each step of the simulation took the last time, s: a long one runs in a

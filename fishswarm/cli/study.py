@@ -241,7 +241,8 @@ def _interrupt_deferred() -> Iterator[list[int]]:
     try:
         yield came
     finally:
-        signal.signal(signal.SIGINT, previous)
+        # None: a handler not installed from Python; the default is the nearest we can give.
+        signal.signal(signal.SIGINT, signal.SIG_DFL if previous is None else previous)
 
 
 def _tank_of(settings: dict[str, Any], position: np.ndarray) -> list[float]:

@@ -305,7 +305,7 @@ def _summary_text(summary: dict[str, Any]) -> str:
             f" — fish were stopped {stops} time(s) by their watchdog (no perception in time), "
             "so their fins were off for part of the run"
         )
-    elif summary["status"] == "degraded" and summary["lost"]:
+    if summary["status"] == "degraded" and summary["lost"]:
         lost = ", ".join(f"{f['id']} at tick {f['tick']} ({f['reason']})" for f in summary["lost"])
         lines[0] += f" — fish were lost on the way: {lost}"
     orbit = summary.get("orbit")

@@ -18,6 +18,7 @@ import csv
 import fcntl
 import io
 import json
+import logging
 import os
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -39,6 +40,8 @@ from fishswarm.study.scene import FRAME, SCENE_SCHEMA, scene_json_schema
 CHUNK_SIZE = 32 * 1024
 """Bytes of messages per chunk: what a killed run can lose at most (three or four snapshots
 of 25 fish with their metrics and scenes; from about 400 fish on, a snapshot's own chunk)."""
+log = logging.getLogger(__name__)
+
 SNAPSHOT_TOPIC = "snapshot"
 METRICS_TOPIC = "metrics"
 EVENTS_TOPIC = "events"
@@ -139,16 +142,22 @@ def open_recorder(path: Path, scenario: dict[str, Any]) -> Iterator[Recorder]:
     path.parent.mkdir(parents=True, exist_ok=True)
     descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
     try:
-        fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise RecordingError(
+                f"{path} is being recorded into by another process (a run, world or observer "
+                "given the same --record): give this one another file"
+            ) from None
+        except OSError as error:  # a file system without locks (some network mounts)
+            log.warning("recording into %s unlocked: %s", path, error.strerror)
+        # Emptied only once locked: a refused recorder must not destroy the other's.
+        os.ftruncate(descriptor, 0)
+        stream = os.fdopen(descriptor, "wb")
+    except BaseException:
         os.close(descriptor)
-        raise RecordingError(
-            f"{path} is being recorded into by another process (a run, world or observer "
-            "given the same --record): give this one another file"
-        ) from None
-    # Emptied only once locked: a refused recorder must not destroy the other's recording.
-    os.ftruncate(descriptor, 0)
-    with os.fdopen(descriptor, "wb") as stream:
+        raise
+    with stream:
         recorder = Recorder(_Flushing(stream), scenario)
         try:
             yield recorder

@@ -58,7 +58,8 @@ def test_a_survey_hears_statuses_and_tokens_and_a_token_gone_is_not_alive() -> N
 
 def test_a_survey_tells_two_drivers_of_one_robot_id_apart_by_when_they_started() -> None:
     """Robot 5's driver reports every 0.5 s, up since 9 s before the survey; a second
-    process given id 5 reports too, up 3 s. Robot 6's one driver reports four times."""
+    process given id 5 reports too, up 3 s. Robot 6's one driver reports four times, and
+    one of its statuses comes 1.5 s late (Wi-Fi): no second driver."""
 
     async def main() -> list[FleetEntry]:
         bus = MemoryBus()
@@ -72,6 +73,9 @@ def test_a_survey_tells_two_drivers_of_one_robot_id_apart_by_when_they_started()
                     bus.put(KEYS.robot_status(6), encode(status(6, uptime=20.0 + at)))
                     await trio.sleep(0.01)
                     bus.put(KEYS.robot_status(5), encode(status(5, uptime=3.01 + at)))
+                    if step == 2:
+                        late = status(6, uptime=20.0 + at - 1.5)
+                        bus.put(KEYS.robot_status(6), encode(late))
 
             nursery.start_soon(robots)
             fleet = await survey_fleet(bus, KEYS, listen=2.0)
