@@ -358,8 +358,8 @@ class Channel:
         """Keep a broadcast of ``run``, which the channel has not seen a snapshot of, if it
         may be one of that run's first: a new world's fish can broadcast before its first
         snapshot reaches the channel."""
-        if broadcast.tick > FIRST_TICKS:
-            self._intake.refuse(key, "stale", f"broadcast of tick {broadcast.tick} of another run")
+        if broadcast.tick > FIRST_TICKS:  # a run's that has ended, come late: no new one's
+            self._let_go_one(broadcast.sender_id, f"of tick {broadcast.tick} of run {run}")
         elif sum(map(len, self._held.values())) >= HELD_BROADCASTS_MAX:
             self._intake.refuse(key, "flood", f"more than {HELD_BROADCASTS_MAX} held")
         else:

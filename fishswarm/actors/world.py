@@ -951,6 +951,8 @@ class World:
                 np.array([command.fish_id], dtype=np.int64),
                 command.fins[None],
                 [command.broadcasts],
+                # A watchdog's stop repeats the fish's last tick: a second answer, no twin's.
+                twins=not command.watchdog,
             )
 
     def _take_batch(self, key: str, payload: bytes) -> None:
@@ -967,9 +969,17 @@ class World:
         self._accept(key, batch.tick, batch.ids, batch.fins, batch.broadcasts)
 
     def _accept(
-        self, key: str, tick: int, ids: IntArray, fins: FloatArray, broadcasts: ArrayLike
+        self,
+        key: str,
+        tick: int,
+        ids: IntArray,
+        fins: FloatArray,
+        broadcasts: ArrayLike,
+        *,
+        twins: bool = True,
     ) -> None:
-        """Take the commands of fish ``ids`` (distinct) for ``tick``, unless late or stale."""
+        """Take the commands of fish ``ids`` (distinct) for ``tick``, unless late or stale;
+        with ``twins``, a second answer to a tick is taken for another process's."""
         current = self._current
         if self.scenario.time_mode == "realtime" and tick < current.tick:
             # A command for a tick already integrated came late: normal in realtime mode
@@ -977,7 +987,7 @@ class World:
             return
         rows = current.rows_awaited(ids) if tick == current.tick else None
         if rows is None:
-            twice = current.answered_before(ids) if tick == current.tick else []
+            twice = current.answered_before(ids) if twins and tick == current.tick else []
             if twice:
                 self.intake.refuse(key, "duplicate", f"a second answer to tick {tick}")
                 self._warn_of_twins(twice, tick)

@@ -1105,6 +1105,41 @@ def test_two_processes_answering_for_one_fish_are_named_once(
     ]
 
 
+def test_a_fishs_watchdog_stop_for_a_tick_it_answered_is_no_twins_answer(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # Fish 0 answers tick 0; its watchdog then stops its fins, repeating tick 0 (so that a
+    # driver acts at once) while the world still waits for fish 1: a second answer from
+    # the same process, not a second process's.
+    scenario = Scenario(fish=2, duration=1.0, seed=1)
+    keys = scenario.keys
+    fins = np.array([1.0, 0.0, 0.0, 0.0])
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1), admit_delay=0.0))
+        async with (
+            subscription(bus, keys.perception(1)) as perceptions,
+            open_token(bus, keys.alive("fish", 0)),
+            open_token(bus, keys.alive("fish", 1)),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(world.run, bus)
+            await perceptions.receive()
+            bus.put(keys.command(0), encode(Command(0, 0, fins)))
+            bus.put(keys.command(0), encode(Command(0, 0, np.zeros(4), watchdog=True)))
+            await trio.sleep(0.01)
+            bus.put(keys.command(1), encode(Command(1, 0, fins)))
+            await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    assert world.tick == 1 and world.statistics().rejected == {"stale": 1}
+    assert not [r for r in caplog.records if "twice" in r.getMessage()]
+
+
 def test_fish_started_with_other_study_code_rules_are_named(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
