@@ -164,6 +164,8 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
         study_code=args.study_code,
         profile=args.profile,
     )
+    for warning in chosen.study_code_warnings():
+        print(f"fishswarm experiment: warning: {warning}", file=sys.stderr)
     out = args.out or Path("runs/experiments") / _results_name(args.name, chosen.name)
     prepare_folder(out, "--out")
     total = len(chosen.runs())

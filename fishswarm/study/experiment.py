@@ -291,6 +291,29 @@ class Experiment:
             and not self.orbiting
         )
 
+    def study_code_warnings(self) -> list[str]:
+        """What the study code's ``mean-distance`` switch cannot give in this experiment,
+        said before it runs (the table would otherwise list the switch, or show NaN)."""
+        if "mean-distance" not in self.scenario.study_switches:
+            return []
+        if self.forming or self.orbiting:
+            if "mean-distance" not in self.scenario.study_code:
+                return []  # on by --profile study-code, with every other switch
+            return [
+                f"the study code's mean distance (mean-distance) is not measured for "
+                f"{self.scenario.behavior} fish, only for aggregating and dispersing ones: "
+                "the switch changes nothing here"
+            ]
+        if self.scenario.ticks < 3:
+            period = self.scenario.control_period
+            return [
+                "the study code's mean distance (mean-distance) compares the third sample "
+                f"with the last, and {self.scenario.duration:g} s give "
+                f"{self.scenario.ticks + 1}: its column will say nothing (give --duration "
+                f"{3 * period:g} or more)"
+            ]
+        return []
+
     @property
     def metric_names(self) -> tuple[str, ...]:
         """The columns of each run's metric series."""

@@ -406,3 +406,21 @@ def test_the_batch_engine_gives_a_runs_times_positions_sightings_and_effort() ->
     np.testing.assert_array_equal(seen, trajectory.neighbors_seen)
     np.testing.assert_array_equal(effort, trajectory.effort)
     assert t.tolist() == [0.0, 1.0, 2.0] and (effort[-1] > 0.0).all()  # the fins beat
+
+
+def test_the_study_codes_mean_distance_is_warned_of_where_it_cannot_be_measured() -> None:
+    # Named for orbiting fish, the switch changed nothing while the table listed it; with
+    # fewer than four samples its column said NaN (or 0) without a word.
+    orbit = find("orbit").with_changes(study_code=("mean-distance",), duration=5)
+    (said,) = orbit.study_code_warnings()
+    assert "not measured for orbit fish" in said
+    assert find("orbit").with_changes(profile="study-code").study_code_warnings() == []
+    short = find("blockingsphere").with_changes(profile="study-code", duration=2)
+    (said,) = short.study_code_warnings()
+    assert "compares the third sample with the last, and 2 s give 3" in said
+    assert "give --duration 3 or more" in said
+    assert (
+        find("blockingsphere").with_changes(profile="study-code", duration=3).study_code_warnings()
+        == []
+    )
+    assert find("blockingsphere").with_changes(duration=1).study_code_warnings() == []
