@@ -208,7 +208,7 @@ class Channel:
         )
         if broadcast is None:
             return None
-        if broadcast.run is not None and broadcast.run not in (0, self._run):
+        if broadcast.run is not None and not self._of_this_run(broadcast):
             self._hold(key, broadcast, broadcast.run)
             return None
         # Only broadcasts of the ticks about to be delivered are kept: anything else is
@@ -377,11 +377,15 @@ class Channel:
                 self._let_go(tick, f"of tick {tick}, of a run that has ended")
                 continue
             for sender, sent in list(self._outbox[tick].items()):
-                ended = [b for b in sent if b.run not in (None, 0, self._run)]
-                for _ in ended:
+                kept = [b for b in sent if self._of_this_run(b)]
+                for _ in range(len(sent) - len(kept)):
                     self._let_go_one(sender, f"of tick {tick}, of a run that has ended")
-                if ended:
-                    self._outbox[tick][sender] = [b for b in sent if b.run in (None, 0, self._run)]
+                self._outbox[tick][sender] = kept
+
+    def _of_this_run(self, broadcast: Broadcast) -> bool:
+        """Whether ``broadcast`` is of the run of the snapshots (or names none: a sender
+        or world that does not tell runs)."""
+        return broadcast.run in (None, 0, self._run)
 
     def _take_held(self) -> None:
         """The run of the snapshots changed: take what its fish sent before this snapshot

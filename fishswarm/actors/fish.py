@@ -463,7 +463,7 @@ class Fish:
         last = int(self._last_tick[index])
         # Mail of another run (the fish's next, come before its first perception) is kept
         # until that run starts for the fish or ends.
-        if delivery.run in (None, int(self._run[index])) and delivery.tick <= last:
+        if _of_run(delivery, int(self._run[index])) and delivery.tick <= last:
             self._intake.refuse(key, "stale", f"delivery for tick {delivery.tick} after {last}")
             return
         # Deliveries wait for their perception; a fish that gets many more than any tick
@@ -489,8 +489,7 @@ class Fish:
         wanted = pending.inbox_counts.tolist()
         runs = self._run.tolist()
         mail = [
-            [d for d in self._mail[row] if d.tick == tick and d.run in (None, runs[row])]
-            for row in rows
+            [d for d in self._mail[row] if d.tick == tick and _of_run(d, runs[row])] for row in rows
         ]
         if now < pending.deadline and any(len(m) < w for m, w in zip(mail, wanted, strict=True)):
             return None
@@ -503,7 +502,7 @@ class Fish:
         """The mail of fish ``row`` that is still to come once it has decided ``tick``: of
         later ticks of its run, and of another run (which may start for it next)."""
         run = int(self._run[row])
-        return [d for d in self._mail[row] if d.tick > tick or d.run not in (None, run)]
+        return [d for d in self._mail[row] if d.tick > tick or not _of_run(d, run)]
 
     def _drop_mail_of(self, run: int) -> None:
         """Let go the mail of a run that has ended."""
@@ -627,6 +626,11 @@ class Fish:
                 watchdog=True if watchdog else None,
             )
             bus.put(keys.command(fish_id), encode(command, reuse=True))
+
+
+def _of_run(delivery: Delivery, run: int) -> bool:
+    """Whether ``delivery`` is mail of ``run`` (or names no run: an older channel's)."""
+    return delivery.run is None or delivery.run == run
 
 
 def _inbox(ready: list[_Pending], mail: list[list[list[Delivery]]]) -> HeardInbox:

@@ -875,7 +875,8 @@ class World:
 
     def _take_about(self, key: str, payload: bytes) -> None:
         """Note the fish vouched for; warn, once for each kind of difference, about fish
-        that run another behaviour, version, rules or control period than this world's."""
+        that run another behaviour, version, rules, control period or decision parameters
+        than this world's."""
         about = self.intake.decode(key, payload, FishAbout)
         if about is None:
             return

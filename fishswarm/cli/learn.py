@@ -24,7 +24,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         raise UserError("Turing learning needs pycma: pip install -e '.[learn]'") from None
     from fishswarm.learning.arena import Arena
     from fishswarm.learning.checkpoint import checkpoint_target
-    from fishswarm.learning.session import LearningError, learn
+    from fishswarm.learning.session import CHECKPOINT, LearningError, learn
 
     named = {
         "behavior": args.behavior,
@@ -66,7 +66,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         )
     prepare_folder(args.out, "--out")
     # A resumed run goes on to the generation it was started for, unless told otherwise.
-    told = checkpoint_target(args.out / "checkpoint.npz") if args.resume else None
+    told = checkpoint_target(args.out / CHECKPOINT) if args.resume else None
     generations = args.generations
     if generations is None:
         generations = told if told is not None else DEFAULT_GENERATIONS
