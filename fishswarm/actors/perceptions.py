@@ -166,11 +166,13 @@ class _Stacked:
 
     @classmethod
     def of(cls, perceived: Perceived) -> _Stacked:
-        """Stack what each fish sees (once a tick, for every batch of it)."""
-        rows = stack_rows(perceived.neighbors, perceived.mask)
-        # Read-only down to the memory it views (stack_rows's own, new): a batch then takes
-        # its fish's rows as they are, and can be handed to a reader in this process as it
-        # is (``encode``'s ``reuse``).
+        """Stack what each fish sees (once a tick, for every batch of it), unless its
+        vision stacked it already."""
+        made = perceived.stacked
+        rows = stack_rows(perceived.neighbors, perceived.mask) if made is None else made.rows
+        # Read-only down to the memory it views (its own, new): a batch then takes its
+        # fish's rows as they are, and can be handed to a reader in this process as it is
+        # (``encode``'s ``reuse``).
         viewed: np.ndarray[Any, Any] | None = rows
         while isinstance(viewed, np.ndarray):
             viewed.setflags(write=False)

@@ -12,7 +12,7 @@ import dataclasses
 import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -129,6 +129,18 @@ def _occlusion(
     return visible
 
 
+class Stacked(NamedTuple):
+    """The seen rows of B fish stacked fish after fish, as a perception batch carries them.
+
+    Attributes:
+        counts: (B,) how many rows are each fish's.
+        rows: (sum of counts, 3) the rows, fish after fish, each fish's in its padded order.
+    """
+
+    counts: NDArray[np.int64]
+    rows: FloatArray
+
+
 @dataclass(frozen=True)
 class Perceived:
     """Neighbours seen by each of B fish, padded to K.
@@ -138,15 +150,20 @@ class Perceived:
         mask: (B, K) which rows are real.
         index: (B, K) index of the seen fish in the input arrays (−1 in padding); known to the
             simulator only, never sent to a fish.
+        stacked: the rows of ``neighbors`` that ``mask`` marks, stacked, when the one who
+            computed them had them at hand (the compiled vision); None: not made.
     """
 
     neighbors: FloatArray
     mask: BoolArray
     index: NDArray[np.intp]
+    stacked: Stacked | None = dataclasses.field(default=None, repr=False, compare=False)
 
     @functools.cached_property
     def counts(self) -> NDArray[np.int64]:
         """(B,) how many neighbours each fish sees."""
+        if self.stacked is not None:  # counted as they were stacked (0.3 ms at 10 000 fish)
+            return self.stacked.counts
         counts: NDArray[np.int64] = self.mask.sum(axis=1).astype(np.int64)
         return counts
 
@@ -231,9 +248,11 @@ class VisionKernels(Protocol):
         """As :func:`sift`."""
         ...
 
-    def body_frame(self, relative: FloatArray, yaw: FloatArray, seen: BoolArray) -> FloatArray:
+    def body_frame(
+        self, relative: FloatArray, yaw: FloatArray, seen: BoolArray
+    ) -> tuple[FloatArray, Stacked]:
         """The rows ``seen`` of ``relative`` (B, K, 3) rotated into each fish's body frame
-        (:func:`to_body`), zero elsewhere."""
+        (:func:`to_body`), zero elsewhere; and the same rotated rows stacked."""
         ...
 
 
@@ -319,12 +338,13 @@ def perceive(
             rows = int(seen[fish].sum())
             scale = vision.noise * distance_seen[fish, :rows, None]
             relative_seen[fish, :rows] += rngs[fish].normal(0.0, 1.0, (rows, 3)) * scale
+    stacked = None
     if kernels is None:
         body = to_body(relative_seen, yaw)
         body[~seen] = 0.0
     else:
-        body = kernels.body_frame(relative_seen, yaw, seen)
-    return Perceived(body, seen, np.where(seen, chosen, -1))
+        body, stacked = kernels.body_frame(relative_seen, yaw, seen)
+    return Perceived(body, seen, np.where(seen, chosen, -1), stacked)
 
 
 def perceive_landmarks(

@@ -33,7 +33,7 @@ from numpy.typing import NDArray
 
 from fishswarm.bluebot.dynamics import State, period_inputs
 from fishswarm.bluebot.parameters import BlueBot, Tank
-from fishswarm.bluebot.vision import Sifted, Vision
+from fishswarm.bluebot.vision import Sifted, Stacked, Vision
 
 FloatArray = NDArray[np.float64]
 
@@ -63,7 +63,7 @@ class CompiledVision:
 
     def body_frame(
         self, relative: FloatArray, yaw: FloatArray, seen: NDArray[np.bool_]
-    ) -> FloatArray:
+    ) -> tuple[FloatArray, Stacked]:
         """See :func:`body_frame`."""
         return body_frame(relative, yaw, seen)
 
@@ -256,19 +256,48 @@ def sift(
     return seen[:, :keep], chosen[:, :keep], relative[:, :keep], reach[:, :keep]
 
 
-def body_frame(relative: FloatArray, yaw: FloatArray, seen: NDArray[np.bool_]) -> FloatArray:
+def body_frame(
+    relative: FloatArray, yaw: FloatArray, seen: NDArray[np.bool_]
+) -> tuple[FloatArray, Stacked]:
     """:func:`fishswarm.bluebot.vision.to_body` of the rows ``seen`` of ``relative``
     (B, K, 3), zero elsewhere, compiled: one sine and cosine per fish, no (B, K) temporaries
-    (at 10 000 fish the numpy rotation and masking took 14 ms a tick, a sixth of it)."""
+    (at 10 000 fish the numpy rotation and masking took 14 ms a tick, a sixth of it).
+
+    Returns:
+        The rotated rows, padded (B, K, 3); and the same rows stacked fish after fish with
+        each fish's count, written in the same pass (read-only): what the world's perception
+        batches carry, which stacking and counting afterwards took 1 ms a tick at 10 000 fish.
+    """
+    relative = np.ascontiguousarray(relative, dtype=np.float64)
+    seen = np.ascontiguousarray(seen, dtype=np.bool_)
+    counts = np.zeros(relative.shape[0], dtype=np.int64)
+    starts = np.zeros(relative.shape[0] + 1, dtype=np.intp)
+    _call(_count(), seen, counts)
+    np.cumsum(counts, out=starts[1:])
     body = np.zeros(relative.shape)
+    rows = np.empty((int(starts[-1]), 3))
     _call(
-        _rotate(),
-        np.ascontiguousarray(relative, dtype=np.float64),
-        np.ascontiguousarray(yaw, dtype=np.float64),
-        np.ascontiguousarray(seen, dtype=np.bool_),
-        body,
+        _rotate(), relative, np.ascontiguousarray(yaw, dtype=np.float64), seen, starts, body, rows
     )
-    return body
+    counts.setflags(write=False)
+    rows.setflags(write=False)
+    return body, Stacked(counts, rows)
+
+
+@functools.cache
+def _count() -> Callable[..., None]:
+    """The compiled count of each fish's seen rows (compiled on first use, cached on disk)."""
+    import numba
+
+    @numba.njit(parallel=True, cache=True, nogil=True)
+    def count_all(seen: Any, counts: Any) -> None:
+        for fish in numba.prange(seen.shape[0]):
+            total = 0
+            for k in range(seen.shape[1]):
+                total += seen[fish, k]
+            counts[fish] = total
+
+    return count_all
 
 
 @functools.cache
@@ -277,16 +306,18 @@ def _rotate() -> Callable[..., None]:
     import numba
 
     @numba.njit(parallel=True, cache=True, nogil=True)
-    def rotate_all(relative: Any, yaw: Any, seen: Any, body: Any) -> None:
+    def rotate_all(relative: Any, yaw: Any, seen: Any, starts: Any, body: Any, rows: Any) -> None:
         for fish in numba.prange(relative.shape[0]):
             # The reference's arithmetic, in its order: x' = cos·x + sin·y, y' = −sin·x + cos·y.
             cos, sin = math.cos(yaw[fish]), math.sin(yaw[fish])
+            row = starts[fish]
             for k in range(relative.shape[1]):
                 if seen[fish, k]:
                     x, y = relative[fish, k, 0], relative[fish, k, 1]
-                    body[fish, k, 0] = cos * x + sin * y
-                    body[fish, k, 1] = -sin * x + cos * y
-                    body[fish, k, 2] = relative[fish, k, 2]
+                    body[fish, k, 0] = rows[row, 0] = cos * x + sin * y
+                    body[fish, k, 1] = rows[row, 1] = -sin * x + cos * y
+                    body[fish, k, 2] = rows[row, 2] = relative[fish, k, 2]
+                    row += 1
 
     return rotate_all
 

@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fishswarm.actors.perceptions import Schools, perception_messages
-from fishswarm.bluebot.vision import Perceived
+from fishswarm.behaviors.core import stack_rows
+from fishswarm.bluebot.vision import Perceived, Stacked
 from fishswarm.protocols import codec, decode, encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import Perception, PerceptionBatch
@@ -302,3 +303,34 @@ def _memory_of(array: np.ndarray) -> object:
     while isinstance(array.base, np.ndarray):
         array = array.base
     return array
+
+
+def test_rows_the_vision_stacked_already_are_sent_as_they_are() -> None:
+    keys = KeySpace()
+    ids = np.array([2, 5, 6])
+    plain = _perceived([[[1.0, 0, 0], [2.0, 0, 0]], [], [[0, 3.0, 0]]], width=2)
+    rows = stack_rows(plain.neighbors, plain.mask)
+    rows.setflags(write=False)
+    counts = np.array([2, 0, 1])
+    stacked = Perceived(plain.neighbors, plain.mask, plain.index, Stacked(counts, rows))
+    messages = [
+        perception_messages(
+            keys,
+            ids=ids,
+            schools=Schools.of(ids, dict.fromkeys(ids.tolist(), "s")),
+            depth=np.zeros(3),
+            perceived=perceived,
+            landmarks=_perceived([[], [], []], width=0),
+            inbox_counts=np.zeros(3, dtype=np.int64),
+            tick=1,
+            time=1.0,
+        )
+        for perceived in (plain, stacked)
+    ]
+    assert [encode(message) for _, message in messages[0]] == [
+        encode(message) for _, message in messages[1]
+    ]
+    batch = messages[1][0][1]
+    assert isinstance(batch, PerceptionBatch)
+    assert np.shares_memory(batch.neighbors, rows)  # not stacked again
+    assert stacked.counts is counts

@@ -6,9 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fishswarm.behaviors.core import stack_rows
 from fishswarm.bluebot.dynamics import State, step
 from fishswarm.bluebot.parameters import BlueBot, Tank
-from fishswarm.bluebot.vision import Vision, _in_range, perceive, sift
+from fishswarm.bluebot.vision import Vision, _in_range, perceive, sift, to_body
 from fishswarm.sim import kernels
 from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.physics import WorldParams
@@ -133,6 +134,36 @@ def test_the_sifting_kernel_sees_what_the_reference_sees(vision: Vision) -> None
     if vision.sphere_radius <= 0.065 and vision.visual_range >= 1.0:
         assert 3 in fast.index[2]
         assert (4 in fast.index[2]) == (vision.sphere_radius == 0)
+
+
+def test_the_rotation_kernel_stacks_the_rows_it_rotates() -> None:
+    # Rows seen anywhere in a fish's row (not only first), a fish that sees nothing, and a
+    # fish seeing every row: the stack is the rotated rows the mask marks, fish after fish.
+    rng = np.random.default_rng(8)
+    relative = rng.normal(0.0, 1.0, (50, 7, 3))
+    yaw = rng.uniform(-np.pi, np.pi, 50)
+    seen = rng.random((50, 7)) < 0.4
+    seen[0], seen[1] = False, True
+    body, stacked = kernels.body_frame(relative, yaw, seen)
+    reference = to_body(relative, yaw)
+    reference[~seen] = 0.0
+    np.testing.assert_allclose(body, reference, rtol=0, atol=1e-12)
+    assert stacked.counts.tolist() == seen.sum(axis=1).tolist()
+    assert stacked.counts[0] == 0 and stacked.counts[1] == 7
+    np.testing.assert_array_equal(stacked.rows, stack_rows(body, seen))
+    assert not stacked.rows.flags.writeable and not stacked.counts.flags.writeable
+    empty_body, empty = kernels.body_frame(np.zeros((3, 0, 3)), np.zeros(3), seen[:3, :0])
+    assert empty_body.shape == (3, 0, 3) and empty.rows.shape == (0, 3)
+    assert empty.counts.tolist() == [0, 0, 0]
+
+
+def test_the_compiled_vision_hands_over_its_rows_stacked() -> None:
+    position, yaw = _swarm(np.random.default_rng(5), 300, 6.0)
+    fast = perceive(position, yaw, vision=Vision(), kernels=kernels.CompiledVision())
+    assert fast.stacked is not None
+    np.testing.assert_array_equal(fast.counts, fast.mask.sum(axis=1))
+    np.testing.assert_array_equal(fast.stacked.rows, stack_rows(fast.neighbors, fast.mask))
+    assert perceive(position, yaw, vision=Vision()).stacked is None  # the reference's
 
 
 def test_large_scenarios_integrate_and_see_with_the_kernels_and_match_the_reference(
