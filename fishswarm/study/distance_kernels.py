@@ -57,31 +57,35 @@ def pair_distances(
         ValueError: ``first`` and ``second`` are not integer lists of one length.
         IndexError: a pair names a fish that is not there.
     """
-    first, second = _checked_pairs(position.shape[0], first, second)
+    first, second = _pair_lists(first, second)
     x, y, z = np.ascontiguousarray(position.T, dtype=np.float64)
     distance = np.empty(first.shape[0])
-    _loops().pairs_all(x, y, z, first, second, distance)
+    if not _loops().pairs_all(x, y, z, first, second, distance):
+        raise _outside(position.shape[0])
     return distance
 
 
-def _checked_pairs(
-    count: int, first: NDArray[np.intp], second: NDArray[np.intp]
+def _pair_lists(
+    first: NDArray[np.intp], second: NDArray[np.intp]
 ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
     """The pair lists as the kernels take them, after checking that they are two integer
-    lists of one length naming fish among ``count``."""
+    lists of one length (the kernels check, as they read them, that they name fish there).
+    """
     for indices in (first, second):
         if indices.ndim != 1 or indices.shape != first.shape or indices.dtype.kind not in "iu":
             raise ValueError(
                 f"pairs are two integer lists of one length, got {indices.dtype} "
                 f"{first.shape} and {second.shape}"
             )
-    for indices in (first, second):
-        if indices.size and (int(indices.min()) < 0 or int(indices.max()) >= count):
-            raise IndexError(f"pairs name fish outside 0…{count - 1}")
     return (
         np.ascontiguousarray(first, dtype=np.intp),
         np.ascontiguousarray(second, dtype=np.intp),
     )
+
+
+def _outside(count: int) -> IndexError:
+    """The error for pairs that name a fish outside the ``count`` there."""
+    return IndexError(f"pairs name fish outside 0…{count - 1}")
 
 
 def nearest_distances(position: FloatArray) -> FloatArray:
@@ -130,13 +134,15 @@ def school_distances(
     if pairs is None:
         first = second = np.zeros(0, dtype=np.intp)
     else:
-        first, second = _checked_pairs(count, *pairs)
+        first, second = _pair_lists(*pairs)
     x, y, z = np.ascontiguousarray(points.T)
     distance = np.empty(first.shape[0])
     nearest = np.empty(count)
-    total, found = _loops().pairs_and_nearest(
+    total, named, found = _loops().pairs_and_nearest(
         x, y, z, pairs is None, first, second, distance, points, *columns, nearest
     )
+    if not named:
+        raise _outside(count)
     mean = total / (count * (count - 1) / 2) if pairs is None else float(distance.mean())
     return mean, nearest if found else _tree_nearest(points)
 
@@ -154,8 +160,10 @@ def _columns_of(position: FloatArray) -> tuple[FloatArray, tuple[float, float, f
     points = np.ascontiguousarray(position, dtype=np.float64)
     if not np.isfinite(points).all():
         raise ValueError("positions must be finite")
-    low = points[:, :2].min(axis=0)
-    extent = points[:, :2].max(axis=0) - low
+    # Column by column, as the world's range search does (ten times faster than along the
+    # long axis of a (N, 2) view; exact either way).
+    low = np.array([points[:, 0].min(), points[:, 1].min()])
+    extent = np.array([points[:, 0].max(), points[:, 1].max()]) - low
     span = float(extent.max())
     # Columns of about FISH_PER_COLUMN fish over the school's footprint; fish on a line have
     # none, and then about one fish a column along it. Never more columns than ~2.5 fish.

@@ -48,14 +48,21 @@ def total_all(x: Any, y: Any, z: Any) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
-def pairs_all(x: Any, y: Any, z: Any, first: Any, second: Any, distance: Any) -> None:
-    """Each listed pair's distance into ``distance`` (P,), m."""
+def pairs_all(x: Any, y: Any, z: Any, first: Any, second: Any, distance: Any) -> bool:
+    """Each listed pair's distance into ``distance`` (P,), m; False, with ``distance``
+    unfinished, at the first pair that names a fish outside ``x`` (checked here, as each
+    pair is read, rather than by four passes of numpy over the lists: 0.2 ms of the
+    observer's 2.5 at 10 000 fish)."""
+    count = x.shape[0]
     for pair in range(first.shape[0]):
         one, other = first[pair], second[pair]
+        if one < 0 or one >= count or other < 0 or other >= count:
+            return False
         dx = x[one] - x[other]
         dy = y[one] - y[other]
         dz = z[one] - z[other]
         distance[pair] = math.sqrt(dx * dx + dy * dy + dz * dz)
+    return True
 
 
 @numba.njit(cache=True, nogil=True)
@@ -102,8 +109,14 @@ def nearest_all(
         slot_of[fish] = slot
     widest = max(columns, rows)
     budget = COLUMNS_PER_FISH * count
+    # Fish column by column: neighbouring fish search the same columns one after another,
+    # which stay in the cache (10 000 fish: 1.2 against 1.5 ms in their given order).
+    by_slot = np.empty(count, dtype=np.int64)
     for fish in range(count):
-        home_column, home_row, own = column_of[fish], row_of[fish], slot_of[fish]
+        by_slot[slot_of[fish]] = fish
+    for own in range(count):
+        fish = by_slot[own]
+        home_column, home_row = column_of[fish], row_of[fish]
         squared = math.inf
         ring = 0
         while ring <= widest:
@@ -119,9 +132,9 @@ def nearest_all(
                         for other in range(start[bucket], start[bucket + 1]):
                             if other == own:
                                 continue
-                            dx = points[fish, 0] - filed[other, 0]
-                            dy = points[fish, 1] - filed[other, 1]
-                            dz = points[fish, 2] - filed[other, 2]
+                            dx = filed[own, 0] - filed[other, 0]
+                            dy = filed[own, 1] - filed[other, 1]
+                            dz = filed[own, 2] - filed[other, 2]
                             gap = dx * dx + dy * dy + dz * dz
                             if gap < squared:
                                 squared = gap
@@ -154,13 +167,14 @@ def pairs_and_nearest(
     columns: int,
     rows: int,
     nearest: Any,
-) -> tuple[float, bool]:
+) -> tuple[float, bool, bool]:
     """The summed distance over all pairs (``every_pair``; else 0, and the listed pairs'
-    distances into ``distance``), and whether the nearest-neighbour search filled
-    ``nearest`` (see :func:`nearest_all`)."""
+    distances into ``distance``), whether the listed pairs all name fish there (else
+    nothing more is done), and whether the nearest-neighbour search filled ``nearest`` (see
+    :func:`nearest_all`)."""
     total = 0.0
     if every_pair:
         total = total_all(x, y, z)
-    else:
-        pairs_all(x, y, z, first, second, distance)
-    return total, nearest_all(points, low_x, low_y, side, columns, rows, nearest)
+    elif not pairs_all(x, y, z, first, second, distance):
+        return total, False, False
+    return total, True, nearest_all(points, low_x, low_y, side, columns, rows, nearest)

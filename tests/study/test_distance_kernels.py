@@ -63,7 +63,8 @@ def test_listed_pairs_are_measured_as_numpy_measures_them() -> None:
 
 def test_a_pair_naming_a_fish_not_there_is_refused() -> None:
     position = np.zeros((3, 3))
-    for first, second in (([0], [3]), ([-1], [0])):
+    # The kernel checks each pair as it reads it: a bad pair after good ones too.
+    for first, second in (([0], [3]), ([-1], [0]), ([0, 1, 2], [1, 2, 3])):
         with pytest.raises(IndexError, match="outside 0…2"):
             distance_kernels.pair_distances(
                 position, np.array(first, dtype=np.intp), np.array(second, dtype=np.intp)
