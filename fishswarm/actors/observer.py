@@ -21,6 +21,7 @@ from fishswarm.actors.intake import Intake
 from fishswarm.actors.world import OFFLOAD_FISH
 from fishswarm.protocols.keys import KeySpace, run_id_of
 from fishswarm.protocols.messages import Snapshot, WorldPulse
+from fishswarm.sim import kernels
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.metrics import (
     FormationTarget,
@@ -28,6 +29,7 @@ from fishswarm.study.metrics import (
     OrbitTarget,
     OrbitTracker,
     orbit_target_of,
+    prepare_metrics,
     swarm_metrics,
 )
 from fishswarm.study.recording import Recorder
@@ -112,8 +114,12 @@ class Observer:
         stage: Stage | None = None,
         on_scene: Callable[[Scene, dict[str, float]], None] | None = None,
         on_new_run: Callable[[int], None] | None = None,
+        fish: int | None = None,
     ) -> None:
         self.keys = keys
+        self.fish = fish
+        """How many fish the runs watched have, when known beforehand (None: not known): what
+        measures them is then loaded while the fish come up."""
         self.on_new_run = on_new_run
         self.stage = stage
         self.on_scene = on_scene
@@ -168,6 +174,7 @@ class Observer:
             orbit=orbit_target_of(scenario),
             stage=stage_of(scenario),
             on_scene=on_scene,
+            fish=scenario.fish,
         )
 
     @property
@@ -199,7 +206,10 @@ class Observer:
             open_subscriber(bus, self.keys.world_pulse, lambda k, p: inbox.push(("pulse", k, p))),
             open_alive_events(bus, self.keys.alive_all(), lambda k, a: inbox.push(("alive", k, a))),
             open_token(bus, self.keys.alive("observer", self.observer_id)),
+            trio.open_nursery() as nursery,
         ):
+            if self.fish is not None and kernels.compiles(self.fish):
+                nursery.start_soon(_prepare_in_thread, self.fish)
             task_status.started()
             async for kind, key, payload in inbox:
                 if kind == "alive":
@@ -368,6 +378,13 @@ class Observer:
         self._tick_reached = trio.Event()
         if self.on_progress is not None:
             self.on_progress(progress)
+
+
+async def _prepare_in_thread(fish: int) -> None:
+    """Load what the metrics of ``fish`` fish take (:func:`prepare_metrics`) in a thread,
+    beside the observer's first messages; a cancelled observer leaves the thread to finish
+    on its own."""
+    await trio.to_thread.run_sync(prepare_metrics, fish, abandon_on_cancel=True)
 
 
 async def _in_thread_at_once(function: Callable[[], T]) -> T:
