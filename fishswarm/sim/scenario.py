@@ -69,6 +69,9 @@ STUDY_CODE_SWITCHES = {
 }
 """Ways the study's published code differs from its paper's equations (SPEC §8) that a
 scenario can switch on one by one, with what each does; docs/fidelity.md measures them."""
+EXPERIMENT_SWITCHES = ("side-settings", "mean-distance")
+"""The switches that only ``fishswarm experiment`` acts on (a sweep's other settings, a
+column of its table): a single run has nothing for them to change."""
 
 PROFILES = ("paper", "study-code")
 """``paper``: the paper's equations, plus the switches named in ``study_code``;

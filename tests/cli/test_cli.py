@@ -330,6 +330,22 @@ def test_a_crowded_run_says_so_before_it_starts_and_runs_anyway(tmp_path: Path) 
     assert json.loads(summary.read_text())["scenario"]["spawn_region"] == "tank"
 
 
+def test_a_run_says_which_study_code_switches_only_experiments_act_on(tmp_path: Path) -> None:
+    summary = tmp_path / "s.json"
+    named = ["--study-code", "drag,side-settings,mean-distance", "--fish", "3"]
+    result = _run("run", *named, "--duration", "1", "--quiet", *_outputs(tmp_path, summary))
+    assert result.returncode == 0, result.stderr
+    assert (
+        "fishswarm run: warning: the study-code switch(es) side-settings, mean-distance apply "
+        "to 'fishswarm experiment' only: here they change nothing" in result.stderr
+    )
+    # The study-code profile turns every switch on: nothing named, nothing to say.
+    profile = _run("run", "--profile", "study-code", "--fish", "3", "--duration", "1",
+                   "--quiet", *_outputs(tmp_path, summary))  # fmt: skip
+    assert profile.returncode == 0, profile.stderr
+    assert "warning" not in profile.stderr
+
+
 @pytest.mark.slow
 def test_a_run_in_which_the_watchdog_stopped_fish_says_so_and_exits_4(tmp_path: Path) -> None:
     # Realtime at 1 Hz: perceptions (and the world's pulses) a second apart, against a
