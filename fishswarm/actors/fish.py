@@ -186,6 +186,8 @@ class Fish:
 
     def __init__(self, settings: FishSettings) -> None:
         self.settings = settings
+        self._settings_digest = settings_digest(settings.params)
+        """What the fish tell the world their settings are (30–40 µs to compute, so once)."""
         ids = np.array(settings.fish_ids, dtype=np.int64)
         count = ids.size
         self._ids = ids
@@ -446,7 +448,7 @@ class Fish:
         params = self.settings.params
         about = FishAbout(
             np.asarray(ids, dtype=np.int64), params.behavior.name, __version__, run,
-            rules_of(params), params.control_period, settings_digest(params),
+            rules_of(params), params.control_period, self._settings_digest,
         )  # fmt: skip
         bus.put(self.settings.keys.about(int(ids[0]), self.settings.school), encode(about))
 
