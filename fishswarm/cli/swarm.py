@@ -20,6 +20,8 @@ from fishswarm.actors.channel import Channel
 from fishswarm.actors.control import ask_scenario, run_control, wait_for_scenario
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.launcher import (
+    EXIT_DEGRADED,
+    EXIT_OK,
     EXIT_WORKER_DIED,
     LaunchSettings,
     RunResult,
@@ -484,15 +486,23 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
         if args.record is not None and args.record.exists():
             print(f"recording: {args.record}", file=sys.stderr)
     statistics = actor.statistics()
+    # As `fishswarm run` says it: fish lost on the way leave a trajectory that is not what
+    # they decided (the world cannot tell a fish's process dying from its hanging or its
+    # robot going: all are lost fish to it).
+    degraded = actor.state_name == "finished" and bool(actor.lost)
+    status = "degraded" if degraded else actor.state_name
     print(
-        f"status: {actor.state_name} at tick {statistics.ticks} "
+        f"status: {status} at tick {statistics.ticks} "
         f"({actor.time:g} s simulated, "
         f"{actor.wall_time:.1f} s wall time); {statistics.lost_fish} fish lost, "
         f"{statistics.rejected_total} messages rejected by the world",
         file=sys.stderr,
     )
+    if degraded:
+        lost = ", ".join(f"{f.fish_id} at tick {f.tick} ({f.reason})" for f in actor.lost)
+        print(f"fish were lost on the way: {lost}", file=sys.stderr)
     print(json.dumps(dataclasses.asdict(statistics)), file=sys.stderr)
-    return 0
+    return EXIT_DEGRADED if degraded else EXIT_OK
 
 
 WORLD_ANSWER_TIMEOUT = 2.0

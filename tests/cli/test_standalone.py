@@ -341,6 +341,27 @@ def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_ow
 
 
 @pytest.mark.slow
+def test_a_standalone_world_that_lost_a_fish_ends_degraded_as_a_run_does() -> None:
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    with started_commands() as start:
+        start("router", "--listen", endpoint)
+        wait_for_port(port)
+        start("fish", "--id", "0", "--connect", endpoint)
+        doomed = start("fish", "--id", "1", "--connect", endpoint)
+        world = start("world", "--connect", endpoint, "--fish", "2", "--time", "realtime",
+                      "--duration", "6")  # fmt: skip
+        said = Lines(world)
+        said.wait_for(r"tick +1/6")
+        doomed.kill()
+        assert world.wait(timeout=60) == 4
+        said.wait_for(r"^status: degraded at tick 6 \(6 s simulated, .*; 1 fish lost, ")
+        said.wait_for(r"^fish were lost on the way: 1 at tick \d+ \(")
+    statistics = json.loads(said.wait_for(r"^\{.*\}$")[0])
+    assert statistics["lost_fish"] == 1 and statistics["ticks"] == 6
+
+
+@pytest.mark.slow
 def test_two_worlds_started_together_before_their_fish_both_run_one_after_the_other(
     tmp_path: Path,
 ) -> None:
