@@ -493,6 +493,7 @@ def _summary(
             "broadcasts": world_stats.broadcasts,
             "unannounced_broadcasts": channel_stats.unannounced,
             "mismatched_fish": world_stats.mismatched_fish,
+            "unexpected_fish": world_stats.unexpected_fish,
         },
         "vision": world.sim.sight.summary() if world.params.cameras is not None else None,
         "lost": [{"id": f.fish_id, "tick": f.tick, "reason": f.reason} for f in world.lost],

@@ -156,6 +156,8 @@ class WorldStatistics:
         live_fish: fish in the world now.
         mismatched_fish: fish that run another behaviour, version, rules, control period
             or decision parameters than the world's.
+        unexpected_fish: fish that took part beyond the scenario's ids (robots, or fish
+            processes of another run left up on the swarm): they join the run.
         answer_time_median, answer_time_p90: lockstep and jitter modes: how long the fish
             took to answer a tick — perceptions out to the last command in — median and
             90th percentile over the ticks every fish answered, s (0 before any tick; a tick
@@ -179,6 +181,7 @@ class WorldStatistics:
     late_commands: int
     live_fish: int
     mismatched_fish: int = 0
+    unexpected_fish: int = 0
     answer_time_median: float = 0.0
     answer_time_p90: float = 0.0
     physics_time_median: float = 0.0
@@ -248,6 +251,8 @@ class World:
         self._said_no_channel = False
         self._current = TickCommands()
         self.mismatched: set[int] = set()
+        self.unexpected: set[int] = set()
+        """Fish that took part beyond the scenario's ids (they join its run)."""
         """Fish that said they run another behaviour, version, rules, control period or
         decision parameters than this world's."""
         self._twins: set[int] = set()
@@ -298,6 +303,7 @@ class World:
             late_commands=self.late_commands,
             live_fish=int(self.sim.ids.size),
             mismatched_fish=len(self.mismatched),
+            unexpected_fish=len(self.unexpected),
             answer_time_median=_quantile(self._answer_times, 0.5),
             answer_time_p90=_quantile(self._answer_times, 0.9),
             physics_time_median=_quantile(self._phase_times["physics"], 0.5),
@@ -1038,6 +1044,22 @@ class World:
             for fish_id in new:
                 self.joined.append((fish_id, tick))
                 log.info("fish %d joined at tick %d", fish_id, tick)
+        expected = self.settings.expected_fish
+        unexpected = sorted(set(new).difference(expected, self.unexpected))
+        if unexpected:
+            # Robots join a run by design; fish processes of an earlier, larger run left up
+            # on the swarm join it as well, and the run is then not the scenario's.
+            self.unexpected.update(unexpected)
+            log.warning(
+                "fish %s, up on swarm %r beyond the %d fish of this world's scenario (%s), "
+                "join its run at tick %d: stop them, or give this run another --swarm, to run "
+                "without them",
+                ids_text(unexpected),
+                self.scenario.swarm,
+                len(expected),
+                ids_text(sorted(expected)),
+                tick,
+            )
         self.sim.join(new)
 
 

@@ -379,6 +379,48 @@ def test_the_world_waits_for_a_slow_fish_at_every_tick() -> None:
     assert run_mock(main) == [0.0, 4.0, 8.0, 12.0]
 
 
+def test_fish_up_beyond_the_scenarios_ids_join_the_run_and_are_named(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # A user's run of 1 fish on a swarm where an earlier run's fish 0 and 1 are still up:
+    # both take part (robots join runs so), and the world says so and counts the extra one.
+    scenario = Scenario(fish=1, duration=2.0, seed=1)
+    keys = scenario.keys
+    settings = WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0, turn_delay=0.0)
+    world = World(settings)
+    told: list[list[int]] = []
+
+    async def main() -> None:
+        bus = MemoryBus()
+        bus.subscribe(keys.snapshot, lambda k, p: told.append(decode(p, Snapshot).ids.tolist()))
+        async with (
+            subscription(bus, keys.perception(0)) as first,
+            subscription(bus, keys.perception(1)) as second,
+            open_token(bus, keys.alive("fish", 0)),
+            open_token(bus, keys.alive("fish", 1)),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(world.run, bus)
+            for _ in range(2):
+                for fish_id, perceptions in ((0, first), (1, second)):
+                    perception = decode((await perceptions.receive())[1], Perception)
+                    off = Command(fish_id, perception.tick, np.zeros(4))
+                    bus.put(keys.command(fish_id), encode(off))
+            with trio.fail_after(5):
+                while world.state_name != "finished":
+                    await trio.sleep(0.1)
+
+    with caplog.at_level(logging.WARNING, logger="fishswarm.actors.world"):
+        run_mock(main)
+    assert told == [[0, 1], [0, 1], [0, 1]]
+    assert world.statistics().unexpected_fish == 1
+    said = [r.getMessage() for r in caplog.records if "beyond" in r.getMessage()]
+    assert said == [
+        "fish 1, up on swarm 'default' beyond the 1 fish of this world's scenario (0), join "
+        "its run at tick 0: stop them, or give this run another --swarm, to run without them"
+    ]
+
+
 @asynccontextmanager
 async def two_fish_world(
     settings: WorldSettings, told: list[tuple[list[int], list[int] | None]]
