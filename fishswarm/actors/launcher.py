@@ -285,6 +285,17 @@ async def launch_swarm(
     return RunResult(exit_code, summary, observer.history)
 
 
+def shapes_told(history: list[Progress]) -> dict[str, Any]:
+    """The shape a formation run's final metrics measure (``shape``), and every shape its
+    fish were told to take, from when (``shapes``: time s, shape; one entry when the run was
+    never switched)."""
+    shapes: list[dict[str, Any]] = []
+    for progress in history:
+        if not shapes or progress.shape != shapes[-1]["shape"]:
+            shapes.append({"time": progress.time, "shape": progress.shape})
+    return {"shape": history[-1].shape, "shapes": shapes}
+
+
 def shared_memory_pool_bytes(fish: int, *, free: int | None = None) -> int | None:
     """Bytes of shared memory for the world's Zenoh session (the launcher's, or that of
     ``fishswarm world``) to copy its large messages into for the fish on this machine:
@@ -434,7 +445,10 @@ def _summary(
             change = 100.0 * (last[name] - first[name]) / first[name] if first[name] else None
             metrics[name] = {"initial": first[name], "final": last[name], "change_percent": change}
     formation = (
-        formation_summary([p.time for p in history], [p.metrics for p in history])
+        {
+            **formation_summary([p.time for p in history], [p.metrics for p in history]),
+            **shapes_told(history),
+        }
         if history and observer.formation is not None
         else None
     )

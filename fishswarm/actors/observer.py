@@ -57,12 +57,15 @@ slow the observer."""
 
 @dataclass(frozen=True)
 class Progress:
-    """What an observer knows after a snapshot."""
+    """What an observer knows after a snapshot: its tick, time (s), fish and metrics, and
+    in a formation run the shape the fish were told to take, which the formation metrics
+    measure (None in other runs)."""
 
     tick: int
     time: float
     fish: int
     metrics: dict[str, float]
+    shape: str | None = None
 
 
 @dataclass(frozen=True)
@@ -345,7 +348,10 @@ class Observer:
         else:
             metrics = swarm_metrics(*measure)
         formations = self.formations
-        target = None if formations is None else formations.told(snapshot.formation, snapshot.time)
+        shape = (
+            None if formations is None else formations.shape_told(snapshot.formation, snapshot.time)
+        )
+        target = None if formations is None else formations.at(shape)
         if target is not None:
             try:
                 metrics.update(target.metrics(snapshot.position))
@@ -355,7 +361,7 @@ class Observer:
             metrics.update(
                 self._orbit_tracker.metrics(snapshot.ids, snapshot.position, snapshot.time)
             )
-        progress = Progress(snapshot.tick, snapshot.time, int(snapshot.ids.size), metrics)
+        progress = Progress(snapshot.tick, snapshot.time, int(snapshot.ids.size), metrics, shape)
         self.history.append(progress)
         self._sim_time = snapshot.time
         if self.recorder is not None:

@@ -334,8 +334,13 @@ def _summary_text(summary: dict[str, Any]) -> str:
     formation = summary.get("formation")
     if formation:
         ninety = formation["time_to_90_percent_joined"]
+        # Every shape the fish were told, from when: the metrics measure the last.
+        told = " → ".join(
+            told["shape"] + (f" (from {told['time']:g} s)" if turn else "")
+            for turn, told in enumerate(formation.get("shapes", []))
+        )
         lines.append(
-            f"  formation: shape error {formation['shape_error']:.3f} m, "
+            f"  formation {told}: shape error {formation['shape_error']:.3f} m, "
             f"{100 * formation['joined_fraction']:.0f} % joined "
             f"({'never 90 %' if ninety is None else f'90 % first at {ninety:g} s'}), "
             f"lattice energy {formation['lattice_energy']:.3f}, "

@@ -495,6 +495,16 @@ def test_a_scheduled_formation_switch_reaches_fish_in_worker_processes(
     result = _launch(scenario, endpoint, path)
     assert result.exit_code == 0
     np.testing.assert_array_equal(read_recording(path).arrays()["pos"], reference.position)
+    # The summary names the shape its final formation metrics measure, and the switch.
+    formation = result.summary["formation"]
+    assert formation["shape"] == "diamond"
+    assert formation["shapes"] == [
+        {"time": 0.0, "shape": "pyramid"},
+        {"time": 1.0, "shape": "diamond"},
+    ]
+    from fishswarm.cli.swarm import _summary_text
+
+    assert "  formation pyramid → diamond (from 1 s): shape error " in _summary_text(result.summary)
 
 
 def test_effort_sharing_in_a_flow_is_the_same_across_processes_and_engines(

@@ -685,7 +685,7 @@ def test_a_formation_run_reports_its_shape_and_flags(tmp_path: Path) -> None:
         *_outputs(tmp_path, summary),
     )
     assert result.returncode == 0, result.stderr
-    assert "formation: shape error" in result.stderr
+    assert "formation pyramid: shape error" in result.stderr
     assert (
         "the study's fitness ΣF:" in result.stderr and "summed over 11 snapshots" in result.stderr
     )
