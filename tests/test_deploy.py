@@ -169,6 +169,45 @@ def _service_arguments(folder: Path, **variables: str) -> list[str]:
 
 
 @pytest.mark.slow
+def test_a_robot_given_the_worlds_scenario_file_and_fish_decides_with_them(
+    tmp_path: Path,
+) -> None:
+    from fishswarm.cli.parsers import scenario_from
+
+    plain = build_parser().parse_args(_service_arguments(tmp_path, fishswarm_hardware="mock"))
+    assert (plain.behavior, plain.control_period) == ("dispersion", 1.0)
+    assert plain.config is None and plain.fish is None
+    words = _service_arguments(
+        tmp_path, fishswarm_hardware="mock", fishswarm_config="/lab/formation.toml",
+        fishswarm_fish="8",
+    )  # fmt: skip
+    given = build_parser().parse_args(words)
+    assert given.config == Path("/etc/fishswarm/scenario.toml") and given.fish == 8
+    assert given.behavior is None and given.control_period is None  # the file's
+    # The file as the play copies it: the robot's fish take the world's formation, for 8.
+    words[words.index("--config") + 1] = str(DEPLOY.parent / "experiments" / "formation.toml")
+    scenario = scenario_from(build_parser().parse_args(words))
+    assert (scenario.behavior, scenario.formation, scenario.fish) == ("formation", "pyramid", 8)
+
+
+@pytest.mark.slow
+def test_the_playbook_copies_the_worlds_scenario_file_and_refuses_a_missing_one(
+    tmp_path: Path, wheel: Path
+) -> None:
+    scenario = DEPLOY.parent / "experiments" / "formation.toml"
+    path = inventory(tmp_path, wheel, fish_id=3, fishswarm_config=str(scenario), fishswarm_fish=8)
+    result = ansible("ansible-playbook", "-i", str(path), "site.yml", "--check", "--diff")
+    assert result.returncode == 0, result.stdout + result.stderr
+    copied = result.stdout.split("Copy the swarm's scenario file")[1].split("TASK")[0]
+    assert "changed: [localhost]" in copied
+    assert "FISHSWARM_SCENARIO=--config /etc/fishswarm/scenario.toml --fish 8" in result.stdout
+    missing = inventory(tmp_path, wheel, fish_id=3, fishswarm_config=str(tmp_path / "no.toml"))
+    result = ansible("ansible-playbook", "-i", str(missing), "site.yml", "--check")
+    assert result.returncode != 0
+    assert "no.toml, which is not a file on the control node" in result.stdout
+
+
+@pytest.mark.slow
 def test_a_secured_robots_service_gives_its_certificates_folder(tmp_path: Path) -> None:
     plain = build_parser().parse_args(_service_arguments(tmp_path, fishswarm_hardware="mock"))
     assert plain.secure is None
