@@ -323,9 +323,9 @@ class Observer:
         if snapshot is None:
             return
         if self.world_run is not None and snapshot.run != self.world_run:
-            self._intake.refuse(
-                key, "foreign", f"snapshot of run {snapshot.run}, not {self.world_run}"
-            )
+            # Another world's run on the swarm (worlds take turns on a router): ordinary,
+            # so neither a rejection nor a warning, and not this observer's to measure.
+            self._intake.disregard()
             return
         if snapshot.run != self.current_run:
             if snapshot.run in self._ended_runs:
