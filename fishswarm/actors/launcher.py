@@ -516,6 +516,7 @@ def _summary(
         "simulated_time": simulated,
         "wall_time": wall_time,
         "loop_time": world.wall_time,
+        "paused_time": world.paused_time,
         "compiled_kernels": world.params.compiled,
         "world_time": {
             "physics": world_stats.physics_time_median,
@@ -526,6 +527,11 @@ def _summary(
             "median": world_stats.answer_time_median,
             "p90": world_stats.answer_time_p90,
         },
-        "real_time_factor": simulated / world.wall_time if world.wall_time > 0 else None,
+        # Of the time the ticks ran: an operator's pause is no time the world took.
+        "real_time_factor": (
+            simulated / (world.wall_time - world.paused_time)
+            if world.wall_time > world.paused_time
+            else None
+        ),
         "recording": str(settings.record) if settings.record else None,
     }

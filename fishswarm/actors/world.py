@@ -206,6 +206,8 @@ class World:
         self.state_name = "waiting"
         self.tick = 0
         self.wall_time = 0.0
+        self.paused_time = 0.0
+        """How long the run was held by an operator's pause, s (part of ``wall_time``)."""
         self.late_commands = 0
         """Realtime mode: commands that missed their tick's deadline (the fish kept its fins)."""
         self._answer_times: list[float] = []
@@ -650,9 +652,13 @@ class World:
                     return
             if not event.deciding:
                 continue
-            if not self._resume.is_set():
+            paused = not self._resume.is_set()
+            if paused:
                 self.state_name = "paused"  # held here, at this snapshot, until resumed
+            held = trio.current_time()
             await self._resume.wait()
+            if paused:
+                self.paused_time += trio.current_time() - held
             if self._stop_requested:
                 # Stopped while paused (or in the moment the wait yields): the run ends at
                 # this snapshot, without asking the fish for one more tick.

@@ -383,7 +383,9 @@ def _summary_text(summary: dict[str, Any]) -> str:
         )
         + f", wall {summary['wall_time']:.2f} s"
         + (
-            f" (ticks {summary['loop_time']:.2f} s of it: {rtf:.{2 if rtf < 1 else 0}f}× real time)"
+            f" (ticks {summary['loop_time']:.2f} s of it"
+            + (f", paused {paused:.2f} s" if (paused := summary.get("paused_time", 0.0)) else "")
+            + f": {rtf:.{2 if rtf < 1 else 0}f}× real time)"
             if rtf
             else ""
         )

@@ -851,7 +851,9 @@ def test_control_pauses_resumes_and_stops_the_world() -> None:
         await _until_state(world, "stopped")
         ask("status")
 
-    answers, _ = run_mock(lambda: _under_control(Scenario(fish=2, duration=1000.0), script))
+    answers, world = run_mock(lambda: _under_control(Scenario(fish=2, duration=1000.0), script))
+    # Held from the snapshot of tick 3 until the resume, 100 s after the pause was asked.
+    assert 99.0 < world.paused_time <= 100.0
     # Asked during tick 2, after its perceptions went out: the world is pausing, tick 2
     # completes, then the world holds after the snapshot of tick 3, for as long as it is
     # paused. Asked during tick 5, a stop ends the run at once, at the snapshot of tick 5.
