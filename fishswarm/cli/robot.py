@@ -102,7 +102,7 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
             )
     if sent is None:
         return 0
-    if not fleet:
+    if not fleet and sent.robot_ids.size == 0:
         print(
             f"no robot was heard from, so none is known to have obeyed the {sent.action}: "
             "are they up and connected to this router? send it again once they are",

@@ -185,6 +185,13 @@ def test_mock_robots_join_obey_a_stop_and_survive_losing_the_router(
                 # Another swarm's name on this router: no robot answers an order to all.
                 code, said = await robots_command("--swarm", "nobody", "--stop")
                 assert code == 1 and "no robot was heard from" in said, said
+                # A robot named there is named as unconfirmed, with why.
+                code, said = await robots_command("--swarm", "nobody", "--resume", "4")
+                assert code == 1, said
+                assert (
+                    "robot 4 did not confirm the resume (not heard from): no robot 4 is known "
+                    "on this router (robots heard from: none)" in said
+                ), said
                 await until(lambda: all(r.state == "swimming" for r in robots), timeout=5)
 
             # The router (and the world) die: no more frames, no more commands, fins off.
