@@ -91,6 +91,12 @@ it. A shorter step stays in the event loop: handing it over would cost more than
 observer's decoding and the step's numpy then contend for the GIL and the two cores)."""
 
 
+MISMATCH_NAMED = 10
+"""Fish a world names as started with other settings, for each difference, one by one as
+they come after its first tick (those that answered it are named together then; the run's
+end counts them all)."""
+
+
 STEP_PHASES = {"next_event": "physics", "sense": "vision"}
 """The simulation's steps whose times :meth:`World.statistics` reports, by the part of a
 tick they are."""
@@ -269,7 +275,11 @@ class World:
         """The rules this world's scenario says its fish decide by (FishAbout.rules)."""
         self._fish_settings = settings_digest(fish_params)
         """The digest of its fish's decision parameters (FishAbout.settings)."""
-        self._warned: set[str] = set()
+        self._warned: dict[str, dict[int, None]] = {}
+        """The fish that differ from this world's settings, by difference: named together
+        once the first tick is answered, and any that come later one by one
+        (MISMATCH_NAMED at most)."""
+        self._differences_named = False
         self._step_times: dict[str, float] = {}
         """How long each step of the simulation took the last time, s: a long one runs in a
         worker thread, so that the world keeps pulsing meanwhile."""
@@ -354,8 +364,10 @@ class World:
                             nursery.cancel_scope.cancel()
                 finally:
                     self.wall_time = time.perf_counter() - started
+                    if not self._differences_named:  # the run ended before its first answer
+                        self._name_differing_fish()
                     if self.mismatched:
-                        # The warnings above named the first fish of each difference only.
+                        # Every fish that differed in any way, counted once.
                         log.warning(
                             "%d fish ran with other settings than this world's: %s",
                             len(self.mismatched),
@@ -711,6 +723,9 @@ class World:
                 # the fish yet to answer are not lost for it.
                 return
             self._hold()
+            if not self._differences_named:
+                # Every fish has said what it runs by its first answer: name them together.
+                self._name_differing_fish()
 
     def _stoppable(self) -> trio.CancelScope:
         """A scope for one of the world's waits, cancelled by a stop (at once if one was
@@ -941,9 +956,19 @@ class World:
             return
         self.mismatched.update(ids)
         for difference in differences:
-            if difference not in self._warned:
-                self._warned.add(difference)
-                log.warning("fish %s %s (started with other settings?)", ids_text(ids), difference)
+            differing = self._warned.setdefault(difference, {})  # an ordered set
+            new = [fish_id for fish_id in ids if fish_id not in differing]
+            differing.update(dict.fromkeys(new))
+            if new and self._differences_named and len(differing) <= MISMATCH_NAMED:
+                # Fish that come after the start (robots, fish joining), named as they come.
+                _warn_of_difference(new, difference)
+
+    def _name_differing_fish(self) -> None:
+        """Name, for each difference, every fish that said so (at the end of the first
+        tick, and at the run's end if it had none)."""
+        for difference, differing in self._warned.items():
+            _warn_of_difference(sorted(differing), difference)
+        self._differences_named = True
 
     def _take_command(self, key: str, payload: bytes) -> None:
         sender, _ = self.keys.member_of(key)
@@ -1067,6 +1092,10 @@ class World:
                 tick,
             )
         self.sim.join(new)
+
+
+def _warn_of_difference(ids: list[int], difference: str) -> None:
+    log.warning("fish %s %s (started with other settings?)", ids_text(ids), difference)
 
 
 def _quantile(values: list[float], share: float) -> float:

@@ -22,7 +22,7 @@ from fishswarm.actors.channel import Channel
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.observer import Observer
-from fishswarm.actors.world import StartTimeout, World, WorldSettings
+from fishswarm.actors.world import MISMATCH_NAMED, StartTimeout, World, WorldSettings
 from fishswarm.bluebot.vision import to_body
 from fishswarm.protocols import codec
 from fishswarm.protocols.codec import decode, encode
@@ -1032,17 +1032,53 @@ def test_fish_that_run_another_behaviour_are_named_once_and_counted(
     with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
         world = run_mock(main)
     assert world.statistics().mismatched_fish == 4
-    # One warning for the difference (naming the fish that said so first), not one per fish.
+    # One warning for the difference as the run starts, naming every fish that said so (a
+    # school's and a fish's own), not one per fish.
     warnings = [r.getMessage() for r in caplog.records if "this world's scenario says" in r.message]
-    assert len(warnings) == 1
-    assert warnings[0].endswith(
-        "run 'aggregation', but this world's scenario says 'dispersion' "
+    assert warnings == [
+        "fish 0, 1, 2, 3 run 'aggregation', but this world's scenario says 'dispersion' "
         "(started with other settings?)"
-    )
+    ]
     # At the end, every fish that differed, by id.
     assert caplog.records[-1].getMessage() == (
         "4 fish ran with other settings than this world's: 0, 1, 2, 3"
     )
+
+
+def test_fish_that_say_they_differ_after_the_first_tick_are_named_one_by_one(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Robots (fish alone) that come up during the run, each deciding every 0.5 s in a world
+    of 1-s ticks: each is named as it says so, MISMATCH_NAMED of them at most; the run's
+    end counts them all."""
+    scenario = Scenario(fish=1, duration=4.0, seed=1)
+    keys = scenario.keys
+    late = range(100, 100 + MISMATCH_NAMED + 3)
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,)))
+
+        def say_at_tick_2(key: str, payload: bytes) -> None:
+            if decode(payload, Snapshot).tick == 2:
+                for fish_id in late:
+                    about = FishAbout(np.array([fish_id]), "dispersion", __version__, 0,
+                                      "paper", 0.5)  # fmt: skip
+                    bus.put(keys.about(fish_id), encode(about))
+
+        bus.subscribe(keys.snapshot, say_at_tick_2)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
+            await world.run(bus)
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    assert world.mismatched == set(late)
+    named = [r.getMessage() for r in caplog.records if "decide every 0.5 s" in r.getMessage()]
+    assert [message.split()[1] for message in named] == [str(i) for i in late][:MISMATCH_NAMED]
+    assert caplog.records[-1].getMessage().startswith(f"{len(late)} fish ran with other")
 
 
 def _world_with_fish(
