@@ -534,4 +534,5 @@ def _summary(
             else None
         ),
         "recording": str(settings.record) if settings.record else None,
+        "summary": str(settings.summary) if settings.summary else None,
     }

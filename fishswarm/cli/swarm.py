@@ -405,6 +405,8 @@ def _summary_text(summary: dict[str, Any]) -> str:
         )
     if summary.get("recording"):
         lines.append(f"  recording: {summary['recording']}")
+    if summary.get("summary"):
+        lines.append(f"  summary: {summary['summary']}")
     return "\n".join(lines)
 
 

@@ -69,6 +69,9 @@ def test_run_writes_recording_and_summary_then_export_reads_it(tmp_path: Path) -
     assert said is not None, result.stderr
     assert float(said[1]) == pytest.approx(data["wall_time"], abs=0.006)
     assert float(said[2]) == pytest.approx(data["loop_time"], abs=0.006)
+    # Where the run went: the recording and this summary, named.
+    assert f"  recording: {record}\n  summary: {summary}" in result.stderr
+    assert data["summary"] == str(summary)
     assert int(said[3]) == round(data["real_time_factor"])
     # Where a tick went: each part of the world's a share of the loop, the fish's answer too.
     parts = data["world_time"]
