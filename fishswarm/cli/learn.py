@@ -23,7 +23,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             raise
         raise UserError("Turing learning needs pycma: pip install -e '.[learn]'") from None
     from fishswarm.learning.arena import Arena
-    from fishswarm.learning.checkpoint import checkpoint_target
+    from fishswarm.learning.checkpoint import checkpoint_generation, checkpoint_target
     from fishswarm.learning.session import CHECKPOINT, LearningError, learn
 
     named = {
@@ -68,6 +68,13 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
     # A resumed run goes on to the generation it was started for, unless told otherwise.
     told = checkpoint_target(args.out / CHECKPOINT) if args.resume else None
     generations = args.generations
+    done = checkpoint_generation(args.out / CHECKPOINT) if args.resume else None
+    if generations is not None and done is not None and generations < done:
+        raise ConfigError(
+            f"--out {args.out} has done {done} generations, more than --generations "
+            f"{generations}: give more to go on"
+            + (f", or leave --generations out to go on to {told}" if told else "")
+        )
     if generations is None:
         generations = told if told is not None else DEFAULT_GENERATIONS
     every = max(1, generations // 50)

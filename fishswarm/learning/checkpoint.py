@@ -113,13 +113,24 @@ def checkpoint_target(path: Path) -> int | None:
     """The generation the run in the checkpoint at ``path`` was to reach (None: the file
     does not say — written before checkpoints did — or cannot be read, which
     :func:`load_checkpoint` then explains)."""
+    return _meta_number(path, "target")
+
+
+def checkpoint_generation(path: Path) -> int | None:
+    """The generations the run in the checkpoint at ``path`` has done (None: it cannot be
+    read, which :func:`load_checkpoint` then explains)."""
+    return _meta_number(path, "generation")
+
+
+def _meta_number(path: Path, name: str) -> int | None:
+    """A whole number the checkpoint's description holds (None: not there, or unreadable)."""
     try:
         with path.open("rb") as stream, np.load(stream, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         return None
-    target = meta.get("target") if isinstance(meta, dict) else None
-    return target if isinstance(target, int) and not isinstance(target, bool) else None
+    value = meta.get(name) if isinstance(meta, dict) else None
+    return value if isinstance(value, int) and not isinstance(value, bool) else None
 
 
 def _rows(rows: list[np.ndarray]) -> np.ndarray:

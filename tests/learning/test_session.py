@@ -308,3 +308,24 @@ def test_a_resumed_run_goes_on_to_the_generation_it_was_started_for(tmp_path: Pa
     assert main(["learn", "--out", str(tmp_path), "--resume", "--generations", "5", "--quiet"]) == 0
     assert checkpoint_target(tmp_path / "checkpoint.npz") == 5
     assert checkpoint_target(tmp_path / "missing.npz") is None
+
+
+def test_resuming_to_fewer_generations_than_done_is_refused_with_what_to_give(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Done 2 of 4: asked to resume to 1, it said 'up to generation 1', then 'done: 2'.
+    from fishswarm.cli import main
+    from fishswarm.learning.checkpoint import checkpoint_generation
+
+    settings = LearningSettings(models=4, classifiers=4, seed=3)
+    with pytest.raises(_Stop):
+        learn(settings, generations=4, out=tmp_path, checkpoint_every=1, on_generation=_stop_at(3))
+    assert checkpoint_generation(tmp_path / "checkpoint.npz") == 2
+    with pytest.raises(SystemExit) as exited:
+        main(["learn", "--out", str(tmp_path), "--resume", "--generations", "1", "--quiet"])
+    assert exited.value.code == 2
+    assert (
+        f"--out {tmp_path} has done 2 generations, more than --generations 1: give more to "
+        "go on, or leave --generations out to go on to 4"
+    ) in capsys.readouterr().err
+    assert checkpoint_generation(tmp_path / "checkpoint.npz") == 2  # nothing changed
