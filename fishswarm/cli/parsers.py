@@ -77,6 +77,17 @@ def seconds(text: str) -> float:
     return value
 
 
+def listening_time(text: str) -> float:
+    """How long to listen, s (an argparse type for ``robots`` and ``formation``, whose
+    --listen is a time where other commands' is an endpoint: an endpoint says so)."""
+    if "/" in text:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is an endpoint, but here --listen is how long to listen, s: give the "
+            f"router with --connect {text}"
+        )
+    return seconds(text)
+
+
 def longest_wait(text: str) -> float:
     """A longest wait, s: a finite number; a negative one waits forever (an argparse type)."""
     return _number(text)
@@ -563,7 +574,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
     )
     robots.add_argument(
-        "--listen", type=seconds, default=1.5, help="how long to listen, s (default %(default)g)"
+        "--listen",
+        type=listening_time,
+        default=1.5,
+        help="how long to listen, s (default %(default)g)",
     )
     order = robots.add_mutually_exclusive_group()
     order.add_argument(
@@ -695,7 +709,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     formation.add_argument(
         "--listen",
-        type=seconds,
+        type=listening_time,
         default=1.5,
         help="how long to listen for the robots' confirmations, s (default %(default)g)",
     )

@@ -229,6 +229,11 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["run", "--listen", "tls/127.0.0.1:7447"], "is a secured (tls/) endpoint: give --secure"),
         (["run", "--period", "100", "--duration", "200"], "control_period must be at most 60 s"),
         (["world", "--connect", "bogus"], "--connect: endpoint 'bogus'"),
+        (
+            ["robots", "--listen", "tcp/127.0.0.1:7447"],
+            "here --listen is how long to listen, s: give the router with --connect "
+            "tcp/127.0.0.1:7447",
+        ),
         (["run", "--config", str(Path(__file__).parent)], "is a folder, not a scenario file"),
         (
             ["run", "--config", str(Path(__file__).parents[2] / "experiments" / "orbit.toml")],
