@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import difflib
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -65,8 +66,27 @@ class _Parser(argparse.ArgumentParser):
                 f"fishswarm {option}{' INFO' if option == '--log-level' else ''} {command} …"
             )
         if rest:
-            self.error(f"unrecognized arguments: {' '.join(rest)}")
+            # Said by the command's own parser (its usage, not fishswarm's), with the option
+            # a misspelt one was likely meant to be (--behaviour for --behavior).
+            command = self._command_parser(getattr(parsed, "command", None))
+            options = [o for a in command._actions for o in a.option_strings if o.startswith("--")]
+            meant = [
+                close[0]
+                for word in rest
+                if word.startswith("--")
+                and (close := difflib.get_close_matches(word.split("=")[0], options, 1, 0.8))
+            ]
+            hint = f" (did you mean {', '.join(meant)}?)" if meant else ""
+            command.error(f"unrecognized arguments: {' '.join(rest)}{hint}")
         return parsed
+
+    def _command_parser(self, command: str | None) -> argparse.ArgumentParser:
+        """The parser of ``command`` (this one when there is none)."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction) and command in action.choices:
+                parser: argparse.ArgumentParser = action.choices[command]
+                return parser
+        return self
 
 
 def seconds(text: str) -> float:

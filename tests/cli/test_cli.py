@@ -173,7 +173,12 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
             "--log-level is an option of fishswarm itself: give it before the command, e.g. "
             "fishswarm --log-level INFO run",
         ),
-        (["run", "--bogus"], "unrecognized arguments: --bogus"),
+        (["run", "--bogus"], "fishswarm run: error: unrecognized arguments: --bogus\n"),
+        (
+            ["run", "--behaviour", "aggregation"],
+            "fishswarm run: error: unrecognized arguments: --behaviour aggregation (did you "
+            "mean --behavior?)",
+        ),
         (["run", "--fish", "many"], "invalid int value"),
         (["export", "nowhere.mcap"], "say what to write"),
         (["run", "--vision", "sonar"], "vision_model must be one of geometric, camera"),
