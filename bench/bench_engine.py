@@ -39,7 +39,7 @@ def tick_seconds(fish: int, compiled: bool) -> tuple[float, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     add_sizes(parser, fish=[25, 1000, 10_000])
     args = parser.parse_args()
     if not kernels.available():

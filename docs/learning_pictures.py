@@ -23,7 +23,7 @@ from fishswarm.learning.session import JUDGED_FROM, JUDGED_UNTIL, SPACING_TOLERA
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("runs", type=Path, nargs="+", help="folders written by fishswarm learn")
     parser.add_argument(
         "--out",
@@ -32,6 +32,9 @@ def main() -> None:
         help="the picture to write (default: %(default)s)",
     )
     args = parser.parse_args()
+    for run in args.runs:
+        if not (run / "summary.json").is_file():
+            parser.error(f"{run} holds no summary.json: give folders that fishswarm learn wrote")
     summaries = [json.loads((run / "summary.json").read_text()) for run in args.runs]
     behaviors = sorted({s["settings"]["behavior"] for s in summaries})
     figure, axes = plt.subplots(

@@ -20,7 +20,7 @@ from tests.conftest import Lines, free_port
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=" ".join(__doc__.split("\n\n")[0].split()))
     parser.add_argument("--after", type=float, default=30.0, help="seconds into the run")
     parser.add_argument(
         "--out",

@@ -68,6 +68,9 @@ def test_a_script_imports_and_its_help_explains_every_option(
         if action.option_strings and action.help in (None, "")
     ]
     assert unexplained == [], f"{path.name}: options without help: {unexplained}"
+    # The description says the docstring's whole first sentence, not its first line.
+    description = parser.description or ""
+    assert description.rstrip().endswith((".", ")")), f"{path.name}: {description!r}"
 
 
 def test_the_swarm_benchmark_times_the_batch_engines_steps(
@@ -96,3 +99,16 @@ def test_the_swarm_benchmark_reports_the_round_of_the_median_ratio_and_the_range
     assert row["tick"] == 0.003
     assert module._with_range(1.5, (1.5, 1.5)) == "1.50"
     assert module._with_range(2.0, (1.5, 3.0)) == "2.00 (1.50–3.00)"
+
+
+def test_the_learning_pictures_name_a_folder_learn_did_not_write(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    module = _load(ROOT / "docs" / "learning_pictures.py", monkeypatch)
+    monkeypatch.setattr(sys, "argv", ["learning_pictures.py", str(tmp_path / "nope")])
+    with pytest.raises(SystemExit) as stopped:
+        module.main()
+    assert stopped.value.code == 2
+    assert "nope holds no summary.json: give folders that fishswarm learn wrote" in (
+        capsys.readouterr().err
+    )
