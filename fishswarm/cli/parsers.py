@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import difflib
 import math
+import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -402,8 +403,38 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
     except TypeError as error:
         raise ConfigError(str(error)) from None
     _refuse_inapplicable(overrides, scenario)
+    for warning in _unused_file_settings(table, overrides, scenario, path):
+        print(f"fishswarm {args.command}: warning: {warning}", file=sys.stderr)
     # Only commands that run a scenario to its end take --duration.
     return scenario.check_duration() if hasattr(args, "duration") else scenario
+
+
+_FILE_APPLIES_WHEN = {
+    **_APPLIES_WHEN,
+    "switch_formation": ("behavior", ("formation",), "behavior formation"),
+    "switch_at": ("behavior", ("formation",), "behavior formation"),
+}
+"""Settings of a scenario file that mean something only beside another (as
+:data:`_APPLIES_WHEN` for flags, and a scheduled formation switch)."""
+
+
+def _unused_file_settings(
+    table: dict[str, Any], given: dict[str, Any], scenario: Scenario, path: Path | None
+) -> list[str]:
+    """What to say of settings the scenario file gives that this run ignores: a file may
+    serve several runs (a flag on the command line changing its behaviour), so they are
+    warned of, where the same flag given on the command line is refused."""
+    unused: dict[tuple[str, str], list[str]] = {}
+    for name, (setting, values, _) in _FILE_APPLIES_WHEN.items():
+        if name in table and given.get(name) is None and getattr(scenario, setting) not in values:
+            needed = " or ".join([", ".join(values[:-1]), values[-1]] if values[1:] else values)
+            unused.setdefault((setting, needed), []).append(name)
+    return [
+        f"{path}: {', '.join(names)} {'apply' if names[1:] else 'applies'} only with "
+        f"{setting} {needed}, and this run's {setting} is {getattr(scenario, setting)}: "
+        f"here {'they change' if names[1:] else 'it changes'} nothing"
+        for (setting, needed), names in unused.items()
+    ]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -343,6 +343,30 @@ def test_a_crowded_run_says_so_before_it_starts_and_runs_anyway(tmp_path: Path) 
     assert json.loads(summary.read_text())["scenario"]["spawn_region"] == "tank"
 
 
+def test_a_scenario_files_settings_that_the_run_ignores_are_named(tmp_path: Path) -> None:
+    # The same as flags are refused; from a file (which may serve several runs) warned of.
+    config = tmp_path / "c.toml"
+    config.write_text('switch_formation = "diamond"\nswitch_at = 1\njitter = 0.1\nfish = 3\n')
+    summary = tmp_path / "s.json"
+    result = _run("run", "--config", str(config), "--duration", "1", "--quiet",
+                  *_outputs(tmp_path, summary))  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert (
+        f"fishswarm run: warning: {config}: switch_formation, switch_at apply only with "
+        "behavior formation, and this run's behavior is dispersion: here they change nothing"
+    ) in result.stderr
+    assert (
+        f"fishswarm run: warning: {config}: jitter applies only with time_mode jitter, and "
+        "this run's time_mode is lockstep: here it changes nothing"
+    ) in result.stderr
+    # With the behaviour they belong to, nothing to say of them.
+    formed = _run("run", "--config", str(config), "--behavior", "formation", "--duration", "1",
+                  "--time", "jitter", "--no-flags", "--quiet",
+                  *_outputs(tmp_path, summary))  # fmt: skip
+    assert formed.returncode == 0, formed.stderr
+    assert "warning" not in formed.stderr, formed.stderr
+
+
 def test_a_run_says_which_study_code_switches_only_experiments_act_on(tmp_path: Path) -> None:
     summary = tmp_path / "s.json"
     named = ["--study-code", "drag,side-settings,mean-distance", "--fish", "3"]
