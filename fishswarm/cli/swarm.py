@@ -777,15 +777,14 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
     if reply is not None:
         print(
             f"formation {args.shape} from tick {reply.tick + 1} (world {reply.state}, "
-            f"{reply.live_fish} fish)",
-            file=sys.stderr,
+            f"{reply.live_fish} fish)"
         )
     if not fleet or order is None:
         return 0
     missing = say_unconfirmed(fleet, order)
     confirmed = sorted({entry.robot_id for entry in fleet} - set(missing))
     if confirmed:
-        print(f"formation {args.shape} on robots {ids_text(confirmed)}", file=sys.stderr)
+        print(f"formation {args.shape} on robots {ids_text(confirmed)}")
     return 1 if missing else 0
 
 

@@ -317,7 +317,7 @@ def test_fishswarm_formation_switches_robots_that_have_no_world_and_names_those_
                      endpoint, "--listen", "1.5"],
                     capture_stdout=True, capture_stderr=True, check=False,
                 )  # fmt: skip
-                return done.returncode, done.stderr.decode()
+                return done.returncode, done.stdout.decode() + done.stderr.decode()
 
             said["two"] = await formation("column")
             assert [r.statistics().orders for r in robots] == [1, 1]

@@ -826,12 +826,13 @@ def test_an_operator_switches_a_running_schools_formation(tmp_path: Path) -> Non
         deadline = time.monotonic() + 30
         while True:  # until the world answers with all six fish joined
             switch = _run("formation", "diamond", "--connect", endpoint, timeout=30)
-            joined = switch.returncode == 0 and "6 fish" in switch.stderr
+            joined = switch.returncode == 0 and "6 fish" in switch.stdout
             if joined or time.monotonic() > deadline:
                 break
             time.sleep(0.2)
         assert switch.returncode == 0, switch.stderr
-        assert "formation diamond from tick" in switch.stderr and "6 fish" in switch.stderr
+        # What was done on stdout, as control's status is.
+        assert "formation diamond from tick" in switch.stdout and "6 fish" in switch.stdout
         bad = _run("formation", "circle", "--connect", endpoint, timeout=30)
         assert bad.returncode == 2 and "invalid choice: 'circle'" in bad.stderr
         # Let a few snapshots come after the switch.
