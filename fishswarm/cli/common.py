@@ -9,8 +9,10 @@ base station's commands in :mod:`fishswarm.cli.swarm`.
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
+import tempfile
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -230,9 +232,11 @@ def prepare_folder(folder: Path, flag: str) -> None:
         raise ConfigError(f"{flag} {folder} is a file: give a folder to write into")
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        probe = folder / ".fishswarm-write-test"
-        probe.write_bytes(b"")
-        probe.unlink()
+        # A probe of its own name: two commands preparing one folder at once (two worlds
+        # recording into runs/) must not remove each other's.
+        handle, probe = tempfile.mkstemp(prefix=".fishswarm-write-test-", dir=folder)
+        os.close(handle)
+        os.unlink(probe)
     except OSError as error:
         raise ConfigError(f"{flag} {folder}: cannot write there ({error.strerror})") from None
 

@@ -343,6 +343,18 @@ def test_a_crowded_run_says_so_before_it_starts_and_runs_anyway(tmp_path: Path) 
     assert json.loads(summary.read_text())["scenario"]["spawn_region"] == "tank"
 
 
+def test_preparing_a_folder_leaves_another_commands_probe_alone(tmp_path: Path) -> None:
+    # Two worlds recording into one folder at once: each probed it with one file name, and
+    # one removed the other's probe, which then said "cannot write there".
+    from fishswarm.cli.common import prepare_folder
+
+    theirs = tmp_path / ".fishswarm-write-test"
+    theirs.write_bytes(b"")
+    prepare_folder(tmp_path, "--record")
+    assert theirs.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".fishswarm-write-test"]
+
+
 def test_a_scenario_files_settings_that_the_run_ignores_are_named(tmp_path: Path) -> None:
     # The same as flags are refused; from a file (which may serve several runs) warned of.
     config = tmp_path / "c.toml"
