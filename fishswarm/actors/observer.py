@@ -389,8 +389,12 @@ class Observer:
 async def _prepare_in_thread(fish: int) -> None:
     """Load what the metrics of ``fish`` fish take (:func:`prepare_metrics`) in a thread,
     beside the observer's first messages; a cancelled observer leaves the thread to finish
-    on its own."""
-    await trio.to_thread.run_sync(prepare_metrics, fish, abandon_on_cancel=True)
+    on its own. Only a head start: should it fail, the first snapshot's metrics load them
+    (and say what is wrong), so the observer goes on."""
+    try:
+        await trio.to_thread.run_sync(prepare_metrics, fish, abandon_on_cancel=True)
+    except Exception as error:  # any failure: the first snapshot's metrics will tell it
+        log.debug("the metrics of %d fish were not loaded ahead: %s", fish, error)
 
 
 async def _in_thread_at_once(function: Callable[[], T]) -> T:

@@ -92,9 +92,9 @@ observer's decoding and the step's numpy then contend for the GIL and the two co
 
 
 MISMATCH_NAMED = 10
-"""Fish a world names as started with other settings, for each difference, one by one as
-they come after its first tick (those that answered it are named together then; the run's
-end counts them all)."""
+"""Warnings a world gives, for each difference, of fish started with other settings that
+say so after its first tick, one for each fish or school as it comes (those that answered
+the first tick are named together then; the run's end counts them all)."""
 
 
 STEP_PHASES = {"next_event": "physics", "sense": "vision"}
@@ -259,10 +259,10 @@ class World:
         self._said_no_channel = False
         self._current = TickCommands()
         self.mismatched: set[int] = set()
-        self.unexpected: set[int] = set()
-        """Fish that took part beyond the scenario's ids (they join its run)."""
         """Fish that said they run another behaviour, version, rules, control period or
         decision parameters than this world's."""
+        self.unexpected: set[int] = set()
+        """Fish that took part beyond the scenario's ids (they join its run)."""
         self._twins: set[int] = set()
         """Fish that two processes answer for (warned of once)."""
         self.vouched: set[tuple[int, str | None]] = set()
@@ -280,6 +280,9 @@ class World:
         once the first tick is answered, and any that come later one by one
         (MISMATCH_NAMED at most)."""
         self._differences_named = False
+        self._late_warnings: dict[str, int] = {}
+        """How many warnings each difference gave of fish that said so after the first
+        tick."""
         self._step_times: dict[str, float] = {}
         """How long each step of the simulation took the last time, s: a long one runs in a
         worker thread, so that the world keeps pulsing meanwhile."""
@@ -959,8 +962,11 @@ class World:
             differing = self._warned.setdefault(difference, {})  # an ordered set
             new = [fish_id for fish_id in ids if fish_id not in differing]
             differing.update(dict.fromkeys(new))
-            if new and self._differences_named and len(differing) <= MISMATCH_NAMED:
-                # Fish that come after the start (robots, fish joining), named as they come.
+            late = self._late_warnings.get(difference, 0)
+            if new and self._differences_named and late < MISMATCH_NAMED:
+                # Fish that come after the first tick (robots, fish joining), named as they
+                # come: a school in one warning, MISMATCH_NAMED warnings at most.
+                self._late_warnings[difference] = late + 1
                 _warn_of_difference(new, difference)
 
     def _name_differing_fish(self) -> None:
@@ -1095,6 +1101,7 @@ class World:
 
 
 def _warn_of_difference(ids: list[int], difference: str) -> None:
+    """Say that fish ``ids`` run with a setting other than this world's (``difference``)."""
     log.warning("fish %s %s (started with other settings?)", ids_text(ids), difference)
 
 

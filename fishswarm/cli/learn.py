@@ -73,7 +73,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         raise ConfigError(
             f"--out {args.out} has done {done} generations, more than --generations "
             f"{generations}: give more to go on"
-            + (f", or leave --generations out to go on to {told}" if told else "")
+            + (f", or leave --generations out to go on to {told}" if told and told > done else "")
         )
     if generations is None:
         generations = told if told is not None else DEFAULT_GENERATIONS

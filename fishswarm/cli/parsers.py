@@ -69,7 +69,7 @@ class _Parser(argparse.ArgumentParser):
         if rest:
             # Said by the command's own parser (its usage, not fishswarm's), with the option
             # a misspelt one was likely meant to be (--behaviour for --behavior).
-            command = self._command_parser(getattr(parsed, "command", None))
+            command = self._command_parser(parsed)
             options = [o for a in command._actions for o in a.option_strings if o.startswith("--")]
             meant = [
                 close[0]
@@ -81,13 +81,19 @@ class _Parser(argparse.ArgumentParser):
             command.error(f"unrecognized arguments: {' '.join(rest)}{hint}")
         return parsed
 
-    def _command_parser(self, command: str | None) -> argparse.ArgumentParser:
-        """The parser of ``command`` (this one when there is none)."""
-        for action in self._actions:
-            if isinstance(action, argparse._SubParsersAction) and command in action.choices:
-                parser: argparse.ArgumentParser = action.choices[command]
+    def _command_parser(self, parsed: argparse.Namespace) -> argparse.ArgumentParser:
+        """The parser of the command ``parsed`` names, down to a command of a command
+        (``secure init``); this one when it names none."""
+        parser: argparse.ArgumentParser = self
+        while True:
+            for action in parser._actions:
+                if isinstance(action, argparse._SubParsersAction):
+                    chosen = getattr(parsed, action.dest, None)
+                    if chosen in action.choices:
+                        parser = action.choices[chosen]
+                        break
+            else:
                 return parser
-        return self
 
 
 def seconds(text: str) -> float:

@@ -269,7 +269,16 @@ def body_frame(
         The rotated rows, padded (B, K, 3); and the same rows stacked fish after fish with
         each fish's count, written in the same pass (read-only): what the world's perception
         batches carry, which stacking and counting afterwards took 1 ms a tick at 10 000 fish.
+
+    Raises:
+        ValueError: the shapes do not agree.
     """
+    if relative.ndim != 3 or seen.shape != relative.shape[:2] or yaw.shape != seen.shape[:1]:
+        # The loops index by these shapes and do not check: a mismatch would write past rows.
+        raise ValueError(
+            f"body_frame needs relative (B, K, 3), seen (B, K) and yaw (B,), got "
+            f"{relative.shape}, {seen.shape} and {yaw.shape}"
+        )
     relative = np.ascontiguousarray(relative, dtype=np.float64)
     seen = np.ascontiguousarray(seen, dtype=np.bool_)
     counts = np.zeros(relative.shape[0], dtype=np.int64)

@@ -194,6 +194,9 @@ def prepare_metrics(fish: int) -> None:
     side = math.isqrt(fish - 1) + 1
     grid = np.arange(fish)
     position = np.stack([grid % side, grid // side, np.zeros(fish)], axis=1).astype(np.float64)
+    # Read-only, as a snapshot's decoded positions are: numba compiles its loops anew for
+    # arrays that cannot be written to.
+    position.setflags(write=False)
     swarm_metrics(position, np.zeros(fish, dtype=np.int64), np.zeros(fish))
 
 

@@ -510,6 +510,43 @@ def test_an_observer_of_a_large_swarm_loads_its_metrics_before_the_first_snapsho
     assert Observer(KEYS).fish is None  # a remote observer does not know beforehand
 
 
+def test_an_observer_whose_head_start_fails_measures_on(monkeypatch: pytest.MonkeyPatch) -> None:
+    pytest.importorskip("numba")
+
+    def fail(fish: int) -> None:
+        raise MemoryError("no room to load the distances")
+
+    monkeypatch.setattr(observer_module, "prepare_metrics", fail)
+
+    async def main() -> Observer:
+        observer = Observer.of(Scenario.crowded(300, duration=2.0, seed=1))
+        bus = MemoryBus()
+        with trio.fail_after(5):
+            async with trio.open_nursery() as nursery:
+                await nursery.start(observer.run, bus)
+                await trio.sleep(0.05)  # the head start has failed by now
+                bus.put(KEYS.snapshot, _snapshot(0))
+                await observer.wait_for_tick(0)
+                nursery.cancel_scope.cancel()
+        return observer
+
+    assert [p.tick for p in trio.run(main).history] == [0]
+
+
+def test_preparing_the_metrics_loads_the_loops_a_snapshot_is_measured_with() -> None:
+    # A snapshot's positions are read-only (decoded from the wire): numba compiles its loops
+    # anew for those, so the head start must load that signature too.
+    pytest.importorskip("numba")
+    from fishswarm.study import distance_loops
+
+    prepare_metrics(300)
+    loaded = len(distance_loops.pairs_and_nearest.signatures)
+    position = np.random.default_rng(1).uniform(0.0, 5.0, (300, 3))
+    position.setflags(write=False)
+    swarm_metrics(position, np.zeros(300, dtype=np.int64), np.zeros(300))
+    assert len(distance_loops.pairs_and_nearest.signatures) == loaded
+
+
 def test_preparing_the_metrics_of_a_swarm_loads_its_sampled_pairs() -> None:
     pytest.importorskip("numba")
     _sampled_pairs.cache_clear()

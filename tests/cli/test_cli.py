@@ -175,6 +175,11 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         ),
         (["run", "--bogus"], "fishswarm run: error: unrecognized arguments: --bogus\n"),
         (
+            ["secure", "init", "lab-keys", "--robts", "3"],
+            "fishswarm secure init: error: unrecognized arguments: --robts 3 (did you mean "
+            "--robots?)",
+        ),
+        (
             ["run", "--behaviour", "aggregation"],
             "fishswarm run: error: unrecognized arguments: --behaviour aggregation (did you "
             "mean --behavior?)",
@@ -800,6 +805,13 @@ def test_an_operator_pauses_resumes_and_stops_a_run_from_another_process(tmp_pat
     assert run.returncode == 0, errors
     data = json.loads(summary.read_text())
     assert data["status"] == "stopped" and data["counts"]["ticks"] == stopped_at
+    # Held about 2 s: left out of the real-time factor (realtime: about 1× of the rest).
+    assert 1.5 < data["paused_time"] < data["loop_time"] - 0.5
+    assert data["real_time_factor"] == pytest.approx(
+        stopped_at * 0.25 / (data["loop_time"] - data["paused_time"])
+    )
+    assert 0.7 < data["real_time_factor"] <= 1.05
+    assert re.search(r"\(ticks [\d.]+ s of it, paused [\d.]+ s: [\d.]+× real time\)", errors)
     gone = _run("control", "status", "--connect", endpoint, "--connect-timeout", "2")
     assert gone.returncode == 1 and "error:" in gone.stderr
 

@@ -157,6 +157,13 @@ def test_the_rotation_kernel_stacks_the_rows_it_rotates() -> None:
     assert empty.counts.tolist() == [0, 0, 0]
 
 
+def test_the_rotation_kernel_refuses_shapes_that_do_not_agree() -> None:
+    with pytest.raises(ValueError, match=r"relative \(B, K, 3\), seen \(B, K\) and yaw"):
+        kernels.body_frame(np.zeros((3, 4, 3)), np.zeros(3), np.ones((3, 5), dtype=bool))
+    with pytest.raises(ValueError, match="got"):
+        kernels.body_frame(np.zeros((3, 4, 3)), np.zeros(2), np.ones((3, 4), dtype=bool))
+
+
 def test_the_compiled_vision_hands_over_its_rows_stacked() -> None:
     position, yaw = _swarm(np.random.default_rng(5), 300, 6.0)
     fast = perceive(position, yaw, vision=Vision(), kernels=kernels.CompiledVision())
