@@ -1017,20 +1017,11 @@ def test_fish_that_run_another_behaviour_are_named_once_and_counted(
     other = scenario.replace(behavior="aggregation")
     keys = scenario.keys
 
-    async def main() -> World:
-        bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2, 3)))
-        async with trio.open_nursery() as nursery:
-            # A school of three and one fish alone, all started with aggregation.
-            school = FishSettings((0, 1, 2), other.fish_params(), keys, school="s")
-            await nursery.start(Fish(school).run, bus)
-            await nursery.start(Fish(FishSettings((3,), other.fish_params(), keys)).run, bus)
-            await world.run(bus)
-            nursery.cancel_scope.cancel()
-        return world
-
+    # A school of three and one fish alone, all started with aggregation.
+    school = FishSettings((0, 1, 2), other.fish_params(), keys, school="s")
+    alone = FishSettings((3,), other.fish_params(), keys)
     with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
-        world = run_mock(main)
+        world = _world_with_fish(scenario, [school, alone], expected=(0, 1, 2, 3))
     assert world.statistics().mismatched_fish == 4
     # One warning for the difference as the run starts, naming every fish that said so (a
     # school's and a fish's own), not one per fish.
@@ -1055,26 +1046,19 @@ def test_fish_that_say_they_differ_after_the_first_tick_are_named_one_by_one(
     keys = scenario.keys
     late = range(100, 100 + MISMATCH_NAMED + 3)
 
-    async def main() -> World:
-        bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0,)))
-
-        def say_at_tick_2(key: str, payload: bytes) -> None:
+    def say_at_tick_2(bus: MemoryBus) -> None:
+        def said(key: str, payload: bytes) -> None:
             if decode(payload, Snapshot).tick == 2:
                 for fish_id in late:
                     about = FishAbout(np.array([fish_id]), "dispersion", __version__, 0,
                                       "paper", 0.5)  # fmt: skip
                     bus.put(keys.about(fish_id), encode(about))
 
-        bus.subscribe(keys.snapshot, say_at_tick_2)
-        async with trio.open_nursery() as nursery:
-            await nursery.start(Fish(FishSettings((0,), scenario.fish_params(), keys)).run, bus)
-            await world.run(bus)
-            nursery.cancel_scope.cancel()
-        return world
+        bus.subscribe(keys.snapshot, said)
 
+    ours = FishSettings((0,), scenario.fish_params(), keys)
     with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
-        world = run_mock(main)
+        world = _world_with_fish(scenario, [ours], expected=(0,), on_bus=say_at_tick_2)
     assert world.mismatched == set(late)
     named = [r.getMessage() for r in caplog.records if "decide every 0.5 s" in r.getMessage()]
     assert [message.split()[1] for message in named] == [str(i) for i in late][:MISMATCH_NAMED]
@@ -1087,12 +1071,15 @@ def _world_with_fish(
     *,
     expected: tuple[int, ...],
     said: Sequence[tuple[str, bytes]] = (),
+    on_bus: Callable[[MemoryBus], None] = lambda bus: None,
 ) -> World:
     """A world that expects ``expected`` run to its end beside fish actors of ``fish`` on
-    the in-memory bus, with ``said`` put on the bus once all are up (what other fish say)."""
+    the in-memory bus, with ``said`` put on the bus once all are up (what other fish say);
+    ``on_bus`` is given the bus first (to subscribe to what the test watches)."""
 
     async def main() -> World:
         bus = MemoryBus()
+        on_bus(bus)
         world = World(WorldSettings(scenario, expected_fish=expected))
         async with trio.open_nursery() as nursery:
             for settings in fish:
@@ -1227,18 +1214,9 @@ def test_fish_started_with_other_study_code_rules_are_named(
     scenario = Scenario(fish=2, duration=2.0, seed=1, profile="study-code")
     paper = scenario.replace(profile="paper")
 
-    async def main() -> World:
-        bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
-        async with trio.open_nursery() as nursery:
-            fish = FishSettings((0, 1), paper.fish_params(), scenario.keys)
-            await nursery.start(Fish(fish).run, bus)
-            await world.run(bus)
-            nursery.cancel_scope.cancel()
-        return world
-
+    fish = FishSettings((0, 1), paper.fish_params(), scenario.keys)
     with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
-        world = run_mock(main)
+        world = _world_with_fish(scenario, [fish], expected=(0, 1))
     assert world.statistics().mismatched_fish == 2
     (warning,) = [r.getMessage() for r in caplog.records if "rules" in r.getMessage()]
     assert warning.endswith(
@@ -1252,18 +1230,9 @@ def test_fish_that_run_the_worlds_behaviour_raise_no_warning(
 ) -> None:
     scenario = Scenario(fish=2, duration=2.0, seed=1)
 
-    async def main() -> World:
-        bus = MemoryBus()
-        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
-        async with trio.open_nursery() as nursery:
-            fish = FishSettings((0, 1), scenario.fish_params(), scenario.keys)
-            await nursery.start(Fish(fish).run, bus)
-            await world.run(bus)
-            nursery.cancel_scope.cancel()
-        return world
-
+    fish = FishSettings((0, 1), scenario.fish_params(), scenario.keys)
     with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
-        world = run_mock(main)
+        world = _world_with_fish(scenario, [fish], expected=(0, 1))
     assert world.statistics().mismatched_fish == 0
     assert not [r for r in caplog.records if r.name == "fishswarm.actors.world"]
 
