@@ -388,19 +388,10 @@ def test_fish_up_beyond_the_scenarios_ids_join_the_run_and_are_named(
     keys = scenario.keys
     settings = WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0, turn_delay=0.0)
     world = World(settings)
-    told: list[list[int]] = []
+    told: list[tuple[list[int], list[int] | None]] = []
 
     async def main() -> None:
-        bus = MemoryBus()
-        bus.subscribe(keys.snapshot, lambda k, p: told.append(decode(p, Snapshot).ids.tolist()))
-        async with (
-            subscription(bus, keys.perception(0)) as first,
-            subscription(bus, keys.perception(1)) as second,
-            open_token(bus, keys.alive("fish", 0)),
-            open_token(bus, keys.alive("fish", 1)),
-            trio.open_nursery() as nursery,
-        ):
-            nursery.start_soon(world.run, bus)
+        async with two_fish_world(settings, told, world) as (bus, first, second):
             for _ in range(2):
                 for fish_id, perceptions in ((0, first), (1, second)):
                     perception = decode((await perceptions.receive())[1], Perception)
@@ -412,7 +403,7 @@ def test_fish_up_beyond_the_scenarios_ids_join_the_run_and_are_named(
 
     with caplog.at_level(logging.WARNING, logger="fishswarm.actors.world"):
         run_mock(main)
-    assert told == [[0, 1], [0, 1], [0, 1]]
+    assert [ids for ids, _ in told] == [[0, 1], [0, 1], [0, 1]]
     assert world.statistics().unexpected_fish == 1
     said = [r.getMessage() for r in caplog.records if "beyond" in r.getMessage()]
     assert said == [
@@ -423,10 +414,13 @@ def test_fish_up_beyond_the_scenarios_ids_join_the_run_and_are_named(
 
 @asynccontextmanager
 async def two_fish_world(
-    settings: WorldSettings, told: list[tuple[list[int], list[int] | None]]
+    settings: WorldSettings,
+    told: list[tuple[list[int], list[int] | None]],
+    world: World | None = None,
 ) -> AsyncIterator[tuple[MemoryBus, Inbox[tuple[str, bytes]], Inbox[tuple[str, bytes]]]]:
-    """The world of ``settings`` running with fish 0 and 1 up, on an in-memory Bus; each
-    snapshot's ids and lights noted in ``told``. The Bus and the two fish's perceptions."""
+    """The world of ``settings`` (``world``, when the test keeps it) running with fish 0
+    and 1 up, on an in-memory Bus; each snapshot's ids and lights noted in ``told``. The
+    Bus and the two fish's perceptions."""
     bus = MemoryBus()
     keys = settings.scenario.keys
 
@@ -443,7 +437,7 @@ async def two_fish_world(
         open_token(bus, keys.alive("fish", 1)),
         trio.open_nursery() as nursery,
     ):
-        nursery.start_soon(World(settings).run, bus)
+        nursery.start_soon((World(settings) if world is None else world).run, bus)
         yield bus, first, second
         nursery.cancel_scope.cancel()
 
