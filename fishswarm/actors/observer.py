@@ -347,11 +347,10 @@ class Observer:
             metrics = await _in_thread_at_once(lambda: swarm_metrics(*measure))
         else:
             metrics = swarm_metrics(*measure)
-        formations = self.formations
-        shape = (
-            None if formations is None else formations.shape_told(snapshot.formation, snapshot.time)
-        )
-        target = None if formations is None else formations.at(shape)
+        shape, target = None, None
+        if self.formations is not None:
+            shape = self.formations.shape_told(snapshot.formation, snapshot.time)
+            target = self.formations.at(shape)
         if target is not None:
             try:
                 metrics.update(target.metrics(snapshot.position))

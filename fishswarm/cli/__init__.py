@@ -12,7 +12,7 @@ from fishswarm.actors.shared_memory import release_shared_memory_at_exit
 from fishswarm.cli.common import UserError
 from fishswarm.cli.parsers import build_parser, scenario_from
 from fishswarm.sim.allocator import tune_allocator
-from fishswarm.sim.scenario import EXPERIMENT_SWITCHES, ConfigError, Scenario
+from fishswarm.sim.scenario import ConfigError
 
 HANDLERS = {
     "run": ("swarm", "run"),
@@ -51,8 +51,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     handler = getattr(importlib.import_module(f"fishswarm.cli.{module}"), function)
     try:
         scenario = scenario_from(args) if hasattr(args, "config") else None
-        if scenario is not None:
-            _warn_of_experiment_switches(args.command, scenario)
         code = int(handler(args, scenario))
     except ConfigError as error:
         parser.exit(2, f"fishswarm {args.command}: error: {error}\n")
@@ -63,18 +61,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("fishswarm: interrupted", file=sys.stderr)
         return 130
     return code
-
-
-def _warn_of_experiment_switches(command: str, scenario: Scenario) -> None:
-    """Say so when the scenario names study-code switches that only experiments act on
-    (named in ``study_code``; the study-code profile turns every switch on, these too)."""
-    named = [name for name in EXPERIMENT_SWITCHES if name in scenario.study_code]
-    if named:
-        print(
-            f"fishswarm {command}: warning: the study-code switch(es) {', '.join(named)} "
-            "apply to 'fishswarm experiment' only: here they change nothing",
-            file=sys.stderr,
-        )
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             raise
         raise UserError("Turing learning needs pycma: pip install -e '.[learn]'") from None
     from fishswarm.learning.arena import Arena
-    from fishswarm.learning.checkpoint import checkpoint_generation, checkpoint_target
+    from fishswarm.learning.checkpoint import checkpoint_progress
     from fishswarm.learning.session import CHECKPOINT, LearningError, learn
 
     named = {
@@ -66,9 +66,8 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         )
     prepare_folder(args.out, "--out")
     # A resumed run goes on to the generation it was started for, unless told otherwise.
-    told = checkpoint_target(args.out / CHECKPOINT) if args.resume else None
+    done, told = checkpoint_progress(args.out / CHECKPOINT) if args.resume else (None, None)
     generations = args.generations
-    done = checkpoint_generation(args.out / CHECKPOINT) if args.resume else None
     if generations is not None and done is not None and generations < done:
         raise ConfigError(
             f"--out {args.out} has done {done} generations, more than --generations "

@@ -23,6 +23,7 @@ from fishswarm.learning.arena import REPLICA_KINDS
 from fishswarm.protocols.keys import MAX_FISH_ID, check_name
 from fishswarm.protocols.messages import FORMATION_SHAPES
 from fishswarm.sim.scenario import (
+    EXPERIMENT_SWITCHES,
     PROFILES,
     START_TIMEOUT,
     STUDY_CODE_SWITCHES,
@@ -409,7 +410,7 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
     except TypeError as error:
         raise ConfigError(str(error)) from None
     _refuse_inapplicable(overrides, scenario)
-    for warning in _unused_file_settings(table, overrides, scenario, path):
+    for warning in _unused_settings(table, overrides, scenario, path):
         print(f"fishswarm {args.command}: warning: {warning}", file=sys.stderr)
     # Only commands that run a scenario to its end take --duration.
     return scenario.check_duration() if hasattr(args, "duration") else scenario
@@ -424,23 +425,32 @@ _FILE_APPLIES_WHEN = {
 :data:`_APPLIES_WHEN` for flags, and a scheduled formation switch)."""
 
 
-def _unused_file_settings(
+def _unused_settings(
     table: dict[str, Any], given: dict[str, Any], scenario: Scenario, path: Path | None
 ) -> list[str]:
-    """What to say of settings the scenario file gives that this run ignores: a file may
-    serve several runs (a flag on the command line changing its behaviour), so they are
-    warned of, where the same flag given on the command line is refused."""
+    """What to say of settings this run ignores: the scenario file's (a file may serve
+    several runs, a flag on the command line changing its behaviour, so they are warned of,
+    where the same flag given on the command line is refused), and study-code switches
+    only experiments act on (named in ``study_code``, from the file or --study-code; the
+    study-code profile turns every switch on, these too)."""
     unused: dict[tuple[str, str], list[str]] = {}
     for name, (setting, values, _) in _FILE_APPLIES_WHEN.items():
         if name in table and given.get(name) is None and getattr(scenario, setting) not in values:
             needed = " or ".join([", ".join(values[:-1]), values[-1]] if values[1:] else values)
             unused.setdefault((setting, needed), []).append(name)
-    return [
+    warnings = [
         f"{path}: {', '.join(names)} {'apply' if names[1:] else 'applies'} only with "
         f"{setting} {needed}, and this run's {setting} is {getattr(scenario, setting)}: "
         f"here {'they change' if names[1:] else 'it changes'} nothing"
         for (setting, needed), names in unused.items()
     ]
+    switches = [name for name in EXPERIMENT_SWITCHES if name in scenario.study_code]
+    if switches:
+        warnings.append(
+            f"the study-code switch(es) {', '.join(switches)} apply to 'fishswarm experiment' "
+            "only: here they change nothing"
+        )
+    return warnings
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -308,8 +308,8 @@ def _summary_text(summary: dict[str, Any]) -> str:
             "so their fins were off for part of the run"
         )
     if summary["status"] == "degraded" and summary["lost"]:
-        lost = ", ".join(f"{f['id']} at tick {f['tick']} ({f['reason']})" for f in summary["lost"])
-        lines[0] += f" — fish were lost on the way: {lost}"
+        lost = [(f["id"], f["tick"], f["reason"]) for f in summary["lost"]]
+        lines[0] += f" — fish were lost on the way: {_lost_text(lost)}"
     orbit = summary.get("orbit")
     if orbit:
         post = orbit["post"]
@@ -410,6 +410,11 @@ def _summary_text(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _lost_text(lost: list[tuple[int, int, str]]) -> str:
+    """Fish lost on the way, (id, tick, why) each, as a run's last words say them."""
+    return ", ".join(f"{fish_id} at tick {tick} ({why})" for fish_id, tick, why in lost)
+
+
 def fish(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm fish``: fish actors alone, connected to a router."""
     # Compiled decisions as the launcher's workers have them (the same bits either way).
@@ -508,8 +513,8 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
         file=sys.stderr,
     )
     if degraded:
-        lost = ", ".join(f"{f.fish_id} at tick {f.tick} ({f.reason})" for f in actor.lost)
-        print(f"fish were lost on the way: {lost}", file=sys.stderr)
+        lost = [(f.fish_id, f.tick, f.reason) for f in actor.lost]
+        print(f"fish were lost on the way: {_lost_text(lost)}", file=sys.stderr)
     print(json.dumps(dataclasses.asdict(statistics)), file=sys.stderr)
     return EXIT_DEGRADED if degraded else EXIT_OK
 

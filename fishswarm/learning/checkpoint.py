@@ -109,27 +109,36 @@ def load_checkpoint(path: Path) -> Coevolution:
     return run
 
 
-def checkpoint_target(path: Path) -> int | None:
-    """The generation the run in the checkpoint at ``path`` was to reach (None: the file
-    does not say — written before checkpoints did — or cannot be read, which
-    :func:`load_checkpoint` then explains)."""
-    return _meta_number(path, "target")
-
-
-def checkpoint_generation(path: Path) -> int | None:
-    """The generations the run in the checkpoint at ``path`` has done (None: it cannot be
-    read, which :func:`load_checkpoint` then explains)."""
-    return _meta_number(path, "generation")
-
-
-def _meta_number(path: Path, name: str) -> int | None:
-    """A whole number the checkpoint's description holds (None: not there, or unreadable)."""
+def checkpoint_progress(path: Path) -> tuple[int | None, int | None]:
+    """How far the run in the checkpoint at ``path`` is: the generations it has done, and
+    the generation it was to reach (each None where the file does not say — a target was
+    not written before checkpoints did — or cannot be read, which :func:`load_checkpoint`
+    then explains); one read of the file for both."""
     try:
         with path.open("rb") as stream, np.load(stream, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
-        return None
-    value = meta.get(name) if isinstance(meta, dict) else None
+        return None, None
+    if not isinstance(meta, dict):
+        return None, None
+    done, target = (meta.get(name) for name in ("generation", "target"))
+    return _whole(done), _whole(target)
+
+
+def checkpoint_target(path: Path) -> int | None:
+    """The generation the run in the checkpoint at ``path`` was to reach (see
+    :func:`checkpoint_progress`)."""
+    return checkpoint_progress(path)[1]
+
+
+def checkpoint_generation(path: Path) -> int | None:
+    """The generations the run in the checkpoint at ``path`` has done (see
+    :func:`checkpoint_progress`)."""
+    return checkpoint_progress(path)[0]
+
+
+def _whole(value: object) -> int | None:
+    """``value`` if it is a whole number (JSON's true and false are not), else None."""
     return value if isinstance(value, int) and not isinstance(value, bool) else None
 
 
