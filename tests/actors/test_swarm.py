@@ -157,7 +157,8 @@ def test_same_seed_same_trajectory_across_processes_and_batch_engine(
 def test_garbage_on_every_key_is_rejected_and_changes_nothing(
     endpoint: str, tmp_path: Path
 ) -> None:
-    scenario = Scenario(fish=6, duration=10.0, seed=5)
+    # Long enough that the vandal, connecting once the launcher listens, is heard by all.
+    scenario = Scenario(fish=6, duration=40.0, seed=5)
     keys = scenario.keys
     garbage = [b"", b"\xc1\xc1", b"\x93\x01\x02\x03", b"\x83\xa1v\x01\xa1t\xa7command\xa1f\x80"]
     targets = [keys.snapshot, keys.control, keys.channel_report]
