@@ -123,7 +123,9 @@ def align(position: FloatArray, target: FloatArray, *, starts: int = 12) -> Alig
     The alignment is iterated (assign by the Hungarian method, then turn and shift by
     Kabsch) from ``starts`` turns about the vertical; the smallest RMS distance wins. With
     more fish than slots (a fish that joined a school whose map was made for fewer), the
-    slots go to the S fish that fit them best and the others have none.
+    slots go to the S fish that fit them best and the others have none; the extra fish pull
+    a start centred on the whole school off the shape, so the alignment also starts from
+    the target's two farthest slots laid onto pairs of fish as far apart.
 
     Args:
         position: (N, 3) the fish, m.
@@ -143,27 +145,72 @@ def align(position: FloatArray, target: FloatArray, *, starts: int = 12) -> Alig
         return Alignment(position.copy(), np.zeros(1, dtype=np.int64), np.zeros(1))
     best: Alignment | None = None
     centred = target - target.mean(axis=0)
-    for turn in np.linspace(0.0, 2 * math.pi, starts, endpoint=False):
-        c, s = math.cos(turn), math.sin(turn)
-        moved = centred @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
-        moved = moved + position.mean(axis=0)
-        for _ in range(20):
-            rows, columns = linear_sum_assignment(cdist(position, moved))
-            rotation, shift = _kabsch(moved[columns], position[rows])
-            aligned = moved @ rotation + shift
-            if np.allclose(aligned, moved, atol=1e-12):
-                break
-            moved = aligned
-        rows, columns = linear_sum_assignment(cdist(position, moved))
-        slot_of = np.full(count, -1, dtype=np.int64)
-        slot_of[rows] = columns
-        gaps = np.full(count, np.inf)
-        gaps[rows] = np.linalg.norm(position[rows] - moved[columns], axis=1)
-        candidate = Alignment(moved, slot_of, gaps)
+    placed = [
+        _turned(centred, turn) + position.mean(axis=0)
+        for turn in np.linspace(0.0, 2 * math.pi, starts, endpoint=False)
+    ]
+    if count > places:
+        placed += _pair_starts(position, target)
+    for moved in placed:
+        candidate = _refined(position, moved)
         if best is None or candidate.rms < best.rms:
             best = candidate
     assert best is not None
     return best
+
+
+PAIR_STARTS = 6
+"""Most pairs of fish :func:`align` lays the target's two farthest slots onto (those nearest
+the slots' distance apart), when there are more fish than slots."""
+
+
+def _turned(points: FloatArray, turn: float) -> FloatArray:
+    """``points`` turned by ``turn`` rad about the vertical (anticlockwise seen from above)."""
+    c, s = math.cos(turn), math.sin(turn)
+    turned: FloatArray = points @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    return turned
+
+
+def _pair_starts(position: FloatArray, target: FloatArray) -> list[FloatArray]:
+    """Starting placements of ``target`` that lay its two farthest slots, a and b, onto a
+    pair of fish (p, q) about as far apart: turned about the vertical so that a→b points
+    along p→q seen from above, and shifted so that the two midpoints meet. The pairs tried
+    are the :data:`PAIR_STARTS` (each way round) whose distance is nearest a–b's."""
+    between = cdist(target, target)
+    a, b = np.unravel_index(int(np.argmax(between)), between.shape)
+    apart = cdist(position, position)
+    first, second = np.triu_indices(position.shape[0], k=1)
+    misfit = np.abs(apart[first, second] - between[a, b])
+    chosen = np.argsort(misfit, kind="stable")[:PAIR_STARTS]
+    slot_way = target[b] - target[a]
+    slot_angle = math.atan2(slot_way[1], slot_way[0])
+    slot_middle = (target[a] + target[b]) / 2
+    placed = []
+    for p, q in zip(first[chosen].tolist(), second[chosen].tolist(), strict=True):
+        for start, end in ((p, q), (q, p)):
+            fish_way = position[end] - position[start]
+            turn = math.atan2(fish_way[1], fish_way[0]) - slot_angle
+            middle = (position[start] + position[end]) / 2
+            placed.append(_turned(target - slot_middle, turn) + middle)
+    return placed
+
+
+def _refined(position: FloatArray, moved: FloatArray) -> Alignment:
+    """From the slots placed at ``moved``: assign fish to slots by the Hungarian method and
+    move the slots onto their fish by Kabsch, until the slots stay put (at most 20 times)."""
+    for _ in range(20):
+        rows, columns = linear_sum_assignment(cdist(position, moved))
+        rotation, shift = _kabsch(moved[columns], position[rows])
+        aligned = moved @ rotation + shift
+        if np.allclose(aligned, moved, atol=1e-12):
+            break
+        moved = aligned
+    rows, columns = linear_sum_assignment(cdist(position, moved))
+    slot_of = np.full(position.shape[0], -1, dtype=np.int64)
+    slot_of[rows] = columns
+    gaps = np.full(position.shape[0], np.inf)
+    gaps[rows] = np.linalg.norm(position[rows] - moved[columns], axis=1)
+    return Alignment(moved, slot_of, gaps)
 
 
 def shape_error(
