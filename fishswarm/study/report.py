@@ -29,14 +29,25 @@ def table_rows(experiment: Experiment, outcomes: list[RunOutcome]) -> list[dict[
             continue
         row: dict[str, Any] = {"group": group} if experiment.groups else {}
         row |= {experiment.parameter: value, "runs": len(mine)}
+        each = [run_values(experiment, outcome) for outcome in mine]
         for summary in experiment.summaries:
-            column = experiment.metric_names.index(summary.metric)
-            values = np.array([summary.reduce(o.metrics[:, column]) for o in mine])
+            values = np.array([run[summary.key] for run in each])
             row[f"{summary.key}_mean"] = float(values.mean())
             row[f"{summary.key}_sd"] = float(values.std(ddof=1)) if values.size > 1 else 0.0
         row["wall_time_mean"] = float(np.mean([o.wall_time for o in mine]))
         rows.append(row)
     return rows
+
+
+def run_values(experiment: Experiment, outcome: RunOutcome) -> dict[str, float]:
+    """The number each of the experiment's summaries gives for one run (what a table row
+    averages over seeds), by the summary's key."""
+    return {
+        summary.key: float(
+            summary.reduce(outcome.metrics[:, experiment.metric_names.index(summary.metric)])
+        )
+        for summary in experiment.summaries
+    }
 
 
 def write_report(
@@ -51,7 +62,8 @@ def write_report(
     """Write the experiment's tables, per-run data and pictures into ``folder``.
 
     Files: ``table.md`` and ``table.csv`` (mean ± s.d. per value), ``runs.csv`` (one row
-    per run), ``summary.json`` (settings, rows, timing, whether complete) and, with
+    per run: each metric's first and last value, and the run's number behind each of the
+    table's columns), ``summary.json`` (settings, rows, timing, whether complete) and, with
     matplotlib, the pictures of :func:`fishswarm.study.figures.experiment_figures`.
 
     Args:
@@ -87,6 +99,7 @@ def write_report(
                 "seed",
                 *(f"{m}_initial" for m in experiment.metric_names),
                 *(f"{m}_final" for m in experiment.metric_names),
+                *(summary.key for summary in experiment.summaries),
                 "wall_time",
             ]
         )
@@ -98,6 +111,7 @@ def write_report(
                     outcome.seed,
                     *outcome.metrics[0].tolist(),
                     *outcome.metrics[-1].tolist(),
+                    *run_values(experiment, outcome).values(),
                     round(outcome.wall_time, 3),
                 ]
             )

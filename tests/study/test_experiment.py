@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 from pathlib import Path
 
@@ -18,7 +19,7 @@ from fishswarm.study.experiment import (
     change_percent,
     find,
 )
-from fishswarm.study.report import markdown_table, table_rows
+from fishswarm.study.report import markdown_table, table_rows, write_report
 
 
 def test_the_studys_experiments_are_defined_as_in_spec() -> None:
@@ -171,7 +172,6 @@ def test_orbit_experiments_summarise_radius_revolutions_speed_and_collisions() -
 def test_ctrl_c_in_a_sweep_returns_the_runs_that_finished(tmp_path: Path) -> None:
     import json
 
-    from fishswarm.study.report import write_report
     from fishswarm.study.sweep import SweepInterrupted, simulate_on_batch_engine, sweep_experiment
 
     experiment = find("blindspot").with_changes(seeds=2, duration=2.0)
@@ -249,7 +249,6 @@ def test_a_controller_the_scenario_names_stays_in_a_group_of_another_behaviour(
 def test_groups_compare_the_sweep_under_named_settings(tmp_path: Path) -> None:
     import json
 
-    from fishswarm.study.report import write_report
     from fishswarm.study.sweep import sweep_experiment
 
     folder = tmp_path / "experiments"
@@ -424,3 +423,32 @@ def test_the_study_codes_mean_distance_is_warned_of_where_it_cannot_be_measured(
         == []
     )
     assert find("blockingsphere").with_changes(duration=1).study_code_warnings() == []
+
+
+def test_runs_csv_holds_each_runs_number_behind_every_table_column(tmp_path: Path) -> None:
+    # The study code's mean distance compares a run's third sample with its last: runs.csv
+    # must hold that per-run number, as it holds the others, so that the table's mean and
+    # s.d. can be checked from it.
+
+    experiment = find("blindspot").with_changes(study_code=("mean-distance",))
+    names = experiment.metric_names
+    outcomes = []
+    for seed, scale in ((0, 1.0), (1, 2.0)):
+        series = np.ones((5, len(names)))
+        # Linked centroid distance 9, 7, 2, 3, 5 (× scale): +150 % from the third sample.
+        series[:, names.index("linked_centroid_distance")] = np.array([9, 7, 2, 3, 5]) * scale
+        # Centroid distance 4 → 5 and 4 → 6: +25 % and +50 % from the first.
+        series[:, names.index("centroid_distance")] = [4, 4, 4, 4, 4 + scale]
+        outcomes.append(RunOutcome(0.25, seed, np.arange(5.0), series, np.zeros((5, 2, 3)), 1.0))
+    write_report(experiment, outcomes, tmp_path, engine="batch", wall_time=2.0)
+    with (tmp_path / "runs.csv").open(encoding="utf-8") as stream:
+        runs = list(csv.DictReader(stream))
+    assert [float(run["study_mean_distance_change_percent"]) for run in runs] == [150.0, 150.0]
+    assert [float(run["centroid_distance_change_percent"]) for run in runs] == [25.0, 50.0]
+    assert [float(run["linked_centroid_distance_initial"]) for run in runs] == [9.0, 18.0]
+    with (tmp_path / "table.csv").open(encoding="utf-8") as stream:
+        (row,) = list(csv.DictReader(stream))
+    assert float(row["centroid_distance_change_percent_mean"]) == pytest.approx(37.5)
+    assert float(row["centroid_distance_change_percent_sd"]) == pytest.approx(
+        np.std([25.0, 50.0], ddof=1)
+    )
