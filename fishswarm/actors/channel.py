@@ -66,7 +66,13 @@ a snapshot of yet (a new world's, whose first snapshot is still on its way) are 
 it."""
 
 HELD_BROADCASTS_MAX = 100_000
-"""Most broadcasts of runs not yet seen the channel keeps: more are refused."""
+"""Most broadcasts the channel keeps for one run it has not seen a snapshot of yet: more
+are refused (as a flood), and do not crowd out another run's."""
+
+HELD_RUNS_MAX = 8
+"""Most runs not seen yet that the channel keeps broadcasts for at once: a run's fish
+broadcast before its first snapshot reaches the channel only in the moment its world
+starts, so a broadcast of a further run is refused (as a flood)."""
 
 
 @dataclass(frozen=True)
@@ -358,10 +364,17 @@ class Channel:
         """Keep a broadcast of ``run``, which the channel has not seen a snapshot of, if it
         may be one of that run's first: a new world's fish can broadcast before its first
         snapshot reaches the channel."""
+        held = self._held.get(run)
         if broadcast.tick > FIRST_TICKS:  # a run's that has ended, come late: no new one's
             self._let_go_one(broadcast.sender_id, f"of tick {broadcast.tick} of run {run}")
-        elif sum(map(len, self._held.values())) >= HELD_BROADCASTS_MAX:
-            self._intake.refuse(key, "flood", f"more than {HELD_BROADCASTS_MAX} held")
+        elif held is None and len(self._held) >= HELD_RUNS_MAX:
+            self._intake.refuse(
+                key, "flood", f"broadcasts of {HELD_RUNS_MAX} runs not seen yet held already"
+            )
+        elif held is not None and len(held) >= HELD_BROADCASTS_MAX:
+            self._intake.refuse(
+                key, "flood", f"{HELD_BROADCASTS_MAX} broadcasts of run {run} held already"
+            )
         else:
             self._held.setdefault(run, []).append(broadcast)
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import trio
 
+from fishswarm.actors import channel as channel_module
 from fishswarm.actors.bus import MemoryBus, open_token
 from fishswarm.actors.channel import Channel
 from fishswarm.actors.inbox import Inbox
@@ -166,6 +167,51 @@ def test_a_new_runs_first_broadcasts_that_come_before_its_first_snapshot_are_del
     statistics = channel.statistics()
     assert statistics.missing_broadcasts == 0
     assert statistics.unannounced == 2 and statistics.rejected == 0
+
+
+def test_a_flood_of_one_unseen_runs_broadcasts_does_not_crowd_out_the_next_runs(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # Run 9's fish 1 floods the channel with tick-0 broadcasts before any snapshot of its
+    # run: past the per-run cap they are refused, while run 8's first broadcast is still
+    # kept and delivered once run 8 starts. A fourth unseen run is one too many.
+    monkeypatch.setattr(channel_module, "HELD_BROADCASTS_MAX", 3)
+    monkeypatch.setattr(channel_module, "HELD_RUNS_MAX", 3)
+
+    async def main() -> tuple[list[Delivery], Channel]:
+        bus = MemoryBus()
+        channel = Channel(SCENARIO)
+        async with (
+            subscription(bus, KEYS.channel_report) as reports,
+            subscription(bus, KEYS.fish_inboxes()) as inboxes,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(channel.run, bus)
+            bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0], run=7))
+            await trio.sleep(0.01)
+            for value in range(5):
+                bus.put(KEYS.outbox(1), broadcast(1, 0, value, run=9))
+            bus.put(KEYS.outbox(0), broadcast(0, 0, 4, run=8))
+            bus.put(KEYS.outbox(2), broadcast(2, 0, 6, run=10))
+            bus.put(KEYS.outbox(2), broadcast(2, 0, 6, run=11))  # a fourth run: refused
+            await trio.sleep(0.01)
+            bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0], run=8))
+            await trio.sleep(0.01)
+            bus.put(KEYS.snapshot, snapshot(1, [1, 0, 0], run=8))
+            with trio.fail_after(10):
+                report = decode((await reports.receive())[1], ChannelReport)
+            nursery.cancel_scope.cancel()
+        assert report.tick == 1 and report.inbox_counts.tolist() == [0, 1, 1]
+        return [decode(payload, Delivery) for _, payload in inboxes.drain()], channel
+
+    deliveries, channel = run_mock(main)
+    assert sorted((d.receiver_id, d.tick, d.run, int(d.values[0])) for d in deliveries) == [
+        (1, 1, 8, 4), (2, 1, 8, 4),
+    ]  # fmt: skip
+    statistics = channel.statistics()
+    # Two of run 9's five and run 11's one refused; run 9's other three and run 10's one
+    # let go when run 8 came.
+    assert statistics.rejected == 3 and statistics.unannounced == 4
 
 
 Step = tuple[str, int, int, int | list[int]]
