@@ -169,14 +169,19 @@ class Channel:
         ):
             task_status.started()
             while True:
+                before = self._run if self._first_tick is not None else None
                 snapshot = await self._next_snapshot()
                 self._take_robots()
                 if self._first_tick is None or snapshot.tick == 0:
                     self._first_tick = snapshot.tick
-                if snapshot.tick == 0:
+                # A run starts at its tick 0, or, where that snapshot was lost, at the first
+                # snapshot of another run than the last one seen: its losses then still draw
+                # from their start. (A channel come up during a run joins it as it is.)
+                if snapshot.tick == 0 or before not in (None, snapshot.run):
                     self._start_run()
                     if self._ask_world is not None:
                         await self._take_the_worlds_medium(self._ask_world)
+                if snapshot.tick == 0:
                     continue
                 shown = flashes_shown(snapshot.lights, time_mode=self.scenario.time_mode)
                 if int(snapshot.broadcasts.sum()) == 0 and not shown:

@@ -340,13 +340,17 @@ def test_broadcasts_of_a_tick_whose_snapshot_was_missed_are_counted_when_a_later
 LOSSY = Scenario(fish=3, channel_loss=0.5, seed=4)
 
 
-async def _one_run(bus: MemoryBus, reports: Inbox[tuple[str, bytes]]) -> list[list[int]]:
-    """A run of 8 ticks in which fish 0 broadcasts at every tick: each tick's inbox counts."""
+async def _one_run(
+    bus: MemoryBus, reports: Inbox[tuple[str, bytes]], *, run: int = 0, first_lost: bool = False
+) -> list[list[int]]:
+    """A run of 8 ticks in which fish 0 broadcasts at every tick: each tick's inbox counts
+    (``first_lost``: the run's snapshot of tick 0 never reaches the channel)."""
     counts = []
-    bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0]))
+    if not first_lost:
+        bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0], run=run))
     for tick in range(1, 9):
-        bus.put(KEYS.outbox(0), broadcast(0, tick - 1, tick))
-        bus.put(KEYS.snapshot, snapshot(tick, [1, 0, 0]))
+        bus.put(KEYS.outbox(0), broadcast(0, tick - 1, tick, run=run))
+        bus.put(KEYS.snapshot, snapshot(tick, [1, 0, 0], run=run))
         report = decode((await reports.receive())[1], ChannelReport)
         counts.append(report.inbox_counts.tolist())
     return counts
@@ -362,6 +366,43 @@ async def _runs(channel: Channel, runs: int) -> list[list[list[int]]]:
         counts = [await _one_run(bus, reports) for _ in range(runs)]
         nursery.cancel_scope.cancel()
     return counts
+
+
+def test_a_run_whose_first_snapshot_was_lost_still_loses_what_its_seed_says() -> None:
+    """A channel that served run 7 misses run 8's snapshot of tick 0: run 8 starts for it
+    at its first snapshot of tick 1, and loses what a channel serving run 8 alone loses
+    (the loss streams restart; they went on from run 7's draws)."""
+
+    async def two_runs(channel: Channel) -> list[list[list[int]]]:
+        bus = MemoryBus()
+        async with (
+            subscription(bus, KEYS.channel_report) as reports,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(channel.run, bus)
+            counts = [
+                await _one_run(bus, reports, run=7),
+                await _one_run(bus, reports, run=8, first_lost=True),
+            ]
+            nursery.cancel_scope.cancel()
+        return counts
+
+    async def alone(channel: Channel) -> list[list[int]]:
+        bus = MemoryBus()
+        async with (
+            subscription(bus, KEYS.channel_report) as reports,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(channel.run, bus)
+            counts = await _one_run(bus, reports, run=8)
+            nursery.cancel_scope.cancel()
+        return counts
+
+    reference = run_mock(lambda: alone(Channel(LOSSY)))
+    served = run_mock(lambda: two_runs(Channel(LOSSY)))
+    assert sum(c[1] + c[2] for c in reference) < 16  # the seed loses some of 16
+    assert served[0] == reference  # run 7 from its start, as run 8 alone
+    assert served[1] == reference
 
 
 def test_a_channel_apart_from_its_world_takes_each_runs_medium_from_the_world(
