@@ -135,6 +135,29 @@ def test_a_new_runs_first_broadcasts_that_come_before_its_first_snapshot_are_del
     # router). They name their run: kept for it, and delivered when announced (they were
     # refused as stale against run 7's ticks, and the run went otherwise than its seed
     # says). Run 9's, whose snapshots never come, are let go when run 8's first comes.
+    deliveries, channel = _run_8_after(
+        [
+            (0, broadcast(0, 0, 4, run=8)),
+            (1, broadcast(1, 0, 5, run=9)),
+            (2, broadcast(2, 3, 6, run=8)),  # no first tick: let go
+        ],
+        run_7_ticks=16,
+    )
+    assert sorted((d.receiver_id, d.tick, d.run, int(d.values[0])) for d in deliveries) == [
+        (1, 1, 8, 4), (2, 1, 8, 4),
+    ]  # fmt: skip
+    statistics = channel.statistics()
+    assert statistics.missing_broadcasts == 0
+    assert statistics.unannounced == 2 and statistics.rejected == 0
+
+
+def _run_8_after(
+    early: list[tuple[int, bytes]], *, run_7_ticks: int
+) -> tuple[list[Delivery], Channel]:
+    """Run 7's first ``run_7_ticks`` snapshots, then the broadcasts ``early`` (sender,
+    payload) before run 8's first snapshot, then run 8's ticks 0 and 1 (which announces
+    fish 0's broadcast of tick 0): what the channel delivered, and the channel."""
+
     async def main() -> tuple[list[Delivery], Channel]:
         bus = MemoryBus()
         channel = Channel(SCENARIO)
@@ -144,12 +167,11 @@ def test_a_new_runs_first_broadcasts_that_come_before_its_first_snapshot_are_del
             trio.open_nursery() as nursery,
         ):
             await nursery.start(channel.run, bus)
-            for tick in range(16):
+            for tick in range(run_7_ticks):
                 bus.put(KEYS.snapshot, snapshot(tick, [0, 0, 0], run=7))
                 await trio.sleep(0.01)
-            bus.put(KEYS.outbox(0), broadcast(0, 0, 4, run=8))
-            bus.put(KEYS.outbox(1), broadcast(1, 0, 5, run=9))
-            bus.put(KEYS.outbox(2), broadcast(2, 3, 6, run=8))  # no first tick: let go
+            for sender, payload in early:
+                bus.put(KEYS.outbox(sender), payload)
             await trio.sleep(0.01)
             bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0], run=8))
             await trio.sleep(0.01)
@@ -160,13 +182,7 @@ def test_a_new_runs_first_broadcasts_that_come_before_its_first_snapshot_are_del
         assert report.tick == 1 and report.inbox_counts.tolist() == [0, 1, 1]
         return [decode(payload, Delivery) for _, payload in inboxes.drain()], channel
 
-    deliveries, channel = run_mock(main)
-    assert sorted((d.receiver_id, d.tick, d.run, int(d.values[0])) for d in deliveries) == [
-        (1, 1, 8, 4), (2, 1, 8, 4),
-    ]  # fmt: skip
-    statistics = channel.statistics()
-    assert statistics.missing_broadcasts == 0
-    assert statistics.unannounced == 2 and statistics.rejected == 0
+    return run_mock(main)
 
 
 def test_a_flood_of_one_unseen_runs_broadcasts_does_not_crowd_out_the_next_runs(
@@ -178,33 +194,16 @@ def test_a_flood_of_one_unseen_runs_broadcasts_does_not_crowd_out_the_next_runs(
     monkeypatch.setattr(channel_module, "HELD_BROADCASTS_MAX", 3)
     monkeypatch.setattr(channel_module, "HELD_RUNS_MAX", 3)
 
-    async def main() -> tuple[list[Delivery], Channel]:
-        bus = MemoryBus()
-        channel = Channel(SCENARIO)
-        async with (
-            subscription(bus, KEYS.channel_report) as reports,
-            subscription(bus, KEYS.fish_inboxes()) as inboxes,
-            trio.open_nursery() as nursery,
-        ):
-            await nursery.start(channel.run, bus)
-            bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0], run=7))
-            await trio.sleep(0.01)
-            for value in range(5):
-                bus.put(KEYS.outbox(1), broadcast(1, 0, value, run=9))
-            bus.put(KEYS.outbox(0), broadcast(0, 0, 4, run=8))
-            bus.put(KEYS.outbox(2), broadcast(2, 0, 6, run=10))
-            bus.put(KEYS.outbox(2), broadcast(2, 0, 6, run=11))  # a fourth run: refused
-            await trio.sleep(0.01)
-            bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0], run=8))
-            await trio.sleep(0.01)
-            bus.put(KEYS.snapshot, snapshot(1, [1, 0, 0], run=8))
-            with trio.fail_after(10):
-                report = decode((await reports.receive())[1], ChannelReport)
-            nursery.cancel_scope.cancel()
-        assert report.tick == 1 and report.inbox_counts.tolist() == [0, 1, 1]
-        return [decode(payload, Delivery) for _, payload in inboxes.drain()], channel
-
-    deliveries, channel = run_mock(main)
+    flood = [(1, broadcast(1, 0, value, run=9)) for value in range(5)]
+    deliveries, channel = _run_8_after(
+        [
+            *flood,
+            (0, broadcast(0, 0, 4, run=8)),
+            (2, broadcast(2, 0, 6, run=10)),
+            (2, broadcast(2, 0, 6, run=11)),  # a fourth run: refused
+        ],
+        run_7_ticks=1,
+    )
     assert sorted((d.receiver_id, d.tick, d.run, int(d.values[0])) for d in deliveries) == [
         (1, 1, 8, 4), (2, 1, 8, 4),
     ]  # fmt: skip
@@ -356,14 +355,17 @@ async def _one_run(
     return counts
 
 
-async def _runs(channel: Channel, runs: int) -> list[list[list[int]]]:
+async def _runs(channel: Channel, runs: int | list[tuple[int, bool]]) -> list[list[list[int]]]:
+    """Runs served one after the other: ``runs`` unnumbered ones, or those listed as (run,
+    whether its tick-0 snapshot is lost)."""
+    listed = [(0, False)] * runs if isinstance(runs, int) else runs
     bus = MemoryBus()
     async with (
         subscription(bus, KEYS.channel_report) as reports,
         trio.open_nursery() as nursery,
     ):
         await nursery.start(channel.run, bus)
-        counts = [await _one_run(bus, reports) for _ in range(runs)]
+        counts = [await _one_run(bus, reports, run=run, first_lost=lost) for run, lost in listed]
         nursery.cancel_scope.cancel()
     return counts
 
@@ -373,33 +375,8 @@ def test_a_run_whose_first_snapshot_was_lost_still_loses_what_its_seed_says() ->
     at its first snapshot of tick 1, and loses what a channel serving run 8 alone loses
     (the loss streams restart; they went on from run 7's draws)."""
 
-    async def two_runs(channel: Channel) -> list[list[list[int]]]:
-        bus = MemoryBus()
-        async with (
-            subscription(bus, KEYS.channel_report) as reports,
-            trio.open_nursery() as nursery,
-        ):
-            await nursery.start(channel.run, bus)
-            counts = [
-                await _one_run(bus, reports, run=7),
-                await _one_run(bus, reports, run=8, first_lost=True),
-            ]
-            nursery.cancel_scope.cancel()
-        return counts
-
-    async def alone(channel: Channel) -> list[list[int]]:
-        bus = MemoryBus()
-        async with (
-            subscription(bus, KEYS.channel_report) as reports,
-            trio.open_nursery() as nursery,
-        ):
-            await nursery.start(channel.run, bus)
-            counts = await _one_run(bus, reports, run=8)
-            nursery.cancel_scope.cancel()
-        return counts
-
-    reference = run_mock(lambda: alone(Channel(LOSSY)))
-    served = run_mock(lambda: two_runs(Channel(LOSSY)))
+    reference = run_mock(lambda: _runs(Channel(LOSSY), [(8, False)]))[0]
+    served = run_mock(lambda: _runs(Channel(LOSSY), [(7, False), (8, True)]))
     assert sum(c[1] + c[2] for c in reference) < 16  # the seed loses some of 16
     assert served[0] == reference  # run 7 from its start, as run 8 alone
     assert served[1] == reference
