@@ -671,9 +671,11 @@ class World:
             if paused:
                 self.state_name = "paused"  # held here, at this snapshot, until resumed
             held = trio.current_time()
-            await self._resume.wait()
-            if paused:
-                self.paused_time += trio.current_time() - held
+            try:
+                await self._resume.wait()
+            finally:  # a pause cut short by the run's end (Ctrl-C) is a pause too
+                if paused:
+                    self.paused_time += trio.current_time() - held
             if self._stop_requested:
                 # Stopped while paused (or in the moment the wait yields): the run ends at
                 # this snapshot, without asking the fish for one more tick.

@@ -827,6 +827,21 @@ async def _under_control(
     return answers, world
 
 
+def test_a_run_interrupted_while_paused_counts_its_pause() -> None:
+    """Cancelled while paused (Ctrl-C in `fishswarm run`), the world still counts the
+    pause so far: the run's real-time factor leaves it out (it counted it as running)."""
+
+    async def script(ask: Ask, observer: Observer, world: World) -> None:
+        await observer.wait_for_tick(2)
+        ask("pause")
+        await _until_state(world, "paused")
+        await trio.sleep(50.0)
+
+    _, world = run_mock(lambda: _under_control(Scenario(fish=2, duration=1000.0), script))
+    assert world.state_name == "paused"
+    assert 50.0 <= world.paused_time < 50.1  # from the snapshot it holds at
+
+
 async def _until_state(world: World, state: str) -> None:
     with trio.fail_after(10.0):
         while world.state_name != state:
