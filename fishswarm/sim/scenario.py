@@ -41,6 +41,7 @@ from fishswarm.bluebot.parameters import (
     Tank,
 )
 from fishswarm.bluebot.vision import Vision
+from fishswarm.protocols.checks import MAX_TICK
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import FORMATION_SHAPES
 from fishswarm.sim.wake import WAKE_LENGTH, WAKE_WIDTH
@@ -306,8 +307,10 @@ class Scenario:
             f"got {self.control_period:g}",
         )
         need(
-            isinstance(self.seed, int) and self.seed >= 0,
-            f"seed must be a non-negative integer, got {self.seed!r}",
+            isinstance(self.seed, int) and 0 <= self.seed <= MAX_TICK,
+            # The bound: the world tells its settings in a message, whose integers are held
+            # to it.
+            f"seed must be a whole number from 0 to 2**62 ({MAX_TICK}), got {self.seed!r}",
         )
         need(
             _positive(self.caudal_cap) and self.caudal_cap <= 1,

@@ -82,7 +82,12 @@ def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
         ({"blind_width": -0.1}, "blind_width must be a finite non-negative number"),
         ({"channel_loss": 1.0}, "channel_loss must be a probability"),
         ({"swarm": "a b"}, "letters, digits"),
-        ({"seed": -1}, "seed must be a non-negative integer"),
+        ({"seed": -1}, r"seed must be a whole number from 0 to 2\*\*62"),
+        # One past what a message's integer may be: the world tells its seed in one.
+        (
+            {"seed": 2**62 + 1},
+            r"seed must be a whole number from 0 to 2\*\*62 \(4611686018427387904\)",
+        ),
         ({"flow": (0.1, math.nan, 0.0)}, r"flow must be a velocity \(x, y, z\) in m/s"),
         ({"wake_saving": 1.0}, r"wake_saving must be a fraction in \[0, 1\)"),
         ({"wake_width": 0.0}, "wake_length and wake_width must be positive lengths"),
