@@ -246,6 +246,17 @@ class Experiment:
             )
         if not self.values:
             raise ConfigError(f"experiment {self.name}: values must not be empty")
+        if len(set(self.values)) < len(self.values):
+            repeated = sorted({v for v in self.values if list(self.values).count(v) > 1})
+            raise ConfigError(
+                f"experiment {self.name}: values must differ; {', '.join(map(str, repeated))} "
+                "is given more than once (more runs of a value: --seeds)"
+            )
+        if self.parameter == "fish" and not all(float(v).is_integer() for v in self.values):
+            raise ConfigError(
+                f"experiment {self.name}: fish must be whole numbers, got "
+                f"{', '.join(map(str, self.values))}"
+            )
         if not isinstance(self.seeds, int) or self.seeds < 1:
             raise ConfigError(f"experiment {self.name}: seeds must be at least 1")
         names = [name for name, _ in self.groups]

@@ -107,7 +107,7 @@ def write_report(
             writer.writerow(
                 [
                     *([outcome.group] if grouped else []),
-                    outcome.value,
+                    int(outcome.value) if experiment.parameter == "fish" else outcome.value,
                     outcome.seed,
                     *outcome.metrics[0].tolist(),
                     *outcome.metrics[-1].tolist(),
@@ -182,7 +182,7 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
     lines = [
         f"# {experiment.title}",
         "",
-        f"{scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
+        f"{_fish_text(experiment)} fish, {scenario.behavior}, {scenario.duration:g} s at "
         f"{1 / scenario.control_period:g} Hz; {experiment.spread_text}. {explain}"
         + _following_text(scenario),
         "",
@@ -200,6 +200,13 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
             cells.append(f"{mean:.{summary.digits}f}{spread}")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _fish_text(experiment: Experiment) -> str:
+    """How many fish the runs have: the scenario's, or the values swept."""
+    if experiment.parameter == "fish":
+        return ", ".join(f"{value:g}" for value in experiment.values)
+    return str(experiment.scenario.fish)
 
 
 def _settings_text(settings: Mapping[str, Any]) -> str:

@@ -97,6 +97,15 @@ def test_unknown_experiment_lists_the_known_ones() -> None:
             '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\nseeds = 0\n',
             "experiment x: seeds must be at least 1",
         ),
+        (
+            '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2.5, 3]\n',
+            "experiment x: fish must be whole numbers, got 2.5, 3",
+        ),
+        (
+            '[experiment]\nname = "x"\nparameter = "blind_width"\nvalues = [0.1, 0.2, 0.1]\n',
+            r"experiment x: values must differ; 0.1 is given more than once \(more runs of a "
+            r"value: --seeds\)",
+        ),
         ("[experiment\n", "not valid TOML"),
         (
             '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\n[scenairo]\nfish = 3\n',
@@ -452,3 +461,22 @@ def test_runs_csv_holds_each_runs_number_behind_every_table_column(tmp_path: Pat
     assert float(row["centroid_distance_change_percent_sd"]) == pytest.approx(
         np.std([25.0, 50.0], ddof=1)
     )
+
+
+def test_a_sweep_of_fish_says_the_counts_it_runs(tmp_path: Path) -> None:
+    path = tmp_path / "fish.toml"
+    path.write_text(
+        '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2, 3]\n'
+        '[scenario]\nbehavior = "aggregation"\nduration = 2\n',
+        encoding="utf-8",
+    )
+    experiment = Experiment.from_toml(path)
+    outcomes = [
+        RunOutcome(value, 0, np.arange(3.0), np.ones((3, len(experiment.metric_names))),
+                   np.zeros((3, int(value), 3)), 1.0)
+        for value in (2.0, 3.0)
+    ]  # fmt: skip
+    write_report(experiment, outcomes, tmp_path / "out", engine="batch", wall_time=1.0)
+    assert "\n2, 3 fish, aggregation, 2 s at 1 Hz" in (tmp_path / "out" / "table.md").read_text()
+    with (tmp_path / "out" / "runs.csv").open(encoding="utf-8") as stream:
+        assert [run["fish"] for run in csv.DictReader(stream)] == ["2", "3"]
