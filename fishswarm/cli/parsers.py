@@ -23,6 +23,7 @@ from fishswarm.learning.arena import REPLICA_KINDS
 from fishswarm.protocols.keys import MAX_FISH_ID, check_name
 from fishswarm.protocols.messages import FORMATION_SHAPES
 from fishswarm.sim.scenario import (
+    APPLIES_WHEN,
     EXPERIMENT_SWITCHES,
     PROFILES,
     START_TIMEOUT,
@@ -30,6 +31,7 @@ from fishswarm.sim.scenario import (
     TURN_DELAY,
     ConfigError,
     Scenario,
+    either,
     scenario_table,
     switch_names,
 )
@@ -360,25 +362,6 @@ def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -
             group.add_argument(flag, dest=name, type=kind, default=None, help=text)
 
 
-_APPLIES_WHEN: dict[str, tuple[str, tuple[str, ...], str]] = {
-    "formation": ("behavior", ("formation",), "--behavior formation"),
-    "spacing": ("behavior", ("formation",), "--behavior formation"),
-    "flags": ("behavior", ("formation",), "--behavior formation"),
-    "flag_medium": ("behavior", ("formation",), "--behavior formation"),
-    "rotate_effort": ("behavior", ("formation",), "--behavior formation"),
-    "model": ("behavior", ("replica",), "--behavior replica"),
-    "orbit_radius": (
-        "behavior",
-        ("orbit", "milling", "waltz"),
-        "--behavior orbit, milling or waltz",
-    ),
-    "jitter": ("time_mode", ("jitter",), "--time jitter"),
-    "spawn_radius": ("spawn_region", ("ball",), "--spawn ball"),
-}
-"""Scenario flags that mean something only beside another setting: (that setting, the
-values it must have, the flag that gives one of them)."""
-
-
 def _refuse_inapplicable(given: dict[str, Any], scenario: Scenario) -> None:
     """Refuse a scenario flag given on the command line that this scenario would ignore
     (``--formation`` in a dispersion run, say), rather than run without it unsaid.
@@ -386,11 +369,12 @@ def _refuse_inapplicable(given: dict[str, Any], scenario: Scenario) -> None:
     Raises:
         ConfigError: naming the flag and what it needs.
     """
-    for name, (setting, values, needed) in _APPLIES_WHEN.items():
+    for name, (setting, values) in APPLIES_WHEN.items():
         if given.get(name) is None or getattr(scenario, setting) in values:
             continue
         flag = _SCENARIO_FLAGS[name][0]
         shown = _SCENARIO_FLAGS[setting][0]
+        needed = f"{shown} {either(values)}"
         raise ConfigError(
             f"{flag} applies only with {needed}, and this {shown} is "
             f"{getattr(scenario, setting)}: add {needed}, or leave {flag} out"
@@ -416,15 +400,6 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
     return scenario.check_duration() if hasattr(args, "duration") else scenario
 
 
-_FILE_APPLIES_WHEN = {
-    **_APPLIES_WHEN,
-    "switch_formation": ("behavior", ("formation",), "behavior formation"),
-    "switch_at": ("behavior", ("formation",), "behavior formation"),
-}
-"""Settings of a scenario file that mean something only beside another (as
-:data:`_APPLIES_WHEN` for flags, and a scheduled formation switch)."""
-
-
 def _unused_settings(
     table: dict[str, Any], given: dict[str, Any], scenario: Scenario, path: Path | None
 ) -> list[str]:
@@ -434,10 +409,9 @@ def _unused_settings(
     only experiments act on (named in ``study_code``, from the file or --study-code; the
     study-code profile turns every switch on, these too)."""
     unused: dict[tuple[str, str], list[str]] = {}
-    for name, (setting, values, _) in _FILE_APPLIES_WHEN.items():
+    for name, (setting, values) in APPLIES_WHEN.items():
         if name in table and given.get(name) is None and getattr(scenario, setting) not in values:
-            needed = " or ".join([", ".join(values[:-1]), values[-1]] if values[1:] else values)
-            unused.setdefault((setting, needed), []).append(name)
+            unused.setdefault((setting, either(values)), []).append(name)
     warnings = [
         f"{path}: {', '.join(names)} {'apply' if names[1:] else 'applies'} only with "
         f"{setting} {needed}, and this run's {setting} is {getattr(scenario, setting)}: "

@@ -96,6 +96,40 @@ START_DELAY_PERIODS = 2
 only once their clock passed 1)."""
 
 
+_FORMING = ("behavior", ("formation",))
+APPLIES_WHEN: dict[str, tuple[str, tuple[str, ...]]] = {
+    **{
+        name: _FORMING
+        for name in (
+            "formation",
+            "spacing",
+            "tolerance",
+            "formation_heading_deg",
+            "formation_lead",
+            "flags",
+            "flag_medium",
+            "slot_rule",
+            "local_rule",
+            "rotate_effort",
+            "effort_margin",
+            "switch_formation",
+            "switch_at",
+        )
+    },
+    "model": ("behavior", ("replica",)),
+    "orbit_radius": ("behavior", ("orbit", "milling", "waltz")),
+    "jitter": ("time_mode", ("jitter",)),
+    "spawn_radius": ("spawn_region", ("ball",)),
+}
+"""Settings that mean something only beside another: (that setting, the values it must
+have). Elsewhere they change nothing, and are refused or warned of."""
+
+
+def either(values: tuple[str, ...]) -> str:
+    """``values`` as words: ``a``, ``a or b``, ``a, b or c``."""
+    return " or ".join([", ".join(values[:-1]), values[-1]] if values[1:] else values)
+
+
 def switch_names(text: str) -> tuple[str, ...]:
     """Study-code switches as written on a command line: ``drag,euler-step`` → ("drag",
     "euler-step"); an empty text → none."""

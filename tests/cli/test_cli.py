@@ -363,13 +363,17 @@ def test_preparing_a_folder_leaves_another_commands_probe_alone(tmp_path: Path) 
 def test_a_scenario_files_settings_that_the_run_ignores_are_named(tmp_path: Path) -> None:
     # The same as flags are refused; from a file (which may serve several runs) warned of.
     config = tmp_path / "c.toml"
-    config.write_text('switch_formation = "diamond"\nswitch_at = 1\njitter = 0.1\nfish = 3\n')
+    config.write_text(
+        'switch_formation = "diamond"\nswitch_at = 1\njitter = 0.1\nfish = 3\ntolerance = 0.1\n'
+        'slot_rule = "share"\n'
+    )
     summary = tmp_path / "s.json"
     result = _run("run", "--config", str(config), "--duration", "1", "--quiet",
                   *_outputs(tmp_path, summary))  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert (
-        f"fishswarm run: warning: {config}: switch_formation, switch_at apply only with "
+        f"fishswarm run: warning: {config}: tolerance, slot_rule, switch_formation, switch_at "
+        "apply only with "
         "behavior formation, and this run's behavior is dispersion: here they change nothing"
     ) in result.stderr
     assert (

@@ -106,6 +106,12 @@ def test_unknown_experiment_lists_the_known_ones() -> None:
             r"experiment x: values must differ; 0.1 is given more than once \(more runs of a "
             r"value: --seeds\)",
         ),
+        (
+            '[experiment]\nname = "x"\nparameter = "spacing"\nvalues = [0.3, 0.4]\n'
+            '[scenario]\nbehavior = "aggregation"\n',
+            "experiment x: spacing applies only with behavior formation, and its behavior is "
+            "aggregation: every value would run alike",
+        ),
         ("[experiment\n", "not valid TOML"),
         (
             '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\n[scenairo]\nfish = 3\n',
