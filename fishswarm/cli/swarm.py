@@ -62,7 +62,7 @@ from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import ControlReply, ControlRequest, RobotOrder
 from fishswarm.sim.decision_kernels import prepare, with_compiled_decisions
-from fishswarm.sim.physics import WorldParams, spawn_spacing
+from fishswarm.sim.physics import WorldParams, spawn_spacing, start_layout
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.live_view import open_live_view
 from fishswarm.study.progress import ProgressLine, bar, ids_text
@@ -137,12 +137,31 @@ CROWDED_SPACING = BODY_LENGTH / 4
 of, m: a quarter of a BlueBot's length, about half the spacing of the study's own start."""
 
 
-def crowding_warning(scenario: Scenario) -> str | None:
-    """What to say when the fish start piled on one another — hundreds of fish in the
-    study's start ball — and how to spread them; None when they do not."""
-    spacing = spawn_spacing(WorldParams.of(scenario), scenario.fish)
-    if spacing >= CROWDED_SPACING:
-        return None
+ON_WALLS_SHARE = 0.1
+"""Fish starting on the tank's walls beyond this share of them are warned of (their place in
+the start ball lay outside the tank)."""
+
+
+def start_warnings(scenario: Scenario) -> list[str]:
+    """What to say of how the fish start, each with the way out: many put on the tank's
+    walls (a start ball that reaches past them), or piled on one another (hundreds of fish
+    in the study's start ball)."""
+    params = WorldParams.of(scenario)
+    layout = start_layout(params, scenario.fish)
+    warnings = []
+    past_walls = (
+        scenario.spawn_region == "ball" and layout.on_walls > ON_WALLS_SHARE * scenario.fish
+    )
+    if past_walls:
+        size = " × ".join(f"{side:g}" for side in scenario.tank)
+        warnings.append(
+            f"{layout.on_walls} of the {scenario.fish} fish start on the tank's walls: the "
+            f"start ball's radius, {params.spawn_radius:g} m, reaches past them (the tank is "
+            f"{size} m); give a --spawn-radius of at most {min(scenario.tank) / 2:g} m, or "
+            "--spawn tank to spread them over the whole tank"
+        )
+    if layout.spacing >= CROWDED_SPACING:
+        return warnings
     study = Scenario()  # the study's dispersion start, the tightest of its set-ups
     usual = spawn_spacing(WorldParams.of(study), study.fish)
     if scenario.spawn_region == "tank":
@@ -150,19 +169,20 @@ def crowding_warning(scenario: Scenario) -> str | None:
     else:
         way_out = (
             "--spawn tank (anywhere in the tank; with a larger tank = [x, y, z] in a "
-            "--config file for more room) or a larger --spawn-radius"
+            "--config file for more room)" + ("" if past_walls else " or a larger --spawn-radius")
         )
-    return (
-        f"the {scenario.fish} fish start a median {spacing * 100:.1f} cm from their nearest "
-        f"neighbour (a BlueBot is {BODY_LENGTH * 100:.0f} cm long; the study's dispersion "
-        f"start puts {study.fish} fish {usual * 100:.0f} cm apart): spread them with {way_out}"
+    warnings.append(
+        f"the {scenario.fish} fish start a median {layout.spacing * 100:.1f} cm from their "
+        f"nearest neighbour (a BlueBot is {BODY_LENGTH * 100:.0f} cm long; the study's "
+        f"dispersion start puts {study.fish} fish {usual * 100:.0f} cm apart): spread them "
+        f"with {way_out}"
     )
+    return warnings
 
 
-def _warn_if_crowded(command: str, scenario: Scenario) -> None:
-    crowded = crowding_warning(scenario)
-    if crowded is not None:
-        print(f"fishswarm {command}: warning: {crowded}", file=sys.stderr)
+def _warn_of_the_start(command: str, scenario: Scenario) -> None:
+    for warning in start_warnings(scenario):
+        print(f"fishswarm {command}: warning: {warning}", file=sys.stderr)
 
 
 def _watchdog_warning(timeout: float, scenario: Scenario) -> str | None:
@@ -228,7 +248,7 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         f"{settings.listen}",
         file=sys.stderr,
     )
-    _warn_if_crowded("run", scenario)
+    _warn_of_the_start("run", scenario)
     show = None if args.quiet else progress_printer(scenario.ticks)
     with contextlib.ExitStack() as serving:
         view = None
@@ -447,7 +467,7 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
 
 def world(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm world``: the world alone."""
-    _warn_if_crowded("world", scenario)
+    _warn_of_the_start("world", scenario)
     actor = World(
         WorldSettings(
             scenario,

@@ -151,14 +151,37 @@ def place(params: WorldParams, ids: IntArray) -> State:
     return rest_state(position, yaw)
 
 
+@dataclass(frozen=True)
+class StartLayout:
+    """How fish ``0 … N − 1`` start.
+
+    Attributes:
+        spacing: the median distance from a fish to its nearest other, m (infinite for
+            fewer than two fish).
+        on_walls: how many start on the tank's walls, floor or surface: their place in the
+            start ball lay outside the tank (uniform draws never land on them exactly).
+    """
+
+    spacing: float
+    on_walls: int
+
+
+def start_layout(params: WorldParams, fish: int) -> StartLayout:
+    """How fish ``0 … fish − 1`` start at their spawn poses."""
+    position = place(params, np.arange(fish, dtype=np.int64)).position
+    on_walls = int(
+        ((position <= 0.0) | (position >= np.asarray(params.tank.size))).any(axis=1).sum()
+    )
+    if fish < 2:
+        return StartLayout(float("inf"), on_walls)
+    distance, _ = cKDTree(position).query(position, k=2)
+    return StartLayout(float(np.median(distance[:, 1])), on_walls)
+
+
 def spawn_spacing(params: WorldParams, fish: int) -> float:
     """How far apart fish ``0 … fish − 1`` start: the median distance from a fish to its
     nearest other at the spawn poses, m (infinite for fewer than two fish)."""
-    if fish < 2:
-        return float("inf")
-    position = place(params, np.arange(fish, dtype=np.int64)).position
-    distance, _ = cKDTree(position).query(position, k=2)
-    return float(np.median(distance[:, 1]))
+    return start_layout(params, fish).spacing
 
 
 def observe(

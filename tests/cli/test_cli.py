@@ -318,20 +318,34 @@ def test_an_observer_with_no_world_to_watch_says_what_it_waits_for() -> None:
 
 
 def test_fish_piled_on_one_another_at_the_start_are_warned_of_with_the_way_out() -> None:
-    from fishswarm.cli.swarm import crowding_warning
+    from fishswarm.cli.swarm import start_warnings
 
-    assert crowding_warning(Scenario()) is None  # the study's 25 fish, 6 cm apart
-    assert crowding_warning(Scenario(fish=1000, spawn_region="tank")) is None  # 8.5 cm
-    warning = crowding_warning(Scenario(fish=1000))  # the study's ball: 2.3 cm
-    assert warning is not None
+    assert start_warnings(Scenario()) == []  # the study's 25 fish, 6 cm apart
+    assert start_warnings(Scenario(fish=1000, spawn_region="tank")) == []  # 8.5 cm
+    (warning,) = start_warnings(Scenario(fish=1000))  # the study's ball: 2.3 cm
     assert warning.startswith("the 1000 fish start a median 2.3 cm from their nearest")
     assert "the study's dispersion start puts 25 fish 6 cm apart" in warning
     assert "--spawn tank" in warning and "--spawn-radius" in warning
     # Already spread over the whole tank: only a larger tank helps.
-    packed = crowding_warning(Scenario(fish=20_000, spawn_region="tank"))
-    assert packed is not None and packed.endswith(
-        "a larger tank (tank = [x, y, z] in a --config file)"
+    (packed,) = start_warnings(Scenario(fish=20_000, spawn_region="tank"))
+    assert packed.endswith("a larger tank (tank = [x, y, z] in a --config file)")
+
+
+def test_a_start_ball_past_the_tanks_walls_is_warned_of_and_not_made_larger() -> None:
+    from fishswarm.cli.swarm import start_warnings
+
+    # A 100-m ball around the centre of the study's 1.78 x 1.78 x 1.17 m tank: nearly every
+    # place drawn in it lies outside, and its fish start clipped onto the walls (at the
+    # corners), piled there: neither warning may say to make the ball larger.
+    walls, piled = start_warnings(Scenario(fish=6, spawn_radius=100.0))
+    assert walls == (
+        "6 of the 6 fish start on the tank's walls: the start ball's radius, 100 m, reaches "
+        "past them (the tank is 1.78 × 1.78 × 1.17 m); give a --spawn-radius of at most "
+        "0.585 m, or --spawn tank to spread them over the whole tank"
     )
+    assert "--spawn tank" in piled and "--spawn-radius" not in piled
+    # A ball just inside the tank's smallest half-size puts nobody on a wall.
+    assert start_warnings(Scenario(fish=25, spawn_radius=0.58)) == []
 
 
 def test_a_crowded_run_says_so_before_it_starts_and_runs_anyway(tmp_path: Path) -> None:
