@@ -7,12 +7,14 @@ import contextlib
 import dataclasses
 import functools
 import json
+import math
 import signal
 import sys
 import time
 from collections.abc import Awaitable, Callable
 from typing import Any
 
+import numpy as np
 import trio
 import zenoh
 
@@ -45,6 +47,7 @@ from fishswarm.actors.security import (
 from fishswarm.actors.session import SessionSettings, open_session, reaches_router
 from fishswarm.actors.world import PULSE_PERIOD, StartTimeout, World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus, query
+from fishswarm.behaviors.formation import DEFAULT_SHAPE
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.cli.common import USER_ERRORS as COMMON_ERRORS
 from fishswarm.cli.common import (
@@ -58,6 +61,7 @@ from fishswarm.cli.common import (
     run_trio,
     secure_extra,
 )
+from fishswarm.formations.local import LOCAL_SHAPES
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import ControlReply, ControlRequest, RobotOrder
@@ -137,28 +141,24 @@ CROWDED_SPACING = BODY_LENGTH / 4
 of, m: a quarter of a BlueBot's length, about half the spacing of the study's own start."""
 
 
-ON_WALLS_SHARE = 0.1
-"""Fish starting on the tank's walls beyond this share of them are warned of (their place in
-the start ball lay outside the tank)."""
-
-
 def start_warnings(scenario: Scenario) -> list[str]:
-    """What to say of how the fish start, each with the way out: many put on the tank's
-    walls (a start ball that reaches past them), or piled on one another (hundreds of fish
-    in the study's start ball)."""
+    """What to say of how the fish start, each with the way out: put on the tank's walls by
+    a start ball larger than the tank, or piled on one another (hundreds of fish in the
+    study's start ball)."""
     params = WorldParams.of(scenario)
     layout = start_layout(params, scenario.fish)
     warnings = []
-    past_walls = (
-        scenario.spawn_region == "ball" and layout.on_walls > ON_WALLS_SHARE * scenario.fish
-    )
+    # Past the corners, the ball holds the whole tank: a larger one spreads no fish more,
+    # it only puts more on the walls. (Within them some may start on a wall, as the
+    # study's formation start of 1.3 m puts them.)
+    corner = float(np.linalg.norm(scenario.tank)) / 2
+    past_walls = scenario.spawn_region == "ball" and params.spawn_radius > corner
     if past_walls:
-        size = " × ".join(f"{side:g}" for side in scenario.tank)
         warnings.append(
-            f"{layout.on_walls} of the {scenario.fish} fish start on the tank's walls: the "
-            f"start ball's radius, {params.spawn_radius:g} m, reaches past them (the tank is "
-            f"{size} m); give a --spawn-radius of at most {min(scenario.tank) / 2:g} m, or "
-            "--spawn tank to spread them over the whole tank"
+            f"the start ball's radius, {params.spawn_radius:g} m, reaches past the tank's "
+            f"corners ({corner:.2f} m from its centre), and {layout.on_walls} of the "
+            f"{scenario.fish} fish start on its walls: give a --spawn-radius of at most "
+            f"{corner:.2f} m, or --spawn tank to spread them evenly over the tank"
         )
     if layout.spacing >= CROWDED_SPACING:
         return warnings
@@ -180,9 +180,31 @@ def start_warnings(scenario: Scenario) -> list[str]:
     return warnings
 
 
+def local_shape_warning(scenario: Scenario) -> str | None:
+    """What to say when a formation's local shape (the shape it starts with, or switches
+    to) needs more fish than the run has: no fish can complete it, and its shape error is
+    not measured. None when it does not."""
+    if scenario.behavior != "formation":
+        return None
+    shapes = [scenario.formation or DEFAULT_SHAPE, scenario.switch_formation]
+    short = [
+        (shape, LOCAL_SHAPES[shape] + 1)
+        for shape in shapes
+        if shape in LOCAL_SHAPES and scenario.fish < LOCAL_SHAPES[shape] + 1
+    ]
+    if not short:
+        return None
+    needs = "; ".join(f"a {shape} needs at least {fish} fish" for shape, fish in short)
+    return (
+        f"{needs}: with {scenario.fish} no fish can complete it, and its shape error is not "
+        "measured (give more --fish)"
+    )
+
+
 def _warn_of_the_start(command: str, scenario: Scenario) -> None:
-    for warning in start_warnings(scenario):
-        print(f"fishswarm {command}: warning: {warning}", file=sys.stderr)
+    for warning in [*start_warnings(scenario), local_shape_warning(scenario)]:
+        if warning is not None:
+            print(f"fishswarm {command}: warning: {warning}", file=sys.stderr)
 
 
 def _watchdog_warning(timeout: float, scenario: Scenario) -> str | None:
@@ -359,8 +381,11 @@ def _summary_text(summary: dict[str, Any]) -> str:
             told["shape"] + (f" (from {told['time']:g} s)" if turn else "")
             for turn, told in enumerate(formation.get("shapes", []))
         )
+        error = formation["shape_error"]
+        measured = error is not None and math.isfinite(error)
         lines.append(
-            f"  formation {told}: shape error {formation['shape_error']:.3f} m, "
+            f"  formation {told}: shape error "
+            f"{f'{error:.3f} m' if measured else 'not measured (too few fish)'}, "
             f"{100 * formation['joined_fraction']:.0f} % joined "
             f"({'never 90 %' if ninety is None else f'90 % first at {ninety:g} s'}), "
             f"lattice energy {formation['lattice_energy']:.3f}, "

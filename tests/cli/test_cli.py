@@ -338,14 +338,16 @@ def test_a_start_ball_past_the_tanks_walls_is_warned_of_and_not_made_larger() ->
     # place drawn in it lies outside, and its fish start clipped onto the walls (at the
     # corners), piled there: neither warning may say to make the ball larger.
     walls, piled = start_warnings(Scenario(fish=6, spawn_radius=100.0))
+    # The corners: √(0.89² + 0.89² + 0.585²) = 1.39 m from the centre.
     assert walls == (
-        "6 of the 6 fish start on the tank's walls: the start ball's radius, 100 m, reaches "
-        "past them (the tank is 1.78 × 1.78 × 1.17 m); give a --spawn-radius of at most "
-        "0.585 m, or --spawn tank to spread them over the whole tank"
+        "the start ball's radius, 100 m, reaches past the tank's corners (1.39 m from its "
+        "centre), and 6 of the 6 fish start on its walls: give a --spawn-radius of at most "
+        "1.39 m, or --spawn tank to spread them evenly over the tank"
     )
     assert "--spawn tank" in piled and "--spawn-radius" not in piled
-    # A ball just inside the tank's smallest half-size puts nobody on a wall.
-    assert start_warnings(Scenario(fish=25, spawn_radius=0.58)) == []
+    # The study's formation start, a 1.3-m ball, stays within the corners: nothing to say.
+    assert start_warnings(Scenario(fish=25, behavior="formation")) == []
+    assert start_warnings(Scenario(fish=25, spawn_radius=1.38)) == []
 
 
 def test_a_crowded_run_says_so_before_it_starts_and_runs_anyway(tmp_path: Path) -> None:
@@ -1145,3 +1147,27 @@ def test_an_experiment_interrupted_as_its_last_run_ends_says_all_runs_are_done(
     assert f"interrupted as the last run ended: all {total} runs done" in said, said
     assert "marked incomplete" not in said
     assert json.loads((out / "summary.json").read_text())["complete"] is True
+
+
+def test_a_local_shape_with_too_few_fish_is_warned_of_and_its_error_said_unmeasured(
+    tmp_path: Path,
+) -> None:
+    from fishswarm.cli.swarm import local_shape_warning
+
+    assert local_shape_warning(Scenario(fish=3, behavior="formation", formation="triangle")) is None
+    assert local_shape_warning(Scenario(fish=2, behavior="aggregation")) is None
+    assert local_shape_warning(
+        Scenario(fish=3, behavior="formation", formation="triangle", switch_formation="tetrahedron")
+    ) == (
+        "a tetrahedron needs at least 4 fish: with 3 no fish can complete it, and its shape "
+        "error is not measured (give more --fish)"
+    )
+    summary = tmp_path / "s.json"
+    result = _run("run", "--behavior", "formation", "--formation", "triangle", "--fish", "2",
+                  "--duration", "2", *_outputs(tmp_path, summary))  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "warning: a triangle needs at least 3 fish: with 2 no fish" in result.stderr
+    # The summary goes to stderr, beside the warnings (stdout is left to data).
+    assert "formation triangle: shape error not measured (too few fish), 0 % joined" in (
+        result.stderr
+    )
