@@ -22,13 +22,13 @@ from __future__ import annotations
 import datetime
 import ipaddress
 import json
-import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from fishswarm.protocols.checks import check_int
+from fishswarm.protocols.hosts import host_address
 from fishswarm.protocols.keys import MAX_FISH_ID, KeySpace, check_name
 
 AUTHORITY = "ca"
@@ -38,11 +38,6 @@ BASE_SUBJECTS = ("router", "world", "channel", "admin", "observer")
 DEFAULT_DAYS = 365
 MAX_DAYS = 36_500
 """Certificates last at most a hundred years (dates past 9999 cannot be written)."""
-_HOST_NAME = re.compile(
-    r"(\*\.)?(?!-)[A-Za-z0-9-]{1,63}(?<!-)(\.(?!-)[A-Za-z0-9-]{1,63}(?<!-))*\.?"
-)
-"""A DNS name as a certificate may hold it: labels joined by dots, a leading ``*.`` for a
-wildcard, a trailing dot for a fully qualified name."""
 
 
 class SecurityError(RuntimeError):
@@ -261,15 +256,8 @@ def init_secure(
             rights_of(subject, keys)  # every subject must have a role
     names: list[x509.GeneralName] = []
     for host in dict.fromkeys(hosts):
-        try:
-            names.append(x509.IPAddress(ipaddress.ip_address(host)))
-        except ValueError:
-            if not _HOST_NAME.fullmatch(host):
-                raise ValueError(
-                    f"host {host!r} is neither an IP address nor a host name (letters, "
-                    "digits and '-', parts joined by '.')"
-                ) from None
-            names.append(x509.DNSName(host))
+        address = host_address(host)
+        names.append(x509.DNSName(host) if address is None else x509.IPAddress(address))
     folder.mkdir(parents=True, exist_ok=True)
     now = datetime.datetime.now(datetime.UTC)
     start, end = now - datetime.timedelta(minutes=5), now + datetime.timedelta(days=days)

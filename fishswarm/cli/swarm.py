@@ -318,7 +318,7 @@ def view_settings(args: argparse.Namespace) -> ViewSettings:
         return ViewSettings(host=args.host, web_port=args.web_port, grpc_port=args.grpc_port)
     except ValueError as error:  # in the command line's words: --web-port, not web_port
         message = str(error).replace("web_port", "--web-port").replace("grpc_port", "--grpc-port")
-        raise ConfigError(message) from None
+        raise ConfigError(f"--{message}" if message.startswith("host ") else message) from None
 
 
 def _report(result: RunResult) -> None:

@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from urllib.parse import quote
 
+from fishswarm.protocols.hosts import url_host
+
 WEB_PORT = 9090
 """Default port of the viewer's page."""
 GRPC_PORT = 9876
@@ -46,11 +48,12 @@ class ViewSettings:
                 raise ValueError(f"{name} must be a port number 1–65535, got {port}")
         if self.web_port == self.grpc_port:
             raise ValueError(f"the page and the data stream need two ports, got {self.web_port}")
+        url_host(self.host)  # a name browsers can reach, or an address
 
     @property
     def stream_url(self) -> str:
         """Where the page streams the swarm from."""
-        return f"rerun+http://{self.host}:{self.grpc_port}/proxy"
+        return f"rerun+http://{url_host(self.host)}:{self.grpc_port}/proxy"
 
     @property
     def local_stream_url(self) -> str:
@@ -60,4 +63,6 @@ class ViewSettings:
     @property
     def page_url(self) -> str:
         """The page to open in a browser."""
-        return f"http://{self.host}:{self.web_port}/?url={quote(self.stream_url, safe='')}"
+        return (
+            f"http://{url_host(self.host)}:{self.web_port}/?url={quote(self.stream_url, safe='')}"
+        )

@@ -65,6 +65,8 @@ def _stop(process: subprocess.Popen[str], lines: Lines) -> None:
         (["--grpc-port", "99999"], 2, "--grpc-port must be a port number 1–65535, got 99999"),
         (["--web-port", "9300", "--grpc-port", "9300"], 2, "need two ports, got 9300"),
         (["missing.mcap"], 1, "cannot open recording missing.mcap"),
+        (["--host", ""], 2, "--host '' is neither an IP address nor a host name"),
+        (["--host", "bad host/x"], 2, "--host 'bad host/x' is neither an IP address nor"),
     ],
 )
 def test_bad_view_arguments_are_explained(args: list[str], code: int, message: str) -> None:
