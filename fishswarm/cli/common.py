@@ -53,6 +53,28 @@ def endpoint_of(value: str, flag: str) -> str:
         raise ConfigError(f"{flag}: {error}") from None
 
 
+def refuse_unused(
+    args: argparse.Namespace, flags: Mapping[str, str], *, applies: str, fix: str
+) -> None:
+    """Refuse the options of ``flags`` (an argument's name → its flag) that were given
+    (not None) where this invocation would ignore them.
+
+    Args:
+        applies: when they apply, e.g. ``with --view``.
+        fix: what to do, with ``{it}`` for "it" or "them".
+
+    Raises:
+        ConfigError: naming the options given, when they apply and what to do.
+    """
+    given = [flag for name, flag in flags.items() if getattr(args, name, None) is not None]
+    if given:
+        many = len(given) > 1
+        raise ConfigError(
+            f"{', '.join(given)} appl{'y' if many else 'ies'} only {applies}: "
+            + fix.format(it="them" if many else "it")
+        )
+
+
 def client_settings(args: argparse.Namespace, subject: str) -> SessionSettings:
     """A client session to ``--connect``; with ``--secure DIR``, over mutual TLS with the
     certificate of ``subject``."""

@@ -51,9 +51,14 @@ class _Parser(argparse.ArgumentParser):
     ) -> tuple[argparse.Namespace, list[str]]:
         parsed, rest = super().parse_known_args(args, namespace)
         secured = getattr(parsed, "secure", None) is not None
+        defaulted = []
         for name in ("connect", "listen"):
             if hasattr(parsed, name) and getattr(parsed, name) is None:
                 setattr(parsed, name, SECURE_ENDPOINT if secured else DEFAULT_ENDPOINT)
+                defaulted.append(name)
+        # Which endpoints the user did not give (a command refuses one it would ignore);
+        # a command's own parser fills them before the top-level one looks.
+        parsed.defaulted_endpoints = (*getattr(parsed, "defaulted_endpoints", ()), *defaulted)
         return parsed, rest
 
     def parse_args(  # type: ignore[override]
@@ -728,9 +733,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --secure: whose observer certificate to use (observer-NAME; default the "
         "plain observer certificate)",
     )
-    view.add_argument(
-        "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
-    )
+    view.add_argument("--swarm", type=swarm_name, help="swarm name (default default)")
     _add_view_flags(view)
     view.add_argument("--open", action="store_true", help="open this machine's browser on the page")
 
@@ -968,22 +971,21 @@ SECURE_HELP = (
 
 
 def _add_view_flags(parser: argparse.ArgumentParser) -> None:
+    # No defaults here (ViewSettings has them): a flag given where no view is served is
+    # refused, not ignored.
     parser.add_argument(
         "--host",
-        default="localhost",
         help="with a live view: the name or address browsers reach this machine by; the page "
         "streams from it (default localhost: a browser on this machine)",
     )
     parser.add_argument(
         "--web-port",
         type=int,
-        default=WEB_PORT,
         help=f"with a live view: port of the page (default {WEB_PORT})",
     )
     parser.add_argument(
         "--grpc-port",
         type=int,
-        default=GRPC_PORT,
         help=f"with a live view: port of the data stream the page reads (default {GRPC_PORT})",
     )
 

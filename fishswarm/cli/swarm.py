@@ -58,6 +58,7 @@ from fishswarm.cli.common import (
     endpoint_of,
     prepare_file,
     read_recording_for,
+    refuse_unused,
     run_trio,
     secure_extra,
 )
@@ -229,6 +230,8 @@ def _watchdog_warning(timeout: float, scenario: Scenario) -> str | None:
 
 def run(args: argparse.Namespace, scenario: Scenario) -> int:
     """``fishswarm run``."""
+    if not args.view:
+        refuse_unused(args, VIEW_FLAGS, applies="with --view", fix="add --view, or leave {it} out")
     if args.procs is not None and args.procs < 0:
         raise ConfigError(
             f"--procs must be 0 (the fish in this process) or more worker processes, got "
@@ -312,13 +315,30 @@ def wait_for_ctrl_c(announcement: str | None = None) -> None:
         signal.signal(signal.SIGTERM, previous)
 
 
+VIEW_FLAGS = {"host": "--host", "web_port": "--web-port", "grpc_port": "--grpc-port"}
+"""Where a live view is served: each argument's name and flag."""
+
+
 def view_settings(args: argparse.Namespace) -> ViewSettings:
-    """Where ``--host``, ``--web-port`` and ``--grpc-port`` say to serve a live view."""
+    """Where ``--host``, ``--web-port`` and ``--grpc-port`` say to serve a live view (the
+    defaults for those not given)."""
+    given = {name: getattr(args, name) for name in VIEW_FLAGS if getattr(args, name) is not None}
     try:
-        return ViewSettings(host=args.host, web_port=args.web_port, grpc_port=args.grpc_port)
+        return ViewSettings(**given)
     except ValueError as error:  # in the command line's words: --web-port, not web_port
         message = str(error).replace("web_port", "--web-port").replace("grpc_port", "--grpc-port")
         raise ConfigError(f"--{message}" if message.startswith("host ") else message) from None
+
+
+def refuse_observer_name(args: argparse.Namespace) -> None:
+    """Refuse ``--name`` without ``--secure``: it picks an observer's certificate."""
+    if args.secure is None:
+        refuse_unused(
+            args,
+            {"name": "--name"},
+            applies="with --secure (it picks an observer certificate of a secured swarm)",
+            fix="add --secure DIR, or leave {it} out",
+        )
 
 
 def _report(result: RunResult) -> None:
@@ -662,6 +682,7 @@ def say_waiting_for_world(command: str, keys: KeySpace, endpoint: str) -> None:
 
 def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm observe``: watch a swarm from anywhere."""
+    refuse_observer_name(args)
     keys = KeySpace(args.swarm)
     ticks = args.ticks
     prepare_file(args.record, "--record", example="runs/observed.mcap")

@@ -17,8 +17,14 @@ from fishswarm.actors.security import observer_subject
 from fishswarm.actors.session import open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.bluebot.parameters import Tank
-from fishswarm.cli.common import UserError, client_settings, read_recording_for
-from fishswarm.cli.swarm import _run_trio, say_waiting_for_world, view_settings, wait_for_ctrl_c
+from fishswarm.cli.common import UserError, client_settings, read_recording_for, refuse_unused
+from fishswarm.cli.swarm import (
+    _run_trio,
+    refuse_observer_name,
+    say_waiting_for_world,
+    view_settings,
+    wait_for_ctrl_c,
+)
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.live_view import LiveView, open_live_view
@@ -33,6 +39,16 @@ NOT_METRICS = ("tick", "time", "fish")
 
 def view(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm view``: serve the view until Ctrl-C."""
+    if args.recording is not None:
+        live = {"connect": "--connect", "secure": "--secure", "name": "--name", "swarm": "--swarm"}
+        refuse_unused(
+            args,
+            {name: flag for name, flag in live.items() if name not in args.defaulted_endpoints},
+            applies="when following a live swarm (no RECORDING)",
+            fix="a recording is replayed as it was recorded; leave {it} out",
+        )
+    refuse_observer_name(args)
+    args.swarm = args.swarm or "default"
     settings = dataclasses.replace(view_settings(args), open_browser=args.open)
     try:
         if args.recording is not None:

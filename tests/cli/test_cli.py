@@ -169,6 +169,20 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["world", "--orbit-radius", "0.3"], "--orbit-radius applies only with --behavior orbit"),
         (["learn", "--resume", "--force"], "--resume continues the learning run in --out and"),
         (
+            ["run", "--host", "lab", "--grpc-port", "9999"],
+            "--host, --grpc-port apply only with --view: add --view, or leave them out",
+        ),
+        (
+            ["view", "runs/any.mcap", "--connect", "tcp/127.0.0.1:7447", "--swarm", "other"],
+            "--connect, --swarm apply only when following a live swarm (no RECORDING): a "
+            "recording is replayed as it was recorded; leave them out",
+        ),
+        (
+            ["observe", "--name", "laptop"],
+            "--name applies only with --secure (it picks an observer certificate of a secured "
+            "swarm): add --secure DIR, or leave it out",
+        ),
+        (
             ["run", "--fish", "2", "--log-level", "INFO"],
             "--log-level is an option of fishswarm itself: give it before the command, e.g. "
             "fishswarm --log-level INFO run",
