@@ -24,7 +24,7 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         raise UserError("Turing learning needs pycma: pip install -e '.[learn]'") from None
     from fishswarm.learning.arena import Arena
     from fishswarm.learning.checkpoint import checkpoint_progress
-    from fishswarm.learning.session import CHECKPOINT, LearningError, learn
+    from fishswarm.learning.session import CHECKPOINT, OUTPUTS, LearningError, learn
 
     named = {
         "behavior": args.behavior,
@@ -59,10 +59,13 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
             settings = LearningSettings(**values)
         except ValueError as error:
             raise ConfigError(str(error)) from None
-    if not args.resume and not args.force and (args.out / "checkpoint.npz").is_file():
+    held = [name for name in OUTPUTS if (args.out / name).is_file()]
+    if not args.resume and not args.force and held:
+        resumable = CHECKPOINT in held
         raise ConfigError(
-            f"--out {args.out} holds a learning run (checkpoint.npz): --resume continues it, "
-            "--force starts over and replaces it, or give another --out"
+            f"--out {args.out} holds a learning run ({', '.join(held)}): "
+            + ("--resume continues it, " if resumable else "")
+            + "--force starts over and replaces it, or give another --out"
         )
     prepare_folder(args.out, "--out")
     # A resumed run goes on to the generation it was started for, unless told otherwise.

@@ -83,8 +83,8 @@ def load_checkpoint(path: Path) -> Coevolution:
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:
         raise CheckpointError(
             f"{path} is not a readable learning checkpoint (truncated or another kind of "
-            f"file: {type(error).__name__}); start afresh without --resume, or keep the "
-            "folder and use a new --out"
+            f"file: {type(error).__name__}); start afresh with --force instead of --resume "
+            "(it replaces the folder's run), or keep the folder and use a new --out"
         ) from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise CheckpointError(f"{path} is not a fishswarm learning checkpoint ({FORMAT})")

@@ -262,8 +262,19 @@ def test_learning_again_into_a_finished_run_needs_resume_or_force(tmp_path: Path
     kept = (tmp_path / "checkpoint.npz").read_bytes()
     again = learn("--seed", "5")
     assert again.returncode == 2
-    assert "holds a learning run (checkpoint.npz): --resume continues it, --force" in again.stderr
+    assert (
+        "holds a learning run (checkpoint.npz, history.csv, best_replica.npz, radii.md, "
+        "summary.json" in again.stderr
+    )
+    assert "): --resume continues it, --force starts over" in again.stderr
     assert (tmp_path / "checkpoint.npz").read_bytes() == kept  # nothing lost
+    # Without its checkpoint the run cannot be resumed, but its results are still there.
+    (tmp_path / "checkpoint.npz").rename(tmp_path / "kept.npz")
+    results = learn("--seed", "5")
+    assert results.returncode == 2
+    assert "holds a learning run (history.csv, best_replica.npz" in results.stderr
+    assert "--resume" not in results.stderr and "--force starts over" in results.stderr
+    (tmp_path / "kept.npz").rename(tmp_path / "checkpoint.npz")
     assert learn("--seed", "5", "--force").returncode == 0
     assert (tmp_path / "checkpoint.npz").read_bytes() != kept
 
