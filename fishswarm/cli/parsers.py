@@ -402,7 +402,14 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
     for warning in _unused_settings(table, overrides, scenario, path):
         print(f"fishswarm {args.command}: warning: {warning}", file=sys.stderr)
     # Only commands that run a scenario to its end take --duration.
-    return scenario.check_duration() if hasattr(args, "duration") else scenario
+    if not hasattr(args, "duration"):
+        return scenario
+    try:
+        return scenario.check_duration()
+    except ConfigError as error:
+        timing = ("duration", "control_period")
+        from_file = any(name in table and overrides.get(name) is None for name in timing)
+        raise ConfigError(f"{path}: {error}" if from_file else str(error)) from None
 
 
 def _unused_settings(

@@ -19,7 +19,7 @@ from fishswarm.actors.robot import (
     unconfirmed,
 )
 from fishswarm.actors.security import SecurityError, robot_subject
-from fishswarm.actors.session import open_session
+from fishswarm.actors.session import ConnectError, SessionSettings, open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.cli.common import UserError, client_settings, endpoint_of, run_trio, secure_extra
 from fishswarm.protocols.keys import KeySpace
@@ -213,8 +213,15 @@ def _zenoh_config(path: Path | None) -> str | None:
     the file is installed, so the parser leaves it alone).
 
     Raises:
-        ConfigError: it does not exist, or is not a file.
+        ConfigError: it does not exist, is not a file, or is not a Zenoh configuration
+            (JSON5) — a bad file as a bad argument, before the robot starts.
     """
-    if path is not None and not path.is_file():
+    if path is None:
+        return None
+    if not path.is_file():
         raise ConfigError(f"--zenoh-config {path} does not exist or is not a file")
-    return None if path is None else str(path)
+    try:
+        SessionSettings(mode="client", config_file=str(path)).to_config()
+    except ConnectError as error:
+        raise ConfigError(f"--zenoh-config: {error}") from None
+    return str(path)

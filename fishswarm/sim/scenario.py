@@ -19,7 +19,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fishswarm.behaviors.core import FishParams
-from fishswarm.behaviors.formation import DEFAULT_EFFORT_MARGIN, DEFAULT_LEAD
+from fishswarm.behaviors.formation import (
+    DEFAULT_EFFORT_MARGIN,
+    DEFAULT_LEAD,
+    LOCAL_RULES,
+    SLOT_RULES,
+)
 from fishswarm.behaviors.lennard_jones import (
     STUDY_FORM_SWITCH,
     LennardJonesParams,
@@ -298,10 +303,12 @@ class Scenario:
             f"and {self.wake_width!r}",
         )
         need(
-            self.station_distance is None
-            or (self.station_distance >= 0 and self.landmark is not None),
-            "station_distance must be a length of 0 m or more, with a landmark to hold "
-            f"station behind (landmark = [x, y, z]), got {self.station_distance!r}",
+            self.station_distance is None or self.station_distance >= 0,
+            f"station_distance must be a length of 0 m or more, got {self.station_distance!r}",
+        )
+        need(
+            self.station_distance is None or self.landmark is not None,
+            "station_distance needs a landmark to hold station behind (landmark = [x, y, z])",
         )
         need(
             self.effort_margin >= 0,
@@ -377,13 +384,14 @@ class Scenario:
         need(
             self.time_mode != "jitter" or self.jitter <= self.control_period,
             f"jitter ({self.jitter:g} s) must not exceed the control period "
-            f"({self.control_period:g} s) in jitter mode: lower --jitter or raise --period",
+            f"({self.control_period:g} s) in jitter mode: lower the jitter or lengthen the "
+            "control period",
         )
         need(
             self.duration >= self.control_period,
             f"duration ({self.duration:g} s) is shorter than one control period "
-            f"({self.control_period:g} s): nothing would happen; lengthen --duration or "
-            "shorten --period",
+            f"({self.control_period:g} s): nothing would happen; lengthen the duration or "
+            "shorten the control period",
         )
         # Around a post the circle's radius is R; partners R apart circle at R/2.
         widest = min(self.tank[0], self.tank[1]) / (1 if self.behavior == "waltz" else 2)
@@ -415,6 +423,14 @@ class Scenario:
         need(
             self.time_mode in TIME_MODES,
             f"time_mode must be one of {', '.join(TIME_MODES)}, got {self.time_mode!r}",
+        )
+        need(
+            self.slot_rule in SLOT_RULES,
+            f"slot_rule must be one of {', '.join(SLOT_RULES)}, got {self.slot_rule!r}",
+        )
+        need(
+            self.local_rule in LOCAL_RULES,
+            f"local_rule must be one of {', '.join(LOCAL_RULES)}, got {self.local_rule!r}",
         )
         need(
             not (self.behavior == "formation" and self.flags and self.time_mode == "jitter"),
@@ -746,13 +762,18 @@ def read_toml(path: Path, kind: str) -> dict[str, Any]:
     except FileNotFoundError:
         raise ConfigError(f"{kind} file {path} does not exist") from None
     except IsADirectoryError:
-        raise ConfigError(f"{path} is a folder, not a {kind} file (a .toml file)") from None
+        raise ConfigError(f"{path} is a folder, not {_a(kind)} file (a .toml file)") from None
     except OSError as error:
         raise ConfigError(f"{kind} file {path} cannot be read: {error.strerror}") from None
     except UnicodeDecodeError:
-        raise ConfigError(f"{path} is not a text file (UTF-8): not a {kind} file") from None
+        raise ConfigError(f"{path} is not a text file (UTF-8): not {_a(kind)} file") from None
     except tomllib.TOMLDecodeError as error:
         raise ConfigError(f"{path} is not valid TOML: {error}") from None
+
+
+def _a(noun: str) -> str:
+    """``noun`` with its indefinite article: a scenario, an experiment."""
+    return f"{'an' if noun[:1] in ('a', 'e', 'i', 'o', 'u') else 'a'} {noun}"
 
 
 def _real(value: object) -> TypeGuard[float]:

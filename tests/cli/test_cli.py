@@ -517,8 +517,9 @@ def test_a_robot_that_cannot_open_its_hardware_or_configuration_says_so(tmp_path
     result = _run(
         "robot", "--id", "1", "--hardware", "mock", "--zenoh-config", str(broken), timeout=30
     )
-    assert result.returncode == 1
-    assert f"Zenoh configuration {broken} cannot be read" in result.stderr
+    # A bad file is a bad argument, as a missing one is: exit 2, before the robot starts.
+    assert result.returncode == 2
+    assert f"--zenoh-config: Zenoh configuration {broken} cannot be read" in result.stderr
 
 
 @pytest.mark.slow
