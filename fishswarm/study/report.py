@@ -197,7 +197,8 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
         for summary in experiment.summaries:
             mean, sd = row[f"{summary.key}_mean"], row[f"{summary.key}_sd"]
             spread = f" ± {sd:.{summary.digits}f}" if experiment.seeds > 1 else ""
-            cells.append(f"{mean:.{summary.digits}f}{spread}")
+            # + 0.0: a mean that rounds to zero from below is shown 0.00, not -0.00.
+            cells.append(f"{round(mean, summary.digits) + 0.0:.{summary.digits}f}{spread}")
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

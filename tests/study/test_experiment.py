@@ -486,3 +486,13 @@ def test_a_sweep_of_fish_says_the_counts_it_runs(tmp_path: Path) -> None:
     assert "\n2, 3 fish, aggregation, 2 s at 1 Hz" in (tmp_path / "out" / "table.md").read_text()
     with (tmp_path / "out" / "runs.csv").open(encoding="utf-8") as stream:
         assert [run["fish"] for run in csv.DictReader(stream)] == ["2", "3"]
+
+
+def test_a_mean_that_rounds_to_zero_from_below_is_shown_as_zero() -> None:
+    experiment = find("orbit")
+    row: dict[str, object] = {experiment.parameter: experiment.values[0], "runs": 2}
+    for summary in experiment.summaries:
+        row[f"{summary.key}_mean"], row[f"{summary.key}_sd"] = -0.001, 0.002
+    cells = [cell.strip() for cell in markdown_table(experiment, [row]).splitlines()[-1].split("|")]
+    # Radius, wobble and speed have three decimals, revolutions two, collisions one.
+    assert cells[2:-1] == ["-0.001 ± 0.002"] * 2 + ["0.00 ± 0.00", "-0.001 ± 0.002", "0.0 ± 0.0"]
