@@ -911,7 +911,11 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
     if args.folder / f"{AUTHORITY}.pem" not in written:  # added to the folder's authority
         renewed = "router" in subjects and "router" in before
         added = [subject for subject in subjects if subject not in before]
-        made = f"certificates for {', '.join(added)}" if added else "no new certificate"
+        made = (
+            f"certificates for {', '.join(added)}"
+            if added
+            else "no new certificate (--days counts for certificates made now only)"
+        )
         if renewed:
             new = [name for name in router_names(args.folder) if name not in named]
             made += (
