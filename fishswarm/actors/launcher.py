@@ -533,6 +533,12 @@ def _summary(
             if world.wall_time > world.paused_time
             else None
         ),
-        "recording": str(settings.record) if settings.record else None,
+        # None too when nothing was recorded (stopped before the first snapshot): the file
+        # is then as it was.
+        "recording": (
+            str(settings.record)
+            if settings.record and observer.recorder is not None and observer.recorder.begun
+            else None
+        ),
         "summary": str(settings.summary) if settings.summary else None,
     }

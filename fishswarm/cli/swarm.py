@@ -72,6 +72,7 @@ from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.live_view import open_live_view
 from fishswarm.study.progress import ProgressLine, bar, ids_text
 from fishswarm.study.recording import (
+    Recorder,
     RecordingError,
     export_csv,
     export_npz,
@@ -536,6 +537,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                 if args.record is not None
                 else None
             )
+            recorders.append(recorder)
             observer = Observer.of(
                 scenario, recorder=recorder, on_progress=show, observer_id="world-cli"
             )
@@ -559,10 +561,11 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                 nursery.cancel_scope.cancel()
 
     prepare_file(args.record, "--record", example="runs/world.mcap")
+    recorders: list[Recorder | None] = []
     try:
         _run_trio(main)
     finally:  # an interrupted run's recording is kept too (read_recording marks it cut short)
-        if args.record is not None and args.record.exists():
+        if any(recorder is not None and recorder.begun for recorder in recorders):
             print(f"recording: {args.record}", file=sys.stderr)
     statistics = actor.statistics()
     # As `fishswarm run` says it: fish lost on the way leave a trajectory that is not what

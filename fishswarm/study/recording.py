@@ -56,6 +56,7 @@ class Recorder:
     """Writes one run to an open MCAP stream; use :func:`open_recorder`."""
 
     def __init__(self, stream: IO[bytes] | _Flushing, scenario: dict[str, Any]) -> None:
+        self._stream = stream
         self._writer = Writer(stream, chunk_size=CHUNK_SIZE)  # type: ignore[arg-type]
         self._writer.start(profile="fishswarm", library="fishswarm")
         self._writer.add_metadata("scenario", {"json": json.dumps(scenario)})
@@ -90,8 +91,16 @@ class Recorder:
         (an observer learns them from the world after it has begun to record)."""
         self._writer.add_metadata("scenario", {"json": json.dumps(settings)})
 
+    @property
+    def begun(self) -> bool:
+        """Whether a snapshot was recorded: the file holds this run (before, it is left as
+        it was)."""
+        return not isinstance(self._stream, _Flushing) or self._stream.begun
+
     def snapshot(self, time: float, payload: bytes) -> None:
-        """Record a snapshot payload as it came over the wire."""
+        """Record a snapshot payload as it came over the wire (the first begins the file)."""
+        if isinstance(self._stream, _Flushing):
+            self._stream.begin()
         self._add(SNAPSHOT_TOPIC, time, payload)
 
     def metrics(self, time: float, values: dict[str, Any]) -> None:
@@ -113,33 +122,58 @@ class Recorder:
 
 class _Flushing:
     """A file that hands every write to the operating system at once (the MCAP writer
-    writes a chunk when it is full: it reaches the disk then, not when the run ends)."""
+    writes a chunk when it is full: it reaches the disk then, not when the run ends) —
+    once :meth:`begin` is called; until then writes are held, and the file is left as it
+    was (a run that never starts must not empty the recording it was given)."""
 
     def __init__(self, stream: IO[bytes]) -> None:
         self._stream = stream
+        self._held: bytearray | None = bytearray()
+
+    @property
+    def begun(self) -> bool:
+        """Whether the file is being written."""
+        return self._held is None
+
+    def begin(self) -> None:
+        """Empty the file and write into it from now on, what was held first."""
+        if self._held is None:
+            return
+        self._stream.seek(0)
+        self._stream.truncate()
+        self._stream.write(self._held)
+        self._stream.flush()
+        self._held = None
 
     def write(self, data: bytes) -> int:
+        if self._held is not None:
+            self._held += data
+            return len(data)
         written = self._stream.write(data)
         self._stream.flush()
         return written
 
     def tell(self) -> int:
-        return self._stream.tell()
+        return len(self._held) if self._held is not None else self._stream.tell()
 
     def flush(self) -> None:
-        self._stream.flush()
+        if self._held is None:
+            self._stream.flush()
 
 
 @contextmanager
 def open_recorder(path: Path, scenario: dict[str, Any]) -> Iterator[Recorder]:
-    """Create ``path`` and record into it; the file is complete when the block ends. The
-    file is locked while it is written: another recorder of this machine refuses it.
+    """Record into ``path``, from the run's first snapshot on; the file is complete when
+    the block ends. A run that records no snapshot (its fish never came up) leaves the file
+    as it was, and makes none. The file is locked while it is written: another recorder of
+    this machine refuses it.
 
     Raises:
         RecordingError: another process records into ``path`` (a run, a world or an
             observer given the same ``--record``); the file is left as it is.
     """
     path.parent.mkdir(parents=True, exist_ok=True)
+    existed = path.exists()
     descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
     try:
         try:
@@ -151,8 +185,8 @@ def open_recorder(path: Path, scenario: dict[str, Any]) -> Iterator[Recorder]:
             ) from None
         except OSError as error:  # a file system without locks (some network mounts)
             log.warning("recording into %s unlocked: %s", path, error.strerror)
-        # Emptied only once locked: a refused recorder must not destroy the other's.
-        os.ftruncate(descriptor, 0)
+        # Emptied only once locked, and at the first snapshot (_Flushing.begin): a refused
+        # recorder must not destroy the other's, nor a run that never starts its own.
         stream = os.fdopen(descriptor, "wb")
     except BaseException:
         os.close(descriptor)
@@ -163,6 +197,8 @@ def open_recorder(path: Path, scenario: dict[str, Any]) -> Iterator[Recorder]:
             yield recorder
         finally:
             recorder.finish()
+            if not recorder.begun and not existed:
+                path.unlink(missing_ok=True)
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ from fishswarm.cli import main
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.messages import Snapshot
 from fishswarm.study.metrics import swarm_metrics
-from fishswarm.study.recording import open_recorder
+from fishswarm.study.recording import Recorder, open_recorder
 
 
 def _observed(path: Path, ticks: int = 4) -> Path:
@@ -135,7 +135,11 @@ def test_outputs_that_cannot_be_written_are_refused_before_any_work(
 def test_a_recording_without_snapshots_has_nothing_to_export(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    recording = _observed(tmp_path / "nothing.mcap", ticks=0)
+    # As an earlier fishswarm wrote one for an observer that saw nothing (a recorder now
+    # makes no file until the first snapshot): the header and the settings only.
+    recording = tmp_path / "nothing.mcap"
+    with recording.open("wb") as stream:
+        Recorder(stream, {"observed": True}).finish()
     assert main(["export", str(recording), "--npz", str(tmp_path / "x.npz")]) == 1
     assert "holds no snapshots: nothing to export" in capsys.readouterr().err
     assert not (tmp_path / "x.npz").exists()

@@ -40,10 +40,28 @@ def test_a_recording_in_progress_is_not_taken_by_a_second_recorder(tmp_path: Pat
     recording = read_recording(path)
     assert recording.complete and recording.scenario == {"fish": 2}
     assert [s.tick for s in recording.snapshots] == [0, 1]
-    # Finished, the file is free: a new recording replaces it.
-    with open_recorder(path, {"fish": 3}):
+    # Finished, the file is free: a new recording replaces it, from its first snapshot.
+    with open_recorder(path, {"fish": 3}) as recorder:
+        recorder.snapshot(0.0, encode(_snapshot(0, [0, 1, 2])))
+    assert read_recording(path).scenario == {"fish": 3}
+    assert [s.ids.size for s in read_recording(path).snapshots] == [3]
+
+
+def test_a_run_that_records_no_snapshot_leaves_the_file_as_it_was(tmp_path: Path) -> None:
+    # A world given --record whose fish never came up: the earlier recording stays whole,
+    # and where there was none, none is made.
+    path = tmp_path / "kept.mcap"
+    with open_recorder(path, {"fish": 2}) as recorder:
+        recorder.snapshot(0.0, encode(_snapshot(0, [0, 1])))
+    kept = path.read_bytes()
+    with open_recorder(path, {"fish": 10}) as recorder:
+        recorder.event(0.0, {"event": "waiting"})
+        assert path.read_bytes() == kept  # while it waits, too
+    assert not recorder.begun and path.read_bytes() == kept
+    fresh = tmp_path / "fresh.mcap"
+    with open_recorder(fresh, {"fish": 10}):
         pass
-    assert read_recording(path).scenario == {"fish": 3} and read_recording(path).snapshots == []
+    assert not fresh.exists()
 
 
 def test_the_scenario_recorded_last_is_the_recordings(tmp_path: Path) -> None:
@@ -188,9 +206,6 @@ def test_a_recording_still_being_written_is_on_disk_up_to_its_last_chunk(tmp_pat
     path = tmp_path / "live.mcap"
     rng = np.random.default_rng(0)
     with open_recorder(path, {"fish": 25}) as recorder:
-        # Before the first snapshot: the header and the scenario are on disk already.
-        started = read_recording(path)
-        assert started.scenario == {"fish": 25} and started.snapshots == []
         for tick in range(60):  # random positions compress poorly: several 32-KiB chunks
             snapshot = _snapshot(tick, list(range(25)))
             noisy = Snapshot(
@@ -199,6 +214,9 @@ def test_a_recording_still_being_written_is_on_disk_up_to_its_last_chunk(tmp_pat
             )  # fmt: skip
             recorder.snapshot(noisy.time, encode(noisy))
             recorder.metrics(noisy.time, {"tick": tick})
+            if tick == 0:  # from the first snapshot on, the header and the scenario are on disk
+                started = read_recording(path)
+                assert started.scenario == {"fish": 25} and started.snapshots == []
         # Read by another handle while the recorder is still open.
         meanwhile = read_recording(path)
     assert not meanwhile.complete

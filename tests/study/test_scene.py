@@ -16,6 +16,7 @@ from mcap.reader import make_reader
 
 from fishswarm.bluebot.parameters import BODY_LENGTH, Tank
 from fishswarm.formations.maps import target_map
+from fishswarm.protocols.codec import encode
 from fishswarm.protocols.messages import Snapshot
 from fishswarm.study.metrics import FormationTarget
 from fishswarm.study.recording import SCENE_TOPIC, open_recorder, read_recording
@@ -165,6 +166,7 @@ def test_a_recording_carries_the_scene_for_foxglove(tmp_path: Path) -> None:
     position = np.array([[0.5, 0.5, 0.2]])
     update = scene_message(scene_of(_snapshot(position, [0.3])), Stage((1.0, 1.0, 1.0)))
     with open_recorder(path, {"fish": 1}) as recorder:
+        recorder.snapshot(2.0, encode(_snapshot(position, [0.3])))
         recorder.scene(2.0, update)
     with path.open("rb") as stream:
         reader = make_reader(stream)
@@ -176,7 +178,8 @@ def test_a_recording_carries_the_scene_for_foxglove(tmp_path: Path) -> None:
     assert json.loads(schema.data) == scene_json_schema()
     assert message.log_time == 2_000_000_000
     assert message.data == update
-    assert read_recording(path).snapshots == []  # readers of snapshots pass over scenes
+    # Readers of snapshots pass over scenes.
+    assert [s.ids.tolist() for s in read_recording(path).snapshots] == [[0]]
 
 
 def test_every_arrow_points_along_its_fish_whatever_the_yaw() -> None:
