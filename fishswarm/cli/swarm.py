@@ -119,7 +119,9 @@ def progress_printer(
         m = progress.metrics
         prefix = bar(progress.tick, ticks) + " " if ticks else ""
         measures = (
-            f"radius {m['radius']:.3f} m  revolutions {m['revolutions']:.2f}  "
+            "no fish in the world"
+            if progress.fish == 0
+            else f"radius {m['radius']:.3f} m  revolutions {m['revolutions']:.2f}  "
             f"speed {m['speed']:.3f} m/s"
             if "radius" in m
             else f"centroid {m['centroid_distance']:.3f} m  "

@@ -205,7 +205,15 @@ def swarm_metrics(
 ) -> dict[str, float]:
     """All metrics of one snapshot: the three distances (m), mean neighbours seen and, when
     the fish's efforts are known, the school's effort (gain-weighted fin beats) and its
-    spread (the most a fish spent over the mean)."""
+    spread (the most a fish spent over the mean). With no fish (a world that lost them
+    all), the distances and neighbours seen are not defined: NaN, not a school shrunk to a
+    point."""
+    if position.shape[0] == 0:
+        return dict.fromkeys(
+            ("centroid_distance", "pairwise_distance", "nearest_neighbor_distance",
+             "neighbors_seen"),
+            math.nan,
+        )  # fmt: skip
     pairwise, nearest = _pairwise_and_nearest(position)
     metrics = {
         "centroid_distance": centroid_distance(position),

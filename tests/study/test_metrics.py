@@ -389,3 +389,12 @@ def test_a_small_swarms_metrics_refuse_positions_that_are_not_finite() -> None:
     position[2, 1] = np.nan
     with pytest.raises(ValueError, match="finite"):
         swarm_metrics(position, np.zeros(4, dtype=np.int64))
+
+
+def test_a_world_without_fish_has_no_distances() -> None:
+    # A world that lost every fish goes on ticking: its school has not shrunk to a point.
+    empty = swarm_metrics(np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
+    assert set(empty) == {
+        "centroid_distance", "pairwise_distance", "nearest_neighbor_distance", "neighbors_seen"
+    }  # fmt: skip
+    assert all(math.isnan(value) for value in empty.values())
