@@ -557,7 +557,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME",
         help="serve the fish as one school: one perception batch and one command batch per "
         "tick instead of a message per fish (for many simulated fish in one process; a robot "
-        "keeps its own keys)",
+        "keeps its own keys). One process per school: a second given a name already served "
+        "is refused",
     )
 
     robot = commands.add_parser(

@@ -506,11 +506,41 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
             open_session(client_settings(args, _fish_subject(args))) as session,
             trio.open_nursery() as nursery,
         ):
+            if args.school is not None:
+                served = await trio.to_thread.run_sync(_school_members, session, keys, args.school)
+                others = sorted(set(served) - set(args.ids))
+                if others:
+                    # Its world would send one batch for both processes' fish, which each
+                    # refuses as not all its own: every fish of the school lost.
+                    raise ConfigError(
+                        f"school {args.school!r} is served already, by another process with "
+                        f"fish {ids_text(others)}: give each 'fishswarm fish' process its own "
+                        "--school"
+                    )
             await nursery.start(Fish(settings).run, ZenohBus(session))
             print(f"fish {', '.join(map(str, args.ids))} up on {args.connect}", file=sys.stderr)
 
     _run_trio(main)
     return 0
+
+
+SCHOOL_QUERY_TIMEOUT = 2.0
+"""How long ``fishswarm fish`` asks the router who serves its school, s."""
+
+
+def _school_members(session: zenoh.Session, keys: KeySpace, school: str) -> list[int]:
+    """The fish whose liveliness tokens say they are served as ``school`` now."""
+    members = []
+    for reply in session.liveliness().get(keys.alive_all("fish"), timeout=SCHOOL_QUERY_TIMEOUT):
+        if reply.ok is None:
+            continue
+        try:
+            member = keys.parse_alive(str(reply.ok.key_expr))
+        except ValueError:
+            continue
+        if member.school == school and member.member_id.isdigit():
+            members.append(int(member.member_id))
+    return members
 
 
 def world(args: argparse.Namespace, scenario: Scenario) -> int:
