@@ -122,10 +122,14 @@ class Roster:
             spares = self._spare_tokens.setdefault(fish_id, [])
             if key not in spares:
                 spares.append(key)
+                # Which came up first is not known here (a world that comes up hears every
+                # token at once): only which it heard of first.
                 log.warning(
-                    "fish %d came up again (%s) while %s speaks for it: ignored while that one "
-                    "is up; give each fish process its own ids",
+                    "fish %d is served by two processes, %s and %s: this world takes the "
+                    "commands of %s, heard of first, while it is up; give each fish process "
+                    "its own ids",
                     fish_id,
+                    current,
                     key,
                     current,
                 )

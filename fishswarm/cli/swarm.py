@@ -64,7 +64,7 @@ from fishswarm.cli.common import (
 )
 from fishswarm.formations.local import LOCAL_SHAPES
 from fishswarm.protocols.codec import MessageError, decode, encode
-from fishswarm.protocols.keys import KeySpace
+from fishswarm.protocols.keys import KeySpace, fish_id_of
 from fishswarm.protocols.messages import ControlReply, ControlRequest, RobotOrder
 from fishswarm.sim.decision_kernels import prepare, with_compiled_decisions
 from fishswarm.sim.physics import WorldParams, spawn_spacing, start_layout
@@ -506,17 +506,8 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
             open_session(client_settings(args, _fish_subject(args))) as session,
             trio.open_nursery() as nursery,
         ):
-            if args.school is not None:
-                served = await trio.to_thread.run_sync(_school_members, session, keys, args.school)
-                others = sorted(set(served) - set(args.ids))
-                if others:
-                    # Its world would send one batch for both processes' fish, which each
-                    # refuses as not all its own: every fish of the school lost.
-                    raise ConfigError(
-                        f"school {args.school!r} is served already, by another process with "
-                        f"fish {ids_text(others)}: give each 'fishswarm fish' process its own "
-                        "--school"
-                    )
+            served = await trio.to_thread.run_sync(_served_fish, session, keys)
+            _refuse_served(served, args.ids, args.school)
             await nursery.start(Fish(settings).run, ZenohBus(session))
             print(f"fish {', '.join(map(str, args.ids))} up on {args.connect}", file=sys.stderr)
 
@@ -524,23 +515,49 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
     return 0
 
 
-SCHOOL_QUERY_TIMEOUT = 2.0
-"""How long ``fishswarm fish`` asks the router who serves its school, s."""
+SERVED_QUERY_TIMEOUT = 2.0
+"""How long ``fishswarm fish`` asks the router which fish are served already, s."""
 
 
-def _school_members(session: zenoh.Session, keys: KeySpace, school: str) -> list[int]:
-    """The fish whose liveliness tokens say they are served as ``school`` now."""
-    members = []
-    for reply in session.liveliness().get(keys.alive_all("fish"), timeout=SCHOOL_QUERY_TIMEOUT):
+def _served_fish(session: zenoh.Session, keys: KeySpace) -> list[tuple[int, str | None]]:
+    """The fish whose liveliness tokens are up now: each id with its school (None: on its
+    own keys)."""
+    served = []
+    for reply in session.liveliness().get(keys.alive_all("fish"), timeout=SERVED_QUERY_TIMEOUT):
         if reply.ok is None:
             continue
         try:
             member = keys.parse_alive(str(reply.ok.key_expr))
         except ValueError:
             continue
-        if member.school == school and member.member_id.isdigit():
-            members.append(int(member.member_id))
-    return members
+        fish_id = fish_id_of(member.member_id)
+        if fish_id is not None:
+            served.append((fish_id, member.school))
+    return served
+
+
+def _refuse_served(
+    served: list[tuple[int, str | None]], ids: list[int], school: str | None
+) -> None:
+    """Refuse to serve fish another process serves already, or a school it serves.
+
+    Raises:
+        ConfigError: naming them: two processes of one fish both answer for it; two of one
+            school each refuse the world's batch for both, and the school's fish are lost.
+    """
+    taken = sorted({fish_id for fish_id, _ in served} & set(ids))
+    if taken:
+        raise ConfigError(
+            f"fish {ids_text(taken)} served already, by another process: give each "
+            "'fishswarm fish' process its own ids (a process that just ended is forgotten "
+            "within seconds)"
+        )
+    others = sorted({fish_id for fish_id, theirs in served if school and theirs == school})
+    if others:
+        raise ConfigError(
+            f"school {school!r} is served already, by another process with fish "
+            f"{ids_text(others)}: give each 'fishswarm fish' process its own --school"
+        )
 
 
 def world(args: argparse.Namespace, scenario: Scenario) -> int:

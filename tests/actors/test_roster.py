@@ -67,7 +67,11 @@ def test_a_fish_that_moves_to_another_school_sends_on_its_new_key_once_the_old_o
     # token in school a is up: school a keeps it, and the world hears of the second one.
     with caplog.at_level(logging.WARNING, logger="fishswarm.actors.roster"):
         assert roster.on_alive(keys.alive("fish", 1, "b"), True, now=1.0) is None
-    assert "fish 1 came up again" in caplog.text
+    assert (
+        f"fish 1 is served by two processes, {keys.alive('fish', 1, 'a')} and "
+        f"{keys.alive('fish', 1, 'b')}: "
+        f"this world takes the commands of {keys.alive('fish', 1, 'a')}, heard of first"
+    ) in caplog.text
     assert roster.all_on(school_a, np.array([0, 1]))
     # School a's token of fish 1 goes: the fish leaves the world (this tick's perception
     # went to school a), and school b's token takes it over, to bring it back.

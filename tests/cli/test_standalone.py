@@ -470,7 +470,7 @@ def test_a_standalone_channel_takes_each_runs_loss_and_seed_from_its_world(
     np.testing.assert_array_equal(recorded["yaw"], reference.yaw)
 
 
-def test_a_second_process_for_a_school_already_served_is_refused() -> None:
+def test_a_second_process_for_a_school_or_fish_already_served_is_refused() -> None:
     # Two 'fishswarm fish' given one --school: the world would send one batch for both,
     # which each refuses as not all its own, and lose every fish of the school.
     port = free_port()
@@ -481,17 +481,21 @@ def test_a_second_process_for_a_school_already_served_is_refused() -> None:
         first = start("fish", "--id", "0", "--id", "1", "--school", "a", "--connect", endpoint)
         Lines(first).wait_for(r"^fish 0, 1 up on ")  # read on until the process ends
 
-        def second(school: str) -> subprocess.CompletedProcess[str]:
-            command = ["fish", "--id", "2", "--school", school, "--connect", endpoint]
+        def second(*options: str) -> subprocess.CompletedProcess[str]:
+            command = ["fish", *options, "--connect", endpoint]
             return subprocess.run([*FISHSWARM, *command], capture_output=True, text=True,
                                   timeout=30, check=False)  # fmt: skip
 
-        refused = second("a")
+        refused = second("--id", "2", "--school", "a")
         assert refused.returncode == 2
         assert (
             "fishswarm fish: error: school 'a' is served already, by another process with "
             "fish 0, 1: give each 'fishswarm fish' process its own --school"
         ) in refused.stderr
+        # One of its fish, on its own keys: both would answer for it.
+        twice = second("--id", "1", "--id", "5")
+        assert twice.returncode == 2
+        assert "fishswarm fish: error: fish 1 served already, by another process" in twice.stderr
         assert first.poll() is None  # the school's own process serves on
         other = start("fish", "--id", "2", "--school", "b", "--connect", endpoint)
         Lines(other).wait_for(r"^fish 2 up on ")
