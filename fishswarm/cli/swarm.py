@@ -750,6 +750,7 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                 else None
             )
             observer = Observer(keys, recorder=recorder, on_progress=show, observer_id="cli")
+            observers.append(observer)
 
             async def learn_the_run() -> None:
                 """Ask the world what runs (until it answers), then measure and record the
@@ -803,22 +804,25 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                     if ticks is not None:
                         waiting.start_soon(wait_then_stop, lambda: observer.wait_for_tick(ticks))
                 nursery.cancel_scope.cancel()
-            history[:] = observer.history
 
-    history: list[Progress] = []
+    observers: list[Observer] = []
     unfinished: list[str] = []
     line = ProgressLine(sys.stderr)
     try:
         _run_trio(main)
-    finally:
+    finally:  # at the end of the run, after --ticks, or on Ctrl-C: what it saw
         line.close()
-    if history:
-        last = history[-1]
-        print(
-            f"observed ticks {history[0].tick}–{last.tick} ({len(history)} snapshots), "
-            f"{last.fish} fish at the end",
-            file=sys.stderr,
-        )
+        history = observers[0].history if observers else []
+        if history:
+            last = history[-1]
+            print(
+                f"observed ticks {history[0].tick}–{last.tick} ({len(history)} snapshots), "
+                f"{last.fish} fish at the end",
+                file=sys.stderr,
+            )
+        recorder = observers[0].recorder if observers else None
+        if recorder is not None and recorder.begun:
+            print(f"recording: {args.record}", file=sys.stderr)
     if unfinished:
         print(
             f"fishswarm observe: {unfinished[0]} before the run ended (its world never said "
