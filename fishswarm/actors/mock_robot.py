@@ -311,7 +311,7 @@ def open_mock_hardware(
             from gpiozero.pins.mock import MockFactory
         except ImportError as error:
             raise HardwareError(
-                "a mock robot runs on gpiozero's mock pins: pip install 'fishswarm[robot]'"
+                "a mock robot runs on gpiozero's mock pins: pip install -e '.[robot]'"
             ) from error
         pin_factory = MockFactory()
     feed = WorldFeed(robot_id, stale_after=stale_after(control_period))

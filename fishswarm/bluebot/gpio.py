@@ -27,7 +27,7 @@ def _output_device(pin: int, pin_factory: Any) -> Any:
     except ImportError as error:
         raise ImportError(
             "the fins and LEDs need gpiozero: on Raspberry Pi OS apt install python3-gpiozero "
-            "(deploy/ does), elsewhere pip install 'fishswarm[robot]'"
+            "(deploy/ does), elsewhere pip install -e '.[robot]'"
         ) from error
     return DigitalOutputDevice(pin, initial_value=False, pin_factory=pin_factory)
 

@@ -373,7 +373,7 @@ def i2c_depth_sensor(
     except ImportError as error:
         raise ImportError(
             "the depth sensor needs smbus2: on Raspberry Pi OS apt install python3-smbus2 "
-            "(deploy/ does), elsewhere pip install 'fishswarm[robot]'"
+            "(deploy/ does), elsewhere pip install -e '.[robot]'"
         ) from error
     bus = SMBus(wiring.depth_bus)
     try:

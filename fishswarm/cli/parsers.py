@@ -521,7 +521,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--view",
         action="store_true",
         help="serve a live 3-D view of the run in the browser (as 'fishswarm view' does; needs "
-        "pip install 'fishswarm[view]'); after the run it stays up until Ctrl-C (a Ctrl-C "
+        "pip install -e '.[view]'); after the run it stays up until Ctrl-C (a Ctrl-C "
         "during the run ends both)",
     )
     _add_view_flags(run)
@@ -728,7 +728,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--record), replay it; "
         "otherwise attach to the running swarm at --connect as a read-only observer (with "
         "--secure, with an observer's certificate) and follow it live. Needs no internet: "
-        "the viewer comes inside the rerun SDK (pip install 'fishswarm[view]'). Runs until "
+        "the viewer comes inside the rerun SDK (pip install -e '.[view]'). Runs until "
         "Ctrl-C.",
     )
     view.add_argument(

@@ -12,7 +12,7 @@ never shows in a trajectory, and a fish deciding alone equals the same fish in a
 The simulator hands this loop to the fish of a swarm of
 :data:`~fishswarm.sim.kernels.COMPILED_MIN_FISH` fish or more (:func:`with_compiled_decisions`:
 the batch engine, the launcher's fish workers, ``fishswarm fish``); a robot's fish keeps the
-numpy path. numba is optional (``pip install 'fishswarm[fast]'``) and imported only when
+numpy path. numba is optional (``pip install -e '.[fast]'``) and imported only when
 the loop is first asked for; the robot's import path never reaches this module.
 """
 

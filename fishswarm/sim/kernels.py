@@ -13,7 +13,7 @@ same fish seen on random swarms).
 The kernels release the GIL: the world's steps, computed in a worker thread, run beside the
 actors' own work. (The observer's distance kernels are in
 :mod:`fishswarm.study.distance_kernels`, on one core each.) numba is optional
-(``pip install 'fishswarm[fast]'``) and imported only when a kernel is
+(``pip install -e '.[fast]'``) and imported only when a kernel is
 first asked for: the robot's import path never reaches this module, and a simulator without
 numba runs the numpy reference.
 """

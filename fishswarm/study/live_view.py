@@ -43,8 +43,7 @@ def _rerun() -> Any:
         import rerun
     except ImportError:
         raise ViewError(
-            "the live view needs the rerun SDK: pip install 'fishswarm[view]' "
-            "(or pip install rerun-sdk)"
+            "the live view needs the rerun SDK: pip install -e '.[view]' (or pip install rerun-sdk)"
         ) from None
     return rerun
 

@@ -106,9 +106,7 @@ def test_a_mock_robot_without_gpiozero_says_how_to_get_it() -> None:
         "robot", "--id", "3", "--hardware", "mock", "--connect", f"tcp/127.0.0.1:{free_port()}"
     )
     assert result.returncode == 1 and "Traceback" not in result.stderr
-    assert "a mock robot runs on gpiozero's mock pins: pip install 'fishswarm[robot]'" in (
-        result.stderr
-    )
+    assert "a mock robot runs on gpiozero's mock pins: pip install -e '.[robot]'" in (result.stderr)
 
 
 def test_an_experiment_without_matplotlib_writes_its_tables(tmp_path: Path) -> None:
@@ -139,4 +137,4 @@ def test_a_view_without_the_rerun_sdk_says_how_to_get_it(tmp_path: Path) -> None
         "--listen", f"tcp/127.0.0.1:{free_port()}", "--record", str(tmp_path / "r.mcap"),
     )  # fmt: skip
     assert ran.returncode == 1 and "Traceback" not in ran.stderr
-    assert "the live view needs the rerun SDK: pip install 'fishswarm[view]'" in ran.stderr
+    assert "the live view needs the rerun SDK: pip install -e '.[view]'" in ran.stderr
