@@ -42,6 +42,18 @@ def started_commands() -> Iterator[Callable[..., subprocess.Popen[str]]]:
         end_processes(processes)
 
 
+@contextlib.contextmanager
+def routed_commands() -> Iterator[tuple[str, Callable[..., subprocess.Popen[str]]]]:
+    """A router on a free port of 127.0.0.1, up: its endpoint, and :func:`started_commands`'s
+    function to start more beside it."""
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    with started_commands() as start:
+        start("router", "--listen", endpoint)
+        wait_for_port(port)
+        yield endpoint, start
+
+
 @pytest.mark.slow
 def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: Path) -> None:
     port = free_port()
@@ -342,11 +354,7 @@ def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_ow
 
 @pytest.mark.slow
 def test_a_standalone_world_that_lost_a_fish_ends_degraded_as_a_run_does() -> None:
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    with started_commands() as start:
-        start("router", "--listen", endpoint)
-        wait_for_port(port)
+    with routed_commands() as (endpoint, start):
         start("fish", "--id", "0", "--connect", endpoint)
         doomed = start("fish", "--id", "1", "--connect", endpoint)
         world = start("world", "--connect", endpoint, "--fish", "2", "--time", "realtime",
@@ -473,11 +481,7 @@ def test_a_standalone_channel_takes_each_runs_loss_and_seed_from_its_world(
 def test_a_second_process_for_a_school_or_fish_already_served_is_refused() -> None:
     # Two 'fishswarm fish' given one --school: the world would send one batch for both,
     # which each refuses as not all its own, and lose every fish of the school.
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    with started_commands() as start:
-        start("router", "--listen", endpoint)
-        wait_for_port(port)
+    with routed_commands() as (endpoint, start):
         first = start("fish", "--id", "0", "--id", "1", "--school", "a", "--connect", endpoint)
         Lines(first).wait_for(r"^fish 0, 1 up on ")  # read on until the process ends
 
