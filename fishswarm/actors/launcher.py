@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import logging
+import math
 import os
 import signal
 import tempfile
@@ -442,7 +443,9 @@ def _summary(
     if history:
         first, last = history[0].metrics, history[-1].metrics
         for name in (*METRIC_NAMES, "neighbors_seen"):
-            change = 100.0 * (last[name] - first[name]) / first[name] if first[name] else None
+            # None where it is not defined: from zero, or to or from a world without fish.
+            defined = first[name] and math.isfinite(first[name]) and math.isfinite(last[name])
+            change = 100.0 * (last[name] - first[name]) / first[name] if defined else None
             metrics[name] = {"initial": first[name], "final": last[name], "change_percent": change}
     formation = (
         {

@@ -131,9 +131,10 @@ def progress_printer(
         count = (
             f"{progress.tick}" if ticks is None else f"{progress.tick:>{len(str(ticks))}}/{ticks}"
         )
+        seen = f"  seen {m['neighbors_seen']:.1f}" if progress.fish else ""
         line = (
-            f"{prefix}tick {count}  t={progress.time:7.1f} s  "
-            f"fish {progress.fish}  {measures}  seen {m['neighbors_seen']:.1f}"
+            f"{prefix}tick {count}  t={progress.time:7.1f} s  fish {progress.fish}  "
+            f"{measures}{seen}"
         )
         output.show(line, last=ticks is not None and progress.tick >= ticks)
 
@@ -155,14 +156,15 @@ def start_warnings(scenario: Scenario) -> list[str]:
     # Past the corners, the ball holds the whole tank: a larger one spreads no fish more,
     # it only puts more on the walls. (Within them some may start on a wall, as the
     # study's formation start of 1.3 m puts them.)
-    corner = float(np.linalg.norm(scenario.tank)) / 2
+    # Rounded down as it is shown: the radius the warning gives must not set it off again.
+    corner = math.floor(float(np.linalg.norm(scenario.tank)) / 2 * 100) / 100
     past_walls = scenario.spawn_region == "ball" and params.spawn_radius > corner
     if past_walls:
         warnings.append(
             f"the start ball's radius, {params.spawn_radius:g} m, reaches past the tank's "
-            f"corners ({corner:.2f} m from its centre), and {layout.on_walls} of the "
+            f"corners ({corner:g} m from its centre), and {layout.on_walls} of the "
             f"{scenario.fish} fish start on its walls: give a --spawn-radius of at most "
-            f"{corner:.2f} m, or --spawn tank to spread them evenly over the tank"
+            f"{corner:g} m, or --spawn tank to spread them evenly over the tank"
         )
     if layout.spacing >= CROWDED_SPACING:
         return warnings
@@ -200,8 +202,9 @@ def local_shape_warning(scenario: Scenario) -> str | None:
         return None
     needs = "; ".join(f"a {shape} needs at least {fish} fish" for shape, fish in short)
     return (
-        f"{needs}: with {scenario.fish} no fish can complete it, and its shape error is not "
-        "measured (give more --fish)"
+        f"{needs}: with {scenario.fish} fish none can complete "
+        f"{'them' if short[1:] else 'it'}, and the shape error is not measured (give more "
+        "--fish)"
     )
 
 
@@ -348,10 +351,12 @@ def _report(result: RunResult) -> None:
     """Say how a run ended."""
     summary = result.summary
     if summary["status"] == "interrupted":
-        print(
-            "\nfishswarm run: interrupted; recording and summary hold the run so far",
-            file=sys.stderr,
+        held = (
+            "recording and summary hold the run so far"
+            if summary.get("recording")
+            else "nothing recorded (the recording file is as it was); the summary holds the run"
         )
+        print(f"\nfishswarm run: interrupted; {held}", file=sys.stderr)
     for line in summary["workers_died"]:
         print(f"fishswarm run: error: {line}", file=sys.stderr)
     print(_summary_text(summary), file=sys.stderr)
@@ -395,7 +400,11 @@ def _summary_text(summary: dict[str, Any]) -> str:
             continue  # the distances say little about circling fish (one fish: all zero)
         change = values["change_percent"]
         change_text = "" if change is None else f" ({change:+.1f} %)"
-        lines.append(f"  {name}: {values['initial']:.3f} → {values['final']:.3f}{change_text}")
+        initial, final = (
+            f"{value:.3f}" if value is not None and math.isfinite(value) else "none (no fish)"
+            for value in (values["initial"], values["final"])
+        )
+        lines.append(f"  {name}: {initial} → {final}{change_text}")
     formation = summary.get("formation")
     if formation:
         ninety = formation["time_to_90_percent_joined"]

@@ -352,11 +352,12 @@ def test_a_start_ball_past_the_tanks_walls_is_warned_of_and_not_made_larger() ->
     # place drawn in it lies outside, and its fish start clipped onto the walls (at the
     # corners), piled there: neither warning may say to make the ball larger.
     walls, piled = start_warnings(Scenario(fish=6, spawn_radius=100.0))
-    # The corners: √(0.89² + 0.89² + 0.585²) = 1.39 m from the centre.
+    # The corners: √(0.89² + 0.89² + 0.585²) = 1.388 m from the centre, said rounded down so
+    # that the radius given clears the warning.
     assert walls == (
-        "the start ball's radius, 100 m, reaches past the tank's corners (1.39 m from its "
+        "the start ball's radius, 100 m, reaches past the tank's corners (1.38 m from its "
         "centre), and 6 of the 6 fish start on its walls: give a --spawn-radius of at most "
-        "1.39 m, or --spawn tank to spread them evenly over the tank"
+        "1.38 m, or --spawn tank to spread them evenly over the tank"
     )
     assert "--spawn tank" in piled and "--spawn-radius" not in piled
     # The study's formation start, a 1.3-m ball, stays within the corners: nothing to say.
@@ -1174,15 +1175,31 @@ def test_a_local_shape_with_too_few_fish_is_warned_of_and_its_error_said_unmeasu
     assert local_shape_warning(
         Scenario(fish=3, behavior="formation", formation="triangle", switch_formation="tetrahedron")
     ) == (
-        "a tetrahedron needs at least 4 fish: with 3 no fish can complete it, and its shape "
+        "a tetrahedron needs at least 4 fish: with 3 fish none can complete it, and the shape "
         "error is not measured (give more --fish)"
     )
     summary = tmp_path / "s.json"
     result = _run("run", "--behavior", "formation", "--formation", "triangle", "--fish", "2",
                   "--duration", "2", *_outputs(tmp_path, summary))  # fmt: skip
     assert result.returncode == 0, result.stderr
-    assert "warning: a triangle needs at least 3 fish: with 2 no fish" in result.stderr
+    assert "warning: a triangle needs at least 3 fish: with 2 fish none can" in result.stderr
     # The summary goes to stderr, beside the warnings (stdout is left to data).
     assert "formation triangle: shape error not measured (too few fish), 0 % joined" in (
         result.stderr
     )
+
+
+def test_a_summary_of_a_world_left_without_fish_says_so_instead_of_nan(tmp_path: Path) -> None:
+    from fishswarm.cli.swarm import _summary_text
+
+    summary = tmp_path / "s.json"
+    result = _run("run", "--fish", "2", "--duration", "1", "--quiet",
+                  *_outputs(tmp_path, summary))  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    data = json.loads(summary.read_text())
+    # As a world that lost every fish ends: its last distances are not defined (null).
+    for values in data["metrics"].values():
+        values["final"], values["change_percent"] = None, None
+    text = _summary_text(data)
+    assert "centroid_distance: " in text and "→ none (no fish)" in text
+    assert "nan" not in text
