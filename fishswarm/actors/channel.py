@@ -69,10 +69,11 @@ HELD_BROADCASTS_MAX = 100_000
 """Most broadcasts the channel keeps for one run it has not seen a snapshot of yet: more
 are refused (as a flood), and do not crowd out another run's."""
 
-HELD_RUNS_MAX = 8
+HELD_RUNS_MAX = 4
 """Most runs not seen yet that the channel keeps broadcasts for at once: a run's fish
 broadcast before its first snapshot reaches the channel only in the moment its world
-starts, so a broadcast of a further run is refused (as a flood)."""
+starts, so a broadcast of a further run lets go what was held for the earliest (the run
+about to start is the latest)."""
 
 
 @dataclass(frozen=True)
@@ -372,11 +373,12 @@ class Channel:
         held = self._held.get(run)
         if broadcast.tick > FIRST_TICKS:  # a run's that has ended, come late: no new one's
             self._let_go_one(broadcast.sender_id, f"of tick {broadcast.tick} of run {run}")
-        elif held is None and len(self._held) >= HELD_RUNS_MAX:
-            self._intake.refuse(
-                key, "flood", f"broadcasts of {HELD_RUNS_MAX} runs not seen yet held already"
-            )
-        elif held is not None and len(held) >= HELD_BROADCASTS_MAX:
+            return
+        if held is None and len(self._held) >= HELD_RUNS_MAX:
+            earliest = next(iter(self._held))
+            for kept in self._held.pop(earliest):
+                self._let_go_one(kept.sender_id, f"of run {earliest}, which never came")
+        if held is not None and len(held) >= HELD_BROADCASTS_MAX:
             self._intake.refuse(
                 key, "flood", f"{HELD_BROADCASTS_MAX} broadcasts of run {run} held already"
             )
