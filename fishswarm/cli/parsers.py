@@ -844,7 +844,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--swarm", type=swarm_name, default="default", help="swarm name (default default)"
     )
     init.add_argument(
-        "--days", type=int, default=365, help="how long the certificates are valid, 1 to 36500 "
+        "--days", type=int, help="how long the certificates made now are valid, 1 to 36500 "
         "(default 365)"
     )  # fmt: skip
     init.add_argument(

@@ -36,6 +36,7 @@ from fishswarm.actors.observer import WORLD_END_SETTLE, Observer, Progress
 from fishswarm.actors.security import (
     ACCESS_FILE,
     AUTHORITY,
+    DEFAULT_DAYS,
     SecurityError,
     certified_subjects,
     init_secure,
@@ -963,7 +964,7 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
             # The run's own processes reach the router on this machine: always named.
             hosts=("localhost", "127.0.0.1", *(args.host or ())),
             swarm=args.swarm,
-            days=args.days,
+            days=DEFAULT_DAYS if args.days is None else args.days,
             replace=args.force,
         )
     except ValueError as error:
@@ -979,7 +980,8 @@ def secure(args: argparse.Namespace, scenario: Scenario | None) -> int:
         made = (
             f"certificates for {', '.join(added)}"
             if added
-            else "no new certificate (--days counts for certificates made now only)"
+            else "no new certificate"
+            + (" (--days counts for certificates made now only)" if args.days else "")
         )
         if renewed:
             new = [name for name in router_names(args.folder) if name not in named]

@@ -515,6 +515,9 @@ def test_secure_init_with_a_new_host_renews_the_routers_certificate_and_nothing_
     assert "renewed" not in said
     # Nothing new to make: the other --days changes no certificate, and the message says so.
     assert "added no new certificate (--days counts for certificates made now only)" in said
+    assert main(["secure", "init", str(folder), "--host", "10.0.0.1"]) == 0
+    said = capsys.readouterr().err  # no --days given: nothing to say of it
+    assert "added no new certificate (signed by it" in said and "--days" not in said
     assert (folder / "router.pem").read_bytes() == renewed
     # A second host besides the first: the message names the new one only.
     assert main(["secure", "init", str(folder), "--host", "10.0.0.1", "--host", "lab.local"]) == 0
