@@ -29,10 +29,16 @@ def host_address(host: str) -> ipaddress.IPv4Address | ipaddress.IPv6Address | N
 
 
 def url_host(host: str) -> str:
-    """``host`` as the host part of a URL: an IPv6 address in brackets (``[::1]``).
+    """``host`` as the host part of a URL: an IPv6 address in brackets (``[::1]``, a zone
+    written ``%25``, as URLs escape ``%``).
 
     Raises:
-        ValueError: ``host`` is neither an IP address nor a host name.
+        ValueError: ``host`` is neither an IP address nor a host name (a wildcard, which a
+            certificate may hold, is no address a browser can reach).
     """
+    if host.startswith("*"):
+        raise ValueError(f"host {host!r} is a wildcard: give the name browsers reach")
     address = host_address(host)
-    return f"[{host}]" if isinstance(address, ipaddress.IPv6Address) else host
+    if isinstance(address, ipaddress.IPv6Address):
+        return f"[{host.replace('%', '%25')}]"
+    return host

@@ -250,7 +250,8 @@ class Experiment:
             repeated = sorted({v for v in self.values if list(self.values).count(v) > 1})
             raise ConfigError(
                 f"experiment {self.name}: values must differ; {', '.join(map(str, repeated))} "
-                "is given more than once (more runs of a value: --seeds)"
+                f"{'are' if repeated[1:] else 'is'} given more than once (more runs of a value: "
+                "--seeds)"
             )
         if self.parameter == "fish" and not all(float(v).is_integer() for v in self.values):
             raise ConfigError(
