@@ -69,6 +69,9 @@ HELD_BROADCASTS_MAX = 100_000
 """Most broadcasts the channel keeps for one run it has not seen a snapshot of yet: more
 are refused (as a flood), and do not crowd out another run's."""
 
+ENDED_RUNS_KEPT = 16
+"""How many runs that have given way the channel remembers, to let go their late snapshots."""
+
 HELD_RUNS_MAX = 4
 """Most runs not seen yet that the channel keeps broadcasts for at once: a run's fish
 broadcast before its first snapshot reaches the channel only in the moment its world
@@ -145,6 +148,9 @@ class Channel:
         """The run of the last snapshot (0: none seen, or its world does not tell)."""
         self._held: dict[int, list[Broadcast]] = {}
         """Broadcasts of the first ticks of runs not yet seen, by run."""
+        self._ended_runs: deque[int] = deque(maxlen=ENDED_RUNS_KEPT)
+        """Runs that have given way to a later one, latest last: a late snapshot of one is
+        let go (it would start that run again, and the next snapshot the current one)."""
         self._first_tick: int | None = None
         """The first tick of the run this channel has seen a snapshot of (0: the whole run;
         later: it came up while the run went on)."""
@@ -201,9 +207,14 @@ class Channel:
                     self._take_outbox(key, payload)
                     continue
             snapshot = self._intake.decode(key, payload, Snapshot)
+            if snapshot is not None and snapshot.run and snapshot.run in self._ended_runs:
+                self._intake.disregard()
+                continue
             if snapshot is not None:
                 self._last_tick = snapshot.tick
                 if snapshot.run != self._run:
+                    if self._run:
+                        self._ended_runs.append(self._run)
                     self._run = snapshot.run
                     self._take_held()
                 return snapshot

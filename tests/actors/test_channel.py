@@ -355,6 +355,22 @@ async def _one_run(
     return counts
 
 
+async def _one_run_with_a_stale_snapshot(
+    bus: MemoryBus, reports: Inbox[tuple[str, bytes]], *, run: int, stale: int
+) -> list[list[int]]:
+    """As :func:`_one_run`, with a late snapshot of the ended run ``stale`` among its own."""
+    counts = []
+    bus.put(KEYS.snapshot, snapshot(0, [0, 0, 0], run=run))
+    for tick in range(1, 9):
+        if tick == 4:
+            bus.put(KEYS.snapshot, snapshot(15, [0, 0, 0], run=stale))
+        bus.put(KEYS.outbox(0), broadcast(0, tick - 1, tick, run=run))
+        bus.put(KEYS.snapshot, snapshot(tick, [1, 0, 0], run=run))
+        report = decode((await reports.receive())[1], ChannelReport)
+        counts.append(report.inbox_counts.tolist())
+    return counts
+
+
 async def _runs(channel: Channel, runs: int | list[tuple[int, bool]]) -> list[list[list[int]]]:
     """Runs served one after the other: ``runs`` unnumbered ones, or those listed as (run,
     whether its tick-0 snapshot is lost)."""
@@ -380,6 +396,28 @@ def test_a_run_whose_first_snapshot_was_lost_still_loses_what_its_seed_says() ->
     assert sum(c[1] + c[2] for c in reference) < 16  # the seed loses some of 16
     assert served[0] == reference  # run 7 from its start, as run 8 alone
     assert served[1] == reference
+
+
+def test_a_late_snapshot_of_an_ended_run_does_not_start_it_again() -> None:
+    """Run 8 follows run 7; a snapshot of run 7 that comes late, in the middle of run 8, is
+    let go: run 8 loses what it loses alone (its loss streams restarted twice before)."""
+
+    async def after_run_7(channel: Channel) -> list[list[int]]:
+        bus = MemoryBus()
+        async with (
+            subscription(bus, KEYS.channel_report) as reports,
+            trio.open_nursery() as nursery,
+        ):
+            await nursery.start(channel.run, bus)
+            await _one_run(bus, reports, run=7)
+            counts = await _one_run_with_a_stale_snapshot(bus, reports, run=8, stale=7)
+            nursery.cancel_scope.cancel()
+        return counts
+
+    reference = run_mock(lambda: _runs(Channel(LOSSY), [(8, False)]))[0]
+    channel = Channel(LOSSY)
+    assert run_mock(lambda: after_run_7(channel)) == reference
+    assert channel.statistics().rejected == 0  # let go, not refused: it is a real snapshot
 
 
 def test_a_channel_apart_from_its_world_takes_each_runs_medium_from_the_world(
