@@ -12,6 +12,7 @@ import signal
 import sys
 import time
 from collections.abc import Awaitable, Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -73,7 +74,6 @@ from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.live_view import open_live_view
 from fishswarm.study.progress import ProgressLine, bar, ids_text
 from fishswarm.study.recording import (
-    Recorder,
     RecordingError,
     export_csv,
     export_npz,
@@ -488,6 +488,14 @@ def _summary_text(summary: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _say_recording(observers: list[Observer], path: Path | None) -> None:
+    """Name the recording the observer of a command wrote, if it wrote one (a run that
+    never started leaves the file as it was)."""
+    recorder = observers[0].recorder if observers else None
+    if recorder is not None and recorder.begun:
+        print(f"recording: {path}", file=sys.stderr)
+
+
 def _lost_text(lost: list[tuple[int, int, str]]) -> str:
     """Fish lost on the way, (id, tick, why) each, as a run's last words say them."""
     return ", ".join(f"{fish_id} at tick {tick} ({why})" for fish_id, tick, why in lost)
@@ -596,11 +604,11 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                 if args.record is not None
                 else None
             )
-            recorders.append(recorder)
             observer = Observer.of(
                 scenario, recorder=recorder, on_progress=show, observer_id="world-cli"
             )
             observer.world_run = actor.run_id  # its world's run only, not another's on the router
+            observers.append(observer)
             async with trio.open_nursery() as nursery:
                 bus = ZenohBus(session)
                 await nursery.start(observer.run, bus)
@@ -620,12 +628,11 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
                 nursery.cancel_scope.cancel()
 
     prepare_file(args.record, "--record", example="runs/world.mcap")
-    recorders: list[Recorder | None] = []
+    observers: list[Observer] = []
     try:
         _run_trio(main)
     finally:  # an interrupted run's recording is kept too (read_recording marks it cut short)
-        if any(recorder is not None and recorder.begun for recorder in recorders):
-            print(f"recording: {args.record}", file=sys.stderr)
+        _say_recording(observers, args.record)
     statistics = actor.statistics()
     # As `fishswarm run` says it: fish lost on the way leave a trajectory that is not what
     # they decided (the world cannot tell a fish's process dying from its hanging or its
@@ -830,9 +837,7 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                 f"{last.fish} fish at the end",
                 file=sys.stderr,
             )
-        recorder = observers[0].recorder if observers else None
-        if recorder is not None and recorder.begun:
-            print(f"recording: {args.record}", file=sys.stderr)
+        _say_recording(observers, args.record)
     if unfinished:
         print(
             f"fishswarm observe: {unfinished[0]} before the run ended (its world never said "
