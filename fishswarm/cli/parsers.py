@@ -31,9 +31,10 @@ from fishswarm.sim.scenario import (
     TURN_DELAY,
     ConfigError,
     Scenario,
-    either,
     scenario_table,
+    setting_text,
     switch_names,
+    unmet_condition,
 )
 from fishswarm.study.view_settings import GRPC_PORT, WEB_PORT
 
@@ -374,15 +375,20 @@ def _refuse_inapplicable(given: dict[str, Any], scenario: Scenario) -> None:
     Raises:
         ConfigError: naming the flag and what it needs.
     """
-    for name, (setting, values) in APPLIES_WHEN.items():
-        if given.get(name) is None or getattr(scenario, setting) in values:
+    for name in APPLIES_WHEN:
+        unmet = unmet_condition(name, scenario) if given.get(name) is not None else None
+        if unmet is None:
             continue
+        setting, wanted = unmet
         flag = _SCENARIO_FLAGS[name][0]
-        shown = _SCENARIO_FLAGS[setting][0]
-        needed = f"{shown} {either(values)}"
+        shown, kind, _ = _SCENARIO_FLAGS.get(setting, (setting, str, ""))
+        if kind is bool:  # the setting's flag turns it off
+            raise ConfigError(f"{flag} applies only without {shown}: leave one of them out")
+        needed = shown if kind is SWITCH_ON else f"{shown} {wanted}"
+        actual = setting_text(getattr(scenario, setting))
         raise ConfigError(
-            f"{flag} applies only with {needed}, and this {shown} is "
-            f"{getattr(scenario, setting)}: add {needed}, or leave {flag} out"
+            f"{flag} applies only with {needed}, and this {shown} is {actual}: add {needed}, "
+            f"or leave {flag} out"
         )
 
 
@@ -421,12 +427,14 @@ def _unused_settings(
     only experiments act on (named in ``study_code``, from the file or --study-code; the
     study-code profile turns every switch on, these too)."""
     unused: dict[tuple[str, str], list[str]] = {}
-    for name, (setting, values) in APPLIES_WHEN.items():
-        if name in table and given.get(name) is None and getattr(scenario, setting) not in values:
-            unused.setdefault((setting, either(values)), []).append(name)
+    for name in APPLIES_WHEN:
+        unmet = unmet_condition(name, scenario) if name in table else None
+        if unmet is not None and given.get(name) is None:
+            unused.setdefault(unmet, []).append(name)
     warnings = [
         f"{path}: {', '.join(names)} {'apply' if names[1:] else 'applies'} only with "
-        f"{setting} {needed}, and this run's {setting} is {getattr(scenario, setting)}: "
+        f"{setting} {needed}, and this run's {setting} is "
+        f"{setting_text(getattr(scenario, setting))}: "
         f"here {'they change' if names[1:] else 'it changes'} nothing"
         for (setting, needed), names in unused.items()
     ]

@@ -102,9 +102,9 @@ only once their clock passed 1)."""
 
 
 _FORMING = ("behavior", ("formation",))
-APPLIES_WHEN: dict[str, tuple[str, tuple[str, ...]]] = {
+APPLIES_WHEN: dict[str, tuple[tuple[str, tuple[object, ...] | None], ...]] = {
     **{
-        name: _FORMING
+        name: (_FORMING,)
         for name in (
             "formation",
             "spacing",
@@ -112,27 +112,49 @@ APPLIES_WHEN: dict[str, tuple[str, tuple[str, ...]]] = {
             "formation_heading_deg",
             "formation_lead",
             "flags",
-            "flag_medium",
             "slot_rule",
             "local_rule",
             "rotate_effort",
-            "effort_margin",
             "switch_formation",
-            "switch_at",
         )
     },
-    "model": ("behavior", ("replica",)),
-    "orbit_radius": ("behavior", ("orbit", "milling", "waltz")),
-    "jitter": ("time_mode", ("jitter",)),
-    "spawn_radius": ("spawn_region", ("ball",)),
+    "flag_medium": (_FORMING, ("flags", (True,))),
+    "effort_margin": (_FORMING, ("rotate_effort", (True,))),
+    "switch_at": (_FORMING, ("switch_formation", None)),
+    "model": (("behavior", ("replica",)),),
+    "orbit_radius": (("behavior", ("orbit", "milling", "waltz")),),
+    "jitter": (("time_mode", ("jitter",)),),
+    "spawn_radius": (("spawn_region", ("ball",)),),
 }
-"""Settings that mean something only beside another: (that setting, the values it must
-have). Elsewhere they change nothing, and are refused or warned of."""
+"""Settings that mean something only beside others: for each, (that setting, the values it
+must have, None for any but none), in the order they are checked. Elsewhere they change
+nothing, and are refused or warned of."""
 
 
-def either(values: tuple[str, ...]) -> str:
+def unmet_condition(name: str, scenario: Scenario) -> tuple[str, str] | None:
+    """The first condition of :data:`APPLIES_WHEN` that ``scenario`` leaves setting ``name``
+    without: (the setting, what it must be, in words: ``formation``, ``true`` or ``set``);
+    None when ``name`` means something."""
+    for setting, values in APPLIES_WHEN.get(name, ()):
+        value = getattr(scenario, setting)
+        if values is None and value is None:
+            return setting, "set"
+        if values is not None and value not in values:
+            return setting, either(values)
+    return None
+
+
+def setting_text(value: object) -> str:
+    """A setting's value as a scenario file spells it: ``true``, ``none``, ``formation``."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return "none" if value is None else str(value)
+
+
+def either(values: tuple[object, ...]) -> str:
     """``values`` as words: ``a``, ``a or b``, ``a, b or c``."""
-    return " or ".join([", ".join(values[:-1]), values[-1]] if values[1:] else values)
+    words = [setting_text(value) for value in values]
+    return " or ".join([", ".join(words[:-1]), words[-1]] if words[1:] else words)
 
 
 def switch_names(text: str) -> tuple[str, ...]:

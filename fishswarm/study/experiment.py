@@ -23,7 +23,13 @@ from numpy.typing import NDArray
 
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.formations.local import LOCAL_SHAPES
-from fishswarm.sim.scenario import APPLIES_WHEN, ConfigError, Scenario, either, read_toml
+from fishswarm.sim.scenario import (
+    ConfigError,
+    Scenario,
+    read_toml,
+    setting_text,
+    unmet_condition,
+)
 from fishswarm.study.catalog import EXPERIMENTS_FOLDER, available
 from fishswarm.study.metrics import (
     FORMATION_METRIC_NAMES,
@@ -263,17 +269,17 @@ class Experiment:
         names = [name for name, _ in self.groups]
         if len(set(names)) < len(names) or "" in names:
             raise ConfigError(f"experiment {self.name}: groups need distinct, non-empty names")
-        applies = APPLIES_WHEN.get(self.parameter)
         for group in self.group_names:
             for value in self.values:
                 scenario = self.scenario_for(value, 0, group)  # each must be valid
-                if applies is not None and getattr(scenario, applies[0]) not in applies[1]:
-                    setting, needed = applies
+                unmet = unmet_condition(self.parameter, scenario)
+                if unmet is not None:
+                    setting, needed = unmet
                     whose = f"group {group!r}'s" if group else "its"
                     raise ConfigError(
                         f"experiment {self.name}: {self.parameter} applies only with {setting} "
-                        f"{either(needed)}, and {whose} {setting} is "
-                        f"{getattr(scenario, setting)}: every value would run alike"
+                        f"{needed}, and {whose} {setting} is "
+                        f"{setting_text(getattr(scenario, setting))}: every value would run alike"
                     )
 
     @property

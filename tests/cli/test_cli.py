@@ -167,6 +167,10 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["run", "--spawn", "tank", "--spawn-radius", "1"], "--spawn-radius applies only with"),
         (["run", "--behavior", "waltz", "--model", __file__], "--model applies only with --beh"),
         (["world", "--orbit-radius", "0.3"], "--orbit-radius applies only with --behavior orbit"),
+        (
+            ["run", "--behavior", "formation", "--no-flags", "--flag-medium", "light"],
+            "--flag-medium applies only without --no-flags: leave one of them out",
+        ),
         (["learn", "--resume", "--force"], "--resume continues the learning run in --out and"),
         (
             ["run", "--host", "lab", "--grpc-port", "9999"],
@@ -417,6 +421,36 @@ def test_a_scenario_files_settings_that_the_run_ignores_are_named(tmp_path: Path
                   *_outputs(tmp_path, summary))  # fmt: skip
     assert formed.returncode == 0, formed.stderr
     assert "warning" not in formed.stderr, formed.stderr
+
+
+def test_a_setting_that_needs_two_others_is_named_when_the_second_is_missing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A formation run's file: effort_margin needs rotate_effort, switch_at a shape to switch
+    # to, and the flag medium flags (turned off on the command line).
+    from fishswarm.cli.parsers import build_parser, scenario_from
+
+    config = tmp_path / "c.toml"
+    config.write_text(
+        'behavior = "formation"\neffort_margin = 2\nswitch_at = 1\nflag_medium = "light"\n'
+    )
+    args = build_parser().parse_args(["run", "--config", str(config), "--no-flags"])
+    scenario_from(args)
+    assert capsys.readouterr().err.splitlines() == [
+        f"fishswarm run: warning: {config}: flag_medium applies only with flags true, and "
+        "this run's flags is false: here it changes nothing",
+        f"fishswarm run: warning: {config}: effort_margin applies only with rotate_effort "
+        "true, and this run's rotate_effort is false: here it changes nothing",
+        f"fishswarm run: warning: {config}: switch_at applies only with switch_formation "
+        "set, and this run's switch_formation is none: here it changes nothing",
+    ]
+    # With what they need, nothing to say of them.
+    config.write_text(
+        'behavior = "formation"\neffort_margin = 2\nswitch_at = 1\nflag_medium = "light"\n'
+        'rotate_effort = true\nswitch_formation = "diamond"\n'
+    )
+    scenario_from(build_parser().parse_args(["run", "--config", str(config)]))
+    assert capsys.readouterr().err == ""
 
 
 def test_a_run_says_which_study_code_switches_only_experiments_act_on(tmp_path: Path) -> None:

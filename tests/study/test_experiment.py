@@ -112,6 +112,12 @@ def test_unknown_experiment_lists_the_known_ones() -> None:
             "experiment x: spacing applies only with behavior formation, and its behavior is "
             "aggregation: every value would run alike",
         ),
+        (
+            '[experiment]\nname = "x"\nparameter = "effort_margin"\nvalues = [1, 2]\n'
+            '[scenario]\nbehavior = "formation"\n',
+            "experiment x: effort_margin applies only with rotate_effort true, and its "
+            "rotate_effort is false: every value would run alike",
+        ),
         ("[experiment\n", "not valid TOML"),
         (
             '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\n[scenairo]\nfish = 3\n',
