@@ -370,6 +370,14 @@ def _report(result: RunResult) -> None:
         )
 
 
+def _measured(
+    value: float | None, form: str, unit: str = "", missing: str = "none (no fish)"
+) -> str:
+    """A summary's number with its unit, or what to say where a world without fish left it
+    undefined (None in JSON, NaN in memory)."""
+    return missing if value is None or not math.isfinite(value) else f"{value:{form}}{unit}"
+
+
 def _summary_text(summary: dict[str, Any]) -> str:
     lines = [f"status: {summary['status']}"]
     stops = summary.get("fish", {}).get("watchdog_stops", 0)
@@ -401,10 +409,7 @@ def _summary_text(summary: dict[str, Any]) -> str:
             continue  # the distances say little about circling fish (one fish: all zero)
         change = values["change_percent"]
         change_text = "" if change is None else f" ({change:+.1f} %)"
-        initial, final = (
-            f"{value:.3f}" if value is not None and math.isfinite(value) else "none (no fish)"
-            for value in (values["initial"], values["final"])
-        )
+        initial, final = (_measured(values[when], ".3f") for when in ("initial", "final"))
         lines.append(f"  {name}: {initial} → {final}{change_text}")
     formation = summary.get("formation")
     if formation:
@@ -414,15 +419,14 @@ def _summary_text(summary: dict[str, Any]) -> str:
             told["shape"] + (f" (from {told['time']:g} s)" if turn else "")
             for turn, told in enumerate(formation.get("shapes", []))
         )
-        error = formation["shape_error"]
-        measured = error is not None and math.isfinite(error)
+        joined = formation["joined_fraction"]
         lines.append(
             f"  formation {told}: shape error "
-            f"{f'{error:.3f} m' if measured else 'not measured (too few fish)'}, "
-            f"{100 * formation['joined_fraction']:.0f} % joined "
+            f"{_measured(formation['shape_error'], '.3f', ' m', 'not measured (too few fish)')}, "
+            f"{_measured(joined and 100 * joined, '.0f', ' % joined', 'none joined (no fish)')} "
             f"({'never 90 %' if ninety is None else f'90 % first at {ninety:g} s'}), "
-            f"lattice energy {formation['lattice_energy']:.3f}, "
-            f"collisions at most {formation['most_collisions']:.0f}"
+            f"lattice energy {_measured(formation['lattice_energy'], '.3f')}, "
+            f"collisions at most {_measured(formation['most_collisions'], '.0f')}"
         )
         if formation.get("fitness_total") is not None:
             lines.append(

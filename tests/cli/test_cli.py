@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import signal
@@ -1227,13 +1228,20 @@ def test_a_summary_of_a_world_left_without_fish_says_so_instead_of_nan(tmp_path:
     from fishswarm.cli.swarm import _summary_text
 
     summary = tmp_path / "s.json"
-    result = _run("run", "--fish", "2", "--duration", "1", "--quiet",
+    result = _run("run", "--fish", "3", "--behavior", "formation", "--duration", "1", "--quiet",
                   *_outputs(tmp_path, summary))  # fmt: skip
     assert result.returncode == 0, result.stderr
     data = json.loads(summary.read_text())
-    # As a world that lost every fish ends: its last distances are not defined (null).
+    # As a world that lost every fish ends: its last distances are not defined (null), its
+    # formation metrics not a number.
     for values in data["metrics"].values():
         values["final"], values["change_percent"] = None, None
+    for name in ("shape_error", "joined_fraction", "lattice_energy", "collisions"):
+        data["formation"][name] = math.nan
     text = _summary_text(data)
     assert "centroid_distance: " in text and "→ none (no fish)" in text
+    assert (
+        "formation pyramid: shape error not measured (too few fish), none joined (no fish) "
+        "(never 90 %), lattice energy none (no fish), collisions at most"
+    ) in text
     assert "nan" not in text
