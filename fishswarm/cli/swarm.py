@@ -118,7 +118,9 @@ def progress_printer(
         if progress.tick % every and progress.tick != ticks:
             return
         m = progress.metrics
-        prefix = bar(progress.tick, ticks) + " " if ticks else ""
+        # An observer that came after the tick it was to stop at sees one snapshot past it.
+        late = ticks is not None and progress.tick > ticks
+        prefix = bar(progress.tick, ticks) + " " if ticks and not late else ""
         measures = (
             "no fish in the world"
             if progress.fish == 0
@@ -130,7 +132,11 @@ def progress_printer(
             f"nearest {m['nearest_neighbor_distance']:.3f} m"
         )
         count = (
-            f"{progress.tick}" if ticks is None else f"{progress.tick:>{len(str(ticks))}}/{ticks}"
+            f"{progress.tick}"
+            if ticks is None
+            else f"{progress.tick} (after the last tick asked for, {ticks})"
+            if late
+            else f"{progress.tick:>{len(str(ticks))}}/{ticks}"
         )
         seen = f"  seen {m['neighbors_seen']:.1f}" if progress.fish else ""
         line = (

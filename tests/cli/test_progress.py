@@ -55,3 +55,13 @@ def test_a_run_of_known_length_ends_its_line_at_the_last_tick() -> None:
     assert "tick 4/4" in terminal.getvalue() and "[####################]" in terminal.getvalue()
     line.close()  # nothing left open
     assert terminal.getvalue().endswith("seen 3.0\n")
+
+
+def test_an_observer_that_came_after_its_last_tick_says_so_instead_of_tick_5_of_1() -> None:
+    terminal = Terminal()
+    line = ProgressLine(terminal)
+    progress_printer(1, line)(Progress(5, 0.5, 5, METRICS))
+    assert terminal.getvalue() == (
+        "\rtick 5 (after the last tick asked for, 1)  t=    0.5 s  fish 5  centroid 0.500 m  "
+        "pairwise 0.700 m  nearest 0.200 m  seen 3.0\n"
+    )
