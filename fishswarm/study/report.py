@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import itertools
 import logging
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -191,15 +192,26 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
         + " |",
         "|" + ":---|" * len(group_label) + "---:|" * (1 + len(experiment.summaries)),
     ]
+    undefined = False
     for row in rows:
         cells = [row["group"]] if group_label else []
         cells.append(f"{row[experiment.parameter]:g}")
         for summary in experiment.summaries:
             mean, sd = row[f"{summary.key}_mean"], row[f"{summary.key}_sd"]
+            if not math.isfinite(mean):
+                undefined = True
+                cells.append("—")
+                continue
             spread = f" ± {sd:.{summary.digits}f}" if experiment.seeds > 1 else ""
             # + 0.0: a mean that rounds to zero from below is shown 0.00, not -0.00.
             cells.append(f"{round(mean, summary.digits) + 0.0:.{summary.digits}f}{spread}")
         lines.append("| " + " | ".join(cells) + " |")
+    if undefined:
+        lines += [
+            "",
+            "—: not defined for these runs (a distance between fish, or a change from a "
+            "first value of 0, with one fish; runs.csv and table.csv hold it as nan).",
+        ]
     return "\n".join(lines) + "\n"
 
 

@@ -502,3 +502,27 @@ def test_a_mean_that_rounds_to_zero_from_below_is_shown_as_zero() -> None:
     cells = [cell.strip() for cell in markdown_table(experiment, [row]).splitlines()[-1].split("|")]
     # Radius, wobble and speed have three decimals, revolutions two, collisions one.
     assert cells[2:-1] == ["-0.001 ± 0.002"] * 2 + ["0.00 ± 0.00", "-0.001 ± 0.002", "0.0 ± 0.0"]
+
+
+def test_a_number_one_fish_leaves_undefined_is_a_dash_in_the_table(tmp_path: Path) -> None:
+    # One fish has no distance to another fish: the table said "nan ± nan".
+    from fishswarm.study.sweep import sweep_experiment
+
+    path = tmp_path / "fish.toml"
+    path.write_text(
+        '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [1, 3]\nseeds = 2\n'
+        '[scenario]\nbehavior = "aggregation"\nduration = 3\n',
+        encoding="utf-8",
+    )
+    experiment = Experiment.from_toml(path)
+    outcomes = sweep_experiment(experiment, jobs=1)
+    write_report(experiment, outcomes, tmp_path / "out", engine="batch", wall_time=1.0)
+    table = (tmp_path / "out" / "table.md").read_text(encoding="utf-8")
+    one, three = (line for line in table.splitlines() if line.startswith(("| 1 |", "| 3 |")))
+    assert "nan ±" not in table and "| nan" not in table
+    # Aggregating fish: centroid, pairwise and nearest-neighbour changes, neighbours seen at
+    # the start and the end. One fish sees none; its distances to others are not defined,
+    # and its distance to the school's centre is 0 throughout, so has no change in per cent.
+    assert one == "| 1 | — | — | — | 0.0 ± 0.0 | 0.0 ± 0.0 |"
+    assert "—" not in three
+    assert table.rstrip().endswith("runs.csv and table.csv hold it as nan).")
