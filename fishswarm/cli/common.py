@@ -212,7 +212,7 @@ def prepare_file(path: Path | None, flag: str, *, example: str, suffix: str | No
         raise ConfigError(
             f"{flag} must name a {suffix} file, e.g. {flag} {example}; got {path.name}"
         )
-    prepare_folder(path.parent, flag)
+    prepare_folder(path.parent, flag, file=path)
 
 
 def check_distinct_files(
@@ -244,14 +244,16 @@ def check_distinct_files(
         seen[where] = flag
 
 
-def prepare_folder(folder: Path, flag: str) -> None:
-    """Make the output folder now, before hours of work go into it.
+def prepare_folder(folder: Path, flag: str, *, file: Path | None = None) -> None:
+    """Make the output folder now (of ``file``, when the flag names a file in it), before
+    hours of work go into it.
 
     Raises:
         ConfigError: it is a file, or cannot be made or written to, with which.
     """
+    named = flag if file is None else f"{flag} {file}: its folder"
     if folder.exists() and not folder.is_dir():
-        raise ConfigError(f"{flag} {folder} is a file: give a folder to write into")
+        raise ConfigError(f"{named} {folder} is a file: give a folder to write into")
     try:
         folder.mkdir(parents=True, exist_ok=True)
         # A probe of its own name: two commands preparing one folder at once (two worlds
@@ -260,7 +262,7 @@ def prepare_folder(folder: Path, flag: str) -> None:
         os.close(handle)
         os.unlink(probe)
     except OSError as error:
-        raise ConfigError(f"{flag} {folder}: cannot write there ({error.strerror})") from None
+        raise ConfigError(f"{named} {folder}: cannot write there ({error.strerror})") from None
 
 
 def read_recording_for(path: Path, *, at_least: int, purpose: str) -> Recording:

@@ -231,6 +231,11 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         ),
         (["learn", "--out", __file__], "is a file: give a folder to write into"),
         (["experiment", "blindspot", "--out", __file__], "is a file: give a folder"),
+        (["run", "--record", "/proc/x.mcap"], "--record /proc/x.mcap: its folder /proc: cannot"),
+        (
+            ["world", "--record", f"{__file__}/x.mcap"],
+            f"--record {__file__}/x.mcap: its folder {__file__} is a file: give a folder",
+        ),
         (["fish", "--id", "1", "--connect", "bogus"], "--connect: endpoint 'bogus'"),
         (
             ["observe", "--connect", "tls/127.0.0.1:7447"],

@@ -113,7 +113,7 @@ def test_outputs_that_cannot_be_written_are_refused_before_any_work(
         (["export", str(recording), "--npz", str(folder)], f"{str(folder)!r} is a folder"),
         (["export", str(recording), "--csv", str(folder)], "--csv must name a file"),
         (["plot", str(recording), "--out", "/proc/none/x.png"],
-         "--out /proc/none: cannot write there"),
+         "--out /proc/none/x.png: its folder /proc/none: cannot write there"),
         (["animate", str(recording), "--out", str(folder / "sub" / "x.gif"), "--fps", "4"],
          None),
         (["observe", "--connect", "tcp/127.0.0.1:1", "--record", str(folder)],
