@@ -56,13 +56,9 @@ def routed_commands() -> Iterator[tuple[str, Callable[..., subprocess.Popen[str]
 
 @pytest.mark.slow
 def test_router_world_fish_and_remote_observer_as_separate_processes(tmp_path: Path) -> None:
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
     record = tmp_path / "observed.mcap"
     world_record = tmp_path / "world.mcap"
-    with started_commands() as start:
-        start("router", "--listen", endpoint)
-        wait_for_port(port)
+    with routed_commands() as (endpoint, start):
         observer = start("observe", "--connect", endpoint, "--ticks", "6", "--record", str(record))
         # Without --ticks an observer ends with the run: when the world leaves.
         until_the_end = start("observe", "--connect", endpoint)
@@ -311,16 +307,12 @@ def test_an_observer_of_a_run_that_ends_does_not_say_it_lost_the_router(tmp_path
 def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_own_run(
     tmp_path: Path,
 ) -> None:
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
     first_record, second_record = tmp_path / "first.mcap", tmp_path / "second.mcap"
+    with routed_commands() as (endpoint, start):
 
-    def world(*args: str) -> list[str]:
-        return ["world", "--connect", endpoint, "--fish", "2", *args]
+        def world(*args: str) -> list[str]:
+            return ["world", "--connect", endpoint, "--fish", "2", *args]
 
-    with started_commands() as start:
-        start("router", "--listen", endpoint)
-        wait_for_port(port)
         start("fish", "--id", "0", "--id", "1", "--school", "pair", "--connect", endpoint)
         # The first world in real time, 30 s: the second comes while it runs.
         first = start(
@@ -375,13 +367,9 @@ def test_two_worlds_started_together_before_their_fish_both_run_one_after_the_ot
 ) -> None:
     """Two worlds of a swarm, both up and waiting when the fish come: one runs, then the
     other (they used to wait for each other until both start timeouts ran out)."""
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
     records = [tmp_path / "a.mcap", tmp_path / "b.mcap"]
     timing = [("--duration", "3"), ("--duration", "1.5", "--period", "0.5")]
-    with started_commands() as start:
-        start("router", "--listen", endpoint)
-        wait_for_port(port)
+    with routed_commands() as (endpoint, start):
         worlds = [
             start(
                 "world",
@@ -437,11 +425,7 @@ def test_a_standalone_channel_takes_each_runs_loss_and_seed_from_its_world(
     channel_config = tmp_path / "channel.toml"
     channel_config.write_text("[scenario]\nchannel_loss = 0.0\nseed = 9\n")
     record = tmp_path / "world.mcap"
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    with started_commands() as start:
-        start("router", "--listen", endpoint)
-        wait_for_port(port)
+    with routed_commands() as (endpoint, start):
         channel = start(
             "--log-level", "INFO", "channel", "--connect", endpoint, "--config", str(channel_config)
         )
