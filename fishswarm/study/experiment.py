@@ -269,18 +269,23 @@ class Experiment:
         names = [name for name, _ in self.groups]
         if len(set(names)) < len(names) or "" in names:
             raise ConfigError(f"experiment {self.name}: groups need distinct, non-empty names")
+        unmet: list[tuple[str, str, str, Any]] = []
         for group in self.group_names:
             for value in self.values:
                 scenario = self.scenario_for(value, 0, group)  # each must be valid
-                unmet = unmet_condition(self.parameter, scenario)
-                if unmet is not None:
-                    setting, needed = unmet
-                    whose = f"group {group!r}'s" if group else "its"
-                    raise ConfigError(
-                        f"experiment {self.name}: {self.parameter} applies only with {setting} "
-                        f"{needed}, and {whose} {setting} is "
-                        f"{setting_text(getattr(scenario, setting))}: every value would run alike"
-                    )
+                if (condition := unmet_condition(self.parameter, scenario)) is not None:
+                    unmet.append((group, *condition, getattr(scenario, condition[0])))
+        # A group the sweep leaves alike is a control beside the others (formation-energy's
+        # "no rotation"); only a sweep that changes no run at all is refused.
+        if unmet and len({group for group, *_ in unmet}) == len(self.group_names):
+            group, setting, needed, actual = unmet[0]
+            whose = f"group {group!r}'s" if group else "its"
+            every = "every group's values" if self.groups else "every value"
+            raise ConfigError(
+                f"experiment {self.name}: {self.parameter} applies only with {setting} "
+                f"{needed}, and {whose} {setting} is {setting_text(actual)}: {every} would "
+                "run alike"
+            )
 
     @property
     def group_names(self) -> tuple[str, ...]:

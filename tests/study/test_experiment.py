@@ -118,6 +118,13 @@ def test_unknown_experiment_lists_the_known_ones() -> None:
             "experiment x: effort_margin applies only with rotate_effort true, and its "
             "rotate_effort is false: every value would run alike",
         ),
+        (
+            '[experiment]\nname = "x"\nparameter = "effort_margin"\nvalues = [1, 2]\n'
+            "[experiment.groups]\na = { flags = false }\nb = { spacing = 0.3 }\n"
+            '[scenario]\nbehavior = "formation"\n',
+            "experiment x: effort_margin applies only with rotate_effort true, and group 'a''s "
+            "rotate_effort is false: every group's values would run alike",
+        ),
         ("[experiment\n", "not valid TOML"),
         (
             '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\n[scenairo]\nfish = 3\n',
@@ -526,3 +533,18 @@ def test_a_number_one_fish_leaves_undefined_is_a_dash_in_the_table(tmp_path: Pat
     assert one == "| 1 | — | — | — | 0.0 ± 0.0 | 0.0 ± 0.0 |"
     assert "—" not in three
     assert table.rstrip().endswith("runs.csv and table.csv hold it as nan).")
+
+
+def test_a_group_the_sweep_leaves_alike_is_a_control_beside_one_it_changes(
+    tmp_path: Path,
+) -> None:
+    # formation-energy's "no rotation" group: the margin changes nothing there, by design.
+    path = tmp_path / "control.toml"
+    path.write_text(
+        '[experiment]\nname = "x"\nparameter = "effort_margin"\nvalues = [1, 2]\n'
+        "[experiment.groups]\non = { rotate_effort = true }\noff = { rotate_effort = false }\n"
+        '[scenario]\nbehavior = "formation"\n',
+        encoding="utf-8",
+    )
+    assert Experiment.from_toml(path).group_names == ("on", "off")
+    assert find("formation-energy").group_names == ("rotation", "no rotation")
