@@ -460,8 +460,13 @@ def share_effort(
         swap_to = np.where(busy, memory.swap_to, STAY)
         swap_from = np.where(busy, memory.swap_from, STAY)
         return _Swaps(swap_to, swap_from, memory.swap_since, np.where(busy, swap_from, STAY))
+    # Without a station the map is anchored at its leader, slot 0: a leader that left it for
+    # another slot would carry the map along with it (the school chased it into a corner).
+    # So slot 0 is swapped only when it is a place in the water, behind the station's post.
+    swappable = in_map & ((slot > 0) | (params.station is not None))
     holds = memory.joined & (place >= 0) & ~busy
-    asked = in_map & heard.joined & (told_swap == place[:, None]) & holds[:, None]
+    holds &= (place > 0) | (params.station is not None)
+    asked = swappable & heard.joined & (told_swap == place[:, None]) & holds[:, None]
     # The slot a seeker offers must be on this fish's map too: a flag from a fish with a
     # larger map (or a forged one) may name one past its end.
     offered = (told_swap >= 0) & (told_swap < slots)
@@ -477,7 +482,7 @@ def share_effort(
     resting = now - since < SWAP_REST
     # Only a neighbour, the holder of a slot next to the fish's own, is asked: a short swap.
     near = np.linalg.norm(inbox.sender, axis=2) <= NEIGHBOUR_SPACINGS * params.spacing
-    rested = in_map & heard.joined & (told_swap < 0) & near
+    rested = swappable & heard.joined & (told_swap < 0) & near
     lowest = np.where(rested, told_effort, np.iinfo(np.int64).max)
     pick = np.argmin(lowest, axis=1)
     least = lowest[rows, pick]

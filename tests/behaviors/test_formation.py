@@ -367,50 +367,77 @@ def _tired(perception: Perception, effort: float) -> Perception:
 
 
 def test_effort_sharing_by_a_handshake_of_flags_drawn_on_paper() -> None:
-    # A column (spacing 0.3 m, margin 40): T leads at slot 0; R holds slot 1, 0.3 m behind
-    # it; U holds slot 2, 0.6 m behind: too far to be T's neighbour (1.5 spacings).
-    params = FormationParams("column", count=3, spacing=0.3, rotate_effort=True, effort_margin=40)
-    behind = _tired(_perception((-0.3, 0.0, 0.0), (-0.6, 0.0, 0.0)), 100.0)
+    # A column (spacing 0.3 m, margin 40) facing +x: L leads at slot 0; T holds slot 1,
+    # 0.3 m behind it; R holds slot 2, 0.3 m behind T; U holds slot 3, 0.6 m behind T: too
+    # far to be T's neighbour (1.5 spacings).
+    params = FormationParams("column", count=4, spacing=0.3, rotate_effort=True, effort_margin=40)
+    around = _tired(_perception((0.3, 0.0, 0.0), (-0.3, 0.0, 0.0), (-0.6, 0.0, 0.0)), 100.0)
     heard = inbox_of([[
-        (FLAG, _flag(1, True, effort=50), np.array([-0.3, 0.0, 0.0])),
-        (FLAG, _flag(2, True, effort=10), np.array([-0.6, 0.0, 0.0])),
+        (FLAG, _flag(0, True, effort=0), np.array([0.3, 0.0, 0.0])),
+        (FLAG, _flag(2, True, effort=50), np.array([-0.3, 0.0, 0.0])),
+        (FLAG, _flag(3, True, effort=10), np.array([-0.6, 0.0, 0.0])),
     ]])  # fmt: skip
     # 1. Ask: T spent 50 more than R (more than the margin): it flags R's slot, and stays.
-    memory, steering = steer_formation(_holding(0), behind, heard, params=params)
+    # L rested more, but the map is anchored at its leader: slot 0 is not swapped.
+    memory, steering = steer_formation(_holding(1), around, heard, params=params)
     asking = FormationFlag.from_values(steering.outbox.values[0])
-    assert (asking.slot, asking.joined, asking.swap, asking.effort) == (0, True, 1, 100)
+    assert (asking.slot, asking.joined, asking.swap, asking.effort) == (1, True, 2, 100)
     assert memory.swap_to.tolist() == [-1]
-    np.testing.assert_array_equal(steering.target, [[0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(steering.target, [[0.0, 0.0, 0.0]], atol=1e-12)
     # Within the margin, nobody is asked.
-    _, calm = steer_formation(_holding(0), _tired(behind, 80.0), heard, params=params)
+    _, calm = steer_formation(_holding(1), _tired(around, 80.0), heard, params=params)
     assert FormationFlag.from_values(calm.outbox.values[0]).swap == -1
-    # 2. Agree: R hears T's request (T 0.3 m ahead of it) and heads for slot 0, flagging
-    # that it seeks it and gives up slot 1.
-    at_r = _tired(_perception((0.3, 0.0, 0.0), (-0.3, 0.0, 0.0)), 50.0)
+    # 2. Agree: R hears T's request (T 0.3 m ahead of it, L 0.6 m) and heads for slot 1,
+    # flagging that it seeks it and gives up slot 2.
+    at_r = _tired(_perception((0.3, 0.0, 0.0), (0.6, 0.0, 0.0)), 50.0)
     request = inbox_of([[(FLAG, asking.values(), np.array([0.3, 0.0, 0.0]))]])
-    memory_r, steering_r = steer_formation(_holding(1), at_r, request, params=params)
+    memory_r, steering_r = steer_formation(_holding(2), at_r, request, params=params)
     agreed = FormationFlag.from_values(steering_r.outbox.values[0])
-    assert (agreed.slot, agreed.joined, agreed.swap) == (0, False, 1)
-    assert (memory_r.swap_to.tolist(), memory_r.swap_from.tolist()) == ([0], [1])
+    assert (agreed.slot, agreed.joined, agreed.swap) == (1, False, 2)
+    assert (memory_r.swap_to.tolist(), memory_r.swap_from.tolist()) == ([1], [2])
     assert memory_r.swap_since.tolist() == [100.0]
-    # 3. Go: T hears R seek its slot and give up slot 1: it heads for slot 1, 0.3 m behind.
+    np.testing.assert_allclose(steering_r.target, [[0.3, 0.0, 0.0]], atol=1e-12)
+    # 3. Go: T hears R seek its slot and give up slot 2: it heads for slot 2, 0.3 m behind.
     answer = inbox_of([[(FLAG, agreed.values(), np.array([-0.3, 0.0, 0.0]))]])
-    memory_t, steering_t = steer_formation(_holding(0), behind, answer, params=params)
+    memory_t, steering_t = steer_formation(_holding(1), around, answer, params=params)
     going = FormationFlag.from_values(steering_t.outbox.values[0])
-    assert (going.slot, going.joined, going.swap) == (1, False, 0)
-    assert memory_t.swap_to.tolist() == [1]
+    assert (going.slot, going.joined, going.swap) == (2, False, 1)
+    assert memory_t.swap_to.tolist() == [2]
     np.testing.assert_allclose(steering_t.target, [[-0.3, 0.0, 0.0]], atol=1e-12)
     # Without rotation (the default) the same inbox moves nobody.
-    still = FormationParams("column", count=3, spacing=0.3)
-    _, unmoved = steer_formation(_holding(0), behind, answer, params=still)
-    np.testing.assert_array_equal(unmoved.target, [[0.0, 0.0, 0.0]])
+    still = FormationParams("column", count=4, spacing=0.3)
+    _, unmoved = steer_formation(_holding(1), around, answer, params=still)
+    np.testing.assert_allclose(unmoved.target, [[0.0, 0.0, 0.0]], atol=1e-12)
     # A seeker offering a slot past the end of T's map (a fish with a larger map, or a
     # forged flag) is not answered: T holds its slot.
     beyond = dataclasses.replace(agreed, swap=40)
     odd = inbox_of([[(FLAG, beyond.values(), np.array([-0.3, 0.0, 0.0]))]])
-    memory_odd, steering_odd = steer_formation(_holding(0), behind, odd, params=params)
+    memory_odd, steering_odd = steer_formation(_holding(1), around, odd, params=params)
     assert memory_odd.swap_to.tolist() == [-1]
-    np.testing.assert_array_equal(steering_odd.target, [[0.0, 0.0, 0.0]])
+    np.testing.assert_allclose(steering_odd.target, [[0.0, 0.0, 0.0]], atol=1e-12)
+
+
+def test_the_leader_of_a_map_anchored_at_it_neither_asks_nor_is_asked_to_swap() -> None:
+    # The map moves with its leader (slot 0): a leader that left for slot 1 would carry
+    # slot 1 along, chase it, and draw the school into a corner of the tank (measured: 15
+    # fish in a pyramid, 0 % joined and every pair colliding after 120 s). A tired leader
+    # 0.3 m ahead of a rested fish at slot 1 (a column, spacing 0.3 m, margin 40):
+    params = FormationParams("column", count=3, spacing=0.3, rotate_effort=True, effort_margin=40)
+    behind = _tired(_perception((-0.3, 0.0, 0.0)), 100.0)
+    rested = inbox_of([[(FLAG, _flag(1, True, effort=10), np.array([-0.3, 0.0, 0.0]))]])
+    _, steering = steer_formation(_holding(0), behind, rested, params=params)
+    assert FormationFlag.from_values(steering.outbox.values[0]).swap == -1
+    # Asked anyway (a flag from an older fish, or a forged one), it stays.
+    asker = _tired(_perception((-0.3, 0.0, 0.0)), 10.0)
+    request = inbox_of([[(FLAG, _flag(1, True, effort=100, swap=0), np.array([-0.3, 0, 0]))]])
+    memory, steering = steer_formation(_holding(0), asker, request, params=params)
+    assert memory.swap_to.tolist() == [-1]
+    np.testing.assert_allclose(steering.target, [[0.0, 0.0, 0.0]], atol=1e-12)
+    # Behind a station's post slot 0 is a place in the water, not the leader's: it is
+    # swapped like any other (the flow tank's formation-energy experiment).
+    stationed = dataclasses.replace(params, station=0.2)
+    _, steering = steer_formation(_holding(0), behind, rested, params=stationed)
+    assert FormationFlag.from_values(steering.outbox.values[0]).swap == 1
 
 
 def test_a_swap_goes_on_until_the_fish_arrives_or_gives_up_and_then_it_rests() -> None:
@@ -515,12 +542,13 @@ def test_effort_sharing_fish_decide_alone_as_in_a_school() -> None:
 
 
 def test_a_fish_exactly_the_margin_more_tired_does_not_ask_one_more_does() -> None:
-    # T leads with R (effort 50) 0.3 m behind it; margin 40.
+    # T holds slot 1 behind the leader (0.3 m ahead), with R (effort 50) at slot 2, 0.3 m
+    # behind it; margin 40.
     params = FormationParams("column", count=3, spacing=0.3, rotate_effort=True, effort_margin=40)
-    behind = _perception((-0.3, 0.0, 0.0))
-    heard = inbox_of([[(FLAG, _flag(1, True, effort=50), np.array([-0.3, 0.0, 0.0]))]])
-    for effort, swap in ((90.0, -1), (91.0, 1)):
-        _, steering = steer_formation(_holding(0), _tired(behind, effort), heard, params=params)
+    around = _perception((0.3, 0.0, 0.0), (-0.3, 0.0, 0.0))
+    heard = inbox_of([[(FLAG, _flag(2, True, effort=50), np.array([-0.3, 0.0, 0.0]))]])
+    for effort, swap in ((90.0, -1), (91.0, 2)):
+        _, steering = steer_formation(_holding(1), _tired(around, effort), heard, params=params)
         assert FormationFlag.from_values(steering.outbox.values[0]).swap == swap
 
 
