@@ -114,12 +114,19 @@ APPLIES_WHEN: dict[str, tuple[tuple[str, tuple[object, ...] | None], ...]] = {
             "flags",
             "slot_rule",
             "local_rule",
-            "rotate_effort",
             "switch_formation",
         )
     },
     "flag_medium": (_FORMING, ("flags", (True,))),
-    "effort_margin": (_FORMING, ("rotate_effort", (True,))),
+    # A swap is asked and agreed by the numbers of a flag: one bit by light or beacon
+    # cannot carry them.
+    "rotate_effort": (_FORMING, ("flags", (True,)), ("flag_medium", ("channel",))),
+    "effort_margin": (
+        _FORMING,
+        ("rotate_effort", (True,)),
+        ("flags", (True,)),
+        ("flag_medium", ("channel",)),
+    ),
     "switch_at": (_FORMING, ("switch_formation", None)),
     "model": (("behavior", ("replica",)),),
     "orbit_radius": (("behavior", ("orbit", "milling", "waltz")),),

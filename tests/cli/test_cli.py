@@ -172,6 +172,15 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
             ["run", "--behavior", "formation", "--no-flags", "--flag-medium", "light"],
             "--flag-medium applies only without --no-flags: leave one of them out",
         ),
+        (
+            ["run", "--behavior", "formation", "--rotate-effort", "--no-flags"],
+            "--rotate-effort applies only without --no-flags: leave one of them out",
+        ),
+        (
+            ["run", "--behavior", "formation", "--rotate-effort", "--flag-medium", "beacon"],
+            "--rotate-effort applies only with --flag-medium channel, and this --flag-medium is "
+            "beacon: add --flag-medium channel, or leave --rotate-effort out",
+        ),
         (["learn", "--resume", "--force"], "--resume continues the learning run in --out and"),
         (
             ["run", "--host", "lab", "--grpc-port", "9999"],
@@ -452,7 +461,7 @@ def test_a_setting_that_needs_two_others_is_named_when_the_second_is_missing(
     ]
     # With what they need, nothing to say of them.
     config.write_text(
-        'behavior = "formation"\neffort_margin = 2\nswitch_at = 1\nflag_medium = "light"\n'
+        'behavior = "formation"\neffort_margin = 2\nswitch_at = 1\nflag_medium = "channel"\n'
         'rotate_effort = true\nswitch_formation = "diamond"\n'
     )
     scenario_from(build_parser().parse_args(["run", "--config", str(config)]))
