@@ -46,6 +46,7 @@ from fishswarm.bluebot.parameters import (
     Tank,
 )
 from fishswarm.bluebot.vision import Vision
+from fishswarm.formations.maps import MAX_FISH as MAX_MAP_FISH
 from fishswarm.protocols.checks import MAX_TICK
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import FORMATION_SHAPES
@@ -487,6 +488,11 @@ class Scenario:
             self.switch_formation is None or self.switch_formation in FORMATION_SHAPES,
             f"switch_formation must be one of {', '.join(FORMATION_SHAPES)}, "
             f"got {self.switch_formation!r}",
+        )
+        need(
+            self.behavior != "formation" or self.fish <= MAX_MAP_FISH,
+            f"a formation is for at most {MAX_MAP_FISH} fish (its map's places), got "
+            f"{self.fish}: give --fish {MAX_MAP_FISH} or fewer",
         )
         need(
             isinstance(self.formation_lead, int | float) and 0 <= self.formation_lead < 60,

@@ -153,6 +153,11 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
     ("args", "message"),
     [
         (["run", "--fish", "0"], "fish must be a whole number from 1 to 100000"),
+        (
+            ["run", "--behavior", "formation", "--fish", "10001"],
+            "a formation is for at most 10000 fish (its map's places), got 10001: give --fish "
+            "10000 or fewer",
+        ),
         (["run", "--behavior", "schooling"], "behavior must be one of dispersion, aggregation"),
         (["run", "--duration", "-3"], "duration must be a positive number of seconds"),
         (["run", "--listen", "localhost"], "write PROTOCOL/HOST:PORT"),
