@@ -129,6 +129,10 @@ APPLIES_WHEN: dict[str, tuple[tuple[str, tuple[object, ...] | None], ...]] = {
         ("flag_medium", ("channel",)),
     ),
     "switch_at": (_FORMING, ("switch_formation", None)),
+    **{
+        name: (("vision_model", ("geometric",)),)
+        for name in ("visual_range", "blind_width", "sphere_radius", "vision_noise")
+    },
     "model": (("behavior", ("replica",)),),
     "orbit_radius": (("behavior", ("orbit", "milling", "waltz")),),
     "jitter": (("time_mode", ("jitter",)),),
@@ -139,10 +143,26 @@ must have, None for any but none), in the order they are checked. Elsewhere they
 nothing, and are refused or warned of."""
 
 
+def _sees_geometrically(scenario: Scenario) -> bool:
+    """Whether the geometric vision model serves a run whose fish see each other through
+    their cameras: landmarks, and formation flags by light, are seen by it."""
+    by_light = scenario.behavior == "formation" and scenario.flags
+    return scenario.landmarks().shape[0] > 0 or (by_light and scenario.flag_medium == "light")
+
+
+_APPLIES_ANYWAY: dict[str, Callable[[Scenario], bool]] = dict.fromkeys(
+    ("visual_range", "blind_width", "sphere_radius", "vision_noise"), _sees_geometrically
+)
+"""Settings that mean something, beside :data:`APPLIES_WHEN`'s conditions, when these say so."""
+
+
 def unmet_condition(name: str, scenario: Scenario) -> tuple[str, str] | None:
     """The first condition of :data:`APPLIES_WHEN` that ``scenario`` leaves setting ``name``
     without: (the setting, what it must be, in words: ``formation``, ``true`` or ``set``);
     None when ``name`` means something."""
+    anyway = _APPLIES_ANYWAY.get(name)
+    if anyway is not None and anyway(scenario):
+        return None
     for setting, values in APPLIES_WHEN.get(name, ()):
         value = getattr(scenario, setting)
         if values is None and value is None:

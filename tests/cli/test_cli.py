@@ -178,6 +178,10 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
             "--flag-medium applies only without --no-flags: leave one of them out",
         ),
         (
+            ["run", "--vision", "camera", "--blind-width", "0.5"],
+            "--blind-width applies only with --vision geometric, and this --vision is camera",
+        ),
+        (
             ["run", "--behavior", "formation", "--rotate-effort", "--no-flags"],
             "--rotate-effort applies only without --no-flags: leave one of them out",
         ),

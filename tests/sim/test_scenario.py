@@ -346,3 +346,21 @@ def test_a_robots_fish_takes_any_period_and_run_checks_its_duration() -> None:
     assert scenario_from(fish).control_period == 0.4  # no duration of its own to divide
     with pytest.raises(ConfigError, match="whole number of control periods"):
         scenario_from(parser.parse_args(["run", "--period", "0.4"]))
+
+
+def test_vision_settings_apply_to_a_camera_run_only_where_the_geometric_model_serves_it() -> None:
+    from fishswarm.sim.scenario import unmet_condition
+
+    camera = Scenario(vision_model="camera", fish=3)
+    assert unmet_condition("blind_width", camera) == ("vision_model", "geometric")
+    assert unmet_condition("blind_width", Scenario()) is None
+    # A landmark is seen by the geometric model (an orbit's post too), and so are formation
+    # flags by light: there the settings mean something even with cameras.
+    assert unmet_condition("sphere_radius", camera.replace(landmark=(1.0, 1.0, 0.5))) is None
+    assert unmet_condition("visual_range", camera.replace(behavior="orbit", fish=1)) is None
+    lit = camera.replace(behavior="formation", flag_medium="light")
+    assert unmet_condition("vision_noise", lit) is None
+    assert unmet_condition("vision_noise", lit.replace(flag_medium="beacon")) == (
+        "vision_model",
+        "geometric",
+    )

@@ -125,6 +125,12 @@ def test_unknown_experiment_lists_the_known_ones() -> None:
             "experiment x: effort_margin applies only with rotate_effort true, and group 'a''s "
             "rotate_effort is false: every group's values would run alike",
         ),
+        (
+            '[experiment]\nname = "x"\nparameter = "blind_width"\nvalues = [0, 2.5]\n'
+            '[scenario]\nvision_model = "camera"\n',
+            "experiment x: blind_width applies only with vision_model geometric, and its "
+            "vision_model is camera: every value would run alike",
+        ),
         ("[experiment\n", "not valid TOML"),
         (
             '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\n[scenairo]\nfish = 3\n',
