@@ -397,8 +397,16 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
     scenario flags given on top (a flag that it would ignore is refused)."""
     path = getattr(args, "config", None)
     table = scenario_table(path) if path else {}
-    base = Scenario.from_mapping(table, source=str(path)) if path else Scenario()
     overrides = {name: getattr(args, name, None) for name in _SCENARIO_FLAGS}
+    try:
+        base = Scenario.from_mapping(table, source=str(path)) if path else Scenario()
+    except ConfigError:
+        given = {name: value for name, value in overrides.items() if value is not None}
+        if not given:
+            raise
+        # The file alone may be refused where the command line mends it (a switch_at past
+        # the file's duration, with a longer --duration): checked with the flags on top.
+        base = Scenario.from_mapping({**table, **given}, source=str(path))
     try:
         # A controller the file names stays when --behavior changes the behaviour.
         scenario = base.with_settings(overrides, controller_chosen="controller" in table)

@@ -520,7 +520,8 @@ class Scenario:
         )
         need(
             isinstance(self.switch_at, int | float) and 0 <= self.switch_at <= self.duration,
-            f"switch_at must be a time within the run, [0, duration] s, got {self.switch_at!r}",
+            f"switch_at must be a time within the run, [0, {self.duration:g}] s (its duration), "
+            f"got {self.switch_at!r}",
         )
         need(
             _real(self.formation_heading_deg),

@@ -105,7 +105,10 @@ def test_toml_loads_and_rejects_unknown_keys(tmp_path: Path) -> None:
         ({"tolerance": 0.0}, "tolerance must be positive metres"),
         ({"caudal_cap": 1.5}, r"caudal_cap must be in \(0, 1\], got 1.5"),
         ({"formation_lead": 60.0}, r"formation_lead must be a time in \[0, 60\) s, got 60.0"),
-        ({"switch_at": 15.5}, r"switch_at must be a time within the run, \[0, duration\] s"),
+        (
+            {"switch_at": 15.5, "duration": 15.0},
+            r"switch_at must be a time within the run, \[0, 15\] s \(its duration\), got 15.5",
+        ),
         (
             {"behavior": "orbit", "orbit_radius": 0.89},
             r"orbit_radius \(0.89 m\) does not fit in the tank .*keep it below 0.89 m",
@@ -364,3 +367,21 @@ def test_vision_settings_apply_to_a_camera_run_only_where_the_geometric_model_se
         "vision_model",
         "geometric",
     )
+
+
+def test_a_files_setting_refused_alone_is_checked_again_with_the_flags_that_mend_it(
+    tmp_path: Path,
+) -> None:
+    from fishswarm.cli.parsers import build_parser, scenario_from
+
+    config = tmp_path / "late.toml"
+    config.write_text(
+        'behavior = "formation"\nduration = 30\nswitch_formation = "diamond"\nswitch_at = 82.5\n'
+    )
+    parser = build_parser()
+    mended = scenario_from(parser.parse_args(["run", "--config", str(config), "--duration", "100"]))
+    assert (mended.duration, mended.switch_at) == (100.0, 82.5)
+    # Not mended: the message names the file and the duration it checked against.
+    for words, duration in (([], 30), (["--duration", "50"], 50)):
+        with pytest.raises(ConfigError, match=rf"late.toml: switch_at .*\[0, {duration}\] s"):
+            scenario_from(parser.parse_args(["run", "--config", str(config), *words]))
