@@ -447,14 +447,12 @@ def _summary(
             defined = first[name] and math.isfinite(first[name]) and math.isfinite(last[name])
             change = 100.0 * (last[name] - first[name]) / first[name] if defined else None
             metrics[name] = {"initial": first[name], "final": last[name], "change_percent": change}
-    formation = (
-        {
-            **formation_summary([p.time for p in history], [p.metrics for p in history]),
-            **shapes_told(history),
-        }
-        if history and observer.formation is not None
-        else None
-    )
+    formation = None
+    if history and observer.formation is not None:
+        told = shapes_told(history)
+        times, series = [p.time for p in history], [p.metrics for p in history]
+        since = told["shapes"][-1]["time"]
+        formation = {**formation_summary(times, series, since=since), **told}
     orbit = None
     if history and observer.orbit is not None:
         centre = observer.orbit.centre

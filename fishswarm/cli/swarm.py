@@ -384,6 +384,16 @@ def _measured(
     return missing if value is None or not math.isfinite(value) else f"{value:{form}}{unit}"
 
 
+def _ninety_text(ninety: float | None, switched_at: float | None) -> str:
+    """When 90 % of the fish were first in their places, counted from the last switch of
+    shape (``switched_at``; None: never switched)."""
+    if switched_at is None:
+        return "never 90 %" if ninety is None else f"90 % first at {ninety:g} s"
+    if ninety is None:
+        return "never 90 % since the switch"
+    return f"90 % first at {ninety:g} s, {ninety - switched_at:g} s after the switch"
+
+
 def _summary_text(summary: dict[str, Any]) -> str:
     lines = [f"status: {summary['status']}"]
     stops = summary.get("fish", {}).get("watchdog_stops", 0)
@@ -426,11 +436,13 @@ def _summary_text(summary: dict[str, Any]) -> str:
             for turn, told in enumerate(formation.get("shapes", []))
         )
         joined = formation["joined_fraction"]
+        shapes = formation.get("shapes", [])
+        switched, told_last = len(shapes) > 1, shapes[-1]["time"] if shapes else 0.0
         lines.append(
             f"  formation {told}: shape error "
             f"{_measured(formation['shape_error'], '.3f', ' m', 'not measured (too few fish)')}, "
             f"{_measured(joined and 100 * joined, '.0f', ' % joined', 'none joined (no fish)')} "
-            f"({'never 90 %' if ninety is None else f'90 % first at {ninety:g} s'}), "
+            f"({_ninety_text(ninety, told_last if switched else None)}), "
             f"lattice energy {_measured(formation['lattice_energy'], '.3f')}, "
             f"collisions at most {_measured(formation['most_collisions'], '.0f')}"
         )
@@ -438,6 +450,7 @@ def _summary_text(summary: dict[str, Any]) -> str:
             lines.append(
                 f"  the study's fitness ΣF: {formation['fitness']:.2f} m at the end, "
                 f"{formation['fitness_total']:.1f} m summed over {formation['snapshots']} snapshots"
+                + (f" (from {told_last:g} s, the last shape's)" if switched else "")
             )
     effort = summary.get("effort")
     if effort:

@@ -563,18 +563,22 @@ class FormationTargets:
         return target
 
 
-def formation_summary(times: list[float], series: list[dict[str, float]]) -> dict[str, Any]:
+def formation_summary(
+    times: list[float], series: list[dict[str, float]], *, since: float = 0.0
+) -> dict[str, Any]:
     """A formation run in a few numbers: the final metrics, the first time 90 % of the fish
     were in their slots (None if never), the most colliding pairs at once, and the study's
     fitness summed over the snapshots (SPEC §5: over fish and over time; None for a local
-    shape)."""
+    shape). The time to 90 % and the sum count from ``since`` (s), when the fish were told
+    the shape the final metrics measure: snapshots before it were judged against another."""
     final = {name: series[-1][name] for name in FORMATION_METRIC_NAMES}
-    joined = [t for t, m in zip(times, series, strict=True) if m["joined_fraction"] >= 0.9]
-    fitness = [m.get("fitness", math.nan) for m in series]
+    measured = [(t, m) for t, m in zip(times, series, strict=True) if t >= since]
+    joined = [t for t, m in measured if m["joined_fraction"] >= 0.9]
+    fitness = [m.get("fitness", math.nan) for _, m in measured]
     return {
         **final,
         "time_to_90_percent_joined": joined[0] if joined else None,
         "most_collisions": max(m["collisions"] for m in series),
         "fitness_total": None if math.isnan(sum(fitness)) else sum(fitness),
-        "snapshots": len(series),
+        "snapshots": len(measured),
     }

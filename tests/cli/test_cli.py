@@ -1268,3 +1268,18 @@ def test_a_summary_of_a_world_left_without_fish_says_so_instead_of_nan(tmp_path:
         "(never 90 %), lattice energy none (no fish), collisions at most"
     ) in text
     assert "nan" not in text
+    # A run switched to another shape counts its 90 % from the switch.
+    data["formation"].update(
+        shape_error=0.02, joined_fraction=1.0, lattice_energy=0.002, fitness=0.25,
+        fitness_total=76.3, snapshots=71, time_to_90_percent_joined=44.0,
+        shapes=[{"time": 0.0, "shape": "pyramid"}, {"time": 25.0, "shape": "diamond"}],
+    )  # fmt: skip
+    text = _summary_text(data)
+    assert "pyramid → diamond (from 25 s): shape error 0.020 m, 100 % joined (90 % first at " \
+        "44 s, 19 s after the switch)" in text  # fmt: skip
+    assert "76.3 m summed over 71 snapshots (from 25 s, the last shape's)" in text
+    data["formation"]["time_to_90_percent_joined"] = None
+    assert "(never 90 % since the switch)" in _summary_text(data)
+    data["formation"]["shapes"] = data["formation"]["shapes"][:1]
+    assert "(never 90 %)" in _summary_text(data)
+    assert "the last shape's" not in _summary_text(data)

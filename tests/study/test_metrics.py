@@ -212,6 +212,13 @@ def test_formation_metrics_against_the_target_and_their_summary() -> None:
     assert in_shape["fitness"] == pytest.approx(0.0, abs=1e-9)
     assert summary["fitness_total"] == pytest.approx(apart["fitness"]) and apart["fitness"] > 0
     assert summary["snapshots"] == 3
+    # Told another shape at 1.5 s: the time to 90 % and the sum count from then on, not
+    # from the old shape's snapshots (its 90 % at 1 s is not the new shape's).
+    switched = formation_summary([0.0, 1.0, 2.0, 3.0], [apart, in_shape, apart, in_shape],
+                                 since=1.5)  # fmt: skip
+    assert switched["time_to_90_percent_joined"] == 3.0
+    assert switched["fitness_total"] == pytest.approx(apart["fitness"])
+    assert switched["snapshots"] == 2 and switched["most_collisions"] == 0.0
 
 
 def test_the_study_fitness_of_a_school_drawn_on_paper() -> None:
