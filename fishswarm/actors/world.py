@@ -648,6 +648,10 @@ class World:
             perceived = await self._compute(self.sim.sense)
             deferred: IntArray | None = None
             lights: IntArray | None = None
+            # The shape told with this tick, fixed as its tick becomes the one a control
+            # reply names: a switch answered from now on (while paused here, say) counts
+            # from the next tick, as the reply says, and snapshot and perceptions agree.
+            told = self._told(event.time)
             if event.snapshot is not None:
                 self.tick = event.snapshot
                 broadcasts = values_at(self._broadcasters, self._broadcasts, self.sim.ids)
@@ -662,7 +666,7 @@ class World:
                     # before the fins are held (0.15 ms off the fish's wait at 1 000 fish).
                     deferred = broadcasts
                 else:
-                    self._send_snapshot(bus, event.time, perceived.counts, broadcasts, lights)
+                    self._send_snapshot(bus, event.time, perceived.counts, broadcasts, lights, told)
                 if event.last or self._stop_requested:
                     return
             if not event.deciding:
@@ -680,7 +684,7 @@ class World:
                 # Stopped while paused (or in the moment the wait yields): the run ends at
                 # this snapshot, without asking the fish for one more tick.
                 if deferred is not None:
-                    self._send_snapshot(bus, event.time, perceived.counts, deferred, lights)
+                    self._send_snapshot(bus, event.time, perceived.counts, deferred, lights, told)
                 return
             if realtime and trio.current_time() - tick_start > period:
                 tick_start = trio.current_time()  # after a pause: pace from now on
@@ -707,7 +711,7 @@ class World:
                 time=event.time,
                 run=self.run_id,
                 heading=self.sim.state.yaw,  # the simulated fish's compass
-                formation=self._told(event.time),
+                formation=told,
                 rows=rows,
             ):
                 # A batch's readers may be here (the fish in the launcher's process); a fish
@@ -715,7 +719,7 @@ class World:
                 self._put(bus, key, encode(message, reuse=isinstance(message, PerceptionBatch)))
             self._phase_times["perceptions"].append(time.perf_counter() - sending)
             if deferred is not None:
-                self._send_snapshot(bus, event.time, perceived.counts, deferred, lights)
+                self._send_snapshot(bus, event.time, perceived.counts, deferred, lights, told)
             with self._stoppable():
                 if realtime:
                     tick_start += period
@@ -747,9 +751,11 @@ class World:
         seen: IntArray,
         broadcasts: IntArray,
         lights: IntArray | None,
+        told: str | None,
     ) -> None:
         """Send the swarm as it is now: this tick's snapshot (``lights``: the fish's LEDs
-        as :meth:`_lights_now` told them when the tick's deliveries were announced)."""
+        as :meth:`_lights_now` told them when the tick's deliveries were announced;
+        ``told``: the shape the fish are told with this tick)."""
         state = self.sim.state
         forming = self.scenario.behavior == "formation"
         snapshot = Snapshot(
@@ -762,7 +768,7 @@ class World:
             seen,
             broadcasts,
             self.sim.effort,
-            self._told(time) if forming else None,
+            told if forming else None,
             self.run_id,
             lights,
         )

@@ -34,6 +34,7 @@ from fishswarm.protocols.messages import (
     Broadcast,
     Command,
     CommandBatch,
+    ControlReply,
     ControlRequest,
     Delivery,
     FishAbout,
@@ -1017,6 +1018,51 @@ def test_an_operators_formation_switch_reaches_every_fish() -> None:
     assert shapes[11] == {diamond}  # every fish, in both schools
     switched = min(tick for tick, seen in shapes.items() if diamond in seen)
     assert 5 <= switched <= 7 and all(shapes[t] == {diamond} for t in shapes if t > switched)
+
+
+def test_a_switch_while_paused_counts_from_the_tick_after_the_held_one_as_the_reply_says() -> None:
+    # The world holds at tick N's snapshot; a switch answered there is "from tick N + 1".
+    # The fish decided tick N under the new shape while the snapshot and the reply said the
+    # old one (a live switch was a tick earlier than a scheduled switch_at at N + 1).
+    scenario = Scenario(fish=2, duration=20.0, behavior="formation", formation="pyramid")
+    keys = scenario.keys
+
+    async def main() -> tuple[ControlReply, dict[int, set[int]], dict[int, str | None]]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
+        observer = Observer(keys)
+        flags: dict[int, set[int]] = {}
+        told: dict[int, str | None] = {}
+
+        def note(key: str, payload: bytes) -> None:
+            broadcast = decode(payload, Broadcast)
+            flags.setdefault(broadcast.tick, set()).add(
+                FormationFlag.from_values(broadcast.values).shape
+            )
+
+        bus.subscribe(f"{keys.prefix}/fish/*/outbox", note)
+        bus.subscribe(keys.snapshot, lambda key, payload: told.update(
+            {decode(payload, Snapshot).tick: decode(payload, Snapshot).formation}))  # fmt: skip
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            params = scenario.fish_params()
+            await nursery.start(Fish(FishSettings((0, 1), params, keys, school="a")).run, bus)
+            nursery.start_soon(world.run, bus)
+            await observer.wait_for_tick(3)
+            world.control(ControlRequest("pause"))
+            await _until_state(world, "paused")
+            reply = world.control(ControlRequest("formation", formation="diamond"))
+            world.control(ControlRequest("resume"))
+            await observer.wait_for_tick(reply.tick + 3)
+            nursery.cancel_scope.cancel()
+        return reply, flags, told
+
+    reply, flags, told = run_mock(main)
+    pyramid, diamond = FORMATION_SHAPES.index("pyramid"), FORMATION_SHAPES.index("diamond")
+    held = reply.tick
+    assert reply.state == "paused" and held >= 4
+    assert flags[held] == {pyramid} and told[held] is None  # None: as configured
+    assert flags[held + 1] == {diamond} and told[held + 1] == "diamond"
 
 
 def test_fish_that_run_another_behaviour_are_named_once_and_counted(
