@@ -380,6 +380,12 @@ class Scenario:
             "the replica behavior needs a learned model: --model runs/learn/best_replica.npz "
             "(make one with 'fishswarm learn')",
         )
+        if self.model is not None and Path(self.model).is_dir():
+            inside = Path(self.model) / "best_replica.npz"
+            hint = (
+                f": give {inside}" if inside.is_file() else " ('fishswarm learn --out' writes one)"
+            )
+            need(False, f"model {self.model} is a folder, not a learned replica file{hint}")
         need(
             self.model is None or Path(self.model).is_file(),
             f"model file {self.model} does not exist",

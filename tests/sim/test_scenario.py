@@ -385,3 +385,11 @@ def test_a_files_setting_refused_alone_is_checked_again_with_the_flags_that_mend
     for words, duration in (([], 30), (["--duration", "50"], 50)):
         with pytest.raises(ConfigError, match=rf"late.toml: switch_at .*\[0, {duration}\] s"):
             scenario_from(parser.parse_args(["run", "--config", str(config), *words]))
+
+
+def test_a_model_that_names_a_learning_runs_folder_points_at_the_file_in_it(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match=r"is a folder, not a learned replica file \('fishswarm"):
+        Scenario(behavior="replica", model=str(tmp_path))
+    (tmp_path / "best_replica.npz").write_bytes(b"")
+    with pytest.raises(ConfigError, match=rf"give {tmp_path / 'best_replica.npz'}$"):
+        Scenario(behavior="replica", model=str(tmp_path))
