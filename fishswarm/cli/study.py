@@ -94,8 +94,11 @@ def add_parsers(commands: Any) -> None:
         "plot",
         help="draw a recorded run: tracks from above and from the side, metrics over time",
         description="Draw a recording made with 'fishswarm run --record' or 'fishswarm "
-        "observe --record': every fish's track seen from above and from the side, and the "
-        "three mean distances and the neighbours seen over time.",
+        "observe --record': every fish's track seen from above and from the side, and its "
+        "metrics over time: the three mean distances and the neighbours seen; for circling "
+        "fish the post, the radius against the expected one, revolutions and speed; for a "
+        "formation the fish at the end coloured by role, the shape error against the "
+        "tolerance, the share in place and the colliding pairs, each switch of shape marked.",
     )
     plot.add_argument("recording", type=Path, help="MCAP recording of a run")
     plot.add_argument(
