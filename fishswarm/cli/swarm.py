@@ -49,7 +49,7 @@ from fishswarm.actors.security import (
 from fishswarm.actors.session import SessionSettings, open_session, reaches_router
 from fishswarm.actors.world import PULSE_PERIOD, StartTimeout, World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus, query
-from fishswarm.behaviors.formation import DEFAULT_SHAPE
+from fishswarm.behaviors.formation import DEFAULT_SHAPE, DEFAULT_SPACING
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.cli.common import USER_ERRORS as COMMON_ERRORS
 from fishswarm.cli.common import (
@@ -65,6 +65,7 @@ from fishswarm.cli.common import (
     secure_extra,
 )
 from fishswarm.formations.local import LOCAL_SHAPES
+from fishswarm.formations.maps import MAPS, target_map
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import KeySpace, fish_id_of
 from fishswarm.protocols.messages import ControlReply, ControlRequest, RobotOrder
@@ -215,8 +216,44 @@ def local_shape_warning(scenario: Scenario) -> str | None:
     )
 
 
+def map_warnings(scenario: Scenario) -> list[str]:
+    """What to say when a formation's places cannot all be held: a global map (the shape
+    it starts with, or switches to) larger than the tank, or places closer than a BlueBot
+    is long (neighbours in place touch, and count as colliding)."""
+    if scenario.behavior != "formation":
+        return []
+    warnings = []
+    spacing = DEFAULT_SPACING if scenario.spacing is None else scenario.spacing
+    if spacing < BODY_LENGTH:
+        warnings.append(
+            f"the spacing, {spacing:g} m, is less than a BlueBot's length "
+            f"({BODY_LENGTH * 100:.0f} cm): fish in their places would touch (give a --spacing "
+            f"of at least {BODY_LENGTH:g} m)"
+        )
+    heading = math.radians(scenario.formation_heading_deg)
+    turn = np.array(
+        [[math.cos(heading), -math.sin(heading)], [math.sin(heading), math.cos(heading)]]
+    )
+    tank = np.asarray(scenario.tank)
+    for shape in dict.fromkeys([scenario.formation or DEFAULT_SHAPE, scenario.switch_formation]):
+        if shape is None or shape not in MAPS:
+            continue
+        slots = target_map(shape, scenario.fish, spacing=spacing)
+        turned = np.column_stack([slots[:, :2] @ turn.T, slots[:, 2]])
+        span = np.ptp(turned, axis=0)
+        if (span > tank).any():
+            warnings.append(
+                f"a {shape} of {scenario.fish} fish at a spacing of {spacing:g} m spans "
+                f"{' × '.join(f'{v:.2f}' for v in span)} m, more than the tank's "
+                f"{' × '.join(f'{v:g}' for v in tank)} m: the fish cannot all take their places "
+                "(give fewer --fish, a smaller --spacing, or another --formation)"
+            )
+    return warnings
+
+
 def _warn_of_the_start(command: str, scenario: Scenario) -> None:
-    for warning in [*start_warnings(scenario), local_shape_warning(scenario)]:
+    warnings = [*start_warnings(scenario), local_shape_warning(scenario), *map_warnings(scenario)]
+    for warning in warnings:
         if warning is not None:
             print(f"fishswarm {command}: warning: {warning}", file=sys.stderr)
 

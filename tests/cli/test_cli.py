@@ -1223,6 +1223,29 @@ def test_an_experiment_interrupted_as_its_last_run_ends_says_all_runs_are_done(
     assert json.loads((out / "summary.json").read_text())["complete"] is True
 
 
+def test_a_map_larger_than_the_tank_or_places_closer_than_a_body_are_warned_of() -> None:
+    from fishswarm.cli.swarm import map_warnings
+
+    forming = Scenario(behavior="formation", fish=15, spacing=0.25)
+    assert map_warnings(forming) == []  # the pyramid of the README: 0.87 × 1.00 m
+    assert map_warnings(Scenario(fish=15, spacing=0.05)) == []  # not a formation
+    # A column of 15 at 0.25 m is 14 spacings long, 3.5 m in a 1.78-m tank.
+    assert map_warnings(forming.replace(formation="column")) == [
+        "a column of 15 fish at a spacing of 0.25 m spans 3.50 × 0.00 × 0.00 m, more than the "
+        "tank's 1.78 × 1.78 × 1.17 m: the fish cannot all take their places (give fewer "
+        "--fish, a smaller --spacing, or another --formation)"
+    ]
+    # Six fish, 1.25 m: it fits, and turned by 45° too (0.88 × 0.88 m).
+    six = forming.replace(formation="column", fish=6)
+    assert map_warnings(six) == map_warnings(six.replace(formation_heading_deg=45.0)) == []
+    # A switch to a shape that does not fit is warned of too.
+    assert "a column of 15 fish" in map_warnings(forming.replace(switch_formation="column"))[0]
+    assert map_warnings(forming.replace(spacing=0.1)) == [
+        "the spacing, 0.1 m, is less than a BlueBot's length (13 cm): fish in their places "
+        "would touch (give a --spacing of at least 0.13 m)"
+    ]
+
+
 def test_a_local_shape_with_too_few_fish_is_warned_of_and_its_error_said_unmeasured(
     tmp_path: Path,
 ) -> None:
