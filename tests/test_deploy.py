@@ -207,6 +207,78 @@ def test_the_playbook_copies_the_worlds_scenario_file_and_refuses_a_missing_one(
     assert "no.toml, which is not a file on the control node" in result.stdout
 
 
+def test_the_roles_behaviours_are_fishswarms() -> None:
+    import yaml
+
+    from fishswarm.behaviors.registry import BEHAVIORS
+
+    defaults = yaml.safe_load((ROLE / "defaults" / "main.yml").read_text())
+    assert defaults["fishswarm_behaviors"] == list(BEHAVIORS)
+    assert defaults["fishswarm_behavior"] in BEHAVIORS
+
+
+@pytest.mark.slow
+def test_a_replica_robot_is_given_its_learned_model(tmp_path: Path) -> None:
+    words = _service_arguments(
+        tmp_path, fishswarm_hardware="mock", fishswarm_behavior="replica",
+        fishswarm_model="/lab/best_replica.npz",
+    )  # fmt: skip
+    args = build_parser().parse_args(words)
+    assert args.behavior == "replica" and str(args.model) == "/etc/fishswarm/replica.npz"
+    # With the world's scenario file, the model goes on top of it.
+    words = _service_arguments(
+        tmp_path, fishswarm_hardware="mock", fishswarm_config="/lab/replica.toml",
+        fishswarm_model="/lab/best_replica.npz",
+    )  # fmt: skip
+    args = build_parser().parse_args(words)
+    assert str(args.config) == "/etc/fishswarm/scenario.toml"
+    assert str(args.model) == "/etc/fishswarm/replica.npz"
+
+
+@pytest.mark.slow
+def test_the_playbook_copies_a_learned_model_and_refuses_a_robot_that_could_not_run(
+    tmp_path: Path, wheel: Path
+) -> None:
+    model = tmp_path / "best_replica.npz"
+    model.write_bytes(b"weights")
+    replica = {"fishswarm_behavior": "replica", "fishswarm_model": str(model)}
+    path = inventory(tmp_path, wheel, fish_id=3, **replica)
+    result = ansible("ansible-playbook", "-i", str(path), "site.yml", "--check", "--diff")
+    assert result.returncode == 0, result.stdout + result.stderr
+    copied = result.stdout.split("Copy the learned replica")[1].split("TASK")[0]
+    assert "changed: [localhost]" in copied
+    assert (
+        "FISHSWARM_SCENARIO=--behavior replica --period 1.0 --model /etc/fishswarm/replica.npz"
+        in (result.stdout)
+    )
+    # Three robots the play refuses, in one run, each with what to do: a misspelt
+    # behaviour, a replica without a model, a model that is not there.
+    common = {
+        "ansible_connection": "local", "ansible_python_interpreter": sys.executable,
+        "ansible_become": False, "fishswarm_hardware": "mock", "fishswarm_wheel": str(wheel),
+        "fishswarm_router": "tcp/10.0.0.1:7447",
+    }  # fmt: skip
+    hosts = {
+        "misspelt": {**common, "fish_id": 1, "fishswarm_behavior": "dispersal"},
+        "no-model": {**common, "fish_id": 2, "fishswarm_behavior": "replica"},
+        "missing-model": {
+            **common, "fish_id": 3, "fishswarm_behavior": "replica",
+            "fishswarm_model": str(tmp_path / "gone.npz"),
+        },
+    }  # fmt: skip
+    refused = tmp_path / "refused.yml"
+    refused.write_text(json.dumps({"robots": {"hosts": hosts}}))
+    result = ansible("ansible-playbook", "-i", str(refused), "site.yml", "--check")
+    assert result.returncode != 0
+    assert "fishswarm_behavior is dispersal: give one of dispersion, aggregation" in result.stdout
+    assert "the replica behaviour needs a learned model: give fishswarm_model" in result.stdout
+    assert "gone.npz, which is not a file on the control node" in result.stdout
+    for host in hosts:
+        assert re.search(
+            rf"{host}\s+: ok=\d+\s+changed=0\s+unreachable=0\s+failed=1", result.stdout
+        )
+
+
 @pytest.mark.slow
 def test_a_secured_robots_service_gives_its_certificates_folder(tmp_path: Path) -> None:
     plain = build_parser().parse_args(_service_arguments(tmp_path, fishswarm_hardware="mock"))
@@ -279,6 +351,7 @@ def test_the_service_starts_the_robot_with_arguments_the_cli_accepts(tmp_path: P
     assert args.connect == "tcp/192.168.1.10:7447" and args.connect_timeout == -1
     assert args.control_period == 1.0  # the world's default period
     assert "Restart=on-failure" in unit
+    assert "RestartPreventExitStatus=2" in unit.splitlines()  # a refused setting: no loop
     # lgpio makes its pipes in the working directory: one the robot's user may write.
     assert "RuntimeDirectory=fishswarm-%i" in unit.splitlines()
     assert "WorkingDirectory=/run/fishswarm-%i" in unit.splitlines()
