@@ -512,6 +512,7 @@ def _summary(
         },
         "vision": world.sim.sight.summary() if world.params.cameras is not None else None,
         "lost": [{"id": f.fish_id, "tick": f.tick, "reason": f.reason} for f in world.lost],
+        "joined": [{"id": fish_id, "tick": tick} for fish_id, tick in world.joined],
         "workers_died": died,
         "fish": fish_totals,
         "simulated_time": simulated,

@@ -1086,9 +1086,15 @@ class World:
         if not new:
             return
         if tick > 0:
+            lost_at = {lost.fish_id: lost.tick for lost in self.lost}
             for fish_id in new:
                 self.joined.append((fish_id, tick))
-                log.info("fish %d joined at tick %d", fish_id, tick)
+                if fish_id in lost_at:
+                    # Said as loudly as its loss: a robot that surfaced and came back.
+                    log.warning("fish %d back at tick %d (lost at tick %d)", fish_id, tick,
+                                lost_at[fish_id])  # fmt: skip
+                else:
+                    log.info("fish %d joined at tick %d", fish_id, tick)
         expected = self.settings.expected_fish
         unexpected = sorted(set(new).difference(expected, self.unexpected))
         if unexpected:

@@ -441,7 +441,8 @@ def _summary_text(summary: dict[str, Any]) -> str:
         )
     if summary["status"] == "degraded" and summary["lost"]:
         lost = [(f["id"], f["tick"], f["reason"]) for f in summary["lost"]]
-        lines[0] += f" — fish were lost on the way: {_lost_text(lost)}"
+        joined = [(f["id"], f["tick"]) for f in summary.get("joined", [])]
+        lines[0] += f" — fish were lost on the way: {_lost_text(lost, joined)}"
     orbit = summary.get("orbit")
     if orbit:
         post = orbit["post"]
@@ -556,9 +557,16 @@ def _say_recording(observers: list[Observer], path: Path | None) -> None:
         print(f"recording: {path}", file=sys.stderr)
 
 
-def _lost_text(lost: list[tuple[int, int, str]]) -> str:
-    """Fish lost on the way, (id, tick, why) each, as a run's last words say them."""
-    return ", ".join(f"{fish_id} at tick {tick} ({why})" for fish_id, tick, why in lost)
+def _lost_text(lost: list[tuple[int, int, str]], joined: list[tuple[int, int]]) -> str:
+    """Fish lost on the way, (id, tick, why) each, as a run's last words say them, with
+    when each came back, if it did (``joined``: (id, tick) of the fish that joined late)."""
+    words = []
+    for fish_id, tick, why in lost:
+        back = [later for joiner, later in joined if joiner == fish_id and later > tick]
+        words.append(
+            f"{fish_id} at tick {tick} ({why}" + (f"; back at tick {back[0]})" if back else ")")
+        )
+    return ", ".join(words)
 
 
 def fish(args: argparse.Namespace, scenario: Scenario) -> int:
@@ -708,7 +716,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
     )
     if degraded:
         lost = [(f.fish_id, f.tick, f.reason) for f in actor.lost]
-        print(f"fish were lost on the way: {_lost_text(lost)}", file=sys.stderr)
+        print(f"fish were lost on the way: {_lost_text(lost, actor.joined)}", file=sys.stderr)
     print(json.dumps(dataclasses.asdict(statistics)), file=sys.stderr)
     return EXIT_DEGRADED if degraded else EXIT_OK
 

@@ -1065,6 +1065,55 @@ def test_a_switch_while_paused_counts_from_the_tick_after_the_held_one_as_the_re
     assert flags[held + 1] == {diamond} and told[held + 1] == "diamond"
 
 
+def test_a_fish_lost_and_back_is_said_to_be_back_as_loudly_as_it_was_lost(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # A robot that surfaces: its fish leaves the world (its token gone), then comes back.
+    from fishswarm.cli.swarm import _lost_text
+
+    scenario = Scenario(fish=2, duration=1000.0)
+    keys = scenario.keys
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1)))
+        observer = Observer(keys)
+        params = scenario.fish_params()
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            await nursery.start(Fish(FishSettings((0,), params, keys)).run, bus)
+            async with trio.open_nursery() as surfacing:
+                await surfacing.start(Fish(FishSettings((1,), params, keys)).run, bus)
+                nursery.start_soon(world.run, bus)
+                await observer.wait_for_tick(3)
+                surfacing.cancel_scope.cancel()
+            with trio.fail_after(60):
+                while not world.lost:
+                    await trio.sleep(0.1)
+            await nursery.start(Fish(FishSettings((1,), params, keys)).run, bus)
+            with trio.fail_after(60):
+                while not world.joined:
+                    await trio.sleep(0.1)
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level("INFO", logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    ((lost_id, lost_tick),) = [(f.fish_id, f.tick) for f in world.lost]
+    ((back_id, back_tick),) = world.joined
+    assert lost_id == back_id == 1 and back_tick > lost_tick
+    said = [r for r in caplog.records if "back at tick" in r.getMessage()]
+    assert [(r.levelname, r.getMessage()) for r in said] == [
+        ("WARNING", f"fish 1 back at tick {back_tick} (lost at tick {lost_tick})")
+    ]
+    assert _lost_text([(1, lost_tick, "left")], world.joined) == (
+        f"1 at tick {lost_tick} (left; back at tick {back_tick})"
+    )
+    assert _lost_text([(1, 4, "left"), (2, 6, "silent")], [(2, 5)]) == (
+        "1 at tick 4 (left), 2 at tick 6 (silent)"  # back before it was lost: not back
+    )
+
+
 def test_fish_that_run_another_behaviour_are_named_once_and_counted(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
