@@ -53,12 +53,25 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         raise ConfigError(
             "--resume continues the learning run in --out and --force starts it over: give one"
         )
+    for flag, value in (
+        ("--generations", args.generations),
+        ("--checkpoint-every", args.checkpoint_every),
+    ):
+        if value is not None and value < 1:
+            raise ConfigError(f"{flag} must be at least 1, got {value}")
     settings = None
     if not args.resume:
         try:
             settings = LearningSettings(**values)
         except ValueError as error:
             raise ConfigError(str(error)) from None
+        if args.radii is not None and settings.radius_count == 0:
+            # As a radius start is refused: a setting that would change nothing.
+            raise ConfigError(
+                f"--radii {args.radii} says how learned radii move, but the inputs "
+                f"{','.join(settings.inputs)} learn none: give inputs that count neighbours "
+                "within learned radii (e.g. speed,neighbors2), or leave it out"
+            )
     held = [name for name in OUTPUTS if (args.out / name).is_file()]
     if not args.resume and not args.force and held:
         resumable = CHECKPOINT in held

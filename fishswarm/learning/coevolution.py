@@ -355,7 +355,8 @@ class Coevolution:
         self.population, self.classifier_population = models, classifiers
         self.last_fitness = result
         record = {
-            "generation": self.generation,
+            # Counted from 1, as the progress line, radii.md and the summary count them.
+            "generation": self.generation + 1,
             "model_best": float(result.models.max()),
             "model_mean": float(result.models.mean()),
             "classifier_best": float(result.classifiers.max()),

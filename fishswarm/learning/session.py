@@ -165,8 +165,9 @@ def learn(
         LearningError: nothing to resume, an unreadable checkpoint, or settings that differ
             from the resumed run's.
     """
-    if generations < 1 or checkpoint_every < 1:
-        raise LearningError("generations and checkpoint interval must be at least 1")
+    for name, value in (("generations", generations), ("checkpoint interval", checkpoint_every)):
+        if value < 1:
+            raise LearningError(f"{name} must be at least 1, got {value}")
     checkpoint = out / CHECKPOINT
     if resume:
         if not checkpoint.exists():

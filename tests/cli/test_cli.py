@@ -191,6 +191,13 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
             "beacon: add --flag-medium channel, or leave --rotate-effort out",
         ),
         (["learn", "--resume", "--force"], "--resume continues the learning run in --out and"),
+        (["learn", "--generations", "0"], "--generations must be at least 1, got 0"),
+        (["learn", "--checkpoint-every", "0"], "--checkpoint-every must be at least 1, got 0"),
+        (
+            ["learn", "--radii", "unbounded"],
+            "--radii unbounded says how learned radii move, but the inputs speed,counts learn "
+            "none",
+        ),
         (
             ["run", "--host", "lab", "--grpc-port", "9999"],
             "--host, --grpc-port apply only with --view: add --view, or leave them out",

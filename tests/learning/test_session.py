@@ -152,7 +152,7 @@ def test_learn_command_resumes_to_the_same_result(tmp_path: Path) -> None:
     assert "resumed from generation" not in first.stderr
     assert f"resumed from generation 2 ({tmp_path / 'b' / 'checkpoint.npz'})" in second.stderr
     history = (tmp_path / "b" / "history.csv").read_text().splitlines()
-    assert [line.split(",")[0] for line in history] == ["generation", "0", "1", "2", "3"]
+    assert [line.split(",")[0] for line in history] == ["generation", "1", "2", "3", "4"]
     # Resuming with another setting named stops and says which; the run is left as it was.
     before = (tmp_path / "b" / "checkpoint.npz").read_bytes()
     again = [*base, "--generations", "6", "--out", str(tmp_path / "b"), "--resume"]
