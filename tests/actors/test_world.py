@@ -1087,13 +1087,17 @@ def test_a_fish_lost_and_back_is_said_to_be_back_as_loudly_as_it_was_lost(
                 nursery.start_soon(world.run, bus)
                 await observer.wait_for_tick(3)
                 surfacing.cancel_scope.cancel()
-            with trio.fail_after(60):
-                while not world.lost:
-                    await trio.sleep(0.1)
+            # Tick by tick (the world's own pace, its steps in threads): a poll that slept
+            # would let the mock clock run ahead of them.
+            for _ in range(50):
+                if world.lost:
+                    break
+                await observer.wait_for_tick(observer.history[-1].tick + 1)
             await nursery.start(Fish(FishSettings((1,), params, keys)).run, bus)
-            with trio.fail_after(60):
-                while not world.joined:
-                    await trio.sleep(0.1)
+            for _ in range(50):
+                if world.joined:
+                    break
+                await observer.wait_for_tick(observer.history[-1].tick + 1)
             nursery.cancel_scope.cancel()
         return world
 

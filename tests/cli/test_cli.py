@@ -195,8 +195,7 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         (["learn", "--checkpoint-every", "0"], "--checkpoint-every must be at least 1, got 0"),
         (
             ["learn", "--radii", "unbounded"],
-            "--radii unbounded says how learned radii move, but the inputs speed,counts learn "
-            "none",
+            "--radii unbounded says how learned radii move, but the inputs speed,counts learn none",
         ),
         (
             ["run", "--host", "lab", "--grpc-port", "9999"],
