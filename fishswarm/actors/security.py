@@ -45,6 +45,18 @@ class SecurityError(RuntimeError):
     which and how to fix it."""
 
 
+def _require_cryptography() -> None:
+    """Raise SecurityError, with how to install it, if the ``cryptography`` package that
+    makes and checks certificates is missing."""
+    try:
+        import cryptography  # noqa: F401
+    except ModuleNotFoundError:
+        raise SecurityError(
+            "a secured swarm's certificates need the cryptography package: pip install -e "
+            "'.[secure]' (on a robot: apt install python3-cryptography; deploy/ does)"
+        ) from None
+
+
 def robot_subject(robot_id: int) -> str:
     """The subject (certificate common name) of robot ``robot_id``'s fish."""
     return f"robot-{robot_id}"
@@ -238,6 +250,7 @@ def init_secure(
         SecurityError: ``folder`` holds half an authority (its certificate or its key
             alone), or one that cannot be read.
     """
+    _require_cryptography()
     from cryptography import x509
     from cryptography.hazmat.primitives import hashes
     from cryptography.hazmat.primitives.asymmetric import ec
@@ -355,6 +368,7 @@ def certified_subjects(folder: Path, keys: KeySpace) -> list[str]:
 def router_names(folder: Path) -> list[str]:
     """The hosts and addresses the router's certificate in ``folder`` is valid for (none
     without one)."""
+    _require_cryptography()
     path = folder / "router.pem"
     if not path.is_file():
         return []
@@ -423,6 +437,7 @@ def issue_for_run(folder: Path, subjects: Sequence[str], out: Path, *, hours: fl
     Raises:
         SecurityError: the authority's key or certificate is missing or unreadable.
     """
+    _require_cryptography()
     from cryptography import x509
 
     for path in (folder / f"{AUTHORITY}.key", folder / f"{AUTHORITY}.pem"):
@@ -493,6 +508,7 @@ def check_subject(folder: Path, subject: str) -> None:
         SecurityError: a file is missing or unreadable, the certificate is not valid now,
             names another subject, or was not signed by the folder's authority.
     """
+    _require_cryptography()
     from cryptography import x509
     from cryptography.exceptions import InvalidSignature
     from cryptography.hazmat.primitives.asymmetric import ec

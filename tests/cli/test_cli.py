@@ -1312,3 +1312,27 @@ def test_a_summary_of_a_world_left_without_fish_says_so_instead_of_nan(tmp_path:
     data["formation"]["shapes"] = data["formation"]["shapes"][:1]
     assert "(never 90 %)" in _summary_text(data)
     assert "the last shape's" not in _summary_text(data)
+
+
+def test_a_secured_command_without_cryptography_says_which_extra_to_install(
+    tmp_path: Path,
+) -> None:
+    # The core install has no cryptography: every --secure command ended in a traceback.
+    blocked = (
+        "import sys; sys.modules['cryptography'] = None\n"
+        "from fishswarm.cli import main\nsys.exit(main(sys.argv[1:]))"
+    )
+    (tmp_path / "keys").mkdir()
+    for args in (
+        ["secure", "init", str(tmp_path / "new")],
+        ["observe", "--secure", str(tmp_path / "keys"), "--connect", "tls/127.0.0.1:1"],
+    ):
+        result = subprocess.run(
+            [sys.executable, "-c", blocked, *args], capture_output=True, text=True, timeout=60
+        )
+        assert result.returncode == 1, result.stderr
+        assert "Traceback" not in result.stderr
+        assert result.stderr.rstrip().endswith(
+            "error: a secured swarm's certificates need the cryptography package: pip install "
+            "-e '.[secure]' (on a robot: apt install python3-cryptography; deploy/ does)"
+        )
