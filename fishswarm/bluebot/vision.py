@@ -96,6 +96,10 @@ def in_blind_spot(relative: FloatArray, yaw: FloatArray, *, blind_width: float) 
     return hidden
 
 
+OCCLUSION_BLOCK = 2**25
+"""The most cosines (fish × candidates²) occlusion holds at once: 256 MB of them."""
+
+
 def _occlusion(
     directions: FloatArray, distance: FloatArray, candidate: BoolArray, *, sphere_radius: float
 ) -> BoolArray:
@@ -112,7 +116,19 @@ def _occlusion(
         (B, K) which candidates are visible.
     """
     visible = candidate.copy()
-    if sphere_radius <= 0 or candidate.shape[1] < 2:
+    count, width = candidate.shape
+    if sphere_radius <= 0 or width < 2:
+        return visible
+    block = max(1, OCCLUSION_BLOCK // (width * width))
+    if count > block:
+        # Fish by fish in blocks: every fish of a crowded tank sees every other, and the
+        # cosines of all at once would not fit in memory (60 GB at 2 000 fish). Each fish's
+        # cosines are its own product, so the blocks give the same bits as one batch.
+        for start in range(0, count, block):
+            rows = slice(start, start + block)
+            visible[rows] = _occlusion(
+                directions[rows], distance[rows], candidate[rows], sphere_radius=sphere_radius
+            )
         return visible
     # Cosines are only compared, never fed to arccos, so rounding past ±1 is harmless.
     cosine = directions @ directions.transpose(0, 2, 1)

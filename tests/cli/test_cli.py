@@ -1336,3 +1336,19 @@ def test_a_secured_command_without_cryptography_says_which_extra_to_install(
             "error: a secured swarm's certificates need the cryptography package: pip install "
             "-e '.[secure]' (on a robot: apt install python3-cryptography; deploy/ does)"
         )
+
+
+def test_a_large_swarm_without_numba_is_warned_of_with_the_extra_to_install(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    from fishswarm.cli.swarm import start_warnings
+    from fishswarm.sim import kernels
+
+    spread = Scenario(fish=kernels.COMPILED_MIN_FISH, spawn_region="tank")
+    assert not any("numba" in warning for warning in start_warnings(spread))
+    monkeypatch.setattr(kernels, "available", lambda: False)
+    (said,) = [warning for warning in start_warnings(spread) if "numba" in warning]
+    assert said.startswith(f"numba is not installed: the world sees {spread.fish} fish on the ")
+    assert said.endswith("pip install -e '.[fast]'")
+    small = Scenario(fish=kernels.COMPILED_MIN_FISH - 1, spawn_region="tank")
+    assert not any("numba" in warning for warning in start_warnings(small))
