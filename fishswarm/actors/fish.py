@@ -614,6 +614,7 @@ class Fish:
                 decision.fins[order],
                 decision.led[order],
                 broadcasts[order],
+                watchdog=True if watchdog else None,
             )
             bus.put(keys.school_commands(school), encode(batch, reuse=True))
             return

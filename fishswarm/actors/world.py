@@ -1018,7 +1018,10 @@ class World:
                 f"fish {ids_text(batch.ids.tolist())} are not all of this school",
             )
             return
-        self._accept(key, batch.tick, batch.ids, batch.fins, batch.broadcasts)
+        # A watchdog's stop repeats the school's last tick: a second answer, no twin's.
+        self._accept(
+            key, batch.tick, batch.ids, batch.fins, batch.broadcasts, twins=not batch.watchdog
+        )
 
     def _accept(
         self,

@@ -251,14 +251,19 @@ class CommandBatch(Message):
         fins: (G, 4) fin gains in [0, 1], columns in the order of :data:`FIN_NAMES`.
         led: (G,) whether each fish's LEDs are on.
         broadcasts: (G,) outbox messages each fish sent for this tick.
+        watchdog: True when the school's safety watchdog turned these fish's fins off (no
+            perception nor pulse of the world in time), repeating their last tick; not a
+            decision (None: a decision).
     """
 
     type_name: ClassVar[str] = "command_batch"
+    added_later: ClassVar[frozenset[str]] = frozenset({"watchdog"})
     tick: int
     ids: IntArray
     fins: FloatArray
     led: BoolArray
     broadcasts: IntArray
+    watchdog: bool | None = None
 
     def __post_init__(self) -> None:
         check_int("tick", self.tick)
@@ -272,6 +277,8 @@ class CommandBatch(Message):
         check_array(self, "broadcasts", np.int64, None, rows=count)
         if (self.broadcasts < 0).any() or (self.broadcasts > MAX_ROWS).any():
             raise ValueError(f"broadcasts must be in [0, {MAX_ROWS}]")
+        if self.watchdog is not None and self.watchdog is not True:
+            raise TypeError(f"watchdog must be True or None, got {self.watchdog!r}")
 
 
 def _check_broadcast(message: Broadcast | Delivery) -> None:

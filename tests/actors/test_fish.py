@@ -609,6 +609,7 @@ def test_a_schools_watchdog_stops_its_fish_in_id_order_at_tick_zero() -> None:
     assert at == 1.0
     assert stop.tick == 0 and stop.ids.tolist() == [2, 5]
     assert stop.fins.tolist() == [[0.0] * 4] * 2
+    assert stop.watchdog is True  # so that its world takes it for no second process's
     assert statistics.watchdog_stops == 2
 
 

@@ -1315,6 +1315,35 @@ def test_a_fishs_watchdog_stop_for_a_tick_it_answered_is_no_twins_answer(
     assert not [r for r in caplog.records if "twice" in r.getMessage()]
 
 
+def test_a_schools_watchdog_stop_in_real_time_is_no_twins_answer(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    # `run --perception-timeout 0.8 --time realtime`: the school's watchdog fires between
+    # the 1-s ticks and repeats the tick it answered; the world warned that two processes
+    # served the fish.
+    scenario = Scenario(fish=3, duration=4.0, seed=1, time_mode="realtime")
+    keys = scenario.keys
+    school = FishSettings((0, 1, 2), scenario.fish_params(), keys, school="s",
+                          perception_timeout=0.8)  # fmt: skip
+
+    async def main() -> tuple[World, Fish]:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0, 1, 2)))
+        fish = Fish(school)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(fish.run, bus)
+            nursery.start_soon(world.run, bus)
+            await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return world, fish
+
+    with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
+        world, fish = run_mock(main)
+    assert fish.statistics().watchdog_stops >= 3  # it fired, as in the run that warned
+    assert not [r for r in caplog.records if "twice" in r.getMessage()]
+    assert "duplicate" not in world.statistics().rejected
+
+
 def test_fish_started_with_other_study_code_rules_are_named(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
