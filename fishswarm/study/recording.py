@@ -29,7 +29,7 @@ from typing import IO, Any
 import numpy as np
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Metadata
-from mcap.stream_reader import StreamReader
+from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import Writer
 
 from fishswarm.protocols.codec import MessageError, decode
@@ -277,13 +277,16 @@ def read_recording(path: Path) -> Recording:
     else:
         contents = _Contents()
         try:
-            reader = make_reader(io.BytesIO(data))
+            # Checksums checked: a chunk damaged on disk is said so, not read past silently.
+            reader = make_reader(io.BytesIO(data), validate_crcs=True)
             for metadata in reader.iter_metadata():
                 contents.metadata(metadata.name, metadata.metadata)
             for _, channel, message in reader.iter_messages(log_time_order=False):
                 contents.message(path, channel.topic, message.data)
         except RecordingError:
             raise
+        except CRCValidationError:
+            raise RecordingError(_damaged(path)) from None
         except Exception as error:
             raise RecordingError(f"{path} is not a readable MCAP recording: {error}") from None
     contents.snapshots.sort(key=lambda s: s.tick)
@@ -298,6 +301,14 @@ def read_recording(path: Path) -> Recording:
 
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def _damaged(path: Path) -> str:
+    """What to say of a recording whose chunk fails its checksum."""
+    return (
+        f"{path} is damaged: a chunk of it fails its checksum, so the file was changed after "
+        "it was written; it is not read (a recording cut short by a crash is)"
+    )
 
 
 @dataclass
@@ -331,7 +342,7 @@ def _read_stream(path: Path, data: bytes) -> _Contents:
     contents = _Contents()
     topics: dict[int, str] = {}
     try:
-        for record in StreamReader(io.BytesIO(data)).records:
+        for record in StreamReader(io.BytesIO(data), validate_crcs=True).records:
             if isinstance(record, Channel):
                 topics[record.id] = record.topic
             elif isinstance(record, Message) and record.channel_id in topics:
@@ -340,6 +351,8 @@ def _read_stream(path: Path, data: bytes) -> _Contents:
                 contents.metadata(record.name, record.metadata)
     except RecordingError:
         raise
+    except CRCValidationError:
+        raise RecordingError(_damaged(path)) from None
     except Exception:  # the cut: everything before it has been read
         pass
     return contents

@@ -149,6 +149,30 @@ def test_a_recording_cut_anywhere_reads_up_to_its_last_whole_chunk(tmp_path: Pat
     )
 
 
+def test_a_recording_changed_on_disk_is_refused_whole_or_cut(tmp_path: Path) -> None:
+    # Eight bytes zeroed in the middle of a chunk: read without checksums, ticks went
+    # missing silently.
+    path = tmp_path / "run.mcap"
+    rng = np.random.default_rng(0)
+    with open_recorder(path, {"fish": 25}) as recorder:
+        for tick in range(60):
+            base = _snapshot(tick, list(range(25)))
+            snapshot = Snapshot(
+                tick, float(tick), base.ids, rng.uniform(0, 1.78, (25, 3)),
+                rng.normal(size=(25, 3)), rng.uniform(-3, 3, 25), base.neighbors_seen,
+                base.broadcasts,
+            )  # fmt: skip
+            recorder.snapshot(snapshot.time, encode(snapshot))
+            recorder.metrics(snapshot.time, {"tick": tick})
+    data = bytearray(path.read_bytes())
+    assert len(data) > 60_000
+    data[30_000:30_008] = bytes(8)
+    for name, damaged in (("whole.mcap", data), ("cut.mcap", data[: len(data) // 2])):
+        (tmp_path / name).write_bytes(damaged)
+        with pytest.raises(RecordingError, match=r"is damaged: a chunk of it fails its checksum"):
+            read_recording(tmp_path / name)
+
+
 def test_a_large_swarm_cut_after_its_first_snapshot_reads_as_nothing_whole(
     tmp_path: Path,
 ) -> None:
