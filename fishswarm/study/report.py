@@ -202,10 +202,17 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
                 undefined = True
                 cells.append("—")
                 continue
-            spread = f" ± {sd:.{summary.digits}f}" if experiment.seeds > 1 else ""
+            # A row of one run (an interrupted sweep's) has no spread to show.
+            spread = f" ± {sd:.{summary.digits}f}" if row.get("runs", 0) > 1 else ""
             # + 0.0: a mean that rounds to zero from below is shown 0.00, not -0.00.
             cells.append(f"{round(mean, summary.digits) + 0.0:.{summary.digits}f}{spread}")
         lines.append("| " + " | ".join(cells) + " |")
+    if experiment.seeds > 1 and any(row.get("runs", 0) < experiment.seeds for row in rows):
+        lines += [
+            "",
+            "Rows of fewer runs than seeds (an interrupted sweep's) average the runs done; a "
+            "row of one run shows no spread.",
+        ]
     if undefined:
         lines += [
             "",

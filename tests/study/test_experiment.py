@@ -512,7 +512,9 @@ def test_a_mean_that_rounds_to_zero_from_below_is_shown_as_zero() -> None:
     row: dict[str, object] = {experiment.parameter: experiment.values[0], "runs": 2}
     for summary in experiment.summaries:
         row[f"{summary.key}_mean"], row[f"{summary.key}_sd"] = -0.001, 0.002
-    cells = [cell.strip() for cell in markdown_table(experiment, [row]).splitlines()[-1].split("|")]
+    row["runs"] = experiment.seeds
+    (line,) = [line for line in markdown_table(experiment, [row]).splitlines() if line[:3] == "| 0"]
+    cells = [cell.strip() for cell in line.split("|")]
     # Radius, wobble and speed have three decimals, revolutions two, collisions one.
     assert cells[2:-1] == ["-0.001 ± 0.002"] * 2 + ["0.00 ± 0.00", "-0.001 ± 0.002", "0.0 ± 0.0"]
 
@@ -554,3 +556,16 @@ def test_a_group_the_sweep_leaves_alike_is_a_control_beside_one_it_changes(
     )
     assert Experiment.from_toml(path).group_names == ("on", "off")
     assert find("formation-energy").group_names == ("rotation", "no rotation")
+
+
+def test_a_row_of_one_run_in_an_interrupted_sweep_shows_no_spread() -> None:
+    # One of five seeds done: "223.3 ± 0.0" read as a spread measured over seeds.
+    experiment = find("blindspot").with_changes(values=(0.0, 0.05), seeds=5)
+    outcomes = [_outcome(0.0, seed, 1.0, 1.5 + 0.1 * seed) for seed in range(5)]
+    rows = table_rows(experiment, [*outcomes, _outcome(0.05, 0, 1.0, 0.5)])
+    table = markdown_table(experiment, rows)
+    (done, one) = [line for line in table.splitlines() if line.startswith(("| 0 |", "| 0.05 |"))]
+    assert "±" in done and "±" not in one
+    assert one.startswith("| 0.05 | -50.0 | -50.0 | -50.0 |")
+    assert "Rows of fewer runs than seeds (an interrupted sweep's) average the runs done" in table
+    assert "fewer runs" not in markdown_table(experiment, table_rows(experiment, outcomes))
