@@ -552,6 +552,33 @@ def check_subject(folder: Path, subject: str) -> None:
         ) from None
 
 
+def check_swarm(folder: Path, swarm: str) -> None:
+    """Check that ``folder``'s authority is of ``swarm`` (its access control names that
+    swarm's keys only: on another a client would be let through to nothing, and wait).
+
+    Raises:
+        SecurityError: it is of another swarm, with how to fix it.
+    """
+    _require_cryptography()
+    from cryptography import x509
+    from cryptography.x509.oid import NameOID
+
+    path = folder / f"{AUTHORITY}.pem"
+    if not path.is_file():
+        return  # check_subject says so, with how to make it
+    try:
+        authority = x509.load_pem_x509_certificate(path.read_bytes())
+    except ValueError:
+        return  # check_subject says so
+    named = authority.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+    theirs = str(named[0].value).removeprefix("fishswarm ") if named else None
+    if theirs is not None and theirs != swarm:
+        raise SecurityError(
+            f"{folder} secures swarm {theirs!r}, not {swarm!r}: give --swarm {theirs}, or the "
+            f"folder of swarm {swarm!r} ('fishswarm secure init DIR --swarm {swarm}' makes one)"
+        )
+
+
 def session_security(folder: Path, subject: str, *, router: bool = False) -> dict[str, Any]:
     """The Zenoh settings (``SessionSettings.extra``) of a secured session of ``subject``:
     TLS only, with its certificate; for the router also mutual TLS and the access control.
@@ -594,6 +621,7 @@ def secure_run(
     Raises:
         SecurityError: see :func:`session_security` and :func:`issue_for_run`.
     """
+    check_swarm(folder, keys.swarm)
     router = session_security(folder, "router", router=True)
     if not schools:
         return router, {}

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import trio
 
 from fishswarm.actors.driver import HardwareError
-from fishswarm.actors.security import SecurityError, session_security
+from fishswarm.actors.security import SecurityError, check_swarm, session_security
 from fishswarm.actors.session import ConnectError, SessionSettings, check_endpoint
 from fishswarm.sim.scenario import ConfigError
 
@@ -75,21 +75,27 @@ def refuse_unused(
         )
 
 
-def client_settings(args: argparse.Namespace, subject: str) -> SessionSettings:
+def client_settings(args: argparse.Namespace, subject: str, *, swarm: str) -> SessionSettings:
     """A client session to ``--connect``; with ``--secure DIR``, over mutual TLS with the
-    certificate of ``subject``."""
+    certificate of ``subject`` (its folder checked to secure ``swarm``)."""
     return SessionSettings(
         mode="client",
         connect=[endpoint_of(args.connect, "--connect")],
         connect_timeout=args.connect_timeout,
-        extra=secure_extra(args, subject, endpoint=args.connect),
+        extra=secure_extra(args, subject, endpoint=args.connect, swarm=swarm),
     )
 
 
 def secure_extra(
-    args: argparse.Namespace, subject: str, *, endpoint: str, router: bool = False
+    args: argparse.Namespace,
+    subject: str,
+    *,
+    endpoint: str,
+    router: bool = False,
+    swarm: str | None = None,
 ) -> dict[str, Any]:
-    """The session settings of ``--secure DIR`` for ``subject`` (none without it).
+    """The session settings of ``--secure DIR`` for ``subject`` (none without it), the
+    folder checked to secure ``swarm`` (None: a router's, which serves any).
 
     Raises:
         ConfigError: ``--secure`` with an endpoint that is not ``tls/``, or a ``tls/`` one
@@ -104,7 +110,11 @@ def secure_extra(
         # TLS may come from a Zenoh configuration file instead (robot --zenoh-config).
         tls_elsewhere=getattr(args, "zenoh_config", None) is not None,
     )
-    return {} if folder is None else session_security(folder, subject, router=router)
+    if folder is None:
+        return {}
+    if swarm is not None:
+        check_swarm(folder, swarm)
+    return session_security(folder, subject, router=router)
 
 
 def check_secured_endpoint(

@@ -50,7 +50,9 @@ def robot(args: argparse.Namespace, scenario: Scenario) -> int:
             perception_timeout=args.perception_timeout,
             seed=scenario.seed,
             zenoh_config=_zenoh_config(args.zenoh_config),
-            session_extra=secure_extra(args, robot_subject(args.robot_id), endpoint=args.connect),
+            session_extra=secure_extra(
+                args, robot_subject(args.robot_id), endpoint=args.connect, swarm=scenario.swarm
+            ),
         )
     except ValueError as error:
         raise ConfigError(str(error)) from None
@@ -78,7 +80,7 @@ def robots(args: argparse.Namespace, scenario: Scenario | None) -> int:
         order = ("resume", args.resume)
 
     async def main() -> tuple[RobotOrder | None, list[FleetEntry]]:
-        async with open_session(client_settings(args, "admin")) as session:
+        async with open_session(client_settings(args, "admin", swarm=keys.swarm)) as session:
             bus = ZenohBus(session)
             sent = None
             if order is not None:

@@ -597,7 +597,7 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
 
     async def main() -> None:
         async with (
-            open_session(client_settings(args, _fish_subject(args))) as session,
+            open_session(client_settings(args, _fish_subject(args), swarm=keys.swarm)) as session,
             trio.open_nursery() as nursery,
         ):
             served = await trio.to_thread.run_sync(_served_fish, session, keys)
@@ -670,7 +670,7 @@ def world(args: argparse.Namespace, scenario: Scenario) -> int:
 
     async def main() -> None:
         settings = dataclasses.replace(
-            client_settings(args, "world"),
+            client_settings(args, "world", swarm=scenario.swarm),
             shared_memory_pool_bytes=shared_memory_pool_bytes(scenario.fish),
         )
         # The session first: a world that cannot reach its router writes no recording.
@@ -739,7 +739,7 @@ def channel(args: argparse.Namespace, scenario: Scenario) -> int:
     served: list[Channel] = []
 
     async def main() -> None:
-        async with open_session(client_settings(args, "channel")) as session:
+        async with open_session(client_settings(args, "channel", swarm=scenario.swarm)) as session:
 
             async def ask_world() -> Scenario | None:
                 return await ask_scenario(session, scenario.keys, timeout=WORLD_ANSWER_TIMEOUT)
@@ -834,7 +834,7 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
     async def main() -> None:
         show = progress_printer(ticks, line)
-        settings = client_settings(args, observer_subject(args.name))
+        settings = client_settings(args, observer_subject(args.name), swarm=keys.swarm)
         # The session first: an observer that cannot reach the router writes no recording.
         async with open_session(settings) as session, contextlib.AsyncExitStack() as files:
             recorder = (
@@ -937,7 +937,7 @@ def _ask_world(args: argparse.Namespace, request: ControlRequest) -> ControlRepl
     keys = KeySpace(args.swarm)
 
     async def main() -> ControlReply | None:
-        async with open_session(client_settings(args, "admin")) as session:
+        async with open_session(client_settings(args, "admin", swarm=keys.swarm)) as session:
             return await _ask_control(session, keys, request)
 
     reply: ControlReply | None = _run_trio(main)
@@ -976,7 +976,7 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
     request = ControlRequest("formation", formation=args.shape)
 
     async def main() -> tuple[ControlReply | None, RobotOrder | None, list[FleetEntry]]:
-        async with open_session(client_settings(args, "admin")) as session:
+        async with open_session(client_settings(args, "admin", swarm=keys.swarm)) as session:
             reply = await _ask_control(session, keys, request)
             if reply is not None and reply.refused is not None:
                 return reply, None, []

@@ -133,7 +133,9 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
             view.show_stage(Stage(Tank().size))
             runs = _Runs(view, args.swarm)
             async with (
-                open_session(client_settings(args, observer_subject(args.name))) as session,
+                open_session(
+                    client_settings(args, observer_subject(args.name), swarm=args.swarm)
+                ) as session,
                 trio.open_nursery() as nursery,
             ):
                 observer = Observer(

@@ -586,3 +586,25 @@ def test_a_secured_run_without_workers_needs_no_authority_key(
     assert workers == {} and router["access_control"]["rules"]
     with pytest.raises(SecurityError, match="authority's key"):
         secure_run(folder, KEYS, {"worker-0": [0, 1]}, tmp_path / "signed")
+
+
+def test_a_folder_of_another_swarm_is_refused_at_once_with_the_swarm_it_secures(
+    tmp_path: Path,
+) -> None:
+    # Its access control names the keys of swarm "default" only: a fish of swarm "lab2"
+    # was let through to nothing and waited in silence.
+    from fishswarm.actors.security import check_swarm
+    from fishswarm.cli import main
+
+    folder = tmp_path / "keys"
+    init_secure(folder, robots=[0], observers=["laptop"])
+    check_swarm(folder, "default")
+    with pytest.raises(SecurityError, match=r"keys secures swarm 'default', not 'lab2': give "):
+        check_swarm(folder, "lab2")
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    for args in (
+        ["fish", "--id", "0", "--secure", str(folder), "--swarm", "lab2", "--connect", endpoint],
+        ["observe", "--secure", str(folder), "--name", "laptop", "--swarm", "lab2",
+         "--connect", endpoint],
+    ):  # fmt: skip
+        assert main(args) == 1
