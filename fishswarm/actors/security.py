@@ -514,8 +514,23 @@ def check_subject(folder: Path, subject: str) -> None:
     from cryptography.hazmat.primitives.asymmetric import ec
     from cryptography.x509.oid import NameOID
 
-    fix = f"make them with: fishswarm secure init {folder}{_option_for(subject)}"
     paths = [folder / f"{AUTHORITY}.pem", folder / f"{subject}.pem", folder / f"{subject}.key"]
+    made = f"fishswarm secure init{{}}{_option_for(subject)}"
+    if (folder / f"{AUTHORITY}.key").is_file():
+        fix = "make them with: " + made.format(f" {folder}")
+    else:
+        # A copy on a robot or laptop holds no authority's key: certificates are made where
+        # it is, and copied here.
+        files = ", ".join(path.name for path in paths)
+        fix = (
+            f"make them on the machine with the authority's folder (its {AUTHORITY}.key) with: "
+            + made.format(" DIR")
+            + f", then copy {files} here"
+        )
+    named = sorted(path.name.removesuffix(".pem") for path in folder.glob("observer-*.pem"))
+    if subject == "observer" and named:
+        names = " or ".join(f"--name {name.removeprefix('observer-')}" for name in named)
+        fix = f"this folder holds the certificate of {', '.join(named)}: give {names}"
     for path in paths:
         if not path.is_file():
             raise SecurityError(f"{path} is missing: no certificate for {subject!r} ({fix})")

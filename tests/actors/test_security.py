@@ -93,6 +93,25 @@ def test_certificates_that_cannot_be_used_get_a_clear_message(
     shutil.copy(other / "world.pem", copy / "world.pem")
     with pytest.raises(SecurityError, match=r"was not signed by the authority"):
         check_subject(copy, "world")
+    # A robot's or a laptop's copy holds no authority key: its certificates are made where
+    # the key is and copied (following 'secure init' here led to "half an authority").
+    laptop = tmp_path / "laptop"
+    laptop.mkdir()
+    for name in ("ca.pem", "observer-lab.pem", "observer-lab.key"):
+        shutil.copy(secure_dir / name, laptop / name)
+    with pytest.raises(SecurityError) as missing:
+        check_subject(laptop, "robot-1")
+    assert str(missing.value).endswith(
+        "(make them on the machine with the authority's folder (its ca.key) with: fishswarm "
+        "secure init DIR --robots 1, then copy ca.pem, robot-1.pem, robot-1.key here)"
+    )
+    # The observer's certificate is there under its name: give --name.
+    with pytest.raises(SecurityError) as unnamed:
+        check_subject(laptop, "observer")
+    assert str(unnamed.value).endswith(
+        "(this folder holds the certificate of observer-lab: give --name lab)"
+    )
+    check_subject(laptop, "observer-lab")
     # An expired one, signed by the right authority.
     _expired(copy, "channel")
     with pytest.raises(SecurityError, match=r"not now: renew it"):
