@@ -527,10 +527,10 @@ def check_subject(folder: Path, subject: str) -> None:
             + made.format(" DIR")
             + f", then copy {files} here"
         )
-    named = sorted(path.name.removesuffix(".pem") for path in folder.glob("observer-*.pem"))
-    if subject == "observer" and named:
-        names = " or ".join(f"--name {name.removeprefix('observer-')}" for name in named)
-        fix = f"this folder holds the certificate of {', '.join(named)}: give {names}"
+    observers = sorted(p.name.removesuffix(".pem") for p in folder.glob("observer-*.pem"))
+    if subject == "observer" and observers:
+        options = " or ".join(f"--name {name.removeprefix('observer-')}" for name in observers)
+        fix = f"this folder holds the certificate of {', '.join(observers)}: give {options}"
     for path in paths:
         if not path.is_file():
             raise SecurityError(f"{path} is missing: no certificate for {subject!r} ({fix})")
