@@ -5,16 +5,18 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import math
 import sys
 from pathlib import Path
 
 import trio
+import zenoh
 
 from fishswarm.actors.control import wait_for_scenario
 from fishswarm.actors.observer import Observer
 from fishswarm.actors.security import observer_subject
-from fishswarm.actors.session import open_session
+from fishswarm.actors.session import open_session, reaches_router
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.bluebot.parameters import Tank
 from fishswarm.cli.common import UserError, client_settings, read_recording_for, refuse_unused
@@ -180,12 +182,27 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
                 nursery.start_soon(learn_each_run)
                 watched = 1
                 while True:
-                    await observer.wait_for_world_end()
-                    shown = runs.scenes.get(watched, view.scenes)
-                    say(
-                        f"the run has ended ({shown} snapshots shown); the view stays up until "
-                        "Ctrl-C, and shows the swarm's next run"
+                    # Whether the router is still there is noted the moment the world leaves:
+                    # its token goes for everyone who loses the router too (as observe does).
+                    router: list[bool] = []
+                    run = await observer.wait_for_world_end(
+                        on_left=functools.partial(_note_router, router, session)
                     )
+                    shown = runs.scenes.get(watched, view.scenes)
+                    said = observer.world_said_ended(run)
+                    if said is False or (said is None and router and not router[0]):
+                        lost = not (router and router[0] and reaches_router(session))
+                        why = f"lost the router at {args.connect}" if lost else "its world left"
+                        say(
+                            f"{why} before the run ended ({shown} snapshots shown; its world "
+                            "never said the run was over): the view stays up until Ctrl-C, and "
+                            "shows what comes when the router and the world are back"
+                        )
+                    else:
+                        say(
+                            f"the run has ended ({shown} snapshots shown); the view stays up "
+                            "until Ctrl-C, and shows the swarm's next run"
+                        )
                     await runs.wait_for_run(after=watched)
                     watched = runs.count
                     say(
@@ -194,3 +211,8 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
                     )
 
     _run_trio(main)
+
+
+def _note_router(noted: list[bool], session: zenoh.Session) -> None:
+    """Note whether ``session`` reaches its router now."""
+    noted.append(reaches_router(session))

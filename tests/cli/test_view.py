@@ -329,3 +329,38 @@ def test_a_ctrl_c_that_interrupts_a_run_with_a_view_ends_the_view_too(tmp_path: 
         assert process.wait(timeout=30) == 130  # it stayed up, serving the view
     finally:
         _stop(process, lines)
+
+
+@pytest.mark.slow
+def test_a_view_that_loses_its_router_says_so_instead_of_that_the_run_ended() -> None:
+    # The router killed at about tick 3 of a real-time run: the view said "the run has
+    # ended" while the world went on once the router was back.
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    processes: list[subprocess.Popen[str]] = []
+
+    def start(*args: str) -> subprocess.Popen[str]:
+        process = subprocess.Popen(
+            [*FISHSWARM, *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True
+        )
+        processes.append(process)
+        return process
+
+    process, lines = _view("--connect", endpoint)
+    try:
+        router = start("router", "--listen", endpoint)
+        wait_for_port(port)
+        lines.wait_for(r"following swarm 'default' on tcp/127\.0\.0\.1:\d+$")
+        start("fish", "--connect", endpoint, "--id", "0", "--id", "1", "--school", "s")
+        start("world", "--connect", endpoint, "--fish", "2", "--duration", "60", "--time",
+              "realtime", "--start-timeout", "60", "--quiet")  # fmt: skip
+        lines.wait_for(r"the world runs 2 fish, dispersion, 60 s", timeout=60)
+        time.sleep(3)
+        router.kill()
+        router.wait(timeout=10)
+        said = lines.wait_for(r"(lost the router at .*|the run has ended.*)$", timeout=60)[1]
+        assert said.startswith(f"lost the router at {endpoint} before the run ended"), said
+        assert "its world never said the run was over" in said
+        _close(process, lines)
+    finally:
+        end_processes([process, *processes])
