@@ -604,7 +604,12 @@ class World:
                 f"another world of swarm {self.keys.swarm!r}, up before this one, still waited "
                 f"for its turn after {waited}"
             )
-        raise StartTimeout(f"{which}: stop it, or give this run another swarm name (--swarm)")
+        raise StartTimeout(
+            f"{which}: stop it ('fishswarm control stop --swarm {self.keys.swarm}'), or give "
+            "this run another swarm name (--swarm). If 'fishswarm control status' finds no "
+            "world there, a client that is not a world shows its token (in a secured swarm "
+            "any certificate can: README, 'Securing a swarm')"
+        )
 
     async def _wait_for_fish(self, deadline: float) -> None:
         """Wait until the expected fish are up (and a world that took its turn in the same

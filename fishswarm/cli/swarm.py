@@ -820,7 +820,7 @@ def say_waiting_for_world(command: str, keys: KeySpace, endpoint: str) -> None:
     """Say that ``fishswarm COMMAND`` waits for a world to tell it what runs."""
     print(
         f"fishswarm {command}: waiting for the world of swarm {keys.swarm!r} on {endpoint} "
-        "(is a run going?)",
+        "(is a run going, and under this --swarm?)",
         file=sys.stderr,
     )
 
@@ -943,7 +943,8 @@ def _ask_world(args: argparse.Namespace, request: ControlRequest) -> ControlRepl
     reply: ControlReply | None = _run_trio(main)
     if reply is None:
         raise UserError(
-            f"no world of swarm {args.swarm!r} answered on {args.connect}: is a run going?"
+            f"no world of swarm {args.swarm!r} answered on {args.connect}: is a run going, "
+            "and under this --swarm?"
         )
     return reply
 
@@ -990,7 +991,7 @@ def formation(args: argparse.Namespace, scenario: Scenario | None) -> int:
     if reply is None and not fleet:
         raise UserError(
             f"no world of swarm {args.swarm!r} answered on {args.connect}, and no robot was "
-            "heard from: is a run going?"
+            "heard from: is a run going, and under this --swarm?"
         )
     if reply is not None:
         print(

@@ -156,6 +156,14 @@ def test_the_actors_give_the_batch_engines_trajectory(changes: dict[str, object]
     assert {s.run for s in snapshots} == {world.run_id}  # as its perceptions carry it
 
 
+OTHER_WORLD = (
+    "stop it ('fishswarm control stop --swarm default'), or give this run another swarm name "
+    "(--swarm). If 'fishswarm control status' finds no world there, a client that is not a "
+    "world shows its token (in a secured swarm any certificate can: README, 'Securing a swarm')"
+)
+"""How a world that waited for another for all of its start timeout says what to do."""
+
+
 def test_a_tick_in_one_process_hands_its_messages_over_instead_of_decoding_them(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -1713,8 +1721,7 @@ def test_a_world_waits_for_another_world_of_its_swarm_to_end(
     _, perceived, refused = run_mock(lambda: main(leaves_at=None))
     assert perceived == []
     assert refused == (
-        "20 s: another world ran swarm 'default' on this router for all of 20 s: stop it, or "
-        "give this run another swarm name (--swarm)"
+        "20 s: another world ran swarm 'default' on this router for all of 20 s: " + OTHER_WORLD
     )
 
 
@@ -1821,7 +1828,7 @@ def test_a_world_behind_one_that_never_takes_its_turn_says_so_at_its_start_timeo
 
     assert run_mock(main) == (
         "20 s: another world of swarm 'default', up before this one, still waited for its "
-        "turn after 20 s: stop it, or give this run another swarm name (--swarm)"
+        "turn after 20 s: " + OTHER_WORLD
     )
 
 
@@ -2092,8 +2099,7 @@ def test_a_world_held_by_a_lower_run_that_never_starts_gives_up_at_its_start_tim
         return refused, perceived
 
     assert run_mock(main) == (
-        "20 s: another world ran swarm 'default' on this router for all of 20 s: stop it, or "
-        "give this run another swarm name (--swarm)",
+        "20 s: another world ran swarm 'default' on this router for all of 20 s: " + OTHER_WORLD,
         [],
     )
 

@@ -930,7 +930,7 @@ def test_control_with_no_world_running_says_no_world_answered() -> None:
     assert asked.returncode == 1 and asked.stdout == ""
     assert asked.stderr == (
         f"fishswarm control: error: no world of swarm 'tank2' answered on {endpoint}: is a "
-        "run going?\n"
+        "run going, and under this --swarm?\n"
     )
 
 
