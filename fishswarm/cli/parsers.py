@@ -6,7 +6,7 @@ import argparse
 import difflib
 import math
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -198,8 +198,7 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
     "fish": (
         "--fish",
         int,
-        f"number of fish (default {Scenario.fish}); for 'fish' and 'robot', the swarm's, as "
-        "its world says: a formation's map has a slot for each",
+        f"number of fish (default {Scenario.fish})",
     ),
     "behavior": (
         "--behavior",
@@ -350,7 +349,17 @@ _FISH_FLAGS = (
 """The scenario settings a fish actor reads (``fish`` and ``robot``)."""
 
 
-def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -> None:
+_SWARM_FISH_HELP = (
+    f"the swarm's number of fish, as its world's --fish (default {Scenario.fish}): a "
+    "formation's map has a slot for each"
+)
+"""--fish of a command that runs some of a swarm's fish (``fish``, ``robot``)."""
+
+
+def _add_scenario_flags(
+    parser: argparse.ArgumentParser, names: Sequence[str], *, helps: Mapping[str, str] = {}
+) -> None:
+    """The scenario flags ``names`` (``helps``: a command's own help for some of them)."""
     group = parser.add_argument_group("scenario (override the --config file)")
     group.add_argument(
         "--config",
@@ -360,6 +369,7 @@ def _add_scenario_flags(parser: argparse.ArgumentParser, names: Sequence[str]) -
     )
     for name in names:
         flag, kind, text = _SCENARIO_FLAGS[name]
+        text = helps.get(name, text)
         if kind is bool:  # a switch that turns a setting off
             group.add_argument(flag, dest=name, action="store_const", const=False, help=text)
         elif kind is SWITCH_ON:
@@ -392,6 +402,16 @@ def _refuse_inapplicable(given: dict[str, Any], scenario: Scenario) -> None:
         )
 
 
+def _named_by_flag(message: str, given: Mapping[str, Any]) -> str:
+    """A scenario's message about a setting given as a flag of another name, with the flag
+    first: ``--period: control_period must be ...``."""
+    for name, value in given.items():
+        flag = _SCENARIO_FLAGS[name][0]
+        if value is not None and message.startswith(f"{name} ") and flag != f"--{name}":
+            return f"{flag}: {message}"
+    return message
+
+
 def scenario_from(args: argparse.Namespace) -> Scenario:
     """The scenario a command's arguments describe: its --config file, if any, with the
     scenario flags given on top (a flag that it would ignore is refused)."""
@@ -410,8 +430,8 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
     try:
         # A controller the file names stays when --behavior changes the behaviour.
         scenario = base.with_settings(overrides, controller_chosen="controller" in table)
-    except TypeError as error:
-        raise ConfigError(str(error)) from None
+    except (TypeError, ConfigError) as error:
+        raise ConfigError(_named_by_flag(str(error), overrides)) from None
     _refuse_inapplicable(overrides, scenario)
     for warning in _unused_settings(table, overrides, scenario, path):
         print(f"fishswarm {args.command}: warning: {warning}", file=sys.stderr)
@@ -557,10 +577,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="fish id; repeat for several fish in one process",
     )
     _add_connect(fish)
-    _add_scenario_flags(
-        fish,
-        _FISH_FLAGS,
-    )
+    _add_scenario_flags(fish, _FISH_FLAGS, helps={"fish": _SWARM_FISH_HELP})
     fish.add_argument(
         "--perception-timeout",
         type=seconds,
@@ -599,10 +616,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="bluebot (default: gpiozero, picamera2, the MS5803 over I²C) or mock (a laptop)",
     )
     _add_connect(robot)
-    _add_scenario_flags(
-        robot,
-        [*_FISH_FLAGS, "seed"],
-    )
+    _add_scenario_flags(robot, [*_FISH_FLAGS, "seed"], helps={"fish": _SWARM_FISH_HELP})
     robot.add_argument(
         "--command-timeout",
         type=seconds,

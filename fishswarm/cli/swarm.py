@@ -583,6 +583,9 @@ def fish(args: argparse.Namespace, scenario: Scenario) -> int:
     params = with_compiled_decisions(scenario.fish_params(), scenario.fish)
     keys = scenario.keys
 
+    repeated = sorted({fish_id for fish_id in args.ids if args.ids.count(fish_id) > 1})
+    if repeated:
+        raise ConfigError(f"--id {ids_text(repeated)} given more than once: give each fish once")
     try:
         settings = FishSettings(
             tuple(args.ids),

@@ -43,7 +43,8 @@ def _rerun() -> Any:
         import rerun
     except ImportError:
         raise ViewError(
-            "the live view needs the rerun SDK: pip install -e '.[view]' (or pip install rerun-sdk)"
+            "the view (of a live swarm or of a recording) needs the rerun SDK: pip install -e "
+            "'.[view]' (or pip install rerun-sdk)"
         ) from None
     return rerun
 

@@ -153,6 +153,8 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
     ("args", "message"),
     [
         (["run", "--fish", "0"], "fish must be a whole number from 1 to 100000"),
+        (["run", "--period", "0"], "--period: control_period must be a positive number"),
+        (["fish", "--id", "0", "--id", "0"], "--id 0 given more than once: give each fish once"),
         (
             ["run", "--behavior", "formation", "--fish", "10001"],
             "a formation is for at most 10000 fish (its map's places), got 10001: give --fish "

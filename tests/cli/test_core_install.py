@@ -137,4 +137,7 @@ def test_a_view_without_the_rerun_sdk_says_how_to_get_it(tmp_path: Path) -> None
         "--listen", f"tcp/127.0.0.1:{free_port()}", "--record", str(tmp_path / "r.mcap"),
     )  # fmt: skip
     assert ran.returncode == 1 and "Traceback" not in ran.stderr
-    assert "the live view needs the rerun SDK: pip install -e '.[view]'" in ran.stderr
+    assert (
+        "the view (of a live swarm or of a recording) needs the rerun SDK: pip install -e "
+        "'.[view]'" in ran.stderr
+    )
