@@ -468,10 +468,10 @@ def _summary(
     for statistics in fish_statistics:
         for name, value in dataclasses.asdict(statistics).items():
             fish_totals[name] = fish_totals.get(name, 0) + int(value)
-    if status == "finished" and (fish_totals.get("watchdog_stops", 0) or (world.lost and not died)):
-        # Fins were off for part of the run, or fish went missing while their processes
-        # lived (a hang, a robot gone): its trajectory is not what the fish decided. (Fish
-        # whose process died make the run's exit code say so.)
+    if status == "finished" and (fish_totals.get("watchdog_stops", 0) or world.lost or died):
+        # Fins were off for part of the run, or fish went missing (their process died, hung,
+        # or a robot went): its trajectory is not what the fish decided. (Fish whose process
+        # died make the run's exit code say so too: 3, not 4; workers_died names them.)
         status = "degraded"
     world_stats = world.statistics()
     channel_stats = channel.statistics()
