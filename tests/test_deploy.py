@@ -269,6 +269,10 @@ def test_the_playbook_copies_a_learned_model_and_refuses_a_robot_that_could_not_
             **common, "fish_id": 3, "fishswarm_behavior": "replica",
             "fishswarm_model": str(tmp_path / "gone.npz"),
         },
+        "model-of-none": {
+            **common, "fish_id": 4, "fishswarm_behavior": "dispersion",
+            "fishswarm_model": str(model),
+        },
     }  # fmt: skip
     refused = tmp_path / "refused.yml"
     refused.write_text(json.dumps({"robots": {"hosts": hosts}}))
@@ -277,6 +281,9 @@ def test_the_playbook_copies_a_learned_model_and_refuses_a_robot_that_could_not_
     assert "fishswarm_behavior is dispersal: give one of dispersion, aggregation" in result.stdout
     assert "the replica behaviour needs a learned model: give fishswarm_model" in result.stdout
     assert "gone.npz, which is not a file on the control node" in result.stdout
+    assert "fishswarm_model is a learned replica's, and fishswarm_behavior is dispersion" in (
+        result.stdout
+    )
     for host in hosts:
         assert re.search(
             rf"{host}\s+: ok=\d+\s+changed=0\s+unreachable=0\s+failed=1", result.stdout

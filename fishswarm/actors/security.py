@@ -283,8 +283,7 @@ def init_secure(
                 "certificates already given out then stop being accepted)"
             )
         authority_key, authority = _load_authority(folder)
-        named = authority.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
-        theirs = str(named[0].value).removeprefix("fishswarm ") if named else None
+        theirs = _swarm_of(authority)
         if theirs != swarm:
             raise SecurityError(
                 f"{folder}'s authority is of swarm {theirs!r}, not {swarm!r}: give --swarm "
@@ -516,9 +515,7 @@ def check_subject(folder: Path, subject: str) -> None:
 
     paths = [folder / f"{AUTHORITY}.pem", folder / f"{subject}.pem", folder / f"{subject}.key"]
     made = f"fishswarm secure init{{}}{_option_for(subject)}"
-    if (folder / f"{AUTHORITY}.key").is_file():
-        fix = "make them with: " + made.format(f" {folder}")
-    else:
+    if paths[0].is_file() and not (folder / f"{AUTHORITY}.key").is_file():
         # A copy on a robot or laptop holds no authority's key: certificates are made where
         # it is, and copied here.
         files = ", ".join(path.name for path in paths)
@@ -527,12 +524,14 @@ def check_subject(folder: Path, subject: str) -> None:
             + made.format(" DIR")
             + f", then copy {files} here"
         )
+    else:
+        fix = "make them with: " + made.format(f" {folder}")
     observers = sorted(p.name.removesuffix(".pem") for p in folder.glob("observer-*.pem"))
-    if subject == "observer" and observers:
-        options = " or ".join(f"--name {name.removeprefix('observer-')}" for name in observers)
-        fix = f"this folder holds the certificate of {', '.join(observers)}: give {options}"
     for path in paths:
         if not path.is_file():
+            if subject == "observer" and observers and path != paths[0]:
+                options = " or ".join(f"--name {n.removeprefix('observer-')}" for n in observers)
+                fix = f"this folder holds the certificate of {', '.join(observers)}: give {options}"
             raise SecurityError(f"{path} is missing: no certificate for {subject!r} ({fix})")
     try:
         authority = x509.load_pem_x509_certificate(paths[0].read_bytes())
@@ -567,6 +566,14 @@ def check_subject(folder: Path, subject: str) -> None:
         ) from None
 
 
+def _swarm_of(authority: Any) -> str | None:
+    """The swarm an authority's certificate was made for (its name: ``fishswarm <swarm>``)."""
+    from cryptography.x509.oid import NameOID
+
+    named = authority.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+    return str(named[0].value).removeprefix("fishswarm ") if named else None
+
+
 def check_swarm(folder: Path, swarm: str) -> None:
     """Check that ``folder``'s authority is of ``swarm`` (its access control names that
     swarm's keys only: on another a client would be let through to nothing, and wait).
@@ -576,7 +583,6 @@ def check_swarm(folder: Path, swarm: str) -> None:
     """
     _require_cryptography()
     from cryptography import x509
-    from cryptography.x509.oid import NameOID
 
     path = folder / f"{AUTHORITY}.pem"
     if not path.is_file():
@@ -585,8 +591,7 @@ def check_swarm(folder: Path, swarm: str) -> None:
         authority = x509.load_pem_x509_certificate(path.read_bytes())
     except ValueError:
         return  # check_subject says so
-    named = authority.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
-    theirs = str(named[0].value).removeprefix("fishswarm ") if named else None
+    theirs = _swarm_of(authority)
     if theirs is not None and theirs != swarm:
         raise SecurityError(
             f"{folder} secures swarm {theirs!r}, not {swarm!r}: give --swarm {theirs}, or the "

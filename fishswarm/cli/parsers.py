@@ -392,8 +392,14 @@ def _refuse_inapplicable(given: dict[str, Any], scenario: Scenario) -> None:
         setting, wanted = unmet
         flag = _SCENARIO_FLAGS[name][0]
         shown, kind, _ = _SCENARIO_FLAGS.get(setting, (setting, str, ""))
-        if kind is bool:  # the setting's flag turns it off
+        if kind is bool and given.get(setting) is not None:  # its flag turned it off
             raise ConfigError(f"{flag} applies only without {shown}: leave one of them out")
+        if kind is bool:  # turned off in the scenario file
+            raise ConfigError(
+                f"{flag} applies only with {setting} {wanted}, and the scenario file's "
+                f"{setting} is {setting_text(getattr(scenario, setting))}: leave {flag} out, "
+                f"or set {setting} = {wanted} in the file"
+            )
         needed = shown if kind is SWITCH_ON else f"{shown} {wanted}"
         actual = setting_text(getattr(scenario, setting))
         raise ConfigError(
@@ -426,7 +432,13 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
             raise
         # The file alone may be refused where the command line mends it (a switch_at past
         # the file's duration, with a longer --duration): checked with the flags on top.
-        base = Scenario.from_mapping({**table, **given}, source=str(path))
+        try:
+            base = Scenario.from_mapping({**table, **given}, source=str(path))
+        except ConfigError as error:
+            # A flag's own error is the flag's, not the file's.
+            text = str(error).removeprefix(f"{path}: ")
+            named = _named_by_flag(text, overrides)
+            raise ConfigError(named if named != text else str(error)) from None
     try:
         # A controller the file names stays when --behavior changes the behaviour.
         scenario = base.with_settings(overrides, controller_chosen="controller" in table)

@@ -819,6 +819,21 @@ async def _say_if_nothing_comes(observer: Observer, swarm: str) -> None:
         )
 
 
+async def wait_for_run_end(observer: Observer, session: zenoh.Session, endpoint: str) -> str | None:
+    """Wait until the world of the run ``observer`` watches leaves; None when it said its
+    run was over, else why it left unfinished: ``lost the router at ENDPOINT`` or ``the
+    world left``."""
+    # A world's token is gone for everyone who loses the router too: whether the router is
+    # still there is noted the moment the world leaves.
+    router: list[bool] = []
+    run = await observer.wait_for_world_end(on_left=lambda: router.append(reaches_router(session)))
+    said = observer.world_said_ended(run)
+    if said is True or (said is None and router and router[0]):
+        return None
+    lost = not (router and router[0] and reaches_router(session))
+    return f"lost the router at {endpoint}" if lost else "the world left"
+
+
 def say_waiting_for_world(command: str, keys: KeySpace, endpoint: str) -> None:
     """Say that ``fishswarm COMMAND`` waits for a world to tell it what runs."""
     print(
@@ -882,19 +897,9 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                         waiting.cancel_scope.cancel()
 
                     async def wait_for_world_end() -> None:
-                        # A world's token is gone for everyone who loses the router too:
-                        # whether it is still there is noted the moment the world leaves.
-                        router: list[bool] = []
-                        run = await observer.wait_for_world_end(
-                            on_left=lambda: router.append(reaches_router(session))
-                        )
-                        said = observer.world_said_ended(run)
-                        if said is False or (said is None and not router[0]):
-                            unfinished.append(
-                                "lost the router at " + args.connect
-                                if not (router[0] and reaches_router(session))
-                                else "the world left"
-                            )
+                        why = await wait_for_run_end(observer, session, args.connect)
+                        if why is not None:
+                            unfinished.append(why)
 
                     waiting.start_soon(wait_then_stop, wait_for_world_end)
                     if ticks is not None:

@@ -5,18 +5,16 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import functools
 import math
 import sys
 from pathlib import Path
 
 import trio
-import zenoh
 
 from fishswarm.actors.control import wait_for_scenario
 from fishswarm.actors.observer import Observer
 from fishswarm.actors.security import observer_subject
-from fishswarm.actors.session import open_session, reaches_router
+from fishswarm.actors.session import open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.bluebot.parameters import Tank
 from fishswarm.cli.common import UserError, client_settings, read_recording_for, refuse_unused
@@ -26,6 +24,7 @@ from fishswarm.cli.swarm import (
     say_waiting_for_world,
     view_settings,
     wait_for_ctrl_c,
+    wait_for_run_end,
 )
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.scenario import ConfigError, Scenario
@@ -182,17 +181,9 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
                 nursery.start_soon(learn_each_run)
                 watched = 1
                 while True:
-                    # Whether the router is still there is noted the moment the world leaves:
-                    # its token goes for everyone who loses the router too (as observe does).
-                    router: list[bool] = []
-                    run = await observer.wait_for_world_end(
-                        on_left=functools.partial(_note_router, router, session)
-                    )
+                    why = await wait_for_run_end(observer, session, args.connect)
                     shown = runs.scenes.get(watched, view.scenes)
-                    said = observer.world_said_ended(run)
-                    if said is False or (said is None and router and not router[0]):
-                        lost = not (router and router[0] and reaches_router(session))
-                        why = f"lost the router at {args.connect}" if lost else "its world left"
+                    if why is not None:
                         say(
                             f"{why} before the run ended ({shown} snapshots shown; its world "
                             "never said the run was over): the view stays up until Ctrl-C, and "
@@ -211,8 +202,3 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
                     )
 
     _run_trio(main)
-
-
-def _note_router(noted: list[bool], session: zenoh.Session) -> None:
-    """Note whether ``session`` reaches its router now."""
-    noted.append(reaches_router(session))

@@ -95,7 +95,12 @@ def load_checkpoint(path: Path) -> Coevolution:
         if told_models.shape[0] != generations or told_classifiers.shape[0] != generations:
             raise ValueError("the told scores do not cover every generation")
         run.replay(told_models, told_classifiers)
-        run.history = [dict(record) for record in meta["history"]]
+        # One record a generation, in order: numbered from 1 again (checkpoints written
+        # before history.csv counted from 1 hold 0, 1, 2, ...).
+        run.history = [
+            {**dict(record), "generation": number}
+            for number, record in enumerate(meta["history"], start=1)
+        ]
         run.model_champions = list(arrays["model_champions"])
         run.classifier_champions = list(arrays["classifier_champions"])
         run.population = arrays["population"]

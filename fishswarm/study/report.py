@@ -216,8 +216,8 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
     if undefined:
         lines += [
             "",
-            "—: not defined for these runs (a distance between fish, or a change from a "
-            "first value of 0, with one fish; runs.csv and table.csv hold it as nan).",
+            "—: not defined for these runs (e.g. a distance between fish, or a change from "
+            "a first value of 0, with one fish; runs.csv and table.csv hold it as nan).",
         ]
     return "\n".join(lines) + "\n"
 

@@ -112,6 +112,13 @@ def test_certificates_that_cannot_be_used_get_a_clear_message(
         "(this folder holds the certificate of observer-lab: give --name lab)"
     )
     check_subject(laptop, "observer-lab")
+    # Without the authority's certificate either, that is what is missing first: the
+    # folder of 'secure init' is the fix, not another --name.
+    (laptop / "ca.pem").unlink()
+    with pytest.raises(SecurityError) as bare:
+        check_subject(laptop, "observer")
+    assert f"{laptop / 'ca.pem'} is missing" in str(bare.value)
+    assert str(bare.value).endswith(f"(make them with: fishswarm secure init {laptop})")
     # An expired one, signed by the right authority.
     _expired(copy, "channel")
     with pytest.raises(SecurityError, match=r"not now: renew it"):

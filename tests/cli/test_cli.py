@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from fishswarm.sim.engine import simulate_batch
-from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.recording import read_recording
 from tests.conftest import free_port, wait_for_port
 
@@ -483,6 +483,22 @@ def test_a_setting_that_needs_two_others_is_named_when_the_second_is_missing(
     )
     scenario_from(build_parser().parse_args(["run", "--config", str(config)]))
     assert capsys.readouterr().err == ""
+    # Flags turned off by the file, not by --no-flags: the flag says so, by the file's name.
+    config.write_text('behavior = "formation"\nflags = false\n')
+    with pytest.raises(ConfigError) as refused:
+        scenario_from(build_parser().parse_args(["run", "--config", str(config),
+                                                 "--flag-medium", "light"]))  # fmt: skip
+    assert str(refused.value) == (
+        "--flag-medium applies only with flags true, and the scenario file's flags is false: "
+        "leave --flag-medium out, or set flags = true in the file"
+    )
+    # A file refused alone, checked again with the flags on top: a flag's own error is named
+    # by the flag, not blamed on the file.
+    config.write_text("duration = 30\nbehavior = \"formation\"\nswitch_formation = \"line\"\n"
+                      "switch_at = 50\n")  # fmt: skip
+    with pytest.raises(ConfigError, match=r"^--period: control_period must be a positive"):
+        scenario_from(build_parser().parse_args(["run", "--config", str(config),
+                                                 "--period", "-1"]))  # fmt: skip
 
 
 def test_a_run_says_which_study_code_switches_only_experiments_act_on(tmp_path: Path) -> None:

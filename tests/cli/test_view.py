@@ -249,7 +249,7 @@ def test_a_view_with_no_world_to_follow_says_once_that_it_waits_for_one() -> Non
         lines.wait_for(r"following swarm 'tank2' on tcp/127\.0\.0\.1:\d+$")
         lines.wait_for(
             rf"^fishswarm view: waiting for the world of swarm 'tank2' on {endpoint} "
-            r"\(is a run going\?\)$"
+            r"\(is a run going, and under this --swarm\?\)$"
         )
         time.sleep(5.0)  # more than two more unanswered asks
         _close(process, lines)

@@ -190,6 +190,23 @@ def test_a_loaded_checkpoint_is_the_run_as_it_was_saved(tmp_path: Path) -> None:
         )
 
 
+def test_a_checkpoint_that_counted_generations_from_0_is_counted_from_1(tmp_path: Path) -> None:
+    path = tmp_path / "checkpoint.npz"
+    saved = _run(SMALL, 3)
+    assert [record["generation"] for record in saved.history] == [1, 2, 3]
+    save_checkpoint(saved, path)
+    with np.load(path, allow_pickle=False) as data:
+        arrays = {name: data[name] for name in data.files}
+    meta = json.loads(str(arrays["meta"]))
+    for number, record in enumerate(meta["history"]):
+        record["generation"] = number  # as written before history.csv counted from 1
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez(path, **arrays)
+    loaded = load_checkpoint(path)
+    assert [record["generation"] for record in loaded.history] == [1, 2, 3]
+    assert loaded.history[2]["model_best"] == saved.history[2]["model_best"]
+
+
 def _rewritten(path: Path, change: str) -> None:
     """The checkpoint at ``path`` with its metadata changed (``format`` or ``generation``)
     or its classifiers' told scores one generation short (``told_classifiers``)."""
