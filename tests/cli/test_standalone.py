@@ -3,55 +3,23 @@ remote observer looks like, on 127.0.0.1."""
 
 from __future__ import annotations
 
-import contextlib
 import json
 import re
 import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 
 from fishswarm.study.recording import read_recording
+from tests.cli.processes import routed_commands, started_commands
 from tests.conftest import Lines, end_processes, free_port, wait_for_port
 
 pytestmark = pytest.mark.integration
 
 FISHSWARM = [sys.executable, "-m", "fishswarm"]
-
-
-@contextlib.contextmanager
-def started_commands() -> Iterator[Callable[..., subprocess.Popen[str]]]:
-    """A function that starts ``fishswarm ARGS…`` (output piped); every process it started
-    is ended at the block's exit (terminated, killed if it lingers)."""
-    processes: list[subprocess.Popen[str]] = []
-
-    def start(*args: str) -> subprocess.Popen[str]:
-        process = subprocess.Popen(
-            [*FISHSWARM, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
-        )
-        processes.append(process)
-        return process
-
-    try:
-        yield start
-    finally:
-        end_processes(processes)
-
-
-@contextlib.contextmanager
-def routed_commands() -> Iterator[tuple[str, Callable[..., subprocess.Popen[str]]]]:
-    """A router on a free port of 127.0.0.1, up: its endpoint, and :func:`started_commands`'s
-    function to start more beside it."""
-    port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
-    with started_commands() as start:
-        start("router", "--listen", endpoint)
-        wait_for_port(port)
-        yield endpoint, start
 
 
 @pytest.mark.slow

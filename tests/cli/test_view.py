@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from tests.cli.browser import browser_missing, fish_pixels, open_page, screenshot, wait_for_fish
+from tests.cli.processes import started_commands
 from tests.conftest import Lines, end_processes, free_port, wait_for_port
 
 pytestmark = pytest.mark.integration
@@ -144,39 +145,30 @@ def test_a_view_left_up_follows_the_swarms_next_run_in_a_real_browser(tmp_path: 
     took the second run for the first would refuse its snapshots until tick 31.)"""
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    processes: list[subprocess.Popen[str]] = []
-
-    def start(*args: str) -> subprocess.Popen[str]:
-        process = subprocess.Popen(
-            [*FISHSWARM, *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True
-        )
-        processes.append(process)
-        return process
-
     process, lines = _view("--connect", endpoint)
     try:
-        start("router", "--listen", endpoint)
-        wait_for_port(port)
-        lines.wait_for(r"following swarm 'default' on tcp/127\.0\.0\.1:\d+$")
-        page_url = lines.wait_for(r"^open (\S+) in a browser")[1]
-        start("fish", "--connect", endpoint, "--school", "all",
-              *[part for fish in range(10) for part in ("--id", str(fish))])  # fmt: skip
-        first = subprocess.run(
-            [*FISHSWARM, "world", "--connect", endpoint, "--fish", "10", "--duration", "30",
-             "--start-timeout", "60", "--quiet"],
-            capture_output=True, text=True, timeout=120, check=False,
-        )  # fmt: skip
-        assert first.returncode == 0, first.stderr
-        lines.wait_for(r"the run has ended \(31 snapshots shown\)")
-        start("world", "--connect", endpoint, "--fish", "10", "--duration", "120", "--time",
-              "realtime", "--start-timeout", "60", "--quiet")  # fmt: skip
-        lines.wait_for(r"run 2 of swarm 'default' begins: shown as a new recording")
-        lines.wait_for(r"the world runs 10 fish, dispersion, 120 s")
-        _assert_fish_move(page_url, tmp_path)
-        _close(process, lines)
+        with started_commands(piped=False) as start:
+            start("router", "--listen", endpoint)
+            wait_for_port(port)
+            lines.wait_for(r"following swarm 'default' on tcp/127\.0\.0\.1:\d+$")
+            page_url = lines.wait_for(r"^open (\S+) in a browser")[1]
+            start("fish", "--connect", endpoint, "--school", "all",
+                  *[part for fish in range(10) for part in ("--id", str(fish))])  # fmt: skip
+            first = subprocess.run(
+                [*FISHSWARM, "world", "--connect", endpoint, "--fish", "10", "--duration", "30",
+                 "--start-timeout", "60", "--quiet"],
+                capture_output=True, text=True, timeout=120, check=False,
+            )  # fmt: skip
+            assert first.returncode == 0, first.stderr
+            lines.wait_for(r"the run has ended \(31 snapshots shown\)")
+            start("world", "--connect", endpoint, "--fish", "10", "--duration", "120", "--time",
+                  "realtime", "--start-timeout", "60", "--quiet")  # fmt: skip
+            lines.wait_for(r"run 2 of swarm 'default' begins: shown as a new recording")
+            lines.wait_for(r"the world runs 10 fish, dispersion, 120 s")
+            _assert_fish_move(page_url, tmp_path)
+            _close(process, lines)
     finally:
         _stop(process, lines)
-        end_processes(processes)
 
 
 @pytest.mark.slow
@@ -337,30 +329,22 @@ def test_a_view_that_loses_its_router_says_so_instead_of_that_the_run_ended() ->
     # ended" while the world went on once the router was back.
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    processes: list[subprocess.Popen[str]] = []
-
-    def start(*args: str) -> subprocess.Popen[str]:
-        process = subprocess.Popen(
-            [*FISHSWARM, *args], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True
-        )
-        processes.append(process)
-        return process
-
     process, lines = _view("--connect", endpoint)
     try:
-        router = start("router", "--listen", endpoint)
-        wait_for_port(port)
-        lines.wait_for(r"following swarm 'default' on tcp/127\.0\.0\.1:\d+$")
-        start("fish", "--connect", endpoint, "--id", "0", "--id", "1", "--school", "s")
-        start("world", "--connect", endpoint, "--fish", "2", "--duration", "60", "--time",
-              "realtime", "--start-timeout", "60", "--quiet")  # fmt: skip
-        lines.wait_for(r"the world runs 2 fish, dispersion, 60 s", timeout=60)
-        time.sleep(3)
-        router.kill()
-        router.wait(timeout=10)
-        said = lines.wait_for(r"(lost the router at .*|the run has ended.*)$", timeout=60)[1]
-        assert said.startswith(f"lost the router at {endpoint} before the run ended"), said
-        assert "its world never said the run was over" in said
-        _close(process, lines)
+        with started_commands(piped=False) as start:
+            router = start("router", "--listen", endpoint)
+            wait_for_port(port)
+            lines.wait_for(r"following swarm 'default' on tcp/127\.0\.0\.1:\d+$")
+            start("fish", "--connect", endpoint, "--id", "0", "--id", "1", "--school", "s")
+            start("world", "--connect", endpoint, "--fish", "2", "--duration", "60", "--time",
+                  "realtime", "--start-timeout", "60", "--quiet")  # fmt: skip
+            lines.wait_for(r"the world runs 2 fish, dispersion, 60 s", timeout=60)
+            time.sleep(3)
+            router.kill()
+            router.wait(timeout=10)
+            said = lines.wait_for(r"(lost the router at .*|the run has ended.*)$", timeout=60)[1]
+            assert said.startswith(f"lost the router at {endpoint} before the run ended"), said
+            assert "its world never said the run was over" in said
+            _close(process, lines)
     finally:
-        end_processes([process, *processes])
+        end_processes([process])
