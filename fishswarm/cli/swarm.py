@@ -49,7 +49,7 @@ from fishswarm.actors.security import (
 from fishswarm.actors.session import SessionSettings, open_session, reaches_router
 from fishswarm.actors.world import PULSE_PERIOD, StartTimeout, World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus, query
-from fishswarm.behaviors.formation import DEFAULT_SHAPE, DEFAULT_SPACING
+from fishswarm.behaviors.formation import FormationParams, formation_params
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.cli.common import USER_ERRORS as COMMON_ERRORS
 from fishswarm.cli.common import (
@@ -202,17 +202,24 @@ def start_warnings(scenario: Scenario) -> list[str]:
     return warnings
 
 
+def _formations_told(scenario: Scenario) -> list[FormationParams]:
+    """The parameters of each formation a run's fish are told to take: the one they start
+    with, and the one they switch to (none but a formation run's)."""
+    if scenario.behavior != "formation":
+        return []
+    first = formation_params(dataclasses.asdict(scenario))
+    shapes = dict.fromkeys([first.shape, scenario.switch_formation or first.shape])
+    return [dataclasses.replace(first, shape=shape) for shape in shapes]
+
+
 def local_shape_warning(scenario: Scenario) -> str | None:
     """What to say when a formation's local shape (the shape it starts with, or switches
     to) needs more fish than the run has: no fish can complete it, and its shape error is
     not measured. None when it does not."""
-    if scenario.behavior != "formation":
-        return None
-    shapes = [scenario.formation or DEFAULT_SHAPE, scenario.switch_formation]
     short = [
-        (shape, LOCAL_SHAPES[shape] + 1)
-        for shape in shapes
-        if shape in LOCAL_SHAPES and scenario.fish < LOCAL_SHAPES[shape] + 1
+        (told.shape, LOCAL_SHAPES[told.shape] + 1)
+        for told in _formations_told(scenario)
+        if told.shape in LOCAL_SHAPES and told.count < LOCAL_SHAPES[told.shape] + 1
     ]
     if not short:
         return None
@@ -228,30 +235,30 @@ def map_warnings(scenario: Scenario) -> list[str]:
     """What to say when a formation's places cannot all be held: a global map (the shape
     it starts with, or switches to) larger than the tank, or places closer than a BlueBot
     is long (neighbours in place touch, and count as colliding)."""
-    if scenario.behavior != "formation":
+    told = _formations_told(scenario)
+    if not told:
         return []
     warnings = []
-    spacing = DEFAULT_SPACING if scenario.spacing is None else scenario.spacing
+    spacing, heading = told[0].spacing, told[0].orientation
     if spacing < BODY_LENGTH:
         warnings.append(
             f"the spacing, {spacing:g} m, is less than a BlueBot's length "
             f"({BODY_LENGTH * 100:.0f} cm): fish in their places would touch (give a --spacing "
             f"of at least {BODY_LENGTH:g} m)"
         )
-    heading = math.radians(scenario.formation_heading_deg)
     turn = np.array(
         [[math.cos(heading), -math.sin(heading)], [math.sin(heading), math.cos(heading)]]
     )
     tank = np.asarray(scenario.tank)
-    for shape in dict.fromkeys([scenario.formation or DEFAULT_SHAPE, scenario.switch_formation]):
-        if shape is None or shape not in MAPS:
+    for params in told:
+        if params.shape not in MAPS:
             continue
-        slots = target_map(shape, scenario.fish, spacing=spacing)
+        slots = target_map(params.shape, params.count, spacing=spacing)
         turned = np.column_stack([slots[:, :2] @ turn.T, slots[:, 2]])
         span = np.ptp(turned, axis=0)
         if (span > tank).any():
             warnings.append(
-                f"a {shape} of {scenario.fish} fish at a spacing of {spacing:g} m spans "
+                f"a {params.shape} of {params.count} fish at a spacing of {spacing:g} m spans "
                 f"{' × '.join(f'{v:.2f}' for v in span)} m, more than the tank's "
                 f"{' × '.join(f'{v:g}' for v in tank)} m: the fish cannot all take their places "
                 "(give fewer --fish, a smaller --spacing, or another --formation)"
