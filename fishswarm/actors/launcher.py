@@ -33,6 +33,7 @@ from fishswarm.actors.fish import (
     FishStatistics,
     fish_span,
 )
+from fishswarm.actors.logs import log_prefix
 from fishswarm.actors.observer import Observer, Progress
 from fishswarm.actors.security import secure_run
 from fishswarm.actors.session import SessionSettings, open_session
@@ -229,6 +230,7 @@ async def launch_swarm(
                             _connect_to(settings.listen),
                             perception_timeout=settings.perception_timeout,
                             log_level=settings.log_level,
+                            log_prefix=log_prefix(),
                             session_extra=worker_extra.get(school_of(index), {}),
                         )
                         for index, ids in enumerate(schools or [everyone])

@@ -8,7 +8,6 @@ disappears (the pipe closes), then reports its fish's counters through the pipe.
 from __future__ import annotations
 
 import contextlib
-import logging
 import multiprocessing
 import signal
 from dataclasses import dataclass, field
@@ -25,6 +24,7 @@ from fishswarm.actors.fish import (
     FishStatistics,
     fish_span,
 )
+from fishswarm.actors.logs import DEFAULT_PREFIX, configure_logging
 from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
 from fishswarm.behaviors.core import FishParams
@@ -45,6 +45,7 @@ class WorkerSpec:
         connect: the router's endpoint.
         perception_timeout: the fish's safety watchdog, s.
         log_level: logging level name.
+        log_prefix: what its log lines start with: the launching command's own prefix.
         schooled: serve the fish as one school (batched keys) rather than each on its own
             keys as a robot would.
         session_extra: further Zenoh settings of its session (a secured run's TLS).
@@ -57,6 +58,7 @@ class WorkerSpec:
     connect: str
     perception_timeout: float = PERCEPTION_TIMEOUT
     log_level: str = "WARNING"
+    log_prefix: str = DEFAULT_PREFIX
     schooled: bool = True
     session_extra: dict[str, Any] = field(default_factory=dict)
 
@@ -114,7 +116,7 @@ def worker_main(spec: WorkerSpec, connection: Connection) -> None:
         signal.signal(number, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
     tune_allocator()
-    logging.basicConfig(level=spec.log_level, format="%(levelname)s %(name)s: %(message)s")
+    configure_logging(prefix=spec.log_prefix, level=spec.log_level)
     prepare(spec.params)
     statistics = trio.run(_serve, spec, connection)
     with contextlib.suppress(BrokenPipeError, OSError):

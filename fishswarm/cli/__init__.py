@@ -4,10 +4,10 @@
 from __future__ import annotations
 
 import importlib
-import logging
 import sys
 from collections.abc import Sequence
 
+from fishswarm.actors.logs import configure_logging
 from fishswarm.actors.shared_memory import release_shared_memory_at_exit
 from fishswarm.cli.common import UserError
 from fishswarm.cli.parsers import build_parser, scenario_from
@@ -42,7 +42,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fishswarm`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=args.log_level, format="%(levelname)s %(name)s: %(message)s")
+    configure_logging(prefix=f"fishswarm {args.command}", level=args.log_level)
     if args.command != "robot":  # a robot's small process keeps glibc's own settings
         tune_allocator()
     # Zenoh leaves a shared-memory file behind for each process that sent through it.
