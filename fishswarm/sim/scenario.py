@@ -8,6 +8,7 @@ which setting is wrong and what would be right.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import tomllib
 from collections.abc import Callable, Mapping
@@ -177,6 +178,19 @@ def setting_text(value: object) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     return "none" if value is None else str(value)
+
+
+def as_written(value: object) -> str:
+    """A value read from a TOML file, spelled as the file spells it, to show what it holds:
+    ``true``, not ``True``; ``"ten"`` in double quotes; lists in brackets (where
+    :func:`setting_text` names a setting's value in words)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, list | tuple):
+        return f"[{', '.join(as_written(item) for item in value)}]"
+    return repr(value)
 
 
 def either(values: tuple[object, ...]) -> str:
@@ -728,7 +742,7 @@ class Scenario:
             if isinstance(given, str) or not isinstance(given, list | tuple):
                 raise ConfigError(
                     f'{source}: study_code must be a list of switch names, e.g. ["drag"], '
-                    f"got {given!r}"
+                    f"got {as_written(given)}"
                 )
             values["study_code"] = tuple(given)
         for point in ("tank", "landmark", "flow"):
@@ -736,11 +750,13 @@ class Scenario:
                 given = values[point]
                 if not isinstance(given, list | tuple) or len(given) != 3:
                     raise ConfigError(
-                        f"{source}: {point} must be a list of three lengths, got {given!r}"
+                        f"{source}: {point} must be a list of three lengths, got "
+                        f"{as_written(given)}"
                     )
                 if not all(_real(v) for v in given):
                     raise ConfigError(
-                        f"{source}: {point} must be a list of three numbers (m), got {given!r}"
+                        f"{source}: {point} must be a list of three numbers (m), got "
+                        f"{as_written(given)}"
                     )
                 values[point] = tuple(float(v) for v in given)
         for name in (
@@ -773,7 +789,7 @@ class Scenario:
         for name, value in values.items():
             wanted = _SETTING_KINDS.get(str(known[name].type).split(" | ")[0])
             if wanted is not None and not wanted[0](value):
-                raise ConfigError(f"{source}: {name} must be {wanted[1]}, got {value!r}")
+                raise ConfigError(f"{source}: {name} must be {wanted[1]}, got {as_written(value)}")
         try:
             return cls(**values)
         except ConfigError as error:

@@ -26,6 +26,7 @@ from fishswarm.formations.local import LOCAL_SHAPES
 from fishswarm.sim.scenario import (
     ConfigError,
     Scenario,
+    as_written,
     read_toml,
     setting_text,
     unmet_condition,
@@ -512,7 +513,7 @@ class Experiment:
         if not isinstance(values, list) or not all(
             isinstance(v, int | float) and not isinstance(v, bool) for v in values
         ):
-            raise ConfigError(f"{path}: values must be a list of numbers, got {values!r}")
+            raise ConfigError(f"{path}: values must be a list of numbers, got {as_written(values)}")
         scenario_table = data.get("scenario", {})
         if not isinstance(scenario_table, Mapping):
             raise ConfigError(f"{path}: [scenario] must be a table")

@@ -153,16 +153,19 @@ def test_settings_a_scenario_file_would_ignore_are_refused(
 @pytest.mark.parametrize(
     ("line", "message"),
     [
-        ("fish = true", "fish must be a whole number, got True"),
+        ("fish = true", "fish must be a whole number, got true$"),
         ("seed = 1.5", "seed must be a whole number, got 1.5"),
-        ("tank = [1.78, 1.78, true]", r"tank must be a list of three numbers \(m\)"),
+        (
+            "tank = [1.78, 1.78, true]",
+            r"tank must be a list of three numbers \(m\), got \[1.78, 1.78, true\]$",
+        ),
         ('flow = ["a", 0, 0]', r"flow must be a list of three numbers \(m\)"),
-        ('wake_saving = "0.3"', "wake_saving must be a finite number, got '0.3'"),
+        ('wake_saving = "0.3"', r'wake_saving must be a finite number, got "0.3"$'),
         ("sphere_radius = nan", "sphere_radius must be a finite number, got nan"),
         ("formation_heading_deg = inf", "formation_heading_deg must be a finite number"),
         ("swarm = 3", r"swarm must be text \(in quotes\), got 3"),
         ("model = 3", r"model must be text \(in quotes\), got 3"),
-        ('flags = "yes"', "flags must be true or false, got 'yes'"),
+        ('flags = "yes"', r'flags must be true or false, got "yes"$'),
     ],
 )
 def test_a_file_setting_of_the_wrong_kind_is_named(tmp_path: Path, line: str, message: str) -> None:
