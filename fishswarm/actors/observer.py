@@ -139,6 +139,7 @@ class Observer:
         self._last_tick = -1
         self._tick_reached = trio.Event()
         self._world_left = trio.Event()
+        self._world_back = trio.Event()
         self._sim_time = 0.0
         self.world_run: int | None = None
         """Take only the snapshots of this run of the world (None: any): an observer that
@@ -232,6 +233,17 @@ class Observer:
         while self._last_tick < tick:
             await self._tick_reached.wait()
 
+    @property
+    def last_tick(self) -> int:
+        """The latest tick of the run watched that a snapshot has shown (-1: none yet)."""
+        return self._last_tick
+
+    async def wait_for_world_back(self) -> None:
+        """Wait until the world of the run watched, once left, is back on the swarm (bound
+        it with a timeout): its token seen again, as after a lost router came back. Its
+        leaving may then be waited for again."""
+        await self._world_back.wait()
+
     def world_said_ended(self, run: int | None = None) -> bool | None:
         """Whether the world of the run watched said its run is over — at its end, or when
         it was stopped or failed — by its last pulse: True; it pulsed but did not say so (it
@@ -301,6 +313,11 @@ class Observer:
         if member.role == "world" and not alive and watched:
             self._left_run = self.current_run
             self._world_left.set()
+        elif member.role == "world" and alive and watched and self._world_left.is_set():
+            # Its token is back (the router was lost, and is back): it has not left after all.
+            self._world_left = trio.Event()
+            self._world_back.set()
+            self._world_back = trio.Event()
 
     def _start_run(self, run: int) -> None:
         """The snapshots of ``run`` begin: a later run starts afresh (and is announced)."""

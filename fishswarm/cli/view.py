@@ -121,6 +121,27 @@ class _Runs:
             await self._begun.wait()
 
 
+async def _goes_on(observer: Observer, runs: _Runs, watched: int) -> bool:
+    """After the world of the ``watched``-th run left unfinished, wait until it is back
+    (True) or a later run begins (False)."""
+    back = False
+    async with trio.open_nursery() as nursery:
+
+        async def world_back() -> None:
+            nonlocal back
+            await observer.wait_for_world_back()
+            back = True
+            nursery.cancel_scope.cancel()
+
+        async def next_run() -> None:
+            await runs.wait_for_run(after=watched)
+            nursery.cancel_scope.cancel()
+
+        nursery.start_soon(world_back)
+        nursery.start_soon(next_run)
+    return back and runs.count == watched
+
+
 def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
     keys = KeySpace(args.swarm)
 
@@ -189,6 +210,12 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
                             "never said the run was over): the view stays up until Ctrl-C, and "
                             "shows what comes when the router and the world are back"
                         )
+                        if await _goes_on(observer, runs, watched):
+                            say(
+                                f"the world of run {watched} is back (the last snapshot shown "
+                                f"was of tick {observer.last_tick}): the view goes on with it"
+                            )
+                            continue
                     else:
                         say(
                             f"the run has ended ({shown} snapshots shown); the view stays up "

@@ -293,6 +293,46 @@ def test_a_world_that_leaves_before_any_snapshot_ends_the_wait_for_its_run() -> 
     assert run_mock(main) == [3.0]
 
 
+def test_a_world_whose_token_comes_back_has_not_left_and_its_end_is_waited_for_again() -> None:
+    """The router lost and back: the world's token goes and comes back while run 3 goes
+    on. Its return is told to whoever waits for it, and the wait for the run's end waits for
+    the world's next leaving, not the one before."""
+
+    async def main() -> tuple[list[float], list[float]]:
+        bus = MemoryBus()
+        observer = Observer(KEYS)
+        ended: list[float] = []
+        back: list[float] = []
+
+        async def note_the_return() -> None:
+            await observer.wait_for_world_back()
+            back.append(trio.current_time())
+
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            world = bus.declare_token(KEYS.alive("world", 3))
+            bus.put(KEYS.snapshot, of_run(0, 3))
+            nursery.start_soon(note_the_return)
+            nursery.start_soon(_note_the_end, observer, ended)
+            await trio.sleep(1.0)
+            world.undeclare()  # at 1 s: the router lost
+            await trio.sleep(2.0)
+            world = bus.declare_token(KEYS.alive("world", 3))  # at 3 s: back
+            await trio.sleep(0.5)
+            bus.put(KEYS.snapshot, of_run(1, 3))
+            nursery.start_soon(_note_the_end, observer, ended)
+            await trio.sleep(2.0)
+            world.undeclare()  # at 5.5 s: gone again
+            await trio.sleep(3.0)
+            nursery.cancel_scope.cancel()
+        assert observer.last_tick == 1
+        return ended, back
+
+    ended, back = run_mock(main)
+    assert back == [3.0]
+    assert ended == [2.0, 6.5]  # quiet 1 s after each leaving
+
+
 def test_a_world_token_that_names_no_run_neither_ends_the_run_nor_stops_the_observer() -> None:
     """Liveliness is not access-controlled: a token ``alive/world/intruder`` may come and go
     while run 3 is watched. The observer notes it and goes on; run 3's end is its own."""

@@ -324,7 +324,7 @@ def test_a_ctrl_c_that_interrupts_a_run_with_a_view_ends_the_view_too(tmp_path: 
 
 
 @pytest.mark.slow
-def test_a_view_that_loses_its_router_says_so_instead_of_that_the_run_ended() -> None:
+def test_a_view_that_loses_its_router_says_so_and_says_when_the_world_is_back() -> None:
     # The router killed at about tick 3 of a real-time run: the view said "the run has
     # ended" while the world went on once the router was back.
     port = free_port()
@@ -345,6 +345,15 @@ def test_a_view_that_loses_its_router_says_so_instead_of_that_the_run_ended() ->
             said = lines.wait_for(r"(lost the router at .*|the run has ended.*)$", timeout=60)[1]
             assert said.startswith(f"lost the router at {endpoint} before the run ended"), said
             assert "its world never said the run was over" in said
+            # A router back on the same address brings the world back, and the view says so
+            # (it said nothing, and showed the run again under "lost the router").
+            start("router", "--listen", endpoint)
+            back = lines.wait_for(
+                r"the world of run 1 is back \(the last snapshot shown was of tick (\d+)\): "
+                r"the view goes on with it$",
+                timeout=60,
+            )
+            assert int(back[1]) >= 2, back
             _close(process, lines)
     finally:
         end_processes([process])
