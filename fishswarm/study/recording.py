@@ -303,11 +303,11 @@ def read_recording(path: Path) -> Recording:
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
-def _damaged(path: Path) -> str:
-    """What to say of a recording whose chunk fails its checksum."""
+def _damaged(path: Path, what: str = "fails its checksum") -> str:
+    """What to say of a recording whose chunk fails its checksum (or ``what`` else)."""
     return (
-        f"{path} is damaged: a chunk of it fails its checksum, so the file was changed after "
-        "it was written; it is not read (a recording cut short by a crash is)"
+        f"{path} is damaged: a chunk of it {what}, so the file was changed after it was "
+        "written; it is not read (a recording cut short by a crash is)"
     )
 
 
@@ -341,8 +341,9 @@ def _read_stream(path: Path, data: bytes) -> _Contents:
     """The records of a file without footer, in order, up to the first that is cut off."""
     contents = _Contents()
     topics: dict[int, str] = {}
+    stream = io.BytesIO(data)
     try:
-        for record in StreamReader(io.BytesIO(data), validate_crcs=True).records:
+        for record in StreamReader(stream, validate_crcs=True).records:
             if isinstance(record, Channel):
                 topics[record.id] = record.topic
             elif isinstance(record, Message) and record.channel_id in topics:
@@ -353,8 +354,14 @@ def _read_stream(path: Path, data: bytes) -> _Contents:
         raise
     except CRCValidationError:
         raise RecordingError(_damaged(path)) from None
-    except Exception:  # the cut: everything before it has been read
-        pass
+    except Exception as error:
+        # A cut leaves its last record short: the reader fails at the end of the file. A
+        # record that fails before the end was there whole, and is damaged (a chunk whose
+        # compressed bytes were changed fails to decompress before its checksum is seen).
+        if stream.tell() < len(data):
+            raise RecordingError(
+                _damaged(path, f"cannot be read ({type(error).__name__}: {error})")
+            ) from None
     return contents
 
 

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.records import Chunk
+from mcap.stream_reader import StreamReader
 
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.messages import Snapshot
@@ -171,6 +174,17 @@ def test_a_recording_changed_on_disk_is_refused_whole_or_cut(tmp_path: Path) -> 
         (tmp_path / name).write_bytes(damaged)
         with pytest.raises(RecordingError, match=r"is damaged: a chunk of it fails its checksum"):
             read_recording(tmp_path / name)
+    # The first chunk's compressed bytes changed where they say how they are compressed:
+    # the chunk fails before its checksum is seen. A cut file was read as cut there,
+    # silently without the ticks of that chunk and after it.
+    data = bytearray(path.read_bytes())
+    records = StreamReader(io.BytesIO(bytes(data)), emit_chunks=True).records
+    chunk = next(r for r in records if isinstance(r, Chunk))
+    start = bytes(data).index(chunk.data)
+    data[start : start + 4] = b"\xde\xad\xbe\xef"
+    (tmp_path / "cut.mcap").write_bytes(data[: len(data) // 2])
+    with pytest.raises(RecordingError, match=r"is damaged: a chunk of it cannot be read \(Zstd"):
+        read_recording(tmp_path / "cut.mcap")
 
 
 def test_a_large_swarm_cut_after_its_first_snapshot_reads_as_nothing_whole(
