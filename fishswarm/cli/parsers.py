@@ -31,6 +31,7 @@ from fishswarm.sim.scenario import (
     TURN_DELAY,
     ConfigError,
     Scenario,
+    applies_anyway,
     scenario_table,
     setting_text,
     switch_names,
@@ -404,7 +405,7 @@ def _refuse_inapplicable(given: dict[str, Any], scenario: Scenario) -> None:
         actual = setting_text(getattr(scenario, setting))
         raise ConfigError(
             f"{flag} applies only with {needed}, and this {shown} is {actual}: add {needed}, "
-            f"or leave {flag} out"
+            f"or leave {flag} out{applies_anyway(name)}"
         )
 
 
@@ -475,7 +476,7 @@ def _unused_settings(
         f"{path}: {', '.join(names)} {'apply' if names[1:] else 'applies'} only with "
         f"{setting} {needed}, and this run's {setting} is "
         f"{setting_text(getattr(scenario, setting))}: "
-        f"here {'they change' if names[1:] else 'it changes'} nothing"
+        f"here {'they change' if names[1:] else 'it changes'} nothing{applies_anyway(names[0])}"
         for (setting, needed), names in unused.items()
     ]
     switches = [name for name in EXPERIMENT_SWITCHES if name in scenario.study_code]

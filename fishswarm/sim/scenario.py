@@ -151,10 +151,23 @@ def _sees_geometrically(scenario: Scenario) -> bool:
     return scenario.landmarks().shape[0] > 0 or (by_light and scenario.flag_medium == "light")
 
 
-_APPLIES_ANYWAY: dict[str, Callable[[Scenario], bool]] = dict.fromkeys(
-    ("visual_range", "blind_width", "sphere_radius", "vision_noise"), _sees_geometrically
+_APPLIES_ANYWAY: dict[str, tuple[Callable[[Scenario], bool], str]] = dict.fromkeys(
+    ("visual_range", "blind_width", "sphere_radius", "vision_noise"),
+    (
+        _sees_geometrically,
+        "with cameras, vision settings still count where a landmark or formation flags "
+        "by light are seen (the geometric model sees those)",
+    ),
 )
-"""Settings that mean something, beside :data:`APPLIES_WHEN`'s conditions, when these say so."""
+"""Settings that mean something, beside :data:`APPLIES_WHEN`'s conditions, when these say
+so: (the test, the exception in words)."""
+
+
+def applies_anyway(name: str) -> str:
+    """The exception to setting ``name``'s conditions, in words, after a semicolon, to close a
+    message saying it does not apply (empty when there is none)."""
+    anyway = _APPLIES_ANYWAY.get(name)
+    return "" if anyway is None else f"; {anyway[1]}"
 
 
 def unmet_condition(name: str, scenario: Scenario) -> tuple[str, str] | None:
@@ -162,7 +175,7 @@ def unmet_condition(name: str, scenario: Scenario) -> tuple[str, str] | None:
     without: (the setting, what it must be, in words: ``formation``, ``true`` or ``set``);
     None when ``name`` means something."""
     anyway = _APPLIES_ANYWAY.get(name)
-    if anyway is not None and anyway(scenario):
+    if anyway is not None and anyway[0](scenario):
         return None
     for setting, values in APPLIES_WHEN.get(name, ()):
         value = getattr(scenario, setting)

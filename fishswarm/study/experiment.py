@@ -26,6 +26,7 @@ from fishswarm.formations.local import LOCAL_SHAPES
 from fishswarm.sim.scenario import (
     ConfigError,
     Scenario,
+    applies_anyway,
     as_written,
     read_toml,
     setting_text,
@@ -285,7 +286,7 @@ class Experiment:
             raise ConfigError(
                 f"experiment {self.name}: {self.parameter} applies only with {setting} "
                 f"{needed}, and {whose} {setting} is {setting_text(actual)}: {every} would "
-                "run alike"
+                f"run alike{applies_anyway(self.parameter)}"
             )
 
     @property

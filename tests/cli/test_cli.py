@@ -181,7 +181,9 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
         ),
         (
             ["run", "--vision", "camera", "--blind-width", "0.5"],
-            "--blind-width applies only with --vision geometric, and this --vision is camera",
+            "--blind-width applies only with --vision geometric, and this --vision is camera: "
+            "add --vision geometric, or leave --blind-width out; with cameras, vision settings "
+            "still count where a landmark or formation flags by light are seen",
         ),
         (
             ["run", "--behavior", "formation", "--rotate-effort", "--no-flags"],

@@ -129,7 +129,8 @@ def test_unknown_experiment_lists_the_known_ones() -> None:
             '[experiment]\nname = "x"\nparameter = "blind_width"\nvalues = [0, 2.5]\n'
             '[scenario]\nvision_model = "camera"\n',
             "experiment x: blind_width applies only with vision_model geometric, and its "
-            "vision_model is camera: every value would run alike",
+            "vision_model is camera: every value would run alike; with cameras, vision "
+            "settings still count where a landmark",
         ),
         ("[experiment\n", "not valid TOML"),
         (
