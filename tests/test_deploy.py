@@ -16,6 +16,7 @@ import pytest
 import zenoh
 
 from fishswarm.cli.parsers import build_parser
+from tests.behaviors.example_plugin import EXAMPLE
 from tests.conftest import free_port
 
 pytestmark = pytest.mark.integration
@@ -66,6 +67,19 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
         timeout=300,
     )
     return next(folder.glob("fishswarm-*.whl"))
+
+
+@pytest.fixture(scope="module")
+def example_wheel(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The wheel of the example package that adds a behaviour (examples/behavior_plugin)."""
+    folder = tmp_path_factory.mktemp("example")
+    source = shutil.copytree(EXAMPLE, folder / "source")  # built there: the tree stays clean
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
+         "-w", str(folder), str(source)],
+        check=True, capture_output=True, timeout=300,
+    )  # fmt: skip
+    return next(folder.glob("fishswarm_nearest-*.whl"))
 
 
 def inventory(folder: Path, wheel: Path, **robot: object) -> Path:
@@ -210,9 +224,11 @@ def test_the_playbook_copies_the_worlds_scenario_file_and_refuses_a_missing_one(
 def test_the_roles_behaviours_are_fishswarms() -> None:
     import yaml
 
-    # Asked of a fresh interpreter: tests register behaviours of their own in this one.
+    # Asked of a fresh interpreter (tests register behaviours of their own in this one),
+    # before it reads other packages' behaviours (a developer may have installed some).
+    program = "from fishswarm.behaviors.registry import BEHAVIORS; print(*BEHAVIORS)"
     asked = subprocess.run(
-        [sys.executable, "-c", "from fishswarm.behaviors.registry import names; print(*names())"],
+        [sys.executable, "-c", program],
         capture_output=True, text=True, timeout=60, check=True,
     )  # fmt: skip
     behaviours = asked.stdout.split()
@@ -284,6 +300,52 @@ def test_the_playbook_copies_a_learned_model_and_refuses_a_robot_that_could_not_
     assert "fishswarm_model is a learned replica's, and fishswarm_behavior is dispersion" in (
         result.stdout
     )
+    for host in hosts:
+        assert re.search(
+            rf"{host}\s+: ok=\d+\s+changed=0\s+unreachable=0\s+failed=1", result.stdout
+        )
+
+
+@pytest.mark.slow
+def test_the_playbook_installs_a_behaviour_package_and_refuses_one_not_named(
+    tmp_path: Path, wheel: Path, example_wheel: Path
+) -> None:
+    nearest = {
+        "fishswarm_behavior": "nearest",
+        "fishswarm_behavior_wheels": [str(example_wheel)],
+        "fishswarm_extra_behaviors": ["nearest"],
+    }
+    path = inventory(tmp_path, wheel, fish_id=3, **nearest)
+    result = ansible("ansible-playbook", "-i", str(path), "site.yml", "--check", "--diff")
+    assert result.returncode == 0, result.stdout + result.stderr
+    copied = result.stdout.split("Copy the wheels of behaviour packages")[1].split("TASK")[0]
+    assert f"changed: [localhost] => (item={example_wheel})" in copied
+    assert "FISHSWARM_SCENARIO=--behavior nearest --period 1.0" in result.stdout
+    # The package's behaviour not named, its wheel not there: refused, with what to do.
+    common = {
+        "ansible_connection": "local", "ansible_python_interpreter": sys.executable,
+        "ansible_become": False, "fishswarm_hardware": "mock", "fishswarm_wheel": str(wheel),
+        "fishswarm_router": "tcp/10.0.0.1:7447",
+    }  # fmt: skip
+    hosts = {
+        "unnamed": {
+            **common, "fish_id": 1, "fishswarm_behavior": "nearest",
+            "fishswarm_behavior_wheels": [str(example_wheel)],
+        },
+        "no-wheel": {
+            **common, "fish_id": 2, "fishswarm_behavior_wheels": [str(tmp_path / "gone.whl")],
+        },
+    }  # fmt: skip
+    refused = tmp_path / "refused.yml"
+    refused.write_text(json.dumps({"robots": {"hosts": hosts}}))
+    result = ansible("ansible-playbook", "-i", str(refused), "site.yml", "--check")
+    assert result.returncode != 0
+    assert (
+        "fishswarm_behavior is nearest: give one of dispersion, aggregation, orbit, milling, "
+        "waltz, replica, formation (a package's own behaviour: its wheel in "
+        "fishswarm_behavior_wheels, its name in fishswarm_extra_behaviors)"
+    ) in " ".join(result.stdout.split())
+    assert "gone.whl, which is not a file on the control node" in result.stdout
     for host in hosts:
         assert re.search(
             rf"{host}\s+: ok=\d+\s+changed=0\s+unreachable=0\s+failed=1", result.stdout
@@ -470,7 +532,9 @@ INSTALL_ONLY = """- name: Install fishswarm as the role does, into the test's fo
 
 
 @pytest.mark.slow
-def test_a_mock_robot_runs_from_what_the_role_installs(tmp_path: Path, wheel: Path) -> None:
+def test_a_mock_robot_runs_from_what_the_role_installs(
+    tmp_path: Path, wheel: Path, example_wheel: Path
+) -> None:
     # The role's own install steps, run for real (not in check mode) into a folder of the
     # test's, on a machine whose Python has no site packages to lend: all a mock robot
     # needs must come from what the role installs. Before, it installed only Zenoh and the
@@ -483,6 +547,7 @@ def test_a_mock_robot_runs_from_what_the_role_installs(tmp_path: Path, wheel: Pa
         fishswarm_home=str(home),
         fishswarm_python=getattr(sys, "_base_executable", sys.executable),
         fishswarm_system_site_packages=False,
+        fishswarm_behavior_wheels=[str(example_wheel)],
     )
     playbook = tmp_path / "install.yml"
     playbook.write_text(INSTALL_ONLY)
@@ -495,6 +560,12 @@ def test_a_mock_robot_runs_from_what_the_role_installs(tmp_path: Path, wheel: Pa
     assert result.returncode == 0, result.stdout + result.stderr
     python = str(home / "venv" / "bin" / "python")
     _assert_the_robot_drives(python, tmp_path)
+    # The behaviour package is installed beside fishswarm, and its behaviour known there.
+    known = subprocess.run(
+        [python, "-c", "from fishswarm.behaviors.registry import names; print(*names())"],
+        capture_output=True, text=True, timeout=60, check=True, cwd=tmp_path,
+    )  # fmt: skip
+    assert known.stdout.split()[-1] == "nearest", known.stdout + known.stderr
     # The robot's command as its service runs it: the mock pins open, then it looks for a
     # router (none here) and says so.
     endpoint = f"tcp/127.0.0.1:{free_port()}"

@@ -2,15 +2,22 @@
 experiments, the batch engine and the fish actor all read.
 
 A new behaviour family is a :class:`~fishswarm.behaviors.core.Behavior` (its steering, its
-memory, its parameters) added to :data:`BEHAVIORS` — or, for an experiment of one's own in
-one process, passed to :func:`register`.
+memory, its parameters). fishswarm's own are in :data:`BEHAVIORS` from the start. Another
+package adds its own through an entry point in the group ``fishswarm.behaviors``, named as
+the behaviour (``circle = "my_fish.circle:CIRCLE"`` under
+``[project.entry-points."fishswarm.behaviors"]``): installed beside fishswarm, it is known
+to every command, worker process and robot there, read the first time the table is asked
+for a name it does not hold yet (docs/behaviors.md). For an experiment of one's own in one
+process, :func:`register` adds one.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -20,7 +27,7 @@ from fishswarm.behaviors.formation import FORMATION
 from fishswarm.behaviors.lennard_jones import AGGREGATION, DISPERSION, STUDY_FORM_SWITCH
 from fishswarm.behaviors.orbit import MILLING, ORBIT, WALTZ
 from fishswarm.behaviors.replica import REPLICA
-from fishswarm.bluebot.control import PidGains
+from fishswarm.bluebot.control import CONTROLLERS, PidGains
 
 STUDY_HOMING_SWITCH = "homing"
 """The study-code switch (a scenario's ``study_code``) that selects the study's homing
@@ -30,11 +37,88 @@ BEHAVIORS: dict[str, Behavior] = {
     family.name: family
     for family in (DISPERSION, AGGREGATION, ORBIT, MILLING, WALTZ, REPLICA, FORMATION)
 }
-"""Every behaviour by name, in the order ``--help`` lists them."""
+"""Every behaviour by name, in the order ``--help`` lists them: fishswarm's own, then those
+of other packages (once :func:`names` or a lookup has read them), then any registered."""
+
+PLUGIN_GROUP = "fishswarm.behaviors"
+"""The entry-point group in which other packages name their behaviours."""
+
+
+@dataclass(frozen=True)
+class PluginFailure:
+    """A behaviour another package names that could not be added to the table.
+
+    Attributes:
+        name: the entry point's name.
+        source: where it points (``module:attribute``), and the package that names it.
+        reason: what went wrong, and what to do.
+    """
+
+    name: str
+    source: str
+    reason: str
+
+    def __str__(self) -> str:
+        return f"the behaviour {self.name!r} ({self.source}) is left out: {self.reason}"
+
+
+_plugins_read = False
+_plugin_failures: list[PluginFailure] = []
+
+
+def _read_plugins() -> None:
+    """Add the behaviours other packages name (once a process): each checked, those that
+    fail noted (:func:`plugin_failures`), never raised, so that one broken package does not
+    stop every command."""
+    global _plugins_read
+    if _plugins_read:
+        return
+    _plugins_read = True
+    from importlib.metadata import entry_points  # read when asked for: not on every import
+
+    for point in sorted(entry_points(group=PLUGIN_GROUP), key=lambda point: point.name):
+        package = f"{point.dist.name} {point.dist.version}" if point.dist is not None else None
+        source = point.value if package is None else f"{point.value} in {package}"
+        try:
+            family = point.load()
+        except Exception as error:  # whatever importing another package's code raises
+            failed = f"loading it raised {type(error).__name__}: {error}"
+            _plugin_failures.append(PluginFailure(point.name, source, failed))
+            continue
+        unfit = _unfit(point.name, family)
+        if unfit is None:
+            BEHAVIORS[point.name] = family
+        else:
+            _plugin_failures.append(PluginFailure(point.name, source, unfit))
+
+
+def _unfit(name: str, family: object) -> str | None:
+    """Why ``family``, named ``name`` by an entry point, cannot be a behaviour; None if it can."""
+    if not isinstance(family, Behavior):
+        return f"it is a {type(family).__name__}, not a fishswarm.behaviors.core.Behavior"
+    if family.name != name:
+        return f"the behaviour calls itself {family.name!r}: name the entry point as the behaviour"
+    if name in BEHAVIORS:
+        return "a behaviour of that name is there already (fishswarm's own, or another package's)"
+    for part in ("steer", "fresh_memory", "parameters"):
+        if not callable(getattr(family, part)):
+            return f"its {part} is not a function"
+    if family.controller not in CONTROLLERS:
+        return f"its controller must be one of {', '.join(CONTROLLERS)}, got {family.controller!r}"
+    radius = family.spawn_radius
+    if not (isinstance(radius, int | float) and math.isfinite(radius) and radius > 0):
+        return f"its spawn_radius must be a positive number of metres, got {radius!r}"
+    return None
+
+
+def plugin_failures() -> tuple[PluginFailure, ...]:
+    """The behaviours other packages name that could not be added, once read."""
+    return tuple(_plugin_failures)
 
 
 def names() -> tuple[str, ...]:
-    """The names of the registered behaviours."""
+    """The names of the behaviours there are, other packages' included."""
+    _read_plugins()
     return tuple(BEHAVIORS)
 
 
@@ -46,6 +130,9 @@ def behavior_named(name: str) -> Behavior:
     """
     family = BEHAVIORS.get(name)
     if family is None:
+        _read_plugins()
+        family = BEHAVIORS.get(name)
+    if family is None:
         raise ValueError(f"behavior must be one of {', '.join(BEHAVIORS)}, got {name!r}")
     return family
 
@@ -56,6 +143,7 @@ def register(family: Behavior) -> None:
     Raises:
         ValueError: the name is taken by another behaviour.
     """
+    _read_plugins()  # another package's behaviour of this name is refused, not replaced
     if BEHAVIORS.get(family.name, family) is not family:
         raise ValueError(f"a behaviour called {family.name!r} is registered already")
     BEHAVIORS[family.name] = family

@@ -9,6 +9,7 @@ from collections.abc import Sequence
 
 from fishswarm.actors.logs import configure_logging
 from fishswarm.actors.shared_memory import release_shared_memory_at_exit
+from fishswarm.behaviors.registry import plugin_failures
 from fishswarm.cli.common import UserError
 from fishswarm.cli.parsers import build_parser, scenario_from
 from fishswarm.sim.allocator import tune_allocator
@@ -43,6 +44,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     configure_logging(prefix=f"fishswarm {args.command}", level=args.log_level)
+    for failure in plugin_failures():  # read as the parser listed the behaviours
+        print(f"fishswarm {args.command}: warning: {failure}", file=sys.stderr)
     if args.command != "robot":  # a robot's small process keeps glibc's own settings
         tune_allocator()
     # Zenoh leaves a shared-memory file behind for each process that sent through it.

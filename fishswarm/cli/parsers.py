@@ -16,7 +16,7 @@ from fishswarm.actors.fish import PERCEPTION_TIMEOUT
 from fishswarm.actors.robot import ROBOT_PERCEPTION_TIMEOUT
 from fishswarm.behaviors.formation import DEFAULT_SPACING
 from fishswarm.behaviors.lennard_jones import AGGREGATION_DISTANCE
-from fishswarm.behaviors.registry import BEHAVIORS
+from fishswarm.behaviors.registry import names as behavior_names
 from fishswarm.bluebot.parameters import BLIND_WIDTH, SPHERE_RADIUS
 from fishswarm.cli.study import add_parsers as add_study_parsers
 from fishswarm.learning.arena import REPLICA_KINDS
@@ -192,6 +192,9 @@ def _number(text: str) -> float:
     return value
 
 
+BEHAVIOR_NAMES = "{behaviors}"
+"""Where a help text lists the behaviours there are."""
+
 SWITCH_ON = object()
 """The kind of a flag that turns a setting on (``bool``: one that turns it off)."""
 
@@ -204,7 +207,7 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
     "behavior": (
         "--behavior",
         str,
-        f"one of {', '.join(BEHAVIORS)} (default {Scenario.behavior})",
+        f"one of {BEHAVIOR_NAMES} (default {Scenario.behavior})",
     ),
     "duration": ("--duration", float, f"simulated seconds (default {Scenario.duration:g})"),
     "seed": (
@@ -370,7 +373,8 @@ def _add_scenario_flags(
     )
     for name in names:
         flag, kind, text = _SCENARIO_FLAGS[name]
-        text = helps.get(name, text)
+        # Other packages' behaviours are read as the parser is built, not on import.
+        text = helps.get(name, text).replace(BEHAVIOR_NAMES, ", ".join(behavior_names()))
         if kind is bool:  # a switch that turns a setting off
             group.add_argument(flag, dest=name, action="store_const", const=False, help=text)
         elif kind is SWITCH_ON:

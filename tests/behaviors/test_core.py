@@ -26,6 +26,7 @@ from fishswarm.behaviors.registry import BEHAVIORS, behavior_named, fish_params,
 from fishswarm.behaviors.replica import STUDY_SCALE, replica_motion
 from fishswarm.learning.arena import Arena
 from fishswarm.protocols.messages import BROADCAST_WIDTH
+from tests.behaviors import example_plugin
 from tests.behaviors.signal_behavior import SIGNAL, registered
 
 TANK = (1.78, 1.78, 1.17)
@@ -107,9 +108,10 @@ def model(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.parametrize("controller", ["homing", "pid"])
-@pytest.mark.parametrize("behavior", [*BEHAVIORS, SIGNAL.name])
+@pytest.mark.parametrize("behavior", [*BEHAVIORS, SIGNAL.name, "nearest"])
 def test_batch_equals_loop_of_single_fish(controller: str, behavior: str, model: Path) -> None:
     registered()
+    example_plugin.registered()  # the example package's, as another package would add one
     params = fish_params(_settings(behavior, controller, model))
     rng = np.random.default_rng(8)
     count = 9

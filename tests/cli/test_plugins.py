@@ -1,0 +1,117 @@
+"""Another package's behaviour, installed beside fishswarm, in real processes: listed by
+``--help``, run by the launcher and its worker processes; a broken one said and left out."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.behaviors.example_plugin import EXAMPLE
+from tests.conftest import free_port
+
+pytestmark = pytest.mark.integration
+
+FISHSWARM = [sys.executable, "-m", "fishswarm"]
+
+
+def _installed(site: Path, name: str, entry_points: str) -> None:
+    """A distribution's metadata in ``site``, as pip leaves it: what Python's
+    importlib.metadata reads the entry points from."""
+    info = site / f"{name.replace('-', '_')}-0.1.0.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1.0\n")
+    (info / "entry_points.txt").write_text(entry_points)
+
+
+def _fishswarm(
+    *args: str, path: list[Path], cwd: Path, timeout: float = 120.0
+) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(str(p) for p in path)}
+    return subprocess.run(
+        [*FISHSWARM, *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        check=False,
+        cwd=cwd,
+        env=env,
+    )
+
+
+def _run_nearest(site: Path, path: list[Path], tmp_path: Path) -> dict[str, object]:
+    summary = tmp_path / "run.json"
+    done = _fishswarm(
+        "run", "--behavior", "nearest", "--fish", "4", "--duration", "3", "--procs", "1",
+        "--quiet", "--target-distance", "0.3", "--summary", str(summary),
+        "--record", str(tmp_path / "run.mcap"), "--listen", f"tcp/127.0.0.1:{free_port()}",
+        path=path, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "warning" not in done.stderr, done.stderr
+    result: dict[str, object] = json.loads(summary.read_text())
+    return result
+
+
+def test_another_packages_behaviour_runs_in_the_launcher_and_its_workers(tmp_path: Path) -> None:
+    site = tmp_path / "site"
+    _installed(
+        site, "fishswarm-nearest", "[fishswarm.behaviors]\nnearest = fishswarm_nearest:NEAREST\n"
+    )
+    help_text = _fishswarm("run", "--help", path=[site, EXAMPLE], cwd=tmp_path).stdout
+    assert "replica, formation, nearest (default dispersion)" in " ".join(help_text.split())
+    summary = _run_nearest(site, [site, EXAMPLE], tmp_path)
+    assert summary["status"] == "finished"
+    scenario = summary["scenario"]
+    assert isinstance(scenario, dict)
+    assert (scenario["behavior"], scenario["target_distance"]) == ("nearest", 0.3)
+    counts = summary["counts"]
+    assert isinstance(counts, dict) and counts["lost_fish"] == 0
+
+
+def test_a_broken_behaviour_package_is_said_and_left_out(tmp_path: Path) -> None:
+    site = tmp_path / "site"
+    _installed(site, "fishswarm-broken", "[fishswarm.behaviors]\ngone = no_such_module_here:GONE\n")
+    done = _fishswarm(
+        "run", "--behavior", "gone", "--fish", "2", "--duration", "1",
+        path=[site], cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 2
+    lines = done.stderr.splitlines()
+    assert lines[0] == (
+        "fishswarm run: warning: the behaviour 'gone' (no_such_module_here:GONE in "
+        "fishswarm-broken 0.1.0) is left out: loading it raised ModuleNotFoundError: No "
+        "module named 'no_such_module_here'"
+    )
+    assert lines[-1].startswith("fishswarm run: error: behavior must be one of dispersion,")
+    assert lines[-1].endswith("formation, got 'gone'")
+
+
+@pytest.mark.slow
+def test_the_example_package_builds_installs_and_runs(tmp_path: Path) -> None:
+    """The example's own pyproject.toml, built into a wheel and installed as pip would on a
+    base station or a robot (without its dependencies: fishswarm is there already)."""
+
+    def pip(*args: str) -> None:
+        done = subprocess.run(
+            [sys.executable, "-m", "pip", "-q", *args],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+            cwd=tmp_path,
+        )
+        assert done.returncode == 0, done.stderr
+
+    source = shutil.copytree(EXAMPLE, tmp_path / "source")  # built there: the tree stays clean
+    pip("wheel", "--no-deps", "--no-build-isolation", "-w", str(tmp_path / "dist"), str(source))
+    (wheel,) = (tmp_path / "dist").glob("fishswarm_nearest-0.1.0-*.whl")
+    site = tmp_path / "site"
+    pip("install", "--no-deps", "--target", str(site), str(wheel))
+    summary = _run_nearest(site, [site], tmp_path)
+    assert summary["status"] == "finished"
