@@ -16,6 +16,7 @@ import zenoh
 from fishswarm import __version__
 from fishswarm.actors.world import World
 from fishswarm.actors.zenoh_bus import open_queryable, query, reply
+from fishswarm.behaviors.registry import names as behavior_names
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.protocols.messages import RunSettings
@@ -86,6 +87,13 @@ async def ask_scenario(
             f"the world's answer on {keys.scenario} is no run settings: {error} (does the "
             f"world run this version of fishswarm, {__version__}?)"
         ) from None
+    behavior = settings.scenario.get("behavior")
+    if isinstance(behavior, str) and behavior not in behavior_names():
+        raise ConfigError(
+            f"the world's run has the behaviour {behavior!r}, which is not installed here: "
+            "another package's (docs/behaviors.md)? Install it beside fishswarm to measure "
+            "the run as its world does"
+        )
     return Scenario.as_recorded(settings.scenario, source="the world's scenario")
 
 

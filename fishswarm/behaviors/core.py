@@ -17,7 +17,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 
 import numpy as np
@@ -212,6 +212,11 @@ class Behavior:
         circles_landmark: whether it needs a landmark (by default a post at the tank centre).
         pid_gains: the gains its fish use with the pid controller (None: the defaults).
         controller: the controller its fish use unless a scenario names one.
+        settings: its own settings, by name, with their defaults (a number, text or true
+            or false each): what a scenario's ``behavior_settings`` and the command line's
+            ``--behavior-setting NAME=VALUE`` may set, and an experiment may sweep (the
+            numbers). ``parameters`` finds them, defaults filled in, under the setting
+            ``behavior_settings``.
     """
 
     name: str
@@ -223,6 +228,7 @@ class Behavior:
     circles_landmark: bool = False
     pid_gains: PidGains | None = None
     controller: str = "homing"
+    settings: Mapping[str, bool | int | float | str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

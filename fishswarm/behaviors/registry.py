@@ -108,6 +108,16 @@ def _unfit(name: str, family: object) -> str | None:
     radius = family.spawn_radius
     if not (isinstance(radius, int | float) and math.isfinite(radius) and radius > 0):
         return f"its spawn_radius must be a positive number of metres, got {radius!r}"
+    for setting, default in family.settings.items():
+        if not (isinstance(setting, str) and setting.isidentifier()):
+            return f"its setting {setting!r} is not a name (letters, digits and _)"
+        if not isinstance(default, bool | int | float | str) or (
+            isinstance(default, float) and not math.isfinite(default)
+        ):
+            return (
+                f"its setting {setting}'s default must be a finite number, text or true or "
+                f"false, got {default!r}"
+            )
     return None
 
 
@@ -154,15 +164,18 @@ def fish_params(settings: Mapping[str, Any]) -> FishParams:
 
     ``settings`` holds ``behavior``, ``controller``, ``control_period``, ``caudal_cap``,
     the study code's switches in effect (``study_code``) and whatever the behaviour reads
-    (e.g. ``target_distance``, ``tank``, ``orbit_radius``, ``model``).
+    (e.g. ``target_distance``, ``tank``, ``orbit_radius``, ``model``; its own settings,
+    ``behavior_settings``, reach it with their defaults filled in).
 
     Raises:
         ValueError: an unknown behaviour or a bad parameter, with what is wrong.
     """
     family = behavior_named(str(settings["behavior"]))
+    given = dict(settings.get("behavior_settings") or ())
+    own = {**family.settings, **given}
     return FishParams(
         family,
-        family.parameters(settings),
+        family.parameters({**settings, "behavior_settings": own}),
         controller=str(settings.get("controller") or family.controller),
         control_period=float(settings.get("control_period", 1.0)),
         caudal_cap=float(settings.get("caudal_cap", 1.0)),

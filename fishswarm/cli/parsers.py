@@ -16,6 +16,7 @@ from fishswarm.actors.fish import PERCEPTION_TIMEOUT
 from fishswarm.actors.robot import ROBOT_PERCEPTION_TIMEOUT
 from fishswarm.behaviors.formation import DEFAULT_SPACING
 from fishswarm.behaviors.lennard_jones import AGGREGATION_DISTANCE
+from fishswarm.behaviors.registry import behavior_named
 from fishswarm.behaviors.registry import names as behavior_names
 from fishswarm.bluebot.parameters import BLIND_WIDTH, SPHERE_RADIUS
 from fishswarm.cli.study import add_parsers as add_study_parsers
@@ -195,6 +196,9 @@ def _number(text: str) -> float:
 BEHAVIOR_NAMES = "{behaviors}"
 """Where a help text lists the behaviours there are."""
 
+ONE_EACH = object()
+"""The kind of a flag given once for each of a table's entries (NAME=VALUE)."""
+
 SWITCH_ON = object()
 """The kind of a flag that turns a setting on (``bool``: one that turns it off)."""
 
@@ -331,6 +335,13 @@ _SCENARIO_FLAGS: dict[str, tuple[str, Any, str]] = {
         str,
         "learned replica (best_replica.npz from 'fishswarm learn') for --behavior replica",
     ),
+    "behavior_settings": (
+        "--behavior-setting",
+        ONE_EACH,
+        "NAME=VALUE: one of the behaviour's own settings (a package's behaviour, "
+        "docs/behaviors.md), over the --config file's; repeat for each (a number, true or "
+        "false, or text)",
+    ),
 }
 
 
@@ -349,6 +360,7 @@ _FISH_FLAGS = (
     "model",
     "study_code",
     "profile",
+    "behavior_settings",
 )
 """The scenario settings a fish actor reads (``fish`` and ``robot``)."""
 
@@ -379,6 +391,15 @@ def _add_scenario_flags(
             group.add_argument(flag, dest=name, action="store_const", const=False, help=text)
         elif kind is SWITCH_ON:
             group.add_argument(flag, dest=name, action="store_const", const=True, help=text)
+        elif kind is ONE_EACH:
+            group.add_argument(
+                flag,
+                dest=name,
+                action="append",
+                type=_setting_pair,
+                metavar="NAME=VALUE",
+                help=text,
+            )
         else:
             group.add_argument(flag, dest=name, type=kind, default=None, help=text)
 
@@ -418,9 +439,38 @@ def _named_by_flag(message: str, given: Mapping[str, Any]) -> str:
     first: ``--period: control_period must be ...``."""
     for name, value in given.items():
         flag = _SCENARIO_FLAGS[name][0]
+        if value is not None and message.startswith(f"{name}: "):  # the setting's own word
+            return f"{flag}: {message.removeprefix(f'{name}: ')}"
         if value is not None and message.startswith(f"{name} ") and flag != f"--{name}":
             return f"{flag}: {message}"
     return message
+
+
+def _setting_pair(text: str) -> tuple[str, str]:
+    """``NAME=VALUE`` as a pair of texts (an argparse type): the value is read as its
+    setting's kind once the behaviour is known (:func:`_setting_value`)."""
+    name, equals, value = text.partition("=")
+    if not equals or not name.strip():
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=VALUE, e.g. gain=0.5")
+    return name.strip(), value.strip()
+
+
+def _setting_value(behavior: str, name: str, text: str) -> bool | int | float | str:
+    """``text`` given on the command line for the setting ``name`` of ``behavior``, read as
+    the kind of its default; as it is where it cannot be (the scenario then says why)."""
+    try:
+        default = behavior_named(behavior).settings.get(name)
+    except ValueError:
+        return text
+    if isinstance(default, bool):
+        return {"true": True, "false": False}.get(text, text)
+    for kind in (int, float):
+        if isinstance(default, kind):
+            try:
+                return kind(text)
+            except ValueError:
+                return text
+    return text
 
 
 def scenario_from(args: argparse.Namespace) -> Scenario:
@@ -429,6 +479,17 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
     path = getattr(args, "config", None)
     table = scenario_table(path) if path else {}
     overrides = {name: getattr(args, name, None) for name in _SCENARIO_FLAGS}
+    if overrides["behavior_settings"] is not None:
+        # Each NAME=VALUE over the file's table, the file's other entries kept.
+        behavior = str(overrides["behavior"] or table.get("behavior") or Scenario.behavior)
+        from_file = table.get("behavior_settings")
+        overrides["behavior_settings"] = {
+            **(dict(from_file) if isinstance(from_file, Mapping) else {}),
+            **{
+                name: _setting_value(behavior, name, text)
+                for name, text in overrides["behavior_settings"]
+            },
+        }
     try:
         base = Scenario.from_mapping(table, source=str(path)) if path else Scenario()
     except ConfigError:

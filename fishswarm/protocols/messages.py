@@ -645,7 +645,8 @@ MAX_SETTING_LIST = 64
 
 def _check_setting(name: str, value: object) -> object:
     """A setting's value if it is plain data: None, a boolean, an integer, a finite number,
-    text, or a short list of those (given back as a tuple, so the message cannot change)."""
+    text, a short list of those (given back as a tuple, so the message cannot change), or a
+    short table of those by name (a behaviour's own settings)."""
     if value is None or isinstance(value, bool):
         return value
     if isinstance(value, int):
@@ -666,6 +667,17 @@ def _check_setting(name: str, value: object) -> object:
         if any(isinstance(item, list | tuple) for item in value):
             raise TypeError(f"{name} must be a list of plain values, not of lists")
         return tuple(_check_setting(f"{name}[{index}]", item) for index, item in enumerate(value))
+    if isinstance(value, dict):
+        if len(value) > MAX_SETTING_LIST:
+            raise ValueError(f"{name} must have at most {MAX_SETTING_LIST} entries")
+        # As for lists: one level only, refused before looking deeper.
+        if any(isinstance(item, list | tuple | dict) for item in value.values()):
+            raise TypeError(f"{name} must be a table of plain values, not of lists or tables")
+        table: dict[str, object] = {}
+        for key, item in value.items():
+            check_text(f"a name in {name}", key)
+            table[key] = _check_setting(f"{name}.{key}", item)
+        return table
     raise TypeError(f"{name} must be plain data, got {type(value).__name__}")
 
 
@@ -675,9 +687,10 @@ class RunSettings(Message):
 
     Attributes:
         scenario: the scenario as plain data (``Scenario.to_dict``): setting names to None,
-            booleans, integers, finite numbers, text, or lists of those (the tank's size,
-            the flow, the study code's switches). The settings themselves are checked by
-            whoever builds a scenario from them.
+            booleans, integers, finite numbers, text, lists of those (the tank's size, the
+            flow, the study code's switches), or tables of those by name (a behaviour's own
+            settings). The settings themselves are checked by whoever builds a scenario
+            from them.
     """
 
     type_name: ClassVar[str] = "run_settings"

@@ -193,6 +193,43 @@ def setting_text(value: object) -> str:
     return "none" if value is None else str(value)
 
 
+def _own_settings(behavior: str, given: object) -> tuple[tuple[str, bool | int | float | str], ...]:
+    """A behaviour's own settings, checked against what it declares: (name, value) pairs in
+    name order, a number given as a whole number taken as a float where the default is one.
+
+    Raises:
+        ConfigError: not a table of names and values, a name the behaviour lacks, or a value
+            of another kind than its default.
+    """
+    pairs = given.items() if isinstance(given, Mapping) else given
+    try:
+        settings = dict(pairs)  # type: ignore[call-overload]
+    except (TypeError, ValueError):
+        raise ConfigError(
+            f"behavior_settings must be a table of NAME = VALUE, e.g. {{ gain = 0.5 }}, got "
+            f"{as_written(given)}"
+        ) from None
+    declared = behavior_named(behavior).settings
+    checked: dict[str, bool | int | float | str] = {}
+    for name, value in settings.items():
+        if name not in declared:
+            known = (
+                f"its settings are {', '.join(declared)}"
+                if declared
+                else "it has no settings of its own"
+            )
+            raise ConfigError(f"behavior_settings: {behavior} has no setting {name!r}; {known}")
+        default = declared[name]
+        kind, words = _SETTING_KINDS[type(default).__name__]
+        if not kind(value):
+            raise ConfigError(
+                f"behavior_settings: {name} of {behavior} must be {words} (its default is "
+                f"{as_written(default)}), got {as_written(value)}"
+            )
+        checked[name] = float(value) if isinstance(default, float) else value
+    return tuple(sorted(checked.items()))
+
+
 def as_written(value: object) -> str:
     """A value read from a TOML file, spelled as the file spells it, to show what it holds:
     ``true``, not ``True``; ``"ten"`` in double quotes; lists in brackets (where
@@ -305,6 +342,10 @@ class Scenario:
             name (:data:`STUDY_CODE_SWITCHES`); none by default.
         profile: ``paper`` (default: the paper's equations and the ``study_code`` switches)
             or ``study-code`` (every switch: the model the study's tables came from).
+        behavior_settings: the behaviour's own settings (those its family declares, e.g.
+            a package's behaviour, docs/behaviors.md), as (name, value) pairs in name order;
+            given as a mapping (a TOML table) too. Each of the kind of its default (a whole
+            number given for a number is taken as one); the rest keep their defaults.
     """
 
     fish: int = 25
@@ -351,6 +392,7 @@ class Scenario:
     effort_margin: float = DEFAULT_EFFORT_MARGIN
     study_code: tuple[str, ...] = ()
     profile: str = "paper"
+    behavior_settings: tuple[tuple[str, bool | int | float | str], ...] = ()
 
     def __post_init__(self) -> None:
         def need(ok: bool, message: str) -> None:
@@ -395,6 +437,9 @@ class Scenario:
         need(
             self.behavior in names(),
             f"behavior must be one of {', '.join(names())}, got {self.behavior!r}",
+        )
+        object.__setattr__(
+            self, "behavior_settings", _own_settings(self.behavior, self.behavior_settings)
         )
         if self.controller is None:
             object.__setattr__(self, "controller", behavior_named(self.behavior).controller)
@@ -720,8 +765,13 @@ class Scenario:
         return dataclasses.replace(self, **given)
 
     def to_dict(self) -> dict[str, Any]:
-        """The settings as plain data (for the summary and the recording)."""
+        """The settings as plain data (for the summary and the recording); a behaviour's own
+        settings as a mapping, left out when there are none (as before there were any)."""
         data = dataclasses.asdict(self)
+        if self.behavior_settings:
+            data["behavior_settings"] = dict(self.behavior_settings)
+        else:
+            del data["behavior_settings"]
         data["tank"] = list(self.tank)
         data["target_distance"] = self.resolved_target_distance()
         data["spawn_radius"] = self.resolved_spawn_radius()

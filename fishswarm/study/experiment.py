@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from fishswarm.behaviors.registry import behavior_named
 from fishswarm.bluebot.parameters import BODY_LENGTH
 from fishswarm.formations.local import LOCAL_SHAPES
 from fishswarm.sim.scenario import (
@@ -211,6 +212,21 @@ SWEEPABLE = (
     "effort_margin",
 )
 
+
+def _number_settings(behavior: str) -> dict[str, int | float]:
+    """The settings of ``behavior``'s own that are numbers, with their defaults: what an
+    experiment may sweep beside :data:`SWEEPABLE` (none for an unknown behaviour)."""
+    try:
+        declared = behavior_named(behavior).settings
+    except ValueError:
+        return {}
+    return {
+        name: default
+        for name, default in declared.items()
+        if isinstance(default, int | float) and not isinstance(default, bool)
+    }
+
+
 RunKey = tuple[str, float, int]
 """One run of an experiment: (group, value, seed)."""
 
@@ -247,10 +263,23 @@ class Experiment:
     controller_named: bool = False
 
     def __post_init__(self) -> None:
-        if self.parameter not in SWEEPABLE:
+        own = _number_settings(self.scenario.behavior)
+        if self.parameter not in SWEEPABLE and self.parameter not in own:
+            of_behavior = (
+                f", or a number of {self.scenario.behavior}'s own settings: {', '.join(own)}"
+                if own
+                else ""
+            )
             raise ConfigError(
-                f"experiment {self.name}: parameter must be one of {', '.join(SWEEPABLE)}, "
-                f"got {self.parameter!r}"
+                f"experiment {self.name}: parameter must be one of {', '.join(SWEEPABLE)}"
+                f"{of_behavior}; got {self.parameter!r}"
+            )
+        if isinstance(own.get(self.parameter), int) and not all(
+            float(v).is_integer() for v in self.values
+        ):
+            raise ConfigError(
+                f"experiment {self.name}: {self.parameter} must be whole numbers, got "
+                f"{', '.join(map(str, self.values))}"
             )
         if not self.values:
             raise ConfigError(f"experiment {self.name}: values must not be empty")
@@ -433,7 +462,6 @@ class Experiment:
         Raises:
             ConfigError: no such group, or a setting is wrong.
         """
-        kind = int if self.parameter == "fish" else float
         base = self.scenario
         if group:
             settings = dict(self.groups).get(group)
@@ -447,7 +475,15 @@ class Experiment:
             base = base.with_settings(
                 self.study_settings, controller_chosen=self._controller_chosen
             )
-        return base.replace(**{self.parameter: kind(value), "seed": seed}).check_duration()
+        swept: dict[str, Any]
+        if self.parameter in SWEEPABLE:
+            swept = {self.parameter: int(value) if self.parameter == "fish" else float(value)}
+        else:  # one of the behaviour's own settings, the others as the scenario has them
+            default = behavior_named(base.behavior).settings.get(self.parameter)
+            kind = int if isinstance(default, int) else float
+            given = {**dict(base.behavior_settings), self.parameter: kind(value)}
+            swept = {"behavior_settings": given}
+        return base.replace(**swept, seed=seed).check_duration()
 
     @property
     def _controller_chosen(self) -> bool | None:

@@ -24,6 +24,7 @@ from fishswarm.protocols.messages import (
     ControlReply,
     ControlRequest,
     Delivery,
+    RunSettings,
     Snapshot,
 )
 from fishswarm.sim.scenario import ConfigError, Scenario
@@ -231,6 +232,11 @@ def test_a_view_learns_the_runs_settings_from_the_worlds_scenario_queryable(
         # What a world of the last schema answered: the settings as JSON text.
         (json.dumps(Scenario().to_dict()).encode(), "is no run settings: not msgpack"),
         (encode(ControlReply("running", 4, 4.0, 25)), "expected a run_settings message"),
+        (
+            encode(RunSettings({"behavior": "gone-fishing", "fish": 3})),
+            r"^the world's run has the behaviour 'gone-fishing', which is not installed here: "
+            r"another package's \(docs/behaviors.md\)\?",
+        ),
     ],
 )
 def test_an_answer_on_the_scenario_key_that_is_no_run_settings_is_refused_with_why(

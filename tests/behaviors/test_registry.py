@@ -66,9 +66,11 @@ def test_another_packages_behaviour_is_listed_after_fishswarms_own_and_found_by_
     assert names() == (*OWN, "nearest")
     assert behavior_named("nearest") is example_plugin.nearest()
     assert plugin_failures() == ()
-    # A scenario, and so every command, takes it by name, with its parameters.
-    scenario = Scenario(behavior="nearest", target_distance=0.4)
-    assert scenario.fish_params().steering.distance == 0.4
+    # A scenario, and so every command, takes it by name, with its own settings.
+    scenario = Scenario(behavior="nearest", behavior_settings=(("distance", 1),))
+    assert scenario.behavior_settings == (("distance", 1.0),)
+    steering = scenario.fish_params().steering
+    assert (steering.distance, steering.cruise) == (1.0, pytest.approx(0.52))
 
 
 def test_a_lookup_of_fishswarms_own_behaviour_reads_no_other_package(
@@ -141,6 +143,30 @@ def test_a_behaviour_with_a_controller_or_spawn_radius_fishswarm_lacks_is_left_o
     )
 
 
+@pytest.mark.parametrize(
+    ("settings", "reason"),
+    [
+        ({"two words": 1.0}, "its setting 'two words' is not a name (letters, digits and _)"),
+        ({"gain": float("nan")}, "its setting gain's default must be a finite number, text or"),
+        ({"gain": [1, 2]}, "its setting gain's default must be a finite number, text or"),
+    ],
+)
+def test_a_behaviour_whose_own_settings_are_not_plain_values_is_left_out(
+    points: list[importlib.metadata.EntryPoint],
+    monkeypatch: pytest.MonkeyPatch,
+    settings: dict[str, object],
+    reason: str,
+) -> None:
+    import tests.behaviors.signal_behavior as signal
+
+    monkeypatch.setattr(
+        signal, "ODD_SETTINGS", Behavior(**{**vars(SIGNAL), "settings": settings}), raising=False
+    )
+    points.append(_point("test-signal", "tests.behaviors.signal_behavior:ODD_SETTINGS"))
+    assert names() == OWN
+    assert plugin_failures()[0].reason.startswith(reason), plugin_failures()[0].reason
+
+
 def test_registering_a_name_another_package_took_is_refused(
     points: list[importlib.metadata.EntryPoint],
 ) -> None:
@@ -178,7 +204,7 @@ def test_the_example_behaviour_keeps_the_nearest_neighbour_at_its_distance(
     neighbors: list[tuple[float, float, float]], target: tuple[float, float, float]
 ) -> None:
     family = example_plugin.nearest()
-    params = family.parameters({"target_distance": None})
+    params = family.parameters({"behavior_settings": family.settings})
     memory, steering = family.steer(
         NoMemory(), _perception(*neighbors), Inbox.empty(1), params=params
     )
@@ -188,11 +214,11 @@ def test_the_example_behaviour_keeps_the_nearest_neighbour_at_its_distance(
 
 def test_the_example_behaviour_decides_fins_and_refuses_a_bad_distance() -> None:
     example_plugin.registered()
-    params = fish_params({"behavior": "nearest", "target_distance": 0.26})
+    params = fish_params({"behavior": "nearest"})  # its own settings' defaults
     memory = FishMemory.fresh(params, 1)
     _, decision = decide(memory, _perception((0.0, 0.5, 0.0)), Inbox.empty(1), params=params)
     # Homing: the neighbour 90° to the right; a turn to the right on the left pectoral fin,
     # at min(1, 0.6 + 90/180); no caudal beyond the 20° band, the dorsal fin left off.
     np.testing.assert_allclose(decision.fins[0], [0.0, 0.0, 1.0, 0.0])
-    with pytest.raises(ValueError, match=r"target_distance must be a positive length, got -1\.0"):
-        fish_params({"behavior": "nearest", "target_distance": -1.0})
+    with pytest.raises(ValueError, match=r"distance must be a positive length in m, got -1\.0"):
+        fish_params({"behavior": "nearest", "behavior_settings": {"distance": -1.0}})

@@ -1372,3 +1372,46 @@ def test_a_large_swarm_without_numba_is_warned_of_with_the_extra_to_install(
     assert said.endswith("pip install -e '.[fast]'")
     small = Scenario(fish=kernels.COMPILED_MIN_FISH - 1, spawn_region="tank")
     assert not any("numba" in warning for warning in start_warnings(small))
+
+
+def test_a_behaviours_own_settings_come_from_the_file_and_the_command_line(
+    tmp_path: Path,
+) -> None:
+    from fishswarm.cli.parsers import build_parser, scenario_from
+    from tests.behaviors import example_plugin
+
+    example_plugin.registered()  # nearest: distance 0.26, cruise 0.52 m by default
+
+    def scenario(*args: str) -> Scenario:
+        return scenario_from(build_parser().parse_args(["run", *args]))
+
+    ran = scenario("--behavior", "nearest", "--behavior-setting", "distance=1")
+    assert ran.behavior_settings == (("distance", 1.0),)
+    # Each NAME=VALUE over the file's table; the file's others kept.
+    config = tmp_path / "s.toml"
+    config.write_text(
+        'behavior = "nearest"\nbehavior_settings = { distance = 0.3, cruise = 0.4 }\n'
+    )
+    assert scenario("--config", str(config)).behavior_settings == (
+        ("cruise", 0.4),
+        ("distance", 0.3),
+    )
+    ran = scenario("--config", str(config), "--behavior-setting", "cruise=0.9")
+    assert ran.behavior_settings == (("cruise", 0.9), ("distance", 0.3))
+    named = re.escape(
+        "--behavior-setting: distance of nearest must be a finite number (its default is "
+        '0.26), got "far"'
+    )
+    with pytest.raises(ConfigError, match=f"^{named}$"):
+        scenario("--behavior", "nearest", "--behavior-setting", "distance=far")
+    named = "--behavior-setting: dispersion has no setting 'distance'; it has no settings"
+    with pytest.raises(ConfigError, match=f"^{named}"):
+        scenario("--behavior-setting", "distance=1")
+
+
+def test_a_behaviour_setting_that_is_not_name_equals_value_is_refused() -> None:
+    result = _run("run", "--behavior-setting", "distance")
+    assert result.returncode == 2
+    assert "argument --behavior-setting: 'distance' is not NAME=VALUE, e.g. gain=0.5" in (
+        result.stderr
+    )

@@ -48,7 +48,7 @@ def _run_nearest(site: Path, path: list[Path], tmp_path: Path) -> dict[str, obje
     summary = tmp_path / "run.json"
     done = _fishswarm(
         "run", "--behavior", "nearest", "--fish", "4", "--duration", "3", "--procs", "1",
-        "--quiet", "--target-distance", "0.3", "--summary", str(summary),
+        "--quiet", "--behavior-setting", "distance=0.3", "--summary", str(summary),
         "--record", str(tmp_path / "run.mcap"), "--listen", f"tcp/127.0.0.1:{free_port()}",
         path=path, cwd=tmp_path,
     )  # fmt: skip
@@ -69,9 +69,37 @@ def test_another_packages_behaviour_runs_in_the_launcher_and_its_workers(tmp_pat
     assert summary["status"] == "finished"
     scenario = summary["scenario"]
     assert isinstance(scenario, dict)
-    assert (scenario["behavior"], scenario["target_distance"]) == ("nearest", 0.3)
+    assert (scenario["behavior"], scenario["behavior_settings"]) == ("nearest", {"distance": 0.3})
     counts = summary["counts"]
     assert isinstance(counts, dict) and counts["lost_fish"] == 0
+
+
+def test_an_experiment_sweeps_a_behaviours_own_setting(tmp_path: Path) -> None:
+    site = tmp_path / "site"
+    _installed(
+        site, "fishswarm-nearest", "[fishswarm.behaviors]\nnearest = fishswarm_nearest:NEAREST\n"
+    )
+    experiment = tmp_path / "spacing.toml"
+    experiment.write_text(
+        '[experiment]\nname = "spacing"\nparameter = "distance"\nlabel = "kept distance (m)"\n'
+        "values = [0.2, 0.6]\nseeds = 1\n"
+        '[scenario]\nbehavior = "nearest"\nfish = 5\nduration = 20\n'
+        "behavior_settings = { cruise = 0.3 }\n"
+    )
+    out = tmp_path / "out"
+    done = _fishswarm(
+        "experiment", str(experiment), "--engine", "batch", "--jobs", "1", "--quiet",
+        "--out", str(out), path=[site, EXAMPLE], cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    rows = (out / "table.csv").read_text().splitlines()
+    header = rows[0].split(",")
+    assert header[0] == "distance", header
+    values = [dict(zip(header, row.split(","), strict=True)) for row in rows[1:]]
+    assert [row["distance"] for row in values] == ["0.2", "0.6"]
+    # Fish that keep their nearest neighbour farther off spread farther from it.
+    grew = [float(row["nearest_neighbor_distance_change_percent_mean"]) for row in values]
+    assert grew[1] > grew[0] + 30, grew
 
 
 def test_a_broken_behaviour_package_is_said_and_left_out(tmp_path: Path) -> None:

@@ -97,6 +97,7 @@ EXAMPLES: list[Message] = [
     RunSettings(
         {"fish": 25, "duration": 15.0, "tank": (1.78, 1.78, 1.17), "model": None, "flags": True}
     ),
+    RunSettings({"behavior": "nearest", "behavior_settings": {"distance": 0.3, "mode": "x"}}),
 ]
 
 
@@ -521,7 +522,27 @@ def _robot_status(**overrides: object) -> RobotStatus:
         (lambda: RunSettings({"model": "m" * 4097}), "model must have at most 4096"),
         (lambda: RunSettings({"tank": [1.0, [2.0]]}), "tank must be a list of plain values"),
         (lambda: RunSettings({"tank": [0.0] * 65}), "tank must have at most 64 values"),
-        (lambda: RunSettings({"flow": {"x": 1.0}}), "flow must be plain data, got dict"),
+        (lambda: RunSettings({"flow": object()}), "flow must be plain data, got object"),
+        (
+            lambda: RunSettings({"behavior_settings": {"gain": {"x": 1.0}}}),
+            "behavior_settings must be a table of plain values, not of lists or tables",
+        ),
+        (
+            lambda: RunSettings({"behavior_settings": {"gain": [1.0]}}),
+            "behavior_settings must be a table of plain values, not of lists or tables",
+        ),
+        (
+            lambda: RunSettings({"behavior_settings": {"": 1.0}}),
+            "a name in behavior_settings must have 1 to",
+        ),
+        (
+            lambda: RunSettings({"behavior_settings": {"gain": math.inf}}),
+            "behavior_settings.gain must be finite",
+        ),
+        (
+            lambda: RunSettings({"behavior_settings": {f"s{i}": 1 for i in range(65)}}),
+            "behavior_settings must have at most 64 entries",
+        ),
         (lambda: RunSettings({f"s{n}": 0 for n in range(201)}), "at most 200 settings"),
         (lambda: _perception(heading=-7.0), "heading must be in"),
         (lambda: _perception(inbox_count=MAX_ROWS + 1), "inbox_count must be in"),

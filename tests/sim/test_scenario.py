@@ -11,6 +11,7 @@ import pytest
 
 from fishswarm.sim.scenario import ConfigError, Scenario
 from fishswarm.study.catalog import EXPERIMENTS_FOLDER
+from tests.behaviors import example_plugin
 
 
 def test_defaults_follow_the_study() -> None:
@@ -396,3 +397,50 @@ def test_a_model_that_names_a_learning_runs_folder_points_at_the_file_in_it(tmp_
     (tmp_path / "best_replica.npz").write_bytes(b"")
     with pytest.raises(ConfigError, match=rf"give {tmp_path / 'best_replica.npz'}$"):
         Scenario(behavior="replica", model=str(tmp_path))
+
+
+def test_a_behaviours_own_settings_are_checked_kept_in_name_order_and_read_back(
+    tmp_path: Path,
+) -> None:
+    example_plugin.registered()  # nearest: distance 0.26, cruise 0.52 by default
+    scenario = Scenario(behavior="nearest", behavior_settings=(("distance", 1), ("cruise", 0.4)))
+    assert scenario.behavior_settings == (("cruise", 0.4), ("distance", 1.0))
+    assert isinstance(scenario.behavior_settings[1][1], float)  # a whole number, as a number
+    assert scenario.to_dict()["behavior_settings"] == {"cruise": 0.4, "distance": 1.0}
+    read_back = Scenario.from_mapping(scenario.to_dict())  # defaults resolved, as recorded
+    assert read_back.behavior_settings == scenario.behavior_settings
+    # None given: left out of what a recording or summary holds, as before there were any.
+    assert "behavior_settings" not in Scenario(behavior="nearest").to_dict()
+    path = tmp_path / "s.toml"
+    path.write_text('[scenario]\nbehavior = "nearest"\n[scenario.behavior_settings]\ncruise = 1\n')
+    assert Scenario.from_toml(path).behavior_settings == (("cruise", 1.0),)
+    refused = {
+        "distance = 0.3\n": (
+            "s.toml: behavior_settings: dispersion has no setting 'distance'; it has no "
+            "settings of its own"
+        ),
+    }
+    for table, message in refused.items():
+        path.write_text(f"[scenario.behavior_settings]\n{table}")
+        with pytest.raises(ConfigError, match=f"{re.escape(message)}$"):
+            Scenario.from_toml(path)
+    path.write_text('[scenario]\nbehavior = "nearest"\nbehavior_settings = 3\n')
+    with pytest.raises(
+        ConfigError,
+        match=re.escape(
+            "s.toml: behavior_settings must be a table of NAME = VALUE, e.g. { gain = 0.5 }, got 3"
+        ),
+    ):
+        Scenario.from_toml(path)
+    wrong = {
+        "gap": "behavior_settings: nearest has no setting 'gap'; its settings are distance, cruise",
+        "distance": (
+            "behavior_settings: distance of nearest must be a finite number (its default is "
+            '0.26), got "far"'
+        ),
+    }
+    for name, message in wrong.items():
+        with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
+            Scenario(behavior="nearest", behavior_settings=((name, "far"),))
+    with pytest.raises(ConfigError, match=r"must be a finite number .*, got true$"):
+        Scenario(behavior="nearest", behavior_settings=(("distance", True),))

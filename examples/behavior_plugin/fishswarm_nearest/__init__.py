@@ -1,9 +1,11 @@
 """Nearest-neighbour keeping: each fish holds its nearest visible neighbour at a distance.
 
 An example of a fishswarm behaviour in a package of its own (docs/behaviors.md). A fish
-farther than ``target_distance`` from the nearest fish it sees swims towards it, a nearer one
-swims away from it, and a fish that sees none swims straight on. Schools of such fish break
-into chains and small clusters, spaced about ``target_distance`` apart.
+farther than ``distance`` from the nearest fish it sees swims towards it, a nearer one swims
+away from it, and a fish that sees none swims straight on, ``cruise`` ahead. Schools of such
+fish break into chains and small clusters, spaced about ``distance`` apart. Both are the
+behaviour's own settings: ``--behavior-setting distance=0.3`` on the command line,
+``behavior_settings = { distance = 0.3 }`` in a scenario file, or swept by an experiment.
 """
 
 from __future__ import annotations
@@ -26,11 +28,9 @@ from fishswarm.behaviors.core import (
 )
 from fishswarm.bluebot.parameters import BODY_LENGTH
 
-DEFAULT_DISTANCE = 2 * BODY_LENGTH
-"""The distance kept from the nearest neighbour unless a scenario's target_distance says, m."""
-
-CRUISE = np.array([4 * BODY_LENGTH, 0.0, 0.0])
-"""Where a fish that sees nobody heads, in its body frame, m: straight on."""
+SETTINGS = {"distance": 2 * BODY_LENGTH, "cruise": 4 * BODY_LENGTH}
+"""The behaviour's own settings and their defaults, m: the distance kept from the nearest
+visible neighbour (2 body lengths), and how far ahead a fish that sees nobody aims (4)."""
 
 
 @dataclass(frozen=True)
@@ -39,19 +39,23 @@ class NearestParams:
 
     Attributes:
         distance: the distance kept from the nearest visible neighbour, m.
+        cruise: how far straight ahead a fish that sees nobody aims, m.
     """
 
     distance: float
+    cruise: float
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.distance) and self.distance > 0):
-            raise ValueError(f"target_distance must be a positive length, got {self.distance!r}")
+        for name in ("distance", "cruise"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive length in m, got {value!r}")
 
 
 def nearest_params(settings: Mapping[str, Any]) -> NearestParams:
-    """The distance kept from a scenario's ``target_distance``, 2 body lengths by default."""
-    given = settings.get("target_distance")
-    return NearestParams(DEFAULT_DISTANCE if given is None else float(given))
+    """The parameters from a scenario's settings: the behaviour's own, defaults filled in."""
+    own = settings["behavior_settings"]
+    return NearestParams(float(own["distance"]), float(own["cruise"]))
 
 
 def steer_nearest(
@@ -69,11 +73,12 @@ def steer_nearest(
     Returns:
         The memory, and for each fish a target (B, 3) in its body frame, m: along the line
         to its nearest neighbour, as long as the gap to close (towards it when too far,
-        away when too near); :data:`CRUISE` for a fish that sees nobody.
+        away when too near); ``params.cruise`` straight ahead for a fish that sees nobody.
     """
     count = perception.count
     offsets = perception.neighbors
-    target: FloatArray = np.tile(CRUISE, (count, 1))
+    target: FloatArray = np.zeros((count, 3))
+    target[:, 0] = params.cruise
     if offsets.shape[1] == 0:
         return memory, steady(target)
     distance = np.where(perception.neighbor_mask, np.linalg.norm(offsets, axis=2), np.inf)
@@ -90,10 +95,11 @@ def steer_nearest(
 
 NEAREST = Behavior(
     "nearest",
-    "keep the nearest visible neighbour at target_distance (an example package's)",
+    "keep the nearest visible neighbour at a distance (an example package's)",
     steer_nearest,
     no_memory,
     nearest_params,
     spawn_radius=5 * BODY_LENGTH,
+    settings=SETTINGS,
 )
 """The behaviour, as the entry point ``fishswarm.behaviors: nearest`` names it."""
