@@ -258,6 +258,8 @@ class World:
         self._broadcasts_sent = 0
         self._said_no_channel = False
         self._current = TickCommands()
+        self._previous = TickCommands()
+        """The tick before, closed: a second process's answer to it may come after."""
         self.mismatched: set[int] = set()
         """Fish that said they run another behaviour, version, rules, control period or
         decision parameters than this world's."""
@@ -703,6 +705,7 @@ class World:
             if self._leaving:
                 staying = ~among(self._leaving_ids(), due_ids)
                 due_ids, rows = due_ids[staying], rows[staying]
+            self._previous = self._current
             self._current = TickCommands.of(event.number, due_ids)
             for key, message in perception_messages(
                 self.keys,
@@ -1047,7 +1050,9 @@ class World:
             return
         rows = current.rows_awaited(ids) if tick == current.tick else None
         if rows is None:
-            twice = current.answered_before(ids) if twins and tick == current.tick else []
+            # A second answer to this tick, or to the one just closed (a slower twin's).
+            answers = {current.tick: current, self._previous.tick: self._previous}.get(tick)
+            twice = answers.answered_before(ids) if twins and answers is not None else []
             if twice:
                 self.intake.refuse(key, "duplicate", f"a second answer to tick {tick}")
                 self._warn_of_twins(twice, tick)

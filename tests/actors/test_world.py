@@ -1288,6 +1288,45 @@ def test_two_processes_answering_for_one_fish_are_named_once(
     ]
 
 
+def test_a_twins_answer_after_its_tick_closed_is_named_too(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Two processes serving one fish, the second slower: the first answer closes tick 0,
+    and the twin's comes once tick 1 is asked. It was refused as stale, its process never
+    named."""
+    scenario = Scenario(fish=1, duration=2.0, seed=1)
+    keys = scenario.keys
+    fins = np.array([1.0, 0.0, 0.0, 0.0])
+
+    async def main() -> World:
+        bus = MemoryBus()
+        world = World(WorldSettings(scenario, expected_fish=(0,), admit_delay=0.0))
+        async with (
+            subscription(bus, keys.perception(0)) as perceptions,
+            open_token(bus, keys.alive("fish", 0)),
+            trio.open_nursery() as nursery,
+        ):
+            nursery.start_soon(world.run, bus)
+            await perceptions.receive()
+            bus.put(keys.command(0), encode(Command(0, 0, fins)))
+            await perceptions.receive()  # tick 1 asked: tick 0 is closed
+            bus.put(keys.command(0), encode(Command(0, 0, fins)))  # the twin's, late
+            bus.put(keys.command(0), encode(Command(0, 1, fins)))
+            await _until_state(world, "finished")
+            nursery.cancel_scope.cancel()
+        return world
+
+    with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
+        world = run_mock(main)
+    assert world.tick == 2 and world.statistics().rejected == {"duplicate": 1}
+    said = [r.getMessage() for r in caplog.records if "twice" in r.getMessage()]
+    assert said == [
+        "fish 0 answered tick 0 twice: two processes serve it (robots, or 'fishswarm fish', "
+        "started with one --id?); the first answer of each tick counts: give each process "
+        "its own ids"
+    ]
+
+
 def test_a_fishs_watchdog_stop_for_a_tick_it_answered_is_no_twins_answer(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
