@@ -64,6 +64,7 @@ class PluginFailure:
 
 _plugins_read = False
 _plugin_failures: list[PluginFailure] = []
+_plugin_sources: dict[str, str] = {}
 
 
 def _read_plugins() -> None:
@@ -88,6 +89,7 @@ def _read_plugins() -> None:
         unfit = _unfit(point.name, family)
         if unfit is None:
             BEHAVIORS[point.name] = family
+            _plugin_sources[point.name] = source
         else:
             _plugin_failures.append(PluginFailure(point.name, source, unfit))
 
@@ -124,6 +126,12 @@ def _unfit(name: str, family: object) -> str | None:
 def plugin_failures() -> tuple[PluginFailure, ...]:
     """The behaviours other packages name that could not be added, once read."""
     return tuple(_plugin_failures)
+
+
+def plugin_source(name: str) -> str | None:
+    """Where another package's behaviour ``name`` comes from (``module:attribute in package
+    version``); None for fishswarm's own and for one registered in this process."""
+    return _plugin_sources.get(name)
 
 
 def names() -> tuple[str, ...]:

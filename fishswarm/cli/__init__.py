@@ -30,6 +30,7 @@ HANDLERS = {
     "control": ("swarm", "control"),
     "export": ("swarm", "export"),
     "learn": ("learn", "learn_command"),
+    "behaviors": ("behaviors", "behaviors"),
     "experiment": ("study", "experiment"),
     "plot": ("study", "plot"),
     "animate": ("study", "animate"),

@@ -1067,6 +1067,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     learn.add_argument("--quiet", action="store_true", help="no progress lines")
 
+    commands.add_parser(
+        "behaviors",
+        help="list the behaviours there are, other packages' too, with their own settings",
+        description="List the behaviours fish can have: fishswarm's own and those other "
+        "installed packages add (docs/behaviors.md), each with what it does, the package it "
+        "comes from, and its own settings with their defaults (set with --behavior-setting "
+        "NAME=VALUE or behavior_settings in a scenario file); and any package's behaviour "
+        "that was left out, with why.",
+    )
     export = commands.add_parser(
         "export",
         help="export a recording to NumPy or CSV",

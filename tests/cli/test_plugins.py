@@ -74,6 +74,31 @@ def test_another_packages_behaviour_runs_in_the_launcher_and_its_workers(tmp_pat
     assert isinstance(counts, dict) and counts["lost_fish"] == 0
 
 
+def test_the_behaviours_are_listed_with_their_packages_and_own_settings(tmp_path: Path) -> None:
+    site = tmp_path / "site"
+    _installed(
+        site, "fishswarm-nearest", "[fishswarm.behaviors]\nnearest = fishswarm_nearest:NEAREST\n"
+    )
+    _installed(site, "fishswarm-broken", "[fishswarm.behaviors]\ngone = no_such_module_here:GONE\n")
+    done = _fishswarm("behaviors", path=[site, EXAMPLE], cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert [line.split()[0] for line in lines[:7]] == [
+        "dispersion", "aggregation", "orbit", "milling", "waltz", "replica", "formation",
+    ]  # fmt: skip
+    assert lines[0] == (
+        "dispersion   Lennard-Jones with the target distance at the tank diagonal: spread out"
+    )
+    assert lines[7:] == [
+        "nearest      keep the nearest visible neighbour at a distance (an example package's)"
+        "  [fishswarm_nearest:NEAREST in fishswarm-nearest 0.1.0]",
+        "             its settings (--behavior-setting NAME=VALUE): distance = 0.26, cruise = 0.52",
+        "left out: the behaviour 'gone' (no_such_module_here:GONE in fishswarm-broken 0.1.0) is "
+        "left out: loading it raised ModuleNotFoundError: No module named 'no_such_module_here'",
+    ]
+    assert done.stderr.startswith("fishswarm behaviors: warning: the behaviour 'gone'")
+
+
 def test_an_experiment_sweeps_a_behaviours_own_setting(tmp_path: Path) -> None:
     site = tmp_path / "site"
     _installed(
