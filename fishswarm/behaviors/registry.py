@@ -102,6 +102,16 @@ def _unfit(name: str, family: object) -> str | None:
         return f"the behaviour calls itself {family.name!r}: name the entry point as the behaviour"
     if name in BEHAVIORS:
         return "a behaviour of that name is there already (fishswarm's own, or another package's)"
+    return _malformed(family)
+
+
+PLAIN_SETTING_TYPES = (bool, int, float, str)
+"""What a behaviour's own setting's default may be: Python's own (not NumPy's) number, text,
+or true or false — what a scenario file, a command line and a message carry alike."""
+
+
+def _malformed(family: Behavior) -> str | None:
+    """What in ``family``'s parts fishswarm cannot use; None if nothing."""
     for part in ("steer", "fresh_memory", "parameters"):
         if not callable(getattr(family, part)):
             return f"its {part} is not a function"
@@ -110,15 +120,21 @@ def _unfit(name: str, family: object) -> str | None:
     radius = family.spawn_radius
     if not (isinstance(radius, int | float) and math.isfinite(radius) and radius > 0):
         return f"its spawn_radius must be a positive number of metres, got {radius!r}"
+    if not isinstance(family.settings, Mapping):
+        return (
+            f"its settings must be a dict of names and defaults, e.g. {{'gain': 0.5}}, got a "
+            f"{type(family.settings).__name__}"
+        )
     for setting, default in family.settings.items():
         if not (isinstance(setting, str) and setting.isidentifier()):
             return f"its setting {setting!r} is not a name (letters, digits and _)"
-        if not isinstance(default, bool | int | float | str) or (
+        if type(default) not in PLAIN_SETTING_TYPES or (
             isinstance(default, float) and not math.isfinite(default)
         ):
             return (
                 f"its setting {setting}'s default must be a finite number, text or true or "
-                f"false, got {default!r}"
+                f"false, of Python's own types (float(...) of a NumPy number), got {default!r} "
+                f"({type(default).__name__})"
             )
     return None
 
@@ -164,6 +180,9 @@ def register(family: Behavior) -> None:
     _read_plugins()  # another package's behaviour of this name is refused, not replaced
     if BEHAVIORS.get(family.name, family) is not family:
         raise ValueError(f"a behaviour called {family.name!r} is registered already")
+    malformed = _malformed(family)
+    if malformed is not None:
+        raise ValueError(f"the behaviour {family.name!r} cannot be registered: {malformed}")
     BEHAVIORS[family.name] = family
 
 
@@ -181,9 +200,18 @@ def fish_params(settings: Mapping[str, Any]) -> FishParams:
     family = behavior_named(str(settings["behavior"]))
     given = dict(settings.get("behavior_settings") or ())
     own = {**family.settings, **given}
+    try:
+        steering = family.parameters({**settings, "behavior_settings": own})
+    except ValueError:
+        raise  # a bad value, said by the behaviour
+    except Exception as error:  # a behaviour's own code, failing otherwise
+        raise ValueError(
+            f"the behaviour {family.name!r} could not make its parameters from the settings: "
+            f"{type(error).__name__}: {error}"
+        ) from error
     return FishParams(
         family,
-        family.parameters({**settings, "behavior_settings": own}),
+        steering,
         controller=str(settings.get("controller") or family.controller),
         control_period=float(settings.get("control_period", 1.0)),
         caudal_cap=float(settings.get("caudal_cap", 1.0)),

@@ -4,7 +4,8 @@ the example package's behaviour by hand."""
 from __future__ import annotations
 
 import importlib.metadata
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
+from typing import Any
 
 import numpy as np
 import pytest
@@ -149,22 +150,48 @@ def test_a_behaviour_with_a_controller_or_spawn_radius_fishswarm_lacks_is_left_o
         ({"two words": 1.0}, "its setting 'two words' is not a name (letters, digits and _)"),
         ({"gain": float("nan")}, "its setting gain's default must be a finite number, text or"),
         ({"gain": [1, 2]}, "its setting gain's default must be a finite number, text or"),
+        (
+            {"gain": np.float64(1.0)},
+            "its setting gain's default must be a finite number, text or true or false, of "
+            "Python's own types (float(...) of a NumPy number), got np.float64(1.0) (float64)",
+        ),
+        (
+            [("gain", 1.0)],
+            "its settings must be a dict of names and defaults, e.g. {'gain': 0.5}, got a list",
+        ),
     ],
 )
 def test_a_behaviour_whose_own_settings_are_not_plain_values_is_left_out(
     points: list[importlib.metadata.EntryPoint],
     monkeypatch: pytest.MonkeyPatch,
-    settings: dict[str, object],
+    settings: object,
     reason: str,
 ) -> None:
     import tests.behaviors.signal_behavior as signal
 
-    monkeypatch.setattr(
-        signal, "ODD_SETTINGS", Behavior(**{**vars(SIGNAL), "settings": settings}), raising=False
-    )
+    odd = Behavior(**{**vars(SIGNAL), "settings": settings})
+    monkeypatch.setattr(signal, "ODD_SETTINGS", odd, raising=False)
     points.append(_point("test-signal", "tests.behaviors.signal_behavior:ODD_SETTINGS"))
-    assert names() == OWN
+    assert names() == OWN  # and the rest of fishswarm as before
     assert plugin_failures()[0].reason.startswith(reason), plugin_failures()[0].reason
+    with pytest.raises(ValueError, match="'test-signal' cannot be registered: its setting"):
+        register(odd)
+    assert behavior_named("dispersion").name == "dispersion"
+
+
+def test_a_behaviour_whose_parameters_fail_otherwise_than_by_a_bad_value_is_named(
+    points: list[importlib.metadata.EntryPoint],
+) -> None:
+    def parameters(settings: Mapping[str, Any]) -> object:
+        return settings["behavior_settings"]["gian"]
+
+    register(Behavior(**{**vars(SIGNAL), "parameters": parameters}))
+    with pytest.raises(
+        ValueError,
+        match=r"^the behaviour 'test-signal' could not make its parameters from the settings: "
+        r"KeyError: 'gian'$",
+    ):
+        fish_params({"behavior": "test-signal"})
 
 
 def test_registering_a_name_another_package_took_is_refused(
