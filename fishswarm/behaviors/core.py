@@ -295,6 +295,52 @@ class FishMemory:
         )
 
 
+class BehaviorError(ValueError):
+    """A behaviour's steering failed, or gave what no controller can use (its name, the
+    fish's number and what went wrong in the message)."""
+
+
+def _steer(
+    params: FishParams, memory: Any, perception: Perception, inbox: Inbox
+) -> tuple[Any, Steering]:
+    """The behaviour's steering, checked: a (memory, Steering) pair whose target is (B, 3)
+    and finite, its LEDs (B,) and its outbox B fish's — so that a behaviour of one's own
+    that errs is named where it errs, not in the controller or a message check after."""
+    name, count = params.behavior.name, perception.count
+
+    def wrong(what: str) -> BehaviorError:
+        seen = perception.neighbors.shape[1]
+        return BehaviorError(
+            f"the behaviour {name!r} deciding for {count} fish ({seen} neighbour rows each): "
+            f"{what}"
+        )
+
+    try:
+        result = params.behavior.steer(memory, perception, inbox, params=params.steering)
+    except Exception as error:  # a behaviour's own code
+        raise wrong(f"its steer raised {type(error).__name__}: {error}") from error
+    if not (isinstance(result, tuple) and len(result) == 2 and isinstance(result[1], Steering)):
+        raise wrong(f"its steer must return (memory, Steering), got {type(result).__name__}")
+    steering = result[1]
+    target = np.asarray(steering.target)
+    if target.shape != (count, 3):
+        raise wrong(f"its target must be (B, 3) = ({count}, 3) in m, got shape {target.shape}")
+    if not np.isfinite(target).all():
+        rows = np.flatnonzero(~np.isfinite(target).all(axis=1))
+        raise wrong(f"its target is not finite for fish rows {rows[:10].tolist()}")
+    outbox = steering.outbox
+    shapes = (
+        ("led", np.shape(steering.led), (count,)),
+        ("outbox.kind", np.shape(outbox.kind), (count,)),
+        ("outbox.values", np.shape(outbox.values), (count, BROADCAST_WIDTH)),
+        ("outbox.mask", np.shape(outbox.mask), (count,)),
+    )
+    for part, shape, expected in shapes:
+        if shape != expected:
+            raise wrong(f"its {part} must have shape {expected}, got {shape}")
+    return result
+
+
 def decide(
     memory: FishMemory, perception: Perception, inbox: Inbox, *, params: FishParams
 ) -> tuple[FishMemory, Decision]:
@@ -308,15 +354,16 @@ def decide(
 
     Returns:
         The fish's memory after deciding, and their decision.
+
+    Raises:
+        BehaviorError: the behaviour's steering failed, or gave what cannot be used.
     """
     # The fins a fish commanded ran since its last decision: it counts their beats.
     elapsed = perception.time - memory.last_time
     ran = np.where(elapsed > 0, elapsed, 0.0)
     effort = memory.effort + effort_rate(memory.fins) * ran
     perception = dataclasses.replace(perception, effort=effort)
-    remembered, steering = params.behavior.steer(
-        memory.behavior, perception, inbox, params=params.steering
-    )
+    remembered, steering = _steer(params, memory.behavior, perception, inbox)
     target = steering.target
     if params.controller == "pid":
         # The loops integrate over the real time since a fish's last decision (jittered or

@@ -11,15 +11,22 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fishswarm.behaviors.core import (
+    Behavior,
+    BehaviorError,
     FishMemory,
     FishParams,
     Inbox,
+    Outbox,
     Perception,
+    Steer,
+    Steering,
     decide,
     inbox_of,
+    no_memory,
     pad_rows,
     put_rows,
     stack_rows,
+    steady,
     take_rows,
 )
 from fishswarm.behaviors.registry import BEHAVIORS, behavior_named, fish_params, register
@@ -423,3 +430,55 @@ def test_a_replica_moves_as_far_as_its_period_lets_it(tmp_path: Path) -> None:
     np.savez(path, weights=weights, settings=np.array('{"arena": {}}'))
     settings = {"behavior": "replica", "model": str(path), "tank": TANK, "control_period": 0.5}
     assert fish_params(settings).steering.period == 0.5
+
+
+def _steering_of(target: np.ndarray, led: np.ndarray | None = None) -> Steering:
+    count = target.shape[0] if target.ndim else 1
+    return Steering(target, np.ones(count, bool) if led is None else led, Outbox.silent(count))
+
+
+@pytest.mark.parametrize(
+    ("steer", "said"),
+    [
+        (
+            lambda m, p, i, *, params: (
+                m,
+                steady(p.neighbors[np.arange(p.count), np.argmin(p.neighbor_mask, axis=1)]),
+            ),
+            "its steer raised ValueError: attempt to get argmin of an empty sequence",
+        ),
+        (
+            lambda m, p, i, *, params: _steering_of(np.zeros((p.count, 3))),
+            "its steer must return (memory, Steering), got Steering",
+        ),
+        (
+            lambda m, p, i, *, params: (m, _steering_of(np.zeros((p.count, 2)))),
+            "its target must be (B, 3) = (3, 3) in m, got shape (3, 2)",
+        ),
+        (
+            lambda m, p, i, *, params: (
+                m,
+                _steering_of(np.array([[1.0, 0, 0], [np.nan, 0, 0], [0, 0, np.inf]])),
+            ),
+            "its target is not finite for fish rows [1, 2]",
+        ),
+        (
+            lambda m, p, i, *, params: (m, _steering_of(np.zeros((p.count, 3)), np.ones(1, bool))),
+            "its led must have shape (3,), got (1,)",
+        ),
+    ],
+)
+def test_a_behaviour_that_errs_is_named_with_what_is_wrong(steer: Steer, said: str) -> None:
+    # A behaviour of one's own that fails, or gives what no controller can use: said where
+    # it happens, not as an IndexError in the controller or a message check after.
+    family = Behavior("mine", "a test's", steer, no_memory, lambda settings: None, spawn_radius=0.5)
+    params = FishParams(family, None)
+    perception = Perception(
+        np.zeros(3), np.full(3, 0.5), np.zeros((3, 0, 3)), np.zeros((3, 0), bool),
+        np.zeros((3, 0, 3)), np.zeros((3, 0), bool),
+    )  # fmt: skip
+    with pytest.raises(BehaviorError) as error:
+        decide(FishMemory.fresh(params, 3), perception, Inbox.empty(3), params=params)
+    assert str(error.value) == (
+        f"the behaviour 'mine' deciding for 3 fish (0 neighbour rows each): {said}"
+    )
