@@ -47,7 +47,9 @@ from fishswarm.actors.workers import (
 )
 from fishswarm.actors.world import World, WorldSettings
 from fishswarm.actors.zenoh_bus import ZenohBus
+from fishswarm.behaviors.core import BehaviorError
 from fishswarm.protocols.jsontext import json_text
+from fishswarm.protocols.messages import ControlRequest
 from fishswarm.sim.decision_kernels import prepare, with_compiled_decisions
 from fishswarm.sim.scenario import COMMAND_TIMEOUT, START_TIMEOUT, Scenario
 from fishswarm.study.experiment import ORBIT_SUMMARIES
@@ -174,6 +176,7 @@ async def launch_swarm(
     fish_here: Fish | None = None
     died: list[str] = []
     status = "failed"
+    none_left = False
     world = World(
         WorldSettings(
             scenario,
@@ -235,20 +238,53 @@ async def launch_swarm(
                         )
                         for index, ids in enumerate(schools or [everyone])
                     ]
+                    failed_here: list[bool] = []
+
+                    def stop_if_none_left() -> None:
+                        """Every fish this run started has failed, and no other fish (a
+                        robot's) is in the world: nothing is left to decide, so the run
+                        stops now instead of ticking empty to its end."""
+                        nonlocal none_left
+                        if (here and not failed_here) or not all(w.lost for w in workers):
+                            return
+                        others = world.roster.alive - set(everyone)
+                        if others or world.state_name in ("stopping", "stopped", "finished"):
+                            return
+                        none_left = True
+                        log.error(
+                            "every fish of the run failed and no other is in the world: the "
+                            "run stops at tick %d",
+                            world.tick,
+                        )
+                        world.control(ControlRequest("stop"))
+
+                    def lost_here() -> None:
+                        failed_here.append(True)
+                        stop_if_none_left()
+
                     if here:
                         prepare(params)
                         fish_here = specs[0].fish()
-                        await nursery.start(_run_fish_here, fish_here, bus, died, world)
+                        await nursery.start(
+                            _run_fish_here,
+                            fish_here,
+                            bus,
+                            died,
+                            world,
+                            lost_here,
+                        )
                     else:
                         workers += [start_worker(spec) for spec in specs]
                     if workers:
-                        nursery.start_soon(_watch_workers, workers, died, world)
+                        nursery.start_soon(_watch_workers, workers, died, world, stop_if_none_left)
                     if settings.handle_signals:
                         nursery.start_soon(_watch_signals, interrupted, nursery.cancel_scope)
                     await world.run(bus)
                     with trio.move_on_after(5.0):
                         await observer.wait_for_tick(world.tick)
                     status = "stopped" if world.state_name == "stopped" else "finished"
+                    if none_left:
+                        status = "failed"
                     nursery.cancel_scope.cancel()
                 if interrupted.is_set():
                     status = "interrupted"
@@ -259,7 +295,9 @@ async def launch_swarm(
             finally:
                 with trio.CancelScope(shield=True):
                     await _stop_all(workers)
-                died += _died_unseen(workers)
+                for message in _died_unseen(workers):
+                    log.error(message)  # said as the others were, when seen
+                    died.append(message)
                 summary = _summary(
                     settings,
                     status,
@@ -357,12 +395,14 @@ async def _run_fish_here(
     bus: ZenohBus,
     died: list[str],
     world: World,
+    on_lost: Callable[[], None],
     *,
     task_status: trio.TaskStatus[None] = trio.TASK_STATUS_IGNORED,
 ) -> None:
     """Serve the fish in the launcher's process. A failure of theirs once the run is under
-    way loses them, as a dead worker loses its fish, and the world goes on without them; one
-    before the world has them all fails the run, as a worker that dies then does."""
+    way loses them, as a dead worker loses its fish, and the world goes on without them
+    (``on_lost`` is called); one before the world has them all fails the run, as a worker
+    that dies then does."""
     up = False
     try:
         async with trio.open_nursery() as nursery:
@@ -381,11 +421,15 @@ async def _run_fish_here(
         if world.state_name == "waiting":
             raise WorkerFailed(f"{failure}, before the world had them all") from error
         message = f"{failure}; they are lost"
-        log.error(message, exc_info=error)
+        # A behaviour's own error says all there is to say; anything else, where it came from.
+        log.error(message, exc_info=None if isinstance(error, BehaviorError) else error)
         died.append(message)
+        on_lost()
 
 
-async def _watch_workers(workers: list[Worker], died: list[str], world: World) -> None:
+async def _watch_workers(
+    workers: list[Worker], died: list[str], world: World, on_lost: Callable[[], None]
+) -> None:
     while True:
         for worker in workers:
             if worker.stopping or worker.lost:
@@ -400,6 +444,7 @@ async def _watch_workers(workers: list[Worker], died: list[str], world: World) -
                         "came up; run with --log-level INFO to see why"
                     )
                 log.error(message)
+                on_lost()
         await trio.sleep(0.05)
 
 

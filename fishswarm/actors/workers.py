@@ -8,8 +8,10 @@ disappears (the pipe closes), then reports its fish's counters through the pipe.
 from __future__ import annotations
 
 import contextlib
+import logging
 import multiprocessing
 import signal
+import sys
 from dataclasses import dataclass, field
 from multiprocessing import resource_tracker
 from multiprocessing.connection import Connection
@@ -27,7 +29,7 @@ from fishswarm.actors.fish import (
 from fishswarm.actors.logs import DEFAULT_PREFIX, configure_logging
 from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.zenoh_bus import ZenohBus
-from fishswarm.behaviors.core import FishParams
+from fishswarm.behaviors.core import BehaviorError, FishParams
 from fishswarm.protocols.keys import KeySpace
 from fishswarm.sim.allocator import tune_allocator
 from fishswarm.sim.decision_kernels import prepare
@@ -104,6 +106,8 @@ def split_fish(ids: list[int], procs: int) -> list[tuple[int, ...]]:
     return groups
 
 
+log = logging.getLogger(__name__)
+
 STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
 """What stops a run: the launcher's to handle, never a worker's."""
 
@@ -118,7 +122,18 @@ def worker_main(spec: WorkerSpec, connection: Connection) -> None:
     tune_allocator()
     configure_logging(prefix=spec.log_prefix, level=spec.log_level)
     prepare(spec.params)
-    statistics = trio.run(_serve, spec, connection)
+    try:
+        statistics = trio.run(_serve, spec, connection)
+    except Exception as error:
+        # Said to the launcher, which names it with the fish it loses; a traceback only for
+        # what is not a behaviour's own error (that one says all there is to say).
+        while isinstance(error, ExceptionGroup) and len(error.exceptions) == 1:
+            error = error.exceptions[0]
+        with contextlib.suppress(BrokenPipeError, OSError):
+            connection.send(("failed", f"{type(error).__name__}: {error}"))
+        if not isinstance(error, BehaviorError):
+            log.error("%s failed", spec.describe(), exc_info=error)
+        sys.exit(1)
     with contextlib.suppress(BrokenPipeError, OSError):
         connection.send(("statistics", statistics))
 
@@ -152,18 +167,37 @@ class Worker:
     """Seen to have ended on its own while the run went on."""
     killed: bool = False
     """Killed by :func:`stop_worker`, as it did not stop when asked."""
+    failure: str | None = None
+    """What made it fail, as it said before it exited (None: it said nothing)."""
 
     def exit_description(self) -> str:
-        """How the process ended, in words."""
+        """How the process ended, in words: what made it fail, when it said so."""
         code = self.process.exitcode
         if code is None:
             return "is still running"
+        if self.failure is None and not self.connection.closed:
+            self.failure = _last_words(self.connection)
+        if self.failure is not None:
+            return f"failed: {self.failure}"
         if code < 0:
             try:
                 return f"was killed by {signal.Signals(-code).name}"
             except ValueError:
                 return f"was killed by signal {-code}"
         return f"exited with code {code}"
+
+
+def _last_words(connection: Connection) -> str | None:
+    """What a worker that ended said of its failure, if it did, from what is left in its
+    pipe."""
+    try:
+        while connection.poll(0):
+            kind, payload = connection.recv()
+            if kind == "failed":
+                return str(payload)
+    except (EOFError, OSError):
+        pass
+    return None
 
 
 def start_worker(spec: WorkerSpec) -> Worker:
@@ -194,14 +228,18 @@ def stop_worker(worker: Worker, *, timeout: float = 1.5) -> None:
     Blocking; call it from a thread. Waits at most about ``timeout`` before killing.
     """
     worker.stopping = True
-    try:
+    # A worker that failed is gone, its pipe closed at its end: its last words may be there.
+    with contextlib.suppress(BrokenPipeError, OSError):
         worker.connection.send(("stop", None))
+    try:
         if worker.connection.poll(timeout):
             kind, payload = worker.connection.recv()
-            while kind != "statistics" and worker.connection.poll(timeout):
+            while kind not in ("statistics", "failed") and worker.connection.poll(timeout):
                 kind, payload = worker.connection.recv()
             if kind == "statistics":
                 worker.statistics = payload
+            elif kind == "failed" and worker.failure is None:
+                worker.failure = str(payload)
     except (BrokenPipeError, EOFError, OSError):
         pass
     worker.process.join(timeout)

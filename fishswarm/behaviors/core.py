@@ -311,8 +311,7 @@ def _steer(
     def wrong(what: str) -> BehaviorError:
         seen = perception.neighbors.shape[1]
         return BehaviorError(
-            f"the behaviour {name!r} deciding for {count} fish ({seen} neighbour rows each): "
-            f"{what}"
+            f"the behaviour {name!r} deciding for {count} fish ({seen} neighbour rows each): {what}"
         )
 
     try:

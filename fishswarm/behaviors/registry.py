@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+import pickle
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -102,7 +103,19 @@ def _unfit(name: str, family: object) -> str | None:
         return f"the behaviour calls itself {family.name!r}: name the entry point as the behaviour"
     if name in BEHAVIORS:
         return "a behaviour of that name is there already (fishswarm's own, or another package's)"
-    return _malformed(family)
+    malformed = _malformed(family)
+    if malformed is not None:
+        return malformed
+    try:
+        # Worker processes get a fish's behaviour by reference: module and name.
+        pickle.dumps(family)
+    except Exception as error:  # pickle raises several kinds for what it cannot reference
+        return (
+            "its parts must be functions and classes at the top level of a module, not "
+            f"lambdas or nested functions: worker processes import them by name "
+            f"({type(error).__name__}: {error})"
+        )
+    return None
 
 
 PLAIN_SETTING_TYPES = (bool, int, float, str)

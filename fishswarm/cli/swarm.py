@@ -416,16 +416,16 @@ def _report(result: RunResult) -> None:
             else "nothing recorded (the recording file is as it was); the summary holds the run"
         )
         print(f"\nfishswarm run: interrupted; {held}", file=sys.stderr)
-    for line in summary["workers_died"]:
-        print(f"fishswarm run: error: {line}", file=sys.stderr)
+    # Each failure of the fish was said as it was seen (the launcher logs it).
     print(_summary_text(summary), file=sys.stderr)
     if result.exit_code == EXIT_WORKER_DIED:
         who = "a worker process died" if summary["procs"] else "the fish failed"
-        print(
-            f"fishswarm run: {who}; the run finished without those fish (see 'lost' in the "
-            "summary)",
-            file=sys.stderr,
+        how = (
+            f"the run stopped at tick {summary['counts']['ticks']}, every fish lost"
+            if summary["status"] == "failed"
+            else "the run finished without those fish"
         )
+        print(f"fishswarm run: {who}; {how} (see 'lost' in the summary)", file=sys.stderr)
 
 
 def _measured(

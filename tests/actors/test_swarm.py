@@ -280,31 +280,53 @@ def test_a_fish_lost_while_its_process_lives_on_degrades_the_run(endpoint: str) 
     assert first.startswith("status: degraded — fish were lost on the way: 9 at tick "), first
 
 
-def test_fish_that_fail_in_the_launchers_process_are_lost_and_the_run_completes(
+def test_fish_that_all_fail_in_the_launchers_process_stop_the_run_there(
     endpoint: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    # Every fish of the run failed (one behaviour's error), and no other is in the world:
+    # the run ticked on empty to its end (a real-time run waiting out its whole duration).
     from fishswarm.behaviors.registry import BEHAVIORS
-    from tests.behaviors.signal_behavior import SIGNAL, SignalMemory, steer_signal
+    from tests.behaviors.signal_behavior import FAILING
 
-    def steer_until_the_third(memory: SignalMemory, *args: Any, **kwargs: Any) -> Any:
-        if memory.decisions.max() == 3:
-            raise RuntimeError("no third decision")
-        return steer_signal(memory, *args, **kwargs)
-
-    failing = dataclasses.replace(SIGNAL, name="test-fails-at-third", steer=steer_until_the_third)
-    monkeypatch.setitem(BEHAVIORS, failing.name, failing)
-    scenario = Scenario(fish=4, duration=8.0, seed=2, behavior=failing.name)
+    monkeypatch.setitem(BEHAVIORS, FAILING.name, FAILING)
+    scenario = Scenario(fish=4, duration=8.0, seed=2, behavior=FAILING.name)
     settings = LaunchSettings(scenario, procs=0, listen=endpoint)
     result = run_trio(lambda: launch_swarm(settings), timeout=120)
     summary = result.summary
     assert result.exit_code == EXIT_WORKER_DIED
-    assert summary["status"] == "degraded"  # a script reading it sees the loss too
-    assert summary["counts"]["ticks"] == 8
-    assert sorted(lost["id"] for lost in summary["lost"]) == [0, 1, 2, 3]
-    assert {lost["tick"] for lost in summary["lost"]} == {3}
+    assert summary["status"] == "failed"  # a script reading it sees the failure too
+    assert summary["counts"]["ticks"] == 3
     (died,) = summary["workers_died"]
-    assert "fish 0–3" in died and "RuntimeError: no third decision" in died
+    assert died == (
+        "the fish in the launcher's process (fish 0–3) failed: BehaviorError: the behaviour "
+        "'test-fails-at-third' deciding for 4 fish (3 neighbour rows each): its steer raised "
+        "RuntimeError: no third decision; they are lost"
+    )
     assert summary["fish"]["batches"] == 3  # their counters up to the failure are kept
+
+
+@pytest.mark.slow
+def test_a_worker_whose_behaviour_fails_says_why_and_the_run_stops_when_none_is_left(
+    endpoint: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # It printed its whole traceback among the run's lines, and the run said only "worker 0
+    # exited with code 1", then ticked on empty (in real time, to the end of its duration).
+    from fishswarm.behaviors.registry import BEHAVIORS
+    from tests.behaviors.signal_behavior import FAILING
+
+    monkeypatch.setitem(BEHAVIORS, FAILING.name, FAILING)
+    scenario = Scenario(fish=4, duration=30.0, seed=2, behavior=FAILING.name, time_mode="realtime")
+    settings = LaunchSettings(scenario, procs=2, listen=endpoint)
+    result = run_trio(lambda: launch_swarm(settings), timeout=120)
+    summary = result.summary
+    assert result.exit_code == EXIT_WORKER_DIED
+    assert summary["status"] == "failed" and summary["counts"]["ticks"] < 10
+    for died, fish in zip(sorted(summary["workers_died"]), ("0–1", "2–3"), strict=True):
+        assert died.startswith("worker ") and f"(fish {fish}) failed: BehaviorError: the " in died
+        assert died.endswith(
+            "'test-fails-at-third' deciding for 2 fish (3 neighbour rows each): its steer raised "
+            "RuntimeError: no third decision; its fish are lost"
+        ), died
 
 
 @pytest.mark.parametrize("up", [False, True])

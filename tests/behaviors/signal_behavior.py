@@ -68,3 +68,23 @@ def registered() -> Behavior:
     if SIGNAL.name not in BEHAVIORS:
         register(SIGNAL)
     return SIGNAL
+
+
+def steer_until_the_third(
+    memory: SignalMemory, perception: Perception, inbox: Inbox, *, params: None
+) -> tuple[SignalMemory, Steering]:
+    """The signal behaviour's steering, failing at every fish's third decision."""
+    if memory.decisions.max() == 3:
+        raise RuntimeError("no third decision")
+    return steer_signal(memory, perception, inbox, params=params)
+
+
+FAILING = Behavior(
+    "test-fails-at-third",
+    "tests only: the signal behaviour, failing at the third decision",
+    steer_until_the_third,
+    _fresh,
+    _params,
+    spawn_radius=0.5,
+)
+"""A behaviour of one's own that errs, at module level so that worker processes get it."""

@@ -249,3 +249,19 @@ def test_the_example_behaviour_decides_fins_and_refuses_a_bad_distance() -> None
     np.testing.assert_allclose(decision.fins[0], [0.0, 0.0, 1.0, 0.0])
     with pytest.raises(ValueError, match=r"distance must be a positive length in m, got -1\.0"):
         fish_params({"behavior": "nearest", "behavior_settings": {"distance": -1.0}})
+
+
+def test_a_behaviour_worker_processes_could_not_import_is_left_out(
+    points: list[importlib.metadata.EntryPoint], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import tests.behaviors.signal_behavior as signal
+
+    nested = Behavior(**{**vars(SIGNAL), "parameters": lambda settings: None})
+    monkeypatch.setattr(signal, "NESTED", nested, raising=False)
+    points.append(_point("test-signal", "tests.behaviors.signal_behavior:NESTED"))
+    assert names() == OWN
+    assert plugin_failures()[0].reason.startswith(
+        "its parts must be functions and classes at the top level of a module, not lambdas or "
+        "nested functions: worker processes import them by name (AttributeError: Can't pickle "
+        "local object "
+    ), plugin_failures()[0].reason
