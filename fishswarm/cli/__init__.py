@@ -45,8 +45,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     configure_logging(prefix=f"fishswarm {args.command}", level=args.log_level)
-    for failure in plugin_failures():  # read as the parser listed the behaviours
-        print(f"fishswarm {args.command}: warning: {failure}", file=sys.stderr)
+    if args.command != "behaviors":  # which lists them itself
+        for failure in plugin_failures():  # read as the parser listed the behaviours
+            print(f"fishswarm {args.command}: warning: {failure}", file=sys.stderr)
     if args.command != "robot":  # a robot's small process keeps glibc's own settings
         tune_allocator()
     # Zenoh leaves a shared-memory file behind for each process that sent through it.

@@ -16,7 +16,7 @@ from fishswarm.actors.fish import PERCEPTION_TIMEOUT
 from fishswarm.actors.robot import ROBOT_PERCEPTION_TIMEOUT
 from fishswarm.behaviors.formation import DEFAULT_SPACING
 from fishswarm.behaviors.lennard_jones import AGGREGATION_DISTANCE
-from fishswarm.behaviors.registry import behavior_named
+from fishswarm.behaviors.registry import behavior_named, plugin_failures
 from fishswarm.behaviors.registry import names as behavior_names
 from fishswarm.bluebot.parameters import BLIND_WIDTH, SPHERE_RADIUS
 from fishswarm.cli.study import add_parsers as add_study_parsers
@@ -386,7 +386,7 @@ def _add_scenario_flags(
     for name in names:
         flag, kind, text = _SCENARIO_FLAGS[name]
         # Other packages' behaviours are read as the parser is built, not on import.
-        text = helps.get(name, text).replace(BEHAVIOR_NAMES, ", ".join(behavior_names()))
+        text = helps.get(name, text).replace(BEHAVIOR_NAMES, _behaviors_listed())
         if kind is bool:  # a switch that turns a setting off
             group.add_argument(flag, dest=name, action="store_const", const=False, help=text)
         elif kind is SWITCH_ON:
@@ -402,6 +402,16 @@ def _add_scenario_flags(
             )
         else:
             group.add_argument(flag, dest=name, type=kind, default=None, help=text)
+
+
+def _behaviors_listed() -> str:
+    """The behaviours there are, for a help text: those of packages left out named too (a
+    --help exits before any warning is printed)."""
+    listed = ", ".join(behavior_names())
+    left_out = [failure.name for failure in plugin_failures()]
+    if left_out:
+        listed += f" ({', '.join(left_out)} left out: 'fishswarm behaviors' says why)"
+    return listed
 
 
 def _refuse_inapplicable(given: dict[str, Any], scenario: Scenario) -> None:

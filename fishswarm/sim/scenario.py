@@ -37,6 +37,7 @@ from fishswarm.behaviors.registry import (
     behavior_named,
     fish_params,
     names,
+    plugin_failures,
 )
 from fishswarm.bluebot.control import CONTROLLERS
 from fishswarm.bluebot.parameters import (
@@ -434,10 +435,12 @@ class Scenario:
             "effort_margin must be 0 or more (gain-weighted fin beats), got "
             f"{self.effort_margin!r}",
         )
-        need(
-            self.behavior in names(),
-            f"behavior must be one of {', '.join(names())}, got {self.behavior!r}",
-        )
+        if self.behavior not in names():
+            left_out = [str(f) for f in plugin_failures() if f.name == self.behavior]
+            raise ConfigError(
+                f"behavior must be one of {', '.join(names())}, got {self.behavior!r}"
+                + (f": {left_out[0]}" if left_out else "")
+            )
         object.__setattr__(
             self, "behavior_settings", _own_settings(self.behavior, self.behavior_settings)
         )

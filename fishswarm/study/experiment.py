@@ -227,6 +227,10 @@ def _number_settings(behavior: str) -> dict[str, int | float]:
     }
 
 
+OWN_SETTING_PREFIX = "behavior_settings."
+"""How an experiment's parameter names the behaviour's own setting where a scenario setting
+has the same name."""
+
 RunKey = tuple[str, float, int]
 """One run of an experiment: (group, value, seed)."""
 
@@ -263,18 +267,26 @@ class Experiment:
     controller_named: bool = False
 
     def __post_init__(self) -> None:
-        own = _number_settings(self.scenario.behavior)
-        if self.parameter not in SWEEPABLE and self.parameter not in own:
+        behavior = self.scenario.behavior
+        own = _number_settings(behavior)
+        swept_own = self.own_setting_swept
+        if (swept_own is None and self.parameter not in SWEEPABLE) or (
+            swept_own is not None and swept_own not in own
+        ):
             of_behavior = (
-                f", or a number of {self.scenario.behavior}'s own settings: {', '.join(own)}"
-                if own
-                else ""
+                f", or a number of {behavior}'s own settings: {', '.join(own)}" if own else ""
             )
             raise ConfigError(
                 f"experiment {self.name}: parameter must be one of {', '.join(SWEEPABLE)}"
                 f"{of_behavior}; got {self.parameter!r}"
             )
-        if isinstance(own.get(self.parameter), int) and not all(
+        if self.parameter in SWEEPABLE and self.parameter in own:
+            raise ConfigError(
+                f"experiment {self.name}: {self.parameter} is a scenario setting and one of "
+                f'{behavior}\'s own: write parameter = "behavior_settings.{self.parameter}" '
+                "to sweep the behaviour's"
+            )
+        if isinstance(own.get(swept_own or ""), int) and not all(
             float(v).is_integer() for v in self.values
         ):
             raise ConfigError(
@@ -317,6 +329,15 @@ class Experiment:
                 f"{needed}, and {whose} {setting} is {setting_text(actual)}: {every} would "
                 f"run alike{applies_anyway(self.parameter)}"
             )
+
+    @property
+    def own_setting_swept(self) -> str | None:
+        """The behaviour's own setting the experiment sweeps (``parameter`` names it, or
+        ``behavior_settings.NAME``); None when it sweeps a scenario setting."""
+        name = self.parameter.removeprefix(OWN_SETTING_PREFIX)
+        if name != self.parameter or self.parameter not in SWEEPABLE:
+            return name
+        return None
 
     @property
     def group_names(self) -> tuple[str, ...]:
@@ -476,13 +497,13 @@ class Experiment:
                 self.study_settings, controller_chosen=self._controller_chosen
             )
         swept: dict[str, Any]
-        if self.parameter in SWEEPABLE:
+        own = self.own_setting_swept
+        if own is None:
             swept = {self.parameter: int(value) if self.parameter == "fish" else float(value)}
         else:  # one of the behaviour's own settings, the others as the scenario has them
-            default = behavior_named(base.behavior).settings.get(self.parameter)
+            default = behavior_named(base.behavior).settings.get(own)
             kind = int if isinstance(default, int) else float
-            given = {**dict(base.behavior_settings), self.parameter: kind(value)}
-            swept = {"behavior_settings": given}
+            swept = {"behavior_settings": {**dict(base.behavior_settings), own: kind(value)}}
         return base.replace(**swept, seed=seed).check_duration()
 
     @property

@@ -93,18 +93,23 @@ def write_report(
     with paths[2].open("w", newline="", encoding="utf-8") as stream:
         writer = csv.writer(stream)
         grouped = bool(experiment.groups)
+        ends = [f"{m}_initial" for m in experiment.metric_names] + [
+            f"{m}_final" for m in experiment.metric_names
+        ]
+        # A summary that is a metric's first or last value is there already, as that.
+        summaries = [s.key for s in experiment.summaries if s.key not in ends]
         writer.writerow(
             [
                 *(["group"] if grouped else []),
                 experiment.parameter,
                 "seed",
-                *(f"{m}_initial" for m in experiment.metric_names),
-                *(f"{m}_final" for m in experiment.metric_names),
-                *(summary.key for summary in experiment.summaries),
+                *ends,
+                *summaries,
                 "wall_time",
             ]
         )
         for outcome in outcomes:
+            values = run_values(experiment, outcome)
             writer.writerow(
                 [
                     *([outcome.group] if grouped else []),
@@ -112,7 +117,7 @@ def write_report(
                     outcome.seed,
                     *outcome.metrics[0].tolist(),
                     *outcome.metrics[-1].tolist(),
-                    *run_values(experiment, outcome).values(),
+                    *(values[key] for key in summaries),
                     round(outcome.wall_time, 3),
                 ]
             )

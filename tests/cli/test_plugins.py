@@ -96,7 +96,7 @@ def test_the_behaviours_are_listed_with_their_packages_and_own_settings(tmp_path
         "left out: the behaviour 'gone' (no_such_module_here:GONE in fishswarm-broken 0.1.0) is "
         "left out: loading it raised ModuleNotFoundError: No module named 'no_such_module_here'",
     ]
-    assert done.stderr.startswith("fishswarm behaviors: warning: the behaviour 'gone'")
+    assert done.stderr == ""  # the list says it, once
 
 
 def test_an_experiment_sweeps_a_behaviours_own_setting(tmp_path: Path) -> None:
@@ -142,7 +142,14 @@ def test_a_broken_behaviour_package_is_said_and_left_out(tmp_path: Path) -> None
         "module named 'no_such_module_here'"
     )
     assert lines[-1].startswith("fishswarm run: error: behavior must be one of dispersion,")
-    assert lines[-1].endswith("formation, got 'gone'")
+    assert lines[-1].endswith(
+        "formation, got 'gone': the behaviour 'gone' (no_such_module_here:GONE in "
+        "fishswarm-broken 0.1.0) is left out: loading it raised ModuleNotFoundError: No module "
+        "named 'no_such_module_here'"
+    )
+    # --help, which exits before any warning, names it too.
+    listed = _fishswarm("run", "--help", path=[site], cwd=tmp_path).stdout
+    assert "formation (gone left out: 'fishswarm behaviors' says why)" in " ".join(listed.split())
 
 
 @pytest.mark.slow

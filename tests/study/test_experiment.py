@@ -477,7 +477,11 @@ def test_runs_csv_holds_each_runs_number_behind_every_table_column(tmp_path: Pat
         outcomes.append(RunOutcome(0.25, seed, np.arange(5.0), series, np.zeros((5, 2, 3)), 1.0))
     write_report(experiment, outcomes, tmp_path, engine="batch", wall_time=2.0)
     with (tmp_path / "runs.csv").open(encoding="utf-8") as stream:
+        header = next(csv.reader(stream))
+        stream.seek(0)
         runs = list(csv.DictReader(stream))
+    # Each column once (the neighbours seen at the start and end were there twice).
+    assert len(header) == len(set(header)) and "neighbors_seen_final" in header
     assert [float(run["study_mean_distance_change_percent"]) for run in runs] == [150.0, 150.0]
     assert [float(run["centroid_distance_change_percent"]) for run in runs] == [25.0, 50.0]
     assert [float(run["linked_centroid_distance_initial"]) for run in runs] == [9.0, 18.0]
@@ -570,3 +574,30 @@ def test_a_row_of_one_run_in_an_interrupted_sweep_shows_no_spread() -> None:
     assert one.startswith("| 0.05 | -50.0 | -50.0 | -50.0 |")
     assert "Rows of fewer runs than seeds (an interrupted sweep's) average the runs done" in table
     assert "fewer runs" not in markdown_table(experiment, table_rows(experiment, outcomes))
+
+
+def test_an_experiment_sweeps_a_behaviours_own_setting_by_name_or_by_its_table() -> None:
+    import dataclasses
+
+    from fishswarm.behaviors.registry import BEHAVIORS, register
+    from tests.behaviors.signal_behavior import SIGNAL
+
+    spaced = dataclasses.replace(SIGNAL, name="test-spaced", settings={"spacing": 0.3, "n": 2})
+    if spaced.name not in BEHAVIORS:
+        register(spaced)
+    scenario = Scenario(behavior="test-spaced", fish=3, duration=2.0)
+
+    def sweep(parameter: str, values: tuple[float, ...] = (0.2, 0.4)) -> Experiment:
+        return Experiment("x", "x", parameter, "x", values, 1, scenario)
+
+    # A name a scenario setting has too: the table's name says which.
+    with pytest.raises(ConfigError, match=r'write parameter = "behavior_settings\.spacing"'):
+        sweep("spacing")
+    run = sweep("behavior_settings.spacing").scenario_for(0.4, 0)
+    assert run.behavior_settings == (("spacing", 0.4),) and run.spacing is None
+    # A whole-number setting takes whole numbers, as an int.
+    assert sweep("n", (1, 3)).scenario_for(3, 0).behavior_settings == (("n", 3),)
+    with pytest.raises(ConfigError, match=r"n must be whole numbers, got 1\.5"):
+        sweep("n", (1.5, 3))
+    with pytest.raises(ConfigError, match=r"or a number of test-spaced's own settings: spacing, n"):
+        sweep("behavior_settings.gap")
