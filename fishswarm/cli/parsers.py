@@ -458,14 +458,14 @@ def _named_by_flag(message: str, given: Mapping[str, Any]) -> str:
 
 def _setting_pair(text: str) -> tuple[str, str]:
     """``NAME=VALUE`` as a pair of texts (an argparse type): the value is read as its
-    setting's kind once the behaviour is known (:func:`_setting_value`)."""
+    setting's kind once the behaviour is known (:func:`setting_value`)."""
     name, equals, value = text.partition("=")
     if not equals or not name.strip():
         raise argparse.ArgumentTypeError(f"{text!r} is not NAME=VALUE, e.g. gain=0.5")
     return name.strip(), value.strip()
 
 
-def _setting_value(behavior: str, name: str, text: str) -> bool | int | float | str:
+def setting_value(behavior: str, name: str, text: str) -> bool | int | float | str:
     """``text`` given on the command line for the setting ``name`` of ``behavior``, read as
     the kind of its default; as it is where it cannot be (the scenario then says why)."""
     try:
@@ -496,7 +496,7 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
         overrides["behavior_settings"] = {
             **(dict(from_file) if isinstance(from_file, Mapping) else {}),
             **{
-                name: _setting_value(behavior, name, text)
+                name: setting_value(behavior, name, text)
                 for name, text in overrides["behavior_settings"]
             },
         }
@@ -1077,7 +1077,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     learn.add_argument("--quiet", action="store_true", help="no progress lines")
 
-    commands.add_parser(
+    behaviors = commands.add_parser(
         "behaviors",
         help="list the behaviours there are, other packages' too, with their own settings",
         description="List the behaviours fish can have: fishswarm's own and those other "
@@ -1085,6 +1085,22 @@ def build_parser() -> argparse.ArgumentParser:
         "comes from, and its own settings with their defaults (set with --behavior-setting "
         "NAME=VALUE or behavior_settings in a scenario file); and any package's behaviour "
         "that was left out, with why.",
+    )
+    behaviors.add_argument(
+        "--check",
+        metavar="NAME",
+        help="check the behaviour NAME against the rules every behaviour keeps, on random "
+        "perceptions (seeded): it decides when no fish sees anyone; a batch gives what each "
+        "fish alone gives, memory included; padding rows change nothing; the same inputs give "
+        "the same outputs. Exit 1 if it breaks one",
+    )
+    behaviors.add_argument(
+        "--behavior-setting",
+        dest="behavior_settings",
+        action="append",
+        type=_setting_pair,
+        metavar="NAME=VALUE",
+        help="with --check: one of the behaviour's own settings to check it with (repeat)",
     )
     export = commands.add_parser(
         "export",
