@@ -26,6 +26,7 @@ from fishswarm.sim.scenario import (
     STUDY_CODE_SWITCHES,
     ConfigError,
     Scenario,
+    behavior_text,
     switch_names,
 )
 
@@ -356,7 +357,8 @@ def plot(args: argparse.Namespace, scenario: Scenario | None) -> int:
         series = [tracker.metrics(s.ids, s.position, s.time) for s in recording.snapshots]
         metrics |= {name: np.array([m[name] for m in series]) for name in ORBIT_METRIC_NAMES}
     title = (
-        f"{_fish_recorded(arrays['ids'])}, {settings.get('behavior', '?')}, "
+        f"{_fish_recorded(arrays['ids'])}, "
+        f"{behavior_text(settings.get('behavior'), settings.get('behavior_settings'))}, "
         f"seed {settings.get('seed', '?')} ({args.recording.name})"
     )
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -437,7 +439,8 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
             viewer=args.fish,
             out=args.out,
             fps=args.fps,
-            title=f"{_fish_recorded(arrays['ids'])}, {settings.get('behavior', '?')}",
+            title=f"{_fish_recorded(arrays['ids'])}, "
+            f"{behavior_text(settings.get('behavior'), settings.get('behavior_settings'))}",
             on_frame=show,
             **_animated_formation(recording),
         )

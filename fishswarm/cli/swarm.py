@@ -72,7 +72,7 @@ from fishswarm.protocols.messages import ControlReply, ControlRequest, RobotOrde
 from fishswarm.sim import kernels
 from fishswarm.sim.decision_kernels import prepare, with_compiled_decisions
 from fishswarm.sim.physics import WorldParams, spawn_spacing, start_layout
-from fishswarm.sim.scenario import ConfigError, Scenario
+from fishswarm.sim.scenario import ConfigError, Scenario, behavior_text
 from fishswarm.study.live_view import open_live_view
 from fishswarm.study.progress import ProgressLine, bar, ids_text
 from fishswarm.study.recording import (
@@ -332,7 +332,9 @@ def run(args: argparse.Namespace, scenario: Scenario) -> int:
         except SecurityError as error:
             raise UserError(str(error)) from None
     print(
-        f"fishswarm: {scenario.fish} fish, {scenario.behavior}, {scenario.duration:g} s at "
+        f"fishswarm: {scenario.fish} fish, "
+        f"{behavior_text(scenario.behavior, scenario.behavior_settings)}, "
+        f"{scenario.duration:g} s at "
         f"{1 / scenario.control_period:g} Hz, seed {scenario.seed}, "
         f"{where_fish_run(settings.worker_processes)}, listening on "
         f"{settings.listen}",

@@ -11,7 +11,7 @@ import dataclasses
 import json
 import math
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeGuard
@@ -229,6 +229,21 @@ def _own_settings(behavior: str, given: object) -> tuple[tuple[str, bool | int |
             )
         checked[name] = float(value) if isinstance(default, float) else value
     return tuple(sorted(checked.items()))
+
+
+def behavior_text(
+    behavior: object, own: Mapping[str, object] | Iterable[tuple[str, object]] | None = ()
+) -> str:
+    """A behaviour and the own settings a run gave it, for a title or a first line:
+    ``nearest (distance 0.3, cruise 0.5)``; the name alone when none were given.
+
+    Args:
+        behavior: its name (anything else, e.g. None from a file that lacks it: ``?``).
+        own: its own settings, as a scenario holds them or a recording's table."""
+    pairs = own.items() if isinstance(own, Mapping) else (own or ())
+    given = ", ".join(f"{name} {setting_text(value)}" for name, value in pairs)
+    name = behavior if isinstance(behavior, str) else "?"
+    return f"{name} ({given})" if given else name
 
 
 def as_written(value: object) -> str:

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from fishswarm.protocols.jsontext import json_text
-from fishswarm.sim.scenario import Scenario
+from fishswarm.sim.scenario import Scenario, behavior_text
 from fishswarm.study.experiment import Experiment, RunOutcome
 from fishswarm.study.figures import FiguresUnavailable, experiment_figures
 
@@ -188,7 +188,9 @@ def markdown_table(experiment: Experiment, rows: list[dict[str, Any]]) -> str:
     lines = [
         f"# {experiment.title}",
         "",
-        f"{_fish_text(experiment)} fish, {scenario.behavior}, {scenario.duration:g} s at "
+        f"{_fish_text(experiment)} fish, "
+        f"{behavior_text(scenario.behavior, scenario.behavior_settings)}, "
+        f"{scenario.duration:g} s at "
         f"{1 / scenario.control_period:g} Hz; {experiment.spread_text}. {explain}"
         + _following_text(scenario),
         "",

@@ -54,6 +54,7 @@ def _run_nearest(site: Path, path: list[Path], tmp_path: Path) -> dict[str, obje
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert "warning" not in done.stderr, done.stderr
+    assert done.stderr.startswith("fishswarm: 4 fish, nearest (distance 0.3), 3 s at 1 Hz")
     result: dict[str, object] = json.loads(summary.read_text())
     return result
 

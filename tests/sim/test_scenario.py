@@ -444,3 +444,14 @@ def test_a_behaviours_own_settings_are_checked_kept_in_name_order_and_read_back(
             Scenario(behavior="nearest", behavior_settings=((name, "far"),))
     with pytest.raises(ConfigError, match=r"must be a finite number .*, got true$"):
         Scenario(behavior="nearest", behavior_settings=(("distance", True),))
+
+
+def test_a_behaviour_is_named_with_the_own_settings_a_run_gave_it() -> None:
+    from fishswarm.sim.scenario import behavior_text
+
+    assert behavior_text("nearest", (("cruise", 0.5), ("distance", 0.3))) == (
+        "nearest (cruise 0.5, distance 0.3)"
+    )
+    assert behavior_text("mine", {"fast": True, "mode": "pairs"}) == "mine (fast true, mode pairs)"
+    assert behavior_text("dispersion") == "dispersion"
+    assert behavior_text(None, None) == "?"  # a recording that does not say
