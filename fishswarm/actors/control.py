@@ -9,6 +9,7 @@ the world. A request that is not a control request is rejected and counted by th
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import trio
 import zenoh
@@ -89,12 +90,26 @@ async def ask_scenario(
         ) from None
     behavior = settings.scenario.get("behavior")
     if isinstance(behavior, str) and behavior not in behavior_names():
-        raise ConfigError(
+        raise UnreadableSettings(
             f"the world's run has the behaviour {behavior!r}, which is not installed here: "
             "another package's (docs/behaviors.md)? Install it beside fishswarm to measure "
-            "the run as its world does"
+            "the run as its world does",
+            settings.scenario,
         )
-    return Scenario.as_recorded(settings.scenario, source="the world's scenario")
+    try:
+        return Scenario.as_recorded(settings.scenario, source="the world's scenario")
+    except ConfigError as error:
+        raise UnreadableSettings(str(error), settings.scenario) from None
+
+
+class UnreadableSettings(ConfigError):
+    """A world told its run's settings, and they are not a scenario this fishswarm can run
+    (a behaviour not installed here, a setting of a later version): said, with the settings
+    as the world told them, which a recording can still hold."""
+
+    def __init__(self, message: str, settings: dict[str, Any]) -> None:
+        super().__init__(message)
+        self.settings = settings
 
 
 ASK_TIMEOUT = 2.0

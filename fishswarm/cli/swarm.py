@@ -20,7 +20,12 @@ import trio
 import zenoh
 
 from fishswarm.actors.channel import Channel
-from fishswarm.actors.control import ask_scenario, run_control, wait_for_scenario
+from fishswarm.actors.control import (
+    UnreadableSettings,
+    ask_scenario,
+    run_control,
+    wait_for_scenario,
+)
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.launcher import (
     EXIT_DEGRADED,
@@ -879,6 +884,8 @@ def observe(args: argparse.Namespace, scenario: Scenario | None) -> int:
                     ran = await wait_for_scenario(session, keys)
                 except ConfigError as error:
                     print(f"fishswarm observe: warning: {error}", file=sys.stderr)
+                    if recorder is not None and isinstance(error, UnreadableSettings):
+                        recorder.scenario(error.settings)  # as told, for whoever reads it
                     return
                 observer.measure_as(ran)
                 if recorder is not None:

@@ -12,7 +12,7 @@ import pytest
 import trio
 
 from fishswarm.actors.channel import Channel
-from fishswarm.actors.control import ask_scenario, run_control
+from fishswarm.actors.control import UnreadableSettings, ask_scenario, run_control
 from fishswarm.actors.fish import Fish, FishSettings
 from fishswarm.actors.session import SessionSettings, open_session
 from fishswarm.actors.world import World, WorldSettings
@@ -263,9 +263,12 @@ def test_an_answer_on_the_scenario_key_that_is_no_run_settings_is_refused_with_w
                     await ask_scenario(other, keys, timeout=1.0)
 
             nursery.start_soon(answer_badly)
-            with trio.fail_after(10), pytest.raises(ConfigError, match=reason):
+            with trio.fail_after(10), pytest.raises(ConfigError, match=reason) as caught:
                 await ask_until_answered()
             nursery.cancel_scope.cancel()
+            if "gone-fishing" in reason:  # said, with the settings as told, to record them
+                assert isinstance(caught.value, UnreadableSettings)
+                assert caught.value.settings == {"behavior": "gone-fishing", "fish": 3}
 
     run_trio(main)
 
