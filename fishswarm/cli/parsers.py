@@ -519,7 +519,18 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
         # A controller the file names stays when --behavior changes the behaviour.
         scenario = base.with_settings(overrides, controller_chosen="controller" in table)
     except (TypeError, ConfigError) as error:
-        raise ConfigError(_named_by_flag(str(error), overrides)) from None
+        said = str(error)
+        if (
+            said.startswith("behavior_settings: ")
+            and overrides["behavior"] is not None
+            and overrides["behavior_settings"] is None
+        ):
+            raise ConfigError(
+                f"{path}: {said} (the file's behavior_settings are for its behavior "
+                f"{base.behavior}, and --behavior makes it {overrides['behavior']}: leave "
+                "one of them out)"
+            ) from None
+        raise ConfigError(_named_by_flag(said, overrides)) from None
     _refuse_inapplicable(overrides, scenario)
     for warning in _unused_settings(table, overrides, scenario, path):
         print(f"fishswarm {args.command}: warning: {warning}", file=sys.stderr)

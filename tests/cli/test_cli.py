@@ -1407,6 +1407,14 @@ def test_a_behaviours_own_settings_come_from_the_file_and_the_command_line(
     named = "--behavior-setting: dispersion has no setting 'distance'; it has no settings"
     with pytest.raises(ConfigError, match=f"^{named}"):
         scenario("--behavior-setting", "distance=1")
+    # The file's table, for its behaviour, under another --behavior: said so.
+    with pytest.raises(ConfigError) as refused:
+        scenario("--config", str(config), "--behavior", "aggregation")
+    assert str(refused.value) == (
+        f"{config}: behavior_settings: aggregation has no setting 'cruise'; it has no settings "
+        "of its own (the file's behavior_settings are for its behavior nearest, and --behavior "
+        "makes it aggregation: leave one of them out)"
+    )
 
 
 def test_a_behaviour_setting_that_is_not_name_equals_value_is_refused() -> None:
