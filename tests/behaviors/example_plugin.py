@@ -28,3 +28,17 @@ def registered() -> Behavior:
     if BEHAVIORS.get(family.name) is not family:
         register(family)
     return family
+
+
+def installed(site: Path, name: str, entry_points: str) -> None:
+    """A distribution's metadata in ``site``, as pip leaves it: what Python's
+    importlib.metadata reads the entry points from (the module itself comes from elsewhere
+    on the path, e.g. :data:`EXAMPLE`)."""
+    info = site / f"{name.replace('-', '_')}-0.1.0.dist-info"
+    info.mkdir(parents=True)
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1.0\n")
+    (info / "entry_points.txt").write_text(entry_points)
+
+
+NEAREST_ENTRY_POINT = "[fishswarm.behaviors]\nnearest = fishswarm_nearest:NEAREST\n"
+"""The example's entry point, as its pyproject.toml names it."""

@@ -12,21 +12,12 @@ from pathlib import Path
 
 import pytest
 
-from tests.behaviors.example_plugin import EXAMPLE
+from tests.behaviors.example_plugin import EXAMPLE, NEAREST_ENTRY_POINT, installed
 from tests.conftest import free_port
 
 pytestmark = pytest.mark.integration
 
 FISHSWARM = [sys.executable, "-m", "fishswarm"]
-
-
-def _installed(site: Path, name: str, entry_points: str) -> None:
-    """A distribution's metadata in ``site``, as pip leaves it: what Python's
-    importlib.metadata reads the entry points from."""
-    info = site / f"{name.replace('-', '_')}-0.1.0.dist-info"
-    info.mkdir(parents=True)
-    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {name}\nVersion: 0.1.0\n")
-    (info / "entry_points.txt").write_text(entry_points)
 
 
 def _fishswarm(
@@ -61,9 +52,7 @@ def _run_nearest(site: Path, path: list[Path], tmp_path: Path) -> dict[str, obje
 
 def test_another_packages_behaviour_runs_in_the_launcher_and_its_workers(tmp_path: Path) -> None:
     site = tmp_path / "site"
-    _installed(
-        site, "fishswarm-nearest", "[fishswarm.behaviors]\nnearest = fishswarm_nearest:NEAREST\n"
-    )
+    installed(site, "fishswarm-nearest", NEAREST_ENTRY_POINT)
     help_text = _fishswarm("run", "--help", path=[site, EXAMPLE], cwd=tmp_path).stdout
     assert "replica, formation, nearest (default dispersion)" in " ".join(help_text.split())
     summary = _run_nearest(site, [site, EXAMPLE], tmp_path)
@@ -77,10 +66,8 @@ def test_another_packages_behaviour_runs_in_the_launcher_and_its_workers(tmp_pat
 
 def test_the_behaviours_are_listed_with_their_packages_and_own_settings(tmp_path: Path) -> None:
     site = tmp_path / "site"
-    _installed(
-        site, "fishswarm-nearest", "[fishswarm.behaviors]\nnearest = fishswarm_nearest:NEAREST\n"
-    )
-    _installed(site, "fishswarm-broken", "[fishswarm.behaviors]\ngone = no_such_module_here:GONE\n")
+    installed(site, "fishswarm-nearest", NEAREST_ENTRY_POINT)
+    installed(site, "fishswarm-broken", "[fishswarm.behaviors]\ngone = no_such_module_here:GONE\n")
     done = _fishswarm("behaviors", path=[site, EXAMPLE], cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     lines = done.stdout.splitlines()
@@ -102,9 +89,7 @@ def test_the_behaviours_are_listed_with_their_packages_and_own_settings(tmp_path
 
 def test_an_experiment_sweeps_a_behaviours_own_setting(tmp_path: Path) -> None:
     site = tmp_path / "site"
-    _installed(
-        site, "fishswarm-nearest", "[fishswarm.behaviors]\nnearest = fishswarm_nearest:NEAREST\n"
-    )
+    installed(site, "fishswarm-nearest", NEAREST_ENTRY_POINT)
     experiment = tmp_path / "spacing.toml"
     experiment.write_text(
         '[experiment]\nname = "spacing"\nparameter = "distance"\nlabel = "kept distance (m)"\n'
@@ -130,7 +115,7 @@ def test_an_experiment_sweeps_a_behaviours_own_setting(tmp_path: Path) -> None:
 
 def test_a_broken_behaviour_package_is_said_and_left_out(tmp_path: Path) -> None:
     site = tmp_path / "site"
-    _installed(site, "fishswarm-broken", "[fishswarm.behaviors]\ngone = no_such_module_here:GONE\n")
+    installed(site, "fishswarm-broken", "[fishswarm.behaviors]\ngone = no_such_module_here:GONE\n")
     done = _fishswarm(
         "run", "--behavior", "gone", "--fish", "2", "--duration", "1",
         path=[site], cwd=tmp_path,

@@ -357,3 +357,37 @@ def test_a_view_that_loses_its_router_says_so_and_says_when_the_world_is_back() 
             _close(process, lines)
     finally:
         end_processes([process])
+
+
+@pytest.mark.slow
+def test_a_view_without_the_runs_behaviour_installed_shows_the_run_all_the_same(
+    tmp_path: Path,
+) -> None:
+    # The world runs another package's behaviour, not installed where the view runs: the
+    # view failed with "error: the world's run has the behaviour ...", exit 2.
+    import os
+
+    from tests.behaviors.example_plugin import EXAMPLE, NEAREST_ENTRY_POINT, installed
+
+    site = tmp_path / "site"
+    installed(site, "fishswarm-nearest", NEAREST_ENTRY_POINT)
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    process, lines = _view("--connect", endpoint)
+    run = subprocess.Popen(
+        [*FISHSWARM, "run", "--behavior", "nearest", "--fish", "3", "--duration", "4",
+         "--time", "realtime", "--quiet", "--listen", endpoint,
+         "--record", str(tmp_path / "r.mcap"), "--summary", str(tmp_path / "r.json")],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, text=True,
+        env={**os.environ, "PYTHONPATH": f"{site}{os.pathsep}{EXAMPLE}"},
+    )  # fmt: skip
+    try:
+        said = lines.wait_for(
+            r"warning: the world's run has the behaviour 'nearest'.*$", timeout=60
+        )
+        assert said[0].endswith("; the view shows run 1 without its settings"), said[0]
+        lines.wait_for(r"the run has ended \(([2-9]|\d\d+) snapshots shown\)", timeout=60)
+        assert run.wait(timeout=30) == 0
+        _close(process, lines)
+    finally:
+        end_processes([process, run])
