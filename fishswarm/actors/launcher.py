@@ -41,6 +41,7 @@ from fishswarm.actors.workers import (
     Worker,
     WorkerSpec,
     school_of,
+    sole_error,
     split_fish,
     start_worker,
     stop_worker,
@@ -238,7 +239,7 @@ async def launch_swarm(
                         )
                         for index, ids in enumerate(schools or [everyone])
                     ]
-                    failed_here: list[bool] = []
+                    failed_here = False
 
                     def stop_if_none_left() -> None:
                         """Every fish this run started has failed, and no other fish (a
@@ -247,7 +248,9 @@ async def launch_swarm(
                         nonlocal none_left
                         if (here and not failed_here) or not all(w.lost for w in workers):
                             return
-                        others = world.roster.alive - set(everyone)
+                        # Fish beyond this run's own (robots) may come back after a lost
+                        # link: a run that ever had one goes on.
+                        others = world.unexpected or world.roster.alive - set(everyone)
                         if others or world.state_name in ("stopping", "stopped", "finished"):
                             return
                         none_left = True
@@ -259,7 +262,8 @@ async def launch_swarm(
                         world.control(ControlRequest("stop"))
 
                     def lost_here() -> None:
-                        failed_here.append(True)
+                        nonlocal failed_here
+                        failed_here = True
                         stop_if_none_left()
 
                     if here:
@@ -412,8 +416,7 @@ async def _run_fish_here(
     except Exception as error:
         if not up:
             raise
-        while isinstance(error, ExceptionGroup) and len(error.exceptions) == 1:
-            error = error.exceptions[0]
+        error = sole_error(error)
         failure = (
             f"the fish in the launcher's process (fish {fish_span(fish.settings.fish_ids)}) "
             f"failed: {type(error).__name__}: {error}"

@@ -241,7 +241,10 @@ class Observer:
     async def wait_for_world_back(self) -> None:
         """Wait until the world of the run watched, once left, is back on the swarm (bound
         it with a timeout): its token seen again, as after a lost router came back. Its
-        leaving may then be waited for again."""
+        leaving may then be waited for again. Returns at once if it is back already (its
+        token may return while its end is still being waited for)."""
+        if not self._world_left.is_set():
+            return
         await self._world_back.wait()
 
     def world_said_ended(self, run: int | None = None) -> bool | None:

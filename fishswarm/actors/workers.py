@@ -127,8 +127,7 @@ def worker_main(spec: WorkerSpec, connection: Connection) -> None:
     except Exception as error:
         # Said to the launcher, which names it with the fish it loses; a traceback only for
         # what is not a behaviour's own error (that one says all there is to say).
-        while isinstance(error, ExceptionGroup) and len(error.exceptions) == 1:
-            error = error.exceptions[0]
+        error = sole_error(error)
         with contextlib.suppress(BrokenPipeError, OSError):
             connection.send(("failed", f"{type(error).__name__}: {error}"))
         if not isinstance(error, BehaviorError):
@@ -136,6 +135,14 @@ def worker_main(spec: WorkerSpec, connection: Connection) -> None:
         sys.exit(1)
     with contextlib.suppress(BrokenPipeError, OSError):
         connection.send(("statistics", statistics))
+
+
+def sole_error(error: Exception) -> Exception:
+    """The one error inside nested groups of one (trio's nurseries wrap what fails in
+    them), to say it as it was raised; a group of several as it is."""
+    while isinstance(error, ExceptionGroup) and len(error.exceptions) == 1:
+        error = error.exceptions[0]
+    return error
 
 
 async def _serve(spec: WorkerSpec, connection: Connection) -> FishStatistics:

@@ -137,14 +137,15 @@ def _alone(perception: Perception, inbox: Inbox, row: int) -> tuple[Perception, 
     )
 
 
-def _differs(one: Decision, other: Decision, rows: slice | int, row: int) -> str | None:
-    """How decision rows differ, in words (None: they are the same, bit for bit)."""
+def _differs(one: Decision, other: Decision, index: int, row: int) -> str | None:
+    """How fish ``index`` of one decision and fish ``row`` of another differ, in words
+    (None: they are the same, bit for bit)."""
     parts = (
-        ("fins", one.fins[rows], other.fins[row]),
-        ("LEDs", one.led[rows], other.led[row]),
-        ("broadcast", one.outbox.values[rows], other.outbox.values[row]),
-        ("broadcast kind", one.outbox.kind[rows], other.outbox.kind[row]),
-        ("broadcast sent", one.outbox.mask[rows], other.outbox.mask[row]),
+        ("fins", one.fins[index], other.fins[row]),
+        ("LEDs", one.led[index], other.led[row]),
+        ("broadcast", one.outbox.values[index], other.outbox.values[row]),
+        ("broadcast kind", one.outbox.kind[index], other.outbox.kind[row]),
+        ("broadcast sent", one.outbox.mask[index], other.outbox.mask[row]),
     )
     for name, mine, theirs in parts:
         if not np.array_equal(mine, theirs):

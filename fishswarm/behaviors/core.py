@@ -322,6 +322,8 @@ def _steer(
         raise wrong(f"its steer must return (memory, Steering), got {type(result).__name__}")
     steering = result[1]
     target = np.asarray(steering.target)
+    if target.dtype.kind not in "fiu":
+        raise wrong(f"its target must hold numbers, got dtype {target.dtype}")
     if target.shape != (count, 3):
         raise wrong(f"its target must be (B, 3) = ({count}, 3) in m, got shape {target.shape}")
     if not np.isfinite(target).all():

@@ -29,6 +29,8 @@ from fishswarm.behaviors.lennard_jones import AGGREGATION, DISPERSION, STUDY_FOR
 from fishswarm.behaviors.orbit import MILLING, ORBIT, WALTZ
 from fishswarm.behaviors.replica import REPLICA
 from fishswarm.bluebot.control import CONTROLLERS, PidGains
+from fishswarm.protocols.checks import MAX_TEXT
+from fishswarm.protocols.messages import MAX_SETTING_LIST, MAX_SETTING_TEXT
 
 STUDY_HOMING_SWITCH = "homing"
 """The study-code switch (a scenario's ``study_code``) that selects the study's homing
@@ -138,9 +140,17 @@ def _malformed(family: Behavior) -> str | None:
             f"its settings must be a dict of names and defaults, e.g. {{'gain': 0.5}}, got a "
             f"{type(family.settings).__name__}"
         )
+    if len(family.settings) > MAX_SETTING_LIST:
+        # A run's settings travel in one message, which takes a table of at most this many.
+        return f"it has {len(family.settings)} settings: at most {MAX_SETTING_LIST} can be sent"
     for setting, default in family.settings.items():
-        if not (isinstance(setting, str) and setting.isidentifier()):
-            return f"its setting {setting!r} is not a name (letters, digits and _)"
+        if not (isinstance(setting, str) and setting.isidentifier() and len(setting) <= MAX_TEXT):
+            return (
+                f"its setting {setting!r} is not a name (letters, digits and _, at most "
+                f"{MAX_TEXT} of them)"
+            )
+        if isinstance(default, str) and len(default) > MAX_SETTING_TEXT:
+            return f"its setting {setting}'s default is longer than {MAX_SETTING_TEXT} characters"
         if type(default) not in PLAIN_SETTING_TYPES or (
             isinstance(default, float) and not math.isfinite(default)
         ):

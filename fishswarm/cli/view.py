@@ -190,7 +190,8 @@ def _attach(args: argparse.Namespace, settings: ViewSettings) -> None:
                         except ConfigError as error:
                             # A behaviour not installed here, say: the fish are shown all
                             # the same, in the study's tank.
-                            say(f"warning: {error}; the view shows run {number} without its settings")
+                            without = f"the view shows run {number} without its settings"
+                            say(f"warning: {error}; {without}")
                             return
                         finally:
                             asking.cancel_scope.cancel()

@@ -51,7 +51,7 @@ from fishswarm.bluebot.vision import Vision
 from fishswarm.formations.maps import MAX_FISH as MAX_MAP_FISH
 from fishswarm.protocols.checks import MAX_TICK
 from fishswarm.protocols.keys import KeySpace
-from fishswarm.protocols.messages import FORMATION_SHAPES
+from fishswarm.protocols.messages import FORMATION_SHAPES, MAX_SETTING_TEXT
 from fishswarm.sim.wake import WAKE_LENGTH, WAKE_WIDTH
 
 SPAWN_REGIONS = ("ball", "tank")
@@ -222,6 +222,11 @@ def _own_settings(behavior: str, given: object) -> tuple[tuple[str, bool | int |
             raise ConfigError(f"behavior_settings: {behavior} has no setting {name!r}; {known}")
         default = declared[name]
         kind, words = _SETTING_KINDS[type(default).__name__]
+        if isinstance(value, str) and len(value) > MAX_SETTING_TEXT:
+            raise ConfigError(
+                f"behavior_settings: {name} of {behavior} must be at most {MAX_SETTING_TEXT} "
+                f"characters, got {len(value)}"
+            )
         if not kind(value):
             raise ConfigError(
                 f"behavior_settings: {name} of {behavior} must be {words} (its default is "

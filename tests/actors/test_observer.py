@@ -312,10 +312,11 @@ def test_a_world_whose_token_comes_back_has_not_left_and_its_end_is_waited_for_a
             await nursery.start(observer.run, bus)
             world = bus.declare_token(KEYS.alive("world", 3))
             bus.put(KEYS.snapshot, of_run(0, 3))
-            nursery.start_soon(note_the_return)
             nursery.start_soon(_note_the_end, observer, ended)
             await trio.sleep(1.0)
             world.undeclare()  # at 1 s: the router lost
+            await trio.sleep(0)
+            nursery.start_soon(note_the_return)
             await trio.sleep(2.0)
             world = bus.declare_token(KEYS.alive("world", 3))  # at 3 s: back
             await trio.sleep(0.5)
@@ -331,6 +332,30 @@ def test_a_world_whose_token_comes_back_has_not_left_and_its_end_is_waited_for_a
     ended, back = run_mock(main)
     assert back == [3.0]
     assert ended == [2.0, 6.5]  # quiet 1 s after each leaving
+
+
+def test_a_world_back_before_its_return_is_waited_for_is_known_at_once() -> None:
+    """The token back within the second the end of the run is still settled in (a view
+    then asks whether it is back): the return was told to no one, and missed for good."""
+
+    async def main() -> float:
+        bus = MemoryBus()
+        observer = Observer(KEYS)
+        async with trio.open_nursery() as nursery:
+            await nursery.start(observer.run, bus)
+            world = bus.declare_token(KEYS.alive("world", 3))
+            bus.put(KEYS.snapshot, of_run(0, 3))
+            await trio.sleep(1.0)
+            world.undeclare()
+            await trio.sleep(0.5)
+            world = bus.declare_token(KEYS.alive("world", 3))  # back, before anyone asks
+            await trio.sleep(2.0)
+            with trio.fail_after(1.0):
+                await observer.wait_for_world_back()
+            nursery.cancel_scope.cancel()
+        return trio.current_time()
+
+    assert run_mock(main) == 3.5
 
 
 def test_a_world_token_that_names_no_run_neither_ends_the_run_nor_stops_the_observer() -> None:

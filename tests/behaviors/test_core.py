@@ -463,6 +463,10 @@ def _steering_of(target: np.ndarray, led: np.ndarray | None = None) -> Steering:
             "its target is not finite for fish rows [1, 2]",
         ),
         (
+            lambda m, p, i, *, params: (m, _steering_of(np.array([[0.3, None, 0.0]] * p.count))),
+            "its target must hold numbers, got dtype object",
+        ),
+        (
             lambda m, p, i, *, params: (m, _steering_of(np.zeros((p.count, 3)), np.ones(1, bool))),
             "its led must have shape (3,), got (1,)",
         ),

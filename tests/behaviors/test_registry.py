@@ -47,6 +47,7 @@ def points(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[importlib.metadata.
     monkeypatch.setattr(importlib.metadata, "entry_points", entry_points)
     monkeypatch.setattr(registry, "_plugins_read", False)
     monkeypatch.setattr(registry, "_plugin_failures", [])
+    monkeypatch.setattr(registry, "_plugin_sources", {})
     for name in set(registry.BEHAVIORS) - set(OWN):
         del registry.BEHAVIORS[name]
     yield given
@@ -147,7 +148,10 @@ def test_a_behaviour_with_a_controller_or_spawn_radius_fishswarm_lacks_is_left_o
 @pytest.mark.parametrize(
     ("settings", "reason"),
     [
-        ({"two words": 1.0}, "its setting 'two words' is not a name (letters, digits and _)"),
+        (
+            {"two words": 1.0},
+            "its setting 'two words' is not a name (letters, digits and _, at most 64 of them)",
+        ),
         ({"gain": float("nan")}, "its setting gain's default must be a finite number, text or"),
         ({"gain": [1, 2]}, "its setting gain's default must be a finite number, text or"),
         (
@@ -159,6 +163,9 @@ def test_a_behaviour_with_a_controller_or_spawn_radius_fishswarm_lacks_is_left_o
             [("gain", 1.0)],
             "its settings must be a dict of names and defaults, e.g. {'gain': 0.5}, got a list",
         ),
+        # More than a run's settings message carries: every run of it would fail.
+        ({f"s{i}": 1.0 for i in range(65)}, "it has 65 settings: at most 64 can be sent"),
+        ({"label": "x" * 4097}, "its setting label's default is longer than 4096 characters"),
     ],
 )
 def test_a_behaviour_whose_own_settings_are_not_plain_values_is_left_out(
@@ -174,7 +181,9 @@ def test_a_behaviour_whose_own_settings_are_not_plain_values_is_left_out(
     points.append(_point("test-signal", "tests.behaviors.signal_behavior:ODD_SETTINGS"))
     assert names() == OWN  # and the rest of fishswarm as before
     assert plugin_failures()[0].reason.startswith(reason), plugin_failures()[0].reason
-    with pytest.raises(ValueError, match="'test-signal' cannot be registered: its setting"):
+    with pytest.raises(
+        ValueError, match=r"'test-signal' cannot be registered: (its setting|it has 65)"
+    ):
         register(odd)
     assert behavior_named("dispersion").name == "dispersion"
 

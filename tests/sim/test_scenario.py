@@ -455,3 +455,17 @@ def test_a_behaviour_is_named_with_the_own_settings_a_run_gave_it() -> None:
     assert behavior_text("mine", {"fast": True, "mode": "pairs"}) == "mine (fast true, mode pairs)"
     assert behavior_text("dispersion") == "dispersion"
     assert behavior_text(None, None) == "?"  # a recording that does not say
+
+
+def test_a_behaviours_text_setting_longer_than_a_message_carries_is_refused() -> None:
+    import dataclasses
+
+    from fishswarm.behaviors.registry import BEHAVIORS, register
+    from tests.behaviors.signal_behavior import SIGNAL
+
+    labelled = dataclasses.replace(SIGNAL, name="test-labelled", settings={"label": "a"})
+    if labelled.name not in BEHAVIORS:
+        register(labelled)
+    assert Scenario(behavior="test-labelled", behavior_settings=(("label", "b" * 4096),))
+    with pytest.raises(ConfigError, match="label of test-labelled must be at most 4096 characters"):
+        Scenario(behavior="test-labelled", behavior_settings=(("label", "b" * 4097),))
