@@ -6,8 +6,7 @@ import argparse
 
 from fishswarm.behaviors.conformance import check_decisions
 from fishswarm.behaviors.registry import behavior_named, names, plugin_failures, plugin_source
-from fishswarm.cli.parsers import setting_value
-from fishswarm.sim.scenario import ConfigError, Scenario, as_written
+from fishswarm.sim.scenario import ConfigError, Scenario, as_written, own_setting_from_text
 
 
 def behaviors(args: argparse.Namespace, scenario: Scenario | None) -> int:
@@ -35,7 +34,7 @@ def behaviors(args: argparse.Namespace, scenario: Scenario | None) -> int:
 
 
 def _check(name: str, given: list[tuple[str, str]]) -> int:
-    settings = {setting: setting_value(name, setting, text) for setting, text in given}
+    settings = {setting: own_setting_from_text(name, setting, text) for setting, text in given}
     params = Scenario(behavior=name, behavior_settings=tuple(settings.items())).fish_params()
     found = check_decisions(params)
     print(f"{name}: checked on random perceptions (seeded)")

@@ -16,8 +16,8 @@ from fishswarm.actors.fish import PERCEPTION_TIMEOUT
 from fishswarm.actors.robot import ROBOT_PERCEPTION_TIMEOUT
 from fishswarm.behaviors.formation import DEFAULT_SPACING
 from fishswarm.behaviors.lennard_jones import AGGREGATION_DISTANCE
-from fishswarm.behaviors.registry import behavior_named, plugin_failures
 from fishswarm.behaviors.registry import names as behavior_names
+from fishswarm.behaviors.registry import plugin_failures
 from fishswarm.bluebot.parameters import BLIND_WIDTH, SPHERE_RADIUS
 from fishswarm.cli.study import add_parsers as add_study_parsers
 from fishswarm.learning.arena import REPLICA_KINDS
@@ -33,6 +33,7 @@ from fishswarm.sim.scenario import (
     ConfigError,
     Scenario,
     applies_anyway,
+    own_setting_from_text,
     scenario_table,
     setting_text,
     switch_names,
@@ -458,29 +459,11 @@ def _named_by_flag(message: str, given: Mapping[str, Any]) -> str:
 
 def _setting_pair(text: str) -> tuple[str, str]:
     """``NAME=VALUE`` as a pair of texts (an argparse type): the value is read as its
-    setting's kind once the behaviour is known (:func:`setting_value`)."""
+    setting's kind once the behaviour is known (``own_setting_from_text``)."""
     name, equals, value = text.partition("=")
     if not equals or not name.strip():
         raise argparse.ArgumentTypeError(f"{text!r} is not NAME=VALUE, e.g. gain=0.5")
     return name.strip(), value.strip()
-
-
-def setting_value(behavior: str, name: str, text: str) -> bool | int | float | str:
-    """``text`` given on the command line for the setting ``name`` of ``behavior``, read as
-    the kind of its default; as it is where it cannot be (the scenario then says why)."""
-    try:
-        default = behavior_named(behavior).settings.get(name)
-    except ValueError:
-        return text
-    if isinstance(default, bool):
-        return {"true": True, "false": False}.get(text, text)
-    for kind in (int, float):
-        if isinstance(default, kind):
-            try:
-                return kind(text)
-            except ValueError:
-                return text
-    return text
 
 
 def scenario_from(args: argparse.Namespace) -> Scenario:
@@ -496,7 +479,7 @@ def scenario_from(args: argparse.Namespace) -> Scenario:
         overrides["behavior_settings"] = {
             **(dict(from_file) if isinstance(from_file, Mapping) else {}),
             **{
-                name: setting_value(behavior, name, text)
+                name: own_setting_from_text(behavior, name, text)
                 for name, text in overrides["behavior_settings"]
             },
         }

@@ -236,6 +236,24 @@ def _own_settings(behavior: str, given: object) -> tuple[tuple[str, bool | int |
     return tuple(sorted(checked.items()))
 
 
+def own_setting_from_text(behavior: str, name: str, text: str) -> bool | int | float | str:
+    """``text`` given on a command line for the own setting ``name`` of ``behavior``, read
+    as the kind of its default; as it is where it cannot be (the scenario then says why)."""
+    try:
+        default = behavior_named(behavior).settings.get(name)
+    except ValueError:
+        return text
+    if isinstance(default, bool):
+        return {"true": True, "false": False}.get(text, text)
+    for kind in (int, float):
+        if isinstance(default, kind):
+            try:
+                return kind(text)
+            except ValueError:
+                return text
+    return text
+
+
 def behavior_text(
     behavior: object, own: Mapping[str, object] | Iterable[tuple[str, object]] | None = ()
 ) -> str:
