@@ -7,10 +7,12 @@ import queue
 import re
 import socket
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
 from contextlib import asynccontextmanager
+from pathlib import Path
 from typing import TypeVar
 
 import pytest
@@ -46,6 +48,20 @@ def free_port() -> int:
             _HANDED_OUT.add(port)
             return port
     raise RuntimeError("no free port on 127.0.0.1 that this test session has not used")
+
+
+def pip(*args: str, cwd: Path) -> None:
+    """Run this interpreter's pip quietly in ``cwd`` (offline work: building and installing
+    wheels from folders here), failing the test with pip's output if it fails."""
+    done = subprocess.run(
+        [sys.executable, "-m", "pip", "-q", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        cwd=cwd,
+    )
+    assert done.returncode == 0, done.stderr
 
 
 def wait_for_port(port: int, *, timeout: float = 20.0) -> None:

@@ -9,27 +9,26 @@ from pathlib import Path
 
 import pytest
 
+from tests.conftest import pip
+
 ROOT = Path(__file__).resolve().parents[1]
 
 pytestmark = pytest.mark.integration
 
 
 def test_an_installed_wheel_finds_the_studys_experiments(tmp_path: Path) -> None:
-    def pip(*args: str) -> None:
-        result = subprocess.run(
-            [sys.executable, "-m", "pip", "-q", *args],
-            capture_output=True,
-            text=True,
-            timeout=300,
-            check=False,
-            cwd=tmp_path,
-        )
-        assert result.returncode == 0, result.stderr
-
-    pip("wheel", "--no-deps", "--no-build-isolation", "-w", str(tmp_path / "dist"), str(ROOT))
+    pip(
+        "wheel",
+        "--no-deps",
+        "--no-build-isolation",
+        "-w",
+        str(tmp_path / "dist"),
+        str(ROOT),
+        cwd=tmp_path,
+    )
     (wheel,) = (tmp_path / "dist").glob("fishswarm-*.whl")
     site = tmp_path / "site"
-    pip("install", "--no-deps", "--target", str(site), str(wheel))
+    pip("install", "--no-deps", "--target", str(site), str(wheel), cwd=tmp_path)
     program = (
         f"import sys; sys.path.insert(0, {str(site)!r})\n"
         "import fishswarm.study.experiment as e\n"

@@ -87,7 +87,7 @@ def check_decisions(
     return Conformance(tuple(said for said, _ in checks), tuple(problems))
 
 
-def _perception(rng: np.random.Generator, count: int, time: float, width: int) -> Perception:
+def random_perception(rng: np.random.Generator, count: int, time: float, width: int) -> Perception:
     """B fish that see up to ``width`` neighbours each (padding zero) and a landmark or not."""
     neighbors = rng.normal(0.0, 0.5, (count, width, 3))
     seen = rng.integers(0, width + 1, count)
@@ -103,7 +103,7 @@ def _perception(rng: np.random.Generator, count: int, time: float, width: int) -
     )
 
 
-def _inbox(rng: np.random.Generator, count: int) -> Inbox:
+def random_inbox(rng: np.random.Generator, count: int) -> Inbox:
     """What B fish heard: signals, whose numbers may be anything (a formation flag's must
     make sense, and the formation behaviour refuses ones that do not)."""
     signal = BROADCAST_KINDS.index("signal")
@@ -117,7 +117,7 @@ def _inbox(rng: np.random.Generator, count: int) -> Inbox:
     return inbox_of(heard)
 
 
-def _alone(perception: Perception, inbox: Inbox, row: int) -> tuple[Perception, Inbox]:
+def alone(perception: Perception, inbox: Inbox, row: int) -> tuple[Perception, Inbox]:
     """One fish's perception and inbox, its padding cut to what it really has."""
     seen = int(perception.neighbor_mask[row].sum())
     heard = int(inbox.mask[row].sum())
@@ -158,7 +158,7 @@ def _no_one_seen(
 ) -> str | None:
     memory = FishMemory.fresh(params, fish)
     for step in range(decisions):
-        perception = _perception(rng, fish, 1.0 + step, 0)
+        perception = random_perception(rng, fish, 1.0 + step, 0)
         memory, _ = decide(memory, perception, Inbox.empty(fish), params=params)
     return None
 
@@ -170,11 +170,11 @@ def _batch_is_loop(
     singles = [FishMemory.fresh(params, 1) for _ in range(fish)]
     for step in range(decisions):
         # Jittered decision times: controllers that integrate see uneven periods.
-        perception = _perception(rng, fish, 1.0 + step + rng.uniform(-0.2, 0.2), WIDTH)
-        inbox = _inbox(rng, fish)
+        perception = random_perception(rng, fish, 1.0 + step + rng.uniform(-0.2, 0.2), WIDTH)
+        inbox = random_inbox(rng, fish)
         batch, decision = decide(batch, perception, inbox, params=params)
         for row in range(fish):
-            own, own_inbox = _alone(perception, inbox, row)
+            own, own_inbox = alone(perception, inbox, row)
             singles[row], single = decide(singles[row], own, own_inbox, params=params)
             wrong = _differs(single, decision, 0, row)
             if wrong is not None:
@@ -188,8 +188,8 @@ def _padding_is_ignored(
     plain = FishMemory.fresh(params, fish)
     padded = FishMemory.fresh(params, fish)
     for step in range(decisions):
-        perception = _perception(rng, fish, 1.0 + step, WIDTH)
-        inbox = _inbox(rng, fish)
+        perception = random_perception(rng, fish, 1.0 + step, WIDTH)
+        inbox = random_inbox(rng, fish)
         # Three more rows each, masked out, holding what padding is never promised to hold.
         extra = rng.normal(0.0, 3.0, (fish, 3, 3))
         wide = dataclasses.replace(
@@ -215,8 +215,8 @@ def _repeats(params: FishParams, fish: int, decisions: int, rng: np.random.Gener
     first = FishMemory.fresh(params, fish)
     again = FishMemory.fresh(params, fish)
     for step in range(decisions):
-        perception = _perception(rng, fish, 1.0 + step, WIDTH)
-        inbox = _inbox(rng, fish)
+        perception = random_perception(rng, fish, 1.0 + step, WIDTH)
+        inbox = random_inbox(rng, fish)
         first, decision = decide(first, perception, inbox, params=params)
         again, repeated = decide(again, perception, inbox, params=params)
         for row in range(fish):

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fishswarm.behaviors.conformance import WIDTH, alone, random_inbox, random_perception
 from fishswarm.behaviors.core import (
     Behavior,
     BehaviorError,
@@ -32,7 +33,6 @@ from fishswarm.behaviors.core import (
 from fishswarm.behaviors.registry import BEHAVIORS, behavior_named, fish_params, register
 from fishswarm.behaviors.replica import STUDY_SCALE, replica_motion
 from fishswarm.learning.arena import Arena
-from fishswarm.protocols.messages import BROADCAST_WIDTH
 from tests.behaviors import example_plugin
 from tests.behaviors.signal_behavior import SIGNAL, registered
 
@@ -49,61 +49,6 @@ def _settings(behavior: str, controller: str, model: Path) -> dict[str, object]:
         "model": str(model),
         "control_period": 1.0,
     }
-
-
-def _perception(rng: np.random.Generator, count: int, time: float) -> Perception:
-    width = 6
-    neighbors = rng.normal(0, 0.5, (count, width, 3))
-    seen = rng.integers(0, width + 1, count)
-    mask = np.arange(width)[None, :] < seen[:, None]
-    neighbors[~mask] = 0.0
-    landmarks = rng.normal(0, 0.6, (count, 1, 3))
-    landmark_mask = rng.uniform(size=(count, 1)) < 0.8
-    landmarks[~landmark_mask] = 0.0
-    return Perception(
-        np.full(count, time),
-        rng.uniform(0.2, 1.0, count),
-        neighbors,
-        mask,
-        landmarks,
-        landmark_mask,
-    )
-
-
-def _inbox(rng: np.random.Generator, count: int) -> Inbox:
-    heard = [
-        [
-            (0, rng.integers(-5, 5, BROADCAST_WIDTH), rng.normal(0, 0.4, 3))
-            for _ in range(int(rng.integers(0, 3)))
-        ]
-        for _ in range(count)
-    ]
-    return inbox_of(heard)
-
-
-def _alone(perception: Perception, inbox: Inbox, row: int) -> tuple[Perception, Inbox]:
-    """One fish's perception and inbox, its padding cut to what it really has."""
-    seen = int(perception.neighbor_mask[row].sum())
-    heard = int(inbox.mask[row].sum())
-    rows = np.array([row])
-    own = take_rows(perception, rows)
-    own_inbox = take_rows(inbox, rows)
-    return (
-        Perception(
-            own.time,
-            own.depth,
-            own.neighbors[:, :seen],
-            own.neighbor_mask[:, :seen],
-            own.landmarks,
-            own.landmark_mask,
-        ),
-        Inbox(
-            own_inbox.kind[:, :heard],
-            own_inbox.values[:, :heard],
-            own_inbox.sender[:, :heard],
-            own_inbox.mask[:, :heard],
-        ),
-    )
 
 
 @pytest.fixture(scope="module")
@@ -125,11 +70,11 @@ def test_batch_equals_loop_of_single_fish(controller: str, behavior: str, model:
     memory = FishMemory.fresh(params, count)
     for step in range(3):
         # Jittered decision times, so the pid loops integrate over uneven periods.
-        perception = _perception(rng, count, 1.0 + step + rng.uniform(-0.2, 0.2))
-        inbox = _inbox(rng, count)
+        perception = random_perception(rng, count, 1.0 + step + rng.uniform(-0.2, 0.2), WIDTH)
+        inbox = random_inbox(rng, count)
         next_memory, decision = decide(memory, perception, inbox, params=params)
         for i in range(count):
-            own, own_inbox = _alone(perception, inbox, i)
+            own, own_inbox = alone(perception, inbox, i)
             single_memory, single = decide(
                 take_rows(memory, np.array([i])), own, own_inbox, params=params
             )

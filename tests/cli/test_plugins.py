@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from tests.behaviors.example_plugin import EXAMPLE, NEAREST_ENTRY_POINT, installed
-from tests.conftest import free_port
+from tests.conftest import free_port, pip
 
 pytestmark = pytest.mark.integration
 
@@ -143,21 +143,18 @@ def test_the_example_package_builds_installs_and_runs(tmp_path: Path) -> None:
     """The example's own pyproject.toml, built into a wheel and installed as pip would on a
     base station or a robot (without its dependencies: fishswarm is there already)."""
 
-    def pip(*args: str) -> None:
-        done = subprocess.run(
-            [sys.executable, "-m", "pip", "-q", *args],
-            capture_output=True,
-            text=True,
-            timeout=300,
-            check=False,
-            cwd=tmp_path,
-        )
-        assert done.returncode == 0, done.stderr
-
     source = shutil.copytree(EXAMPLE, tmp_path / "source")  # built there: the tree stays clean
-    pip("wheel", "--no-deps", "--no-build-isolation", "-w", str(tmp_path / "dist"), str(source))
+    pip(
+        "wheel",
+        "--no-deps",
+        "--no-build-isolation",
+        "-w",
+        str(tmp_path / "dist"),
+        str(source),
+        cwd=tmp_path,
+    )
     (wheel,) = (tmp_path / "dist").glob("fishswarm_nearest-0.1.0-*.whl")
     site = tmp_path / "site"
-    pip("install", "--no-deps", "--target", str(site), str(wheel))
+    pip("install", "--no-deps", "--target", str(site), str(wheel), cwd=tmp_path)
     summary = _run_nearest(site, [site], tmp_path)
     assert summary["status"] == "finished"
