@@ -299,9 +299,11 @@ async def launch_swarm(
             finally:
                 with trio.CancelScope(shield=True):
                     await _stop_all(workers)
-                for message in _died_unseen(workers):
+                for worker in _failed_unseen(workers):
+                    message = _death_of(worker)
                     log.error(message)  # said as the others were, when seen
                     died.append(message)
+                    world.explain_loss(worker.spec.fish_ids, _loss_of(worker))
                 summary = _summary(
                     settings,
                     status,
@@ -427,6 +429,7 @@ async def _run_fish_here(
         # A behaviour's own error says all there is to say; anything else, where it came from.
         log.error(message, exc_info=None if isinstance(error, BehaviorError) else error)
         died.append(message)
+        world.explain_loss(fish.settings.fish_ids, f"failed: {type(error).__name__}")
         on_lost()
 
 
@@ -447,16 +450,17 @@ async def _watch_workers(
                         "came up; run with --log-level INFO to see why"
                     )
                 log.error(message)
+                world.explain_loss(worker.spec.fish_ids, _loss_of(worker))
                 on_lost()
         await trio.sleep(0.05)
 
 
-def _died_unseen(workers: list[Worker]) -> list[str]:
+def _failed_unseen(workers: list[Worker]) -> list[Worker]:
     """The workers that failed on their own without the watch seeing it (it looks every
     50 ms; a short run can end first): ended with an error or a signal we did not send, and
     no counters to give."""
     return [
-        _death_of(worker)
+        worker
         for worker in workers
         if not (worker.lost or worker.killed)
         and worker.statistics is None
@@ -466,6 +470,15 @@ def _died_unseen(workers: list[Worker]) -> list[str]:
 
 def _death_of(worker: Worker) -> str:
     return f"{worker.spec.describe()} {worker.exit_description()}; its fish are lost"
+
+
+def _loss_of(worker: Worker) -> str:
+    """Why a dead worker's fish are lost, short enough to follow each of them: the kind of
+    error it said it failed with, or how it ended."""
+    worker.exit_description()  # reads what it said, if anything
+    if worker.failure is not None:
+        return f"failed: {worker.failure.partition(':')[0]}"
+    return f"its worker {worker.exit_description()}"
 
 
 async def _stop_all(workers: list[Worker]) -> None:

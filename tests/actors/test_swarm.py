@@ -321,6 +321,8 @@ def test_a_worker_whose_behaviour_fails_says_why_and_the_run_stops_when_none_is_
     summary = result.summary
     assert result.exit_code == EXIT_WORKER_DIED
     assert summary["status"] == "failed" and summary["counts"]["ticks"] < 10
+    # Each fish lost says it failed, and how, not only that its token went.
+    assert {lost["reason"] for lost in summary["lost"]} == {"failed: BehaviorError"}
     for died, fish in zip(sorted(summary["workers_died"]), ("0–1", "2–3"), strict=True):
         assert died.startswith("worker ") and f"(fish {fish}) failed: BehaviorError: the " in died
         assert died.endswith(
@@ -570,7 +572,7 @@ def test_a_worker_that_failed_before_the_watch_saw_it_is_counted_as_died() -> No
     # the worker's own exit code still says it did.
     import sys
 
-    from fishswarm.actors.launcher import _died_unseen
+    from fishswarm.actors.launcher import _death_of, _failed_unseen, _loss_of
     from fishswarm.actors.workers import Worker, WorkerSpec
 
     context = multiprocessing.get_context("spawn")
@@ -592,9 +594,14 @@ def test_a_worker_that_failed_before_the_watch_saw_it_is_counted_as_died() -> No
         workers.append(Worker(spec, process, ours))
     workers[2].lost = True  # seen by the watch already: reported there
     workers[3].killed = True  # killed by stop_worker: the launcher's doing, not a failure
-    assert _died_unseen(workers) == [
+    failed = _failed_unseen(workers)
+    assert [_death_of(worker) for worker in failed] == [
         "worker 0 (fish 0–1) exited with code 1; its fish are lost",
         "worker 0 (fish 0–1) was killed by SIGSEGV; its fish are lost",
+    ]
+    assert [_loss_of(worker) for worker in failed] == [
+        "its worker exited with code 1",
+        "its worker was killed by SIGSEGV",
     ]
     for worker in workers:
         worker.connection.close()
