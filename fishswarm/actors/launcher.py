@@ -300,10 +300,7 @@ async def launch_swarm(
                 with trio.CancelScope(shield=True):
                     await _stop_all(workers)
                 for worker in _failed_unseen(workers):
-                    message = _death_of(worker)
-                    log.error(message)  # said as the others were, when seen
-                    died.append(message)
-                    world.explain_loss(worker.spec.fish_ids, _loss_of(worker))
+                    _report_death(worker, died, world)
                 summary = _summary(
                     settings,
                     status,
@@ -442,15 +439,13 @@ async def _watch_workers(
                 continue
             if worker.process.exitcode is not None:
                 worker.lost = True
-                message = _death_of(worker)
-                died.append(message)
                 if world.state_name == "waiting":
+                    died.append(_death_of(worker))
                     raise WorkerFailed(
                         f"{worker.spec.describe()} {worker.exit_description()} before its fish "
                         "came up; run with --log-level INFO to see why"
                     )
-                log.error(message)
-                world.explain_loss(worker.spec.fish_ids, _loss_of(worker))
+                _report_death(worker, died, world)
                 on_lost()
         await trio.sleep(0.05)
 
@@ -475,10 +470,19 @@ def _death_of(worker: Worker) -> str:
 def _loss_of(worker: Worker) -> str:
     """Why a dead worker's fish are lost, short enough to follow each of them: the kind of
     error it said it failed with, or how it ended."""
-    worker.exit_description()  # reads what it said, if anything
+    ended = worker.exit_description()  # reads what it said, if anything
     if worker.failure is not None:
         return f"failed: {worker.failure.partition(':')[0]}"
-    return f"its worker {worker.exit_description()}"
+    return f"its worker {ended}"
+
+
+def _report_death(worker: Worker, died: list[str], world: World) -> None:
+    """Say that a worker died, once, when seen: in the log, in the run's list of deaths, and
+    to the world, as why its fish are lost."""
+    message = _death_of(worker)
+    log.error(message)
+    died.append(message)
+    world.explain_loss(worker.spec.fish_ids, _loss_of(worker))
 
 
 async def _stop_all(workers: list[Worker]) -> None:

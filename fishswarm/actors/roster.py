@@ -13,9 +13,10 @@ leaves the world and comes back at a later tick.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,6 +28,9 @@ from fishswarm.actors.tick_commands import among
 from fishswarm.protocols.keys import KeySpace, fish_id_of
 
 log = logging.getLogger(__name__)
+
+TOKEN_GONE = "left (liveliness token gone)"
+"""Why a fish whose token went is lost, unless its launcher says more."""
 
 
 @dataclass(frozen=True)
@@ -69,6 +73,8 @@ class Roster:
         """Places of the worlds of the swarm waiting for their turn, by their token (a
         world's own among them): see :meth:`KeySpace.queue_place`."""
         self.lost: list[LostFish] = []
+        self._loss_reasons: dict[int, str] = {}
+        """Why fish whose process failed left, as their launcher said (:meth:`explain_loss`)."""
         self.joined: list[tuple[int, int]] = []
         self._subscribe = subscribe_commands
         self._subscriptions: dict[str, tuple[Declared, float]] = {}
@@ -214,6 +220,22 @@ class Roster:
         )
         self._handed_over.difference_update(ready)
         return ready
+
+    def why_gone(self, fish_id: int) -> str:
+        """Why a fish whose token went is lost: what its launcher said of it, if anything."""
+        return self._loss_reasons.get(fish_id, TOKEN_GONE)
+
+    def explain_loss(self, fish_ids: Iterable[int], reason: str) -> None:
+        """Say why fish leave or left: their process failed (``reason``). Their losses give
+        it instead of their tokens' going, when recorded already and when still to come."""
+        ids = set(fish_ids)
+        self._loss_reasons.update(dict.fromkeys(ids, reason))
+        self.lost = [
+            dataclasses.replace(lost, reason=reason)
+            if lost.fish_id in ids and lost.reason == TOKEN_GONE
+            else lost
+            for lost in self.lost
+        ]
 
     def mark_lost(self, fish_id: int, tick: int, reason: str, now: float = 0.0) -> bool:
         """Record a fish as lost at ``tick`` (once per tick); whether it is news. ``now``:

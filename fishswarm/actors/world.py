@@ -20,7 +20,6 @@ trajectories however the fish are spread over processes.
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import secrets
@@ -65,9 +64,6 @@ from fishswarm.sim.physics import WorldParams
 from fishswarm.sim.scenario import COMMAND_TIMEOUT, START_TIMEOUT, TURN_DELAY, Scenario
 from fishswarm.sim.tick import WorldSim
 from fishswarm.study.progress import ids_text
-
-TOKEN_GONE = "left (liveliness token gone)"
-"""Why a fish whose token went is lost, unless its launcher says more."""
 
 log = logging.getLogger(__name__)
 
@@ -270,8 +266,6 @@ class World:
         self.unexpected: set[int] = set()
         """Fish that took part beyond the scenario's ids (they join its run)."""
         self._twins: set[int] = set()
-        self._loss_reasons: dict[int, str] = {}
-        """Why fish whose process failed left, as their launcher said (:meth:`explain_loss`)."""
         """Fish that two processes answer for (warned of once)."""
         self.vouched: set[tuple[int, str | None]] = set()
         """(fish id, school or None) pairs vouched for on their own about keys."""
@@ -908,7 +902,7 @@ class World:
                 return
             left = self.roster.on_alive(key, payload, trio.current_time())
             if left is not None and left in self.sim.ids:
-                self._lose(left, self._loss_reasons.get(left, TOKEN_GONE))
+                self._lose(left, self.roster.why_gone(left))
             self.answering = not self.queued
             return
         assert isinstance(payload, bytes)
@@ -1084,17 +1078,9 @@ class World:
         )
 
     def explain_loss(self, fish_ids: Iterable[int], reason: str) -> None:
-        """Say why fish leave or left: their process failed (``reason``, e.g. ``its worker
-        failed: BehaviorError``). Their losses give it, instead of their tokens' going, when
-        recorded already and when still to come."""
-        ids = set(fish_ids)
-        self._loss_reasons.update(dict.fromkeys(ids, reason))
-        self.roster.lost = [
-            dataclasses.replace(lost, reason=reason)
-            if lost.fish_id in ids and lost.reason == TOKEN_GONE
-            else lost
-            for lost in self.roster.lost
-        ]
+        """Say why fish leave or left: their process failed (``reason``, e.g. ``failed:
+        BehaviorError``), as the roster then records it (:meth:`Roster.explain_loss`)."""
+        self.roster.explain_loss(fish_ids, reason)
 
     def _lose(self, fish_id: int, reason: str) -> None:
         self._lights.pop(fish_id, None)

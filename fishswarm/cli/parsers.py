@@ -393,16 +393,22 @@ def _add_scenario_flags(
         elif kind is SWITCH_ON:
             group.add_argument(flag, dest=name, action="store_const", const=True, help=text)
         elif kind is ONE_EACH:
-            group.add_argument(
-                flag,
-                dest=name,
-                action="append",
-                type=_setting_pair,
-                metavar="NAME=VALUE",
-                help=text,
-            )
+            _add_behavior_settings(group, text)
         else:
             group.add_argument(flag, dest=name, type=kind, default=None, help=text)
+
+
+def _add_behavior_settings(parser: argparse._ActionsContainer, text: str) -> None:
+    """``--behavior-setting NAME=VALUE``, once for each of the behaviour's own settings
+    (into ``behavior_settings``, a list of (name, text) pairs)."""
+    parser.add_argument(
+        _SCENARIO_FLAGS["behavior_settings"][0],
+        dest="behavior_settings",
+        action="append",
+        type=_setting_pair,
+        metavar="NAME=VALUE",
+        help=text,
+    )
 
 
 def _behaviors_listed() -> str:
@@ -1088,13 +1094,8 @@ def build_parser() -> argparse.ArgumentParser:
         "fish alone gives, memory included; padding rows change nothing; the same inputs give "
         "the same outputs. Exit 1 if it breaks one",
     )
-    behaviors.add_argument(
-        "--behavior-setting",
-        dest="behavior_settings",
-        action="append",
-        type=_setting_pair,
-        metavar="NAME=VALUE",
-        help="with --check: one of the behaviour's own settings to check it with (repeat)",
+    _add_behavior_settings(
+        behaviors, "with --check: one of the behaviour's own settings to check it with (repeat)"
     )
     export = commands.add_parser(
         "export",
