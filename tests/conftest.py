@@ -64,6 +64,17 @@ def pip(*args: str, cwd: Path) -> None:
     assert done.returncode == 0, done.stderr
 
 
+def install_wheel_of(source: Path, folder: Path, wheel_glob: str) -> Path:
+    """Build the wheel of the package in ``source`` (offline, without its dependencies)
+    into ``folder``/dist, check its name against ``wheel_glob`` and install it into
+    ``folder``/site, as pip would on a machine that has the rest: that site."""
+    dist, site = folder / "dist", folder / "site"
+    pip("wheel", "--no-deps", "--no-build-isolation", "-w", str(dist), str(source), cwd=folder)
+    (wheel,) = dist.glob(wheel_glob)
+    pip("install", "--no-deps", "--target", str(site), str(wheel), cwd=folder)
+    return site
+
+
 def wait_for_port(port: int, *, timeout: float = 20.0) -> None:
     """Wait until something accepts TCP connections on 127.0.0.1:``port`` (e.g. a router
     started in another process)."""

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import pip
+from tests.conftest import install_wheel_of
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -17,18 +17,7 @@ pytestmark = pytest.mark.integration
 
 
 def test_an_installed_wheel_finds_the_studys_experiments(tmp_path: Path) -> None:
-    pip(
-        "wheel",
-        "--no-deps",
-        "--no-build-isolation",
-        "-w",
-        str(tmp_path / "dist"),
-        str(ROOT),
-        cwd=tmp_path,
-    )
-    (wheel,) = (tmp_path / "dist").glob("fishswarm-*.whl")
-    site = tmp_path / "site"
-    pip("install", "--no-deps", "--target", str(site), str(wheel), cwd=tmp_path)
+    site = install_wheel_of(ROOT, tmp_path, "fishswarm-*.whl")
     program = (
         f"import sys; sys.path.insert(0, {str(site)!r})\n"
         "import fishswarm.study.experiment as e\n"

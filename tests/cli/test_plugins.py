@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from tests.behaviors.example_plugin import EXAMPLE, NEAREST_ENTRY_POINT, installed
-from tests.conftest import free_port, pip
+from tests.conftest import free_port, install_wheel_of
 
 pytestmark = pytest.mark.integration
 
@@ -144,17 +144,6 @@ def test_the_example_package_builds_installs_and_runs(tmp_path: Path) -> None:
     base station or a robot (without its dependencies: fishswarm is there already)."""
 
     source = shutil.copytree(EXAMPLE, tmp_path / "source")  # built there: the tree stays clean
-    pip(
-        "wheel",
-        "--no-deps",
-        "--no-build-isolation",
-        "-w",
-        str(tmp_path / "dist"),
-        str(source),
-        cwd=tmp_path,
-    )
-    (wheel,) = (tmp_path / "dist").glob("fishswarm_nearest-0.1.0-*.whl")
-    site = tmp_path / "site"
-    pip("install", "--no-deps", "--target", str(site), str(wheel), cwd=tmp_path)
+    site = install_wheel_of(source, tmp_path, "fishswarm_nearest-0.1.0-*.whl")
     summary = _run_nearest(site, [site], tmp_path)
     assert summary["status"] == "finished"
