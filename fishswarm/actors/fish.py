@@ -54,7 +54,7 @@ from fishswarm.behaviors.core import (
 )
 from fishswarm.behaviors.core import Inbox as HeardInbox
 from fishswarm.behaviors.formation import apply_directive
-from fishswarm.behaviors.registry import rules_of, settings_digest
+from fishswarm.behaviors.registry import rules_of, settings_digest, settings_parts
 from fishswarm.bluebot.control import stop_fins
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
@@ -188,6 +188,8 @@ class Fish:
         self.settings = settings
         self._settings_digest = settings_digest(settings.params)
         """What the fish tell the world their settings are (30–40 µs to compute, so once)."""
+        self._settings_parts = settings_parts(settings.params)
+        """The same, parameter by parameter (so that the world can name those that differ)."""
         ids = np.array(settings.fish_ids, dtype=np.int64)
         count = ids.size
         self._ids = ids
@@ -448,7 +450,7 @@ class Fish:
         params = self.settings.params
         about = FishAbout(
             np.asarray(ids, dtype=np.int64), params.behavior.name, __version__, run,
-            rules_of(params), params.control_period, self._settings_digest,
+            rules_of(params), params.control_period, self._settings_digest, self._settings_parts,
         )  # fmt: skip
         bus.put(self.settings.keys.about(int(ids[0]), self.settings.school), encode(about))
 

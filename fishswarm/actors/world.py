@@ -41,7 +41,7 @@ from fishswarm.actors.intake import Intake
 from fishswarm.actors.perceptions import perception_messages
 from fishswarm.actors.roster import LostFish, Roster
 from fishswarm.actors.tick_commands import TickCommands, among, values_at
-from fishswarm.behaviors.registry import rules_of, settings_digest
+from fishswarm.behaviors.registry import differing_parts, rules_of, settings_digest, settings_parts
 from fishswarm.protocols.codec import MessageError, decode, encode
 from fishswarm.protocols.keys import fish_id_of, run_id_of
 from fishswarm.protocols.messages import (
@@ -277,6 +277,8 @@ class World:
         """The rules this world's scenario says its fish decide by (FishAbout.rules)."""
         self._fish_settings = settings_digest(fish_params)
         """The digest of its fish's decision parameters (FishAbout.settings)."""
+        self._fish_parts = settings_parts(fish_params)
+        """The same, parameter by parameter (FishAbout.parts)."""
         self._warned: dict[str, dict[int, None]] = {}
         """The fish that differ from this world's settings, by difference: named together
         once the first tick is answered, and any that come later one by one
@@ -968,8 +970,10 @@ class World:
                 if behavior == "formation"
                 else "give them the world's --config and flags"
             )
+            named = "" if about.parts is None else _parts_named(self._fish_parts, about.parts)
             differences.append(
-                f"decide with other {behavior} parameters than this world's scenario ({hint})"
+                f"decide with other {behavior} parameters than this world's scenario "
+                f"({named}{hint})"
             )
         if not differences:
             return
@@ -1135,6 +1139,28 @@ class World:
 def _warn_of_difference(ids: list[int], difference: str) -> None:
     """Say that fish ``ids`` run with a setting other than this world's (``difference``)."""
     log.warning("fish %s %s (started with other settings?)", ids_text(ids), difference)
+
+
+PARTS_NAMED = 4
+"""Most differing parameters a warning names; it counts the rest."""
+
+
+def _parts_named(ours: dict[str, str], theirs: dict[str, str]) -> str:
+    """Which decision parameters a fish's fingerprints (``theirs``) differ in from this
+    world's, said for a warning: ``"their count differs; "``, empty when none can be named
+    (the digests differ, their parts not)."""
+    names = differing_parts(ours, theirs)
+    if not names:
+        return ""
+    shown = names[:PARTS_NAMED]
+    if len(names) > len(shown):
+        listed = f"{', '.join(shown)} and {len(names) - len(shown)} more"
+    elif len(shown) > 1:
+        listed = f"{', '.join(shown[:-1])} and {shown[-1]}"
+    else:
+        listed = shown[0]
+    verb = "differs" if len(names) == 1 else "differ"
+    return f"their {listed} {verb}; "
 
 
 def _quantile(values: list[float], share: float) -> float:

@@ -265,18 +265,57 @@ def settings_digest(params: FishParams) -> str:
     Fish whose parameters are equal have one digest in any process (the compiled loops the
     parameters may carry are left out); a fish actor tells it to the world, which warns of
     fish started with other settings."""
-    canonical = "\n".join(
-        _canonical(
-            (
-                params.steering,
-                params.controller,
-                params.caudal_cap,
-                params.pid_gains,
-                params.right_when_ahead,
-            )
-        )
+    whole = (
+        params.steering,
+        params.controller,
+        params.caudal_cap,
+        params.pid_gains,
+        params.right_when_ahead,
     )
-    return hashlib.sha256(canonical.encode()).hexdigest()[:16]
+    return _fingerprint(whole, 16)
+
+
+PART_DIGEST_LENGTH = 8
+"""Hexadecimal digits of each part's fingerprint in :func:`settings_parts`."""
+
+
+def settings_parts(params: FishParams) -> dict[str, str]:
+    """A short fingerprint of each part of what :func:`settings_digest` covers, by the
+    part's name: the behaviour's parameters one by one (a dataclass's fields, a table's
+    keys, else the whole as ``steering``), then ``controller``, ``caudal_cap``,
+    ``pid_gains`` and ``right_when_ahead`` (a behaviour's parameter of one of these names
+    is ``steering.NAME``). Fish tell these beside the digest, so that a world whose digest
+    differs can name the parameters that do."""
+    steering = params.steering
+    if dataclasses.is_dataclass(steering) and not isinstance(steering, type):
+        fields = dataclasses.fields(steering)
+        inner = {field.name: getattr(steering, field.name) for field in fields}
+    elif isinstance(steering, Mapping):
+        inner = {str(key): value for key, value in steering.items()}
+    else:
+        inner = {"steering": steering}
+    outer = {
+        "controller": params.controller,
+        "caudal_cap": params.caudal_cap,
+        "pid_gains": params.pid_gains,
+        "right_when_ahead": params.right_when_ahead,
+    }
+    parts = {f"steering.{name}" if name in outer else name: value for name, value in inner.items()}
+    parts.update(outer)
+    return {name: _fingerprint(value, PART_DIGEST_LENGTH) for name, value in parts.items()}
+
+
+def differing_parts(ours: Mapping[str, str], theirs: Mapping[str, str]) -> list[str]:
+    """The names of the parts (:func:`settings_parts`) that two fish's fingerprints differ
+    in, or that only one of them has, in ``ours``'s order then ``theirs``'s."""
+    names = [*ours, *(name for name in theirs if name not in ours)]
+    return [name for name in names if ours.get(name) != theirs.get(name)]
+
+
+def _fingerprint(value: object, length: int) -> str:
+    """The first ``length`` hexadecimal digits of the SHA-256 of ``value``'s canonical
+    lines."""
+    return hashlib.sha256("\n".join(_canonical(value)).encode()).hexdigest()[:length]
 
 
 def _canonical(value: object) -> Iterator[str]:

@@ -562,6 +562,11 @@ class ControlReply(Message):
             check_text("refused", self.refused)
 
 
+MAX_ABOUT_PARTS = 128
+"""Most parameters a :class:`FishAbout` may name (a behaviour's own settings, up to
+:data:`MAX_SETTING_LIST`, and the controller's)."""
+
+
 @dataclass(frozen=True, eq=False)
 class FishAbout(Message):
     """What some fish run, said by their actor when a run of the world starts for them.
@@ -577,10 +582,13 @@ class FishAbout(Message):
             (None: not said, by an older fishswarm).
         settings: a fingerprint of the rest of what their decisions depend on
             (:func:`fishswarm.behaviors.registry.settings_digest`; None: not said).
+        parts: a short fingerprint of each of those parameters by name
+            (:func:`fishswarm.behaviors.registry.settings_parts`), so that a world can name
+            the ones that differ from its own; None: not said.
     """
 
     type_name: ClassVar[str] = "fish_about"
-    added_later: ClassVar[frozenset[str]] = frozenset({"control_period", "settings"})
+    added_later: ClassVar[frozenset[str]] = frozenset({"control_period", "settings", "parts"})
     ids: IntArray
     behavior: str
     version: str
@@ -588,6 +596,7 @@ class FishAbout(Message):
     rules: str = "paper"
     control_period: float | None = None
     settings: str | None = None
+    parts: dict[str, str] | None = None
 
     def __post_init__(self) -> None:
         check_array(self, "ids", np.int64, None)
@@ -602,6 +611,15 @@ class FishAbout(Message):
             check_float("control_period", self.control_period, 0.0)
         if self.settings is not None:
             check_text("settings", self.settings)
+        if self.parts is not None:
+            if not isinstance(self.parts, dict):
+                raise TypeError(f"parts must be a table, got {type(self.parts).__name__}")
+            if len(self.parts) > MAX_ABOUT_PARTS:
+                raise ValueError(f"parts must have at most {MAX_ABOUT_PARTS} entries")
+            for name, fingerprint in self.parts.items():
+                check_text("a part's name", name)
+                check_text(f"part {name}", fingerprint)
+            object.__setattr__(self, "parts", dict(self.parts))
 
 
 @dataclass(frozen=True, eq=False)

@@ -1246,23 +1246,39 @@ def test_a_robots_fish_is_named_by_what_it_says_as_it_comes_up(
 def test_fish_whose_formation_map_is_made_for_another_school_are_named(
     caplog: pytest.LogCaptureFixture,
 ) -> None:
-    """The world runs 4 fish in a formation; fish 2 and 3 were started without --fish (or
+    """The world runs 6 fish in a formation; fish 2 and 3 were started without --fish (or
     with a file that says 15): their map has 15 slots. Behaviour, version, rules and period
-    agree, so only their settings' digest tells: named, with what to do. Fish 0 and 1 have
-    the world's settings: not named."""
-    scenario = Scenario(fish=4, behavior="formation", duration=2.0, seed=1)
+    agree, so only their settings' fingerprints tell: named, with the parameter that
+    differs and what to do. Fish 4 was given another spacing and no flags: its three
+    parameters named (the tolerance follows the spacing). Fish 5, an older fishswarm, says
+    only its digest: named without parameters. Fish 0 and 1 have the world's settings:
+    not named."""
+    scenario = Scenario(fish=6, behavior="formation", duration=2.0, seed=1)
     keys = scenario.keys
 
     ours = FishSettings((0, 1), scenario.fish_params(), keys, school="a")
     theirs = FishSettings((2, 3), scenario.replace(fish=15).fish_params(), keys, school="b")
+    other = FishSettings((4,), scenario.replace(spacing=0.25, flags=False).fish_params(), keys)
+    older = FishAbout(np.array([5]), "formation", __version__, 0, "paper", 1.0, "0" * 16)
     with caplog.at_level("WARNING", logger="fishswarm.actors.world"):
-        world = _world_with_fish(scenario, [ours, theirs], expected=(0, 1, 2, 3))
-    assert world.mismatched == {2, 3}
+        world = _world_with_fish(
+            scenario,
+            [ours, theirs, other],
+            expected=(0, 1, 2, 3, 4),
+            said=[(keys.about(5), encode(older))],
+        )
+    assert world.mismatched == {2, 3, 4, 5}
     said = [r.getMessage() for r in caplog.records if "scenario" in r.getMessage()]
-    assert said == [
-        "fish 2, 3 decide with other formation parameters than this world's scenario (a "
-        "formation's map is made for --fish fish: give them the world's --config, --fish "
+    hint = (
+        "a formation's map is made for --fish fish: give them the world's --config, --fish "
         "included) (started with other settings?)"
+    )
+    assert sorted(said) == [
+        "fish 2, 3 decide with other formation parameters than this world's scenario "
+        f"(their count differs; {hint}",
+        "fish 4 decide with other formation parameters than this world's scenario (their "
+        f"spacing, tolerance and flags differ; {hint}",
+        f"fish 5 decide with other formation parameters than this world's scenario ({hint}",
     ]
 
 
@@ -2602,3 +2618,14 @@ def test_realtime_answer_times_run_until_the_last_fish_of_the_tick_answered() ->
     assert statistics.rejected == {"duplicate": 4}
     assert statistics.answer_time_median == pytest.approx(0.6)
     assert statistics.answer_time_p90 == pytest.approx(0.6)
+
+
+def test_a_warning_names_at_most_four_differing_parameters() -> None:
+    from fishswarm.actors.world import _parts_named
+
+    ours = {name: "0" for name in "abcdef"}
+    assert _parts_named(ours, ours) == ""
+    assert _parts_named(ours, {**ours, "c": "1"}) == "their c differs; "
+    assert _parts_named(ours, {**ours, "b": "1", "e": "1"}) == "their b and e differ; "
+    every = {name: "1" for name in ours}
+    assert _parts_named(ours, every) == "their a, b, c, d and 2 more differ; "

@@ -305,6 +305,55 @@ def test_the_settings_digest_tells_decisions_apart_and_nothing_else(
     )
 
 
+def test_the_settings_parts_name_what_differs_and_nothing_else() -> None:
+    """Each change of a fish-side setting shows in the part of its name alone; settings the
+    fish do not read, and compiled loops, show in none."""
+    from fishswarm.behaviors.core import FishParams
+    from fishswarm.behaviors.registry import (
+        PART_DIGEST_LENGTH,
+        differing_parts,
+        settings_digest,
+        settings_parts,
+    )
+    from fishswarm.sim.decision_kernels import with_compiled_decisions
+    from fishswarm.sim.scenario import Scenario
+
+    def parts(**settings: object) -> dict[str, str]:
+        return settings_parts(Scenario(**settings).fish_params())  # type: ignore[arg-type]
+
+    formation = parts(behavior="formation", fish=8)
+    assert list(formation)[:3] == ["shape", "count", "spacing"]
+    assert list(formation)[-4:] == ["controller", "caudal_cap", "pid_gains", "right_when_ahead"]
+    assert {len(part) for part in formation.values()} == {PART_DIGEST_LENGTH}
+    assert differing_parts(formation, parts(behavior="formation", fish=8, seed=9)) == []
+    for changed, names in (
+        ({"fish": 15}, ["count"]),
+        ({"spacing": 0.25}, ["spacing", "tolerance"]),  # a quarter of the spacing
+        ({"formation": "column"}, ["shape"]),
+        ({"flags": False}, ["flags"]),
+        ({"controller": "homing"}, ["controller"]),
+        ({"fish": 15, "flags": False}, ["count", "flags"]),
+    ):
+        other = parts(**{"behavior": "formation", "fish": 8, **changed})
+        assert differing_parts(formation, other) == names, changed
+    # Lennard-Jones: the study code's force form is a parameter of the behaviour, its homing
+    # switch the fish's own.
+    study = parts(profile="study-code")
+    assert differing_parts(parts(), study) == ["study_form", "right_when_ahead"]
+    large = Scenario(fish=500).fish_params()
+    assert settings_parts(with_compiled_decisions(large, 500)) == settings_parts(large)
+    # Equal parts, equal digest; and a part only one side has is named too.
+    assert differing_parts({"a": "1"}, {"a": "1", "b": "2"}) == ["b"]
+    assert differing_parts({"b": "2", "a": "1"}, {"a": "3"}) == ["b", "a"]
+    # A behaviour's own settings, a table, by key; a parameter named as one of the fish's
+    # own is told apart from it.
+    behavior = Scenario().fish_params().behavior
+    own = FishParams(behavior, {"distance": 0.3, "controller": "sway"})
+    assert list(settings_parts(own))[:2] == ["distance", "steering.controller"]
+    assert settings_parts(FishParams(behavior, 7.0)).keys() >= {"steering", "controller"}
+    assert settings_digest(own) != settings_digest(FishParams(behavior, {"distance": 0.4}))
+
+
 def test_a_fish_counts_the_effort_of_the_fins_it_commanded() -> None:
     from fishswarm.bluebot.parameters import effort_rate
     from fishswarm.protocols.messages import FormationFlag

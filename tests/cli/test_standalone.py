@@ -312,6 +312,30 @@ def test_a_second_world_on_the_swarm_waits_for_the_first_and_records_only_its_ow
     assert {s.run for s in theirs.snapshots}.isdisjoint({s.run for s in own.snapshots})
 
 
+def test_a_world_names_the_parameters_a_fish_was_started_with_otherwise() -> None:
+    """A formation of three: fish 2 was started with another spacing than the world's file
+    says. Over real sessions, the world names it and the parameters that differ, and counts
+    it; the run goes on to its end."""
+    with routed_commands() as (endpoint, start):
+        start("fish", "--id", "0", "--id", "1", "--school", "a", "--connect", endpoint,
+              "--behavior", "formation", "--fish", "3")  # fmt: skip
+        start("fish", "--id", "2", "--connect", endpoint, "--behavior", "formation",
+              "--fish", "3", "--spacing", "0.25")  # fmt: skip
+        world = subprocess.run(
+            [*FISHSWARM, "world", "--connect", endpoint, "--fish", "3", "--behavior",
+             "formation", "--duration", "3", "--start-timeout", "60"],
+            capture_output=True, text=True, timeout=120, check=False,
+        )  # fmt: skip
+    assert world.returncode == 0, world.stderr
+    assert (
+        "fishswarm world: warning: fish 2 decide with other formation parameters than this "
+        "world's scenario (their spacing and tolerance differ; a formation's map is made for "
+        "--fish fish: give them the world's --config, --fish included) (started with other "
+        "settings?)"
+    ) in world.stderr.splitlines()
+    assert json.loads(world.stderr.strip().splitlines()[-1])["mismatched_fish"] == 1
+
+
 @pytest.mark.slow
 def test_a_standalone_world_that_lost_a_fish_ends_degraded_as_a_run_does() -> None:
     with routed_commands() as (endpoint, start):

@@ -88,6 +88,7 @@ EXAMPLES: list[Message] = [
     FishAbout(np.array([0, 1, 2]), "dispersion", "0.1.0", 7),
     FishAbout(np.array([4]), "aggregation", "0.1.0", 2, "lennard-jones,homing"),
     FishAbout(np.array([5, 6]), "formation", "0.1.0", 3, "paper", 0.5),
+    FishAbout(np.array([7]), "formation", "0.1.0", 3, "paper", 0.5, "01", {"count": "89"}),
     RobotOrder("resume", np.array([2, 5])),
     RobotOrder("formation", np.array([], dtype=np.int64), "column"),
     RobotStatus(
@@ -450,6 +451,14 @@ def test_bad_messages_cannot_be_built() -> None:
         FishAbout(np.array([1]), "dispersion", "0.1.0", 0, "paper", -1.0)
     with pytest.raises(ValueError, match="control_period must be finite"):
         FishAbout(np.array([1]), "dispersion", "0.1.0", 0, "paper", math.nan)
+    with pytest.raises(TypeError, match="parts must be a table, got list"):
+        FishAbout(np.array([1]), "dispersion", "0.1.0", parts=["count"])  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="part count must be a string, got int"):
+        FishAbout(np.array([1]), "dispersion", "0.1.0", parts={"count": 5})  # type: ignore[dict-item]
+    with pytest.raises(ValueError, match="a part's name must have 1 to 64 characters, got 65"):
+        FishAbout(np.array([1]), "dispersion", "0.1.0", parts={"x" * 65: "01234567"})
+    with pytest.raises(ValueError, match="parts must have at most 128 entries"):
+        FishAbout(np.array([1]), "dispersion", "0.1.0", parts={str(i): "0" for i in range(129)})
     with pytest.raises(ValueError, match="ascending"):
         RobotOrder("stop", np.array([3, 1]))
     with pytest.raises(ValueError, match="state must be one of"):
@@ -672,7 +681,10 @@ def test_fields_added_later_stay_off_the_wire_while_unset() -> None:
     about = FishAbout(np.array([4]), "formation", "0.1.0")
     assert wire_fields(about) == {"ids", "behavior", "version", "run", "rules"}
     told = FishAbout(np.array([4]), "formation", "0.1.0", 1, "paper", 0.5, "0123456789abcdef")
-    assert decode(encode(told), FishAbout) == told
+    assert "parts" not in wire_fields(told) and decode(encode(told), FishAbout) == told
+    parted = FishAbout(np.array([4]), "formation", "0.1.0", 1, "paper", 0.5, "01", {"a": "b"})
+    assert "parts" in wire_fields(parted) and decode(encode(parted), FishAbout) == parted
+    assert decode(encode(parted), FishAbout) != told
 
 
 def test_which_leds_flash_stays_off_the_wire_until_a_robot_flashes() -> None:
