@@ -540,32 +540,46 @@ def test_a_mock_robot_runs_from_what_the_role_installs(
     # needs must come from what the role installs. Before, it installed only Zenoh and the
     # wheel without its dependencies, and the robot's service failed on 'import trio'.
     home = tmp_path / "opt"
-    path = inventory(
-        tmp_path,
-        wheel,
-        fish_id=3,
-        fishswarm_home=str(home),
-        fishswarm_python=getattr(sys, "_base_executable", sys.executable),
-        fishswarm_system_site_packages=False,
-        fishswarm_behavior_wheels=[str(example_wheel)],
-    )
     playbook = tmp_path / "install.yml"
     playbook.write_text(INSTALL_ONLY)
-    result = ansible(
-        "ansible-playbook", "-i", str(path), str(playbook), cwd=tmp_path,
-        roles=DEPLOY / "roles",
-    )  # fmt: skip
-    if result.returncode and any(sign in result.stdout for sign in OFFLINE):
-        pytest.skip(f"pip cannot reach its package index here: {result.stdout[-300:]}")
-    assert result.returncode == 0, result.stdout + result.stderr
+
+    def install(behavior_wheels: list[str]) -> None:
+        path = inventory(
+            tmp_path,
+            wheel,
+            fish_id=3,
+            fishswarm_home=str(home),
+            fishswarm_python=getattr(sys, "_base_executable", sys.executable),
+            fishswarm_system_site_packages=False,
+            fishswarm_behavior_wheels=behavior_wheels,
+        )
+        result = ansible(
+            "ansible-playbook", "-i", str(path), str(playbook), cwd=tmp_path,
+            roles=DEPLOY / "roles",
+        )  # fmt: skip
+        if result.returncode and any(sign in result.stdout for sign in OFFLINE):
+            pytest.skip(f"pip cannot reach its package index here: {result.stdout[-300:]}")
+        assert result.returncode == 0, result.stdout + result.stderr
+
+    def known_behaviors() -> list[str]:
+        known = subprocess.run(
+            [python, "-c", "from fishswarm.behaviors.registry import names; print(*names())"],
+            capture_output=True, text=True, timeout=60, check=True, cwd=tmp_path,
+        )  # fmt: skip
+        return known.stdout.split()
+
+    install([str(example_wheel)])
     python = str(home / "venv" / "bin" / "python")
     _assert_the_robot_drives(python, tmp_path)
     # The behaviour package is installed beside fishswarm, and its behaviour known there.
-    known = subprocess.run(
-        [python, "-c", "from fishswarm.behaviors.registry import names; print(*names())"],
-        capture_output=True, text=True, timeout=60, check=True, cwd=tmp_path,
-    )  # fmt: skip
-    assert known.stdout.split()[-1] == "nearest", known.stdout + known.stderr
+    assert known_behaviors()[-1] == "nearest"
+    assert (home / "behavior-packages.txt").read_text() == "fishswarm_nearest\n"
+    # Dropped from the list, the next play uninstalls it and removes its wheel; fishswarm's
+    # own wheel stays.
+    install([])
+    assert "nearest" not in known_behaviors() and "formation" in known_behaviors()
+    assert sorted(whl.name for whl in (home / "wheels").iterdir()) == [wheel.name]
+    assert (home / "behavior-packages.txt").read_text() == "\n"
     # The robot's command as its service runs it: the mock pins open, then it looks for a
     # router (none here) and says so.
     endpoint = f"tcp/127.0.0.1:{free_port()}"
