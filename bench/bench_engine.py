@@ -25,6 +25,7 @@ from options import add_sizes
 
 from fishswarm.sim import kernels
 from fishswarm.sim.allocator import tune_allocator
+from fishswarm.sim.openmp import openmp_waits, tune_openmp
 
 
 def tick_seconds(fish: int, compiled: bool) -> tuple[float, float]:
@@ -45,9 +46,11 @@ def main() -> None:
     if not kernels.available():
         raise SystemExit("numba is not installed: pip install -e '.[fast]'")
     tuned = tune_allocator()  # as a fishswarm process runs
+    tune_openmp()
     print(
         f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-        f"Python {platform.python_version()}, allocator set: {'yes' if tuned else 'no'}"
+        f"Python {platform.python_version()}, allocator set: {'yes' if tuned else 'no'}, "
+        f"{openmp_waits()}"
     )
     print("| fish | numpy ms/tick | compiled ms/tick | speed-up | compiled steps/s | start-up s |")
     print("|---:|---:|---:|---:|---:|---:|")

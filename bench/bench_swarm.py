@@ -60,6 +60,7 @@ from fishswarm.protocols.messages import Perception
 from fishswarm.sim import kernels
 from fishswarm.sim.allocator import tune_allocator
 from fishswarm.sim.engine import simulate_batch
+from fishswarm.sim.openmp import openmp_waits, tune_openmp
 from fishswarm.sim.scenario import Scenario
 from fishswarm.sim.tick import WorldSim
 
@@ -329,12 +330,13 @@ def main() -> None:
     args.procs = list(dict.fromkeys(args.procs))  # each set-up once, however often named
     # As the fishswarm command and its workers do: the batch engine and the launcher run here.
     tuned = tune_allocator()
+    tune_openmp()
     measured: list[tuple[int, int, float, float]] = []
     print(
         f"machine: {platform.machine()}, {os.cpu_count()} cores, Python "
         f"{platform.python_version()}, compiled kernels: "
         f"{'yes' if kernels.available() else 'no (numba not installed)'}, allocator set: "
-        f"{'yes' if tuned else 'no (not glibc)'}\n"
+        f"{'yes' if tuned else 'no (not glibc)'}, {openmp_waits()}\n"
     )
     echo = float(np.median(echo_round_trips("zenoh", 1000))) / 1e3
     print(f"Zenoh echo floor: {echo * 1e3:.3f} ms (median of 1000)\n")

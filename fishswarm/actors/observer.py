@@ -6,18 +6,18 @@ disturbing the run: an observer only listens.
 
 from __future__ import annotations
 
-import contextlib
 import logging
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import Any
 
 import trio
 
 from fishswarm.actors.bus import Bus, open_alive_events, open_subscriber, open_token
 from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
+from fishswarm.actors.threads import in_thread_at_once
 from fishswarm.actors.world import OFFLOAD_FISH
 from fishswarm.protocols.keys import KeySpace, run_id_of
 from fishswarm.protocols.messages import Snapshot, WorldPulse
@@ -35,12 +35,7 @@ from fishswarm.study.metrics import (
 from fishswarm.study.recording import Recorder
 from fishswarm.study.scene import Scene, Stage, scene_message, scene_of, stage_of
 
-if TYPE_CHECKING:
-    import outcome
-
 log = logging.getLogger(__name__)
-
-T = TypeVar("T")
 
 
 WORLD_END_SETTLE = 1.0
@@ -364,7 +359,9 @@ class Observer:
         if snapshot.ids.size >= OFFLOAD_FISH:
             # Hundreds of fish or more: the distances take a millisecond or more; in a
             # thread, the world's tick (in this process) goes on meanwhile.
-            metrics = await _in_thread_at_once(lambda: swarm_metrics(*measure))
+            metrics = await in_thread_at_once(
+                lambda: swarm_metrics(*measure), name="fishswarm observer metrics"
+            )
         else:
             metrics = swarm_metrics(*measure)
         shape, target = None, None
@@ -414,33 +411,3 @@ async def _prepare_in_thread(fish: int) -> None:
         await trio.to_thread.run_sync(prepare_metrics, fish, abandon_on_cancel=True)
     except Exception as error:  # any failure: the first snapshot's metrics will tell it
         log.debug("the metrics of %d fish were not loaded ahead: %s", fish, error)
-
-
-async def _in_thread_at_once(function: Callable[[], T]) -> T:
-    """What ``function()`` returns, run in a thread started at once; once started, waited
-    for even when cancelled (as :func:`trio.to_thread.run_sync` waits for its thread).
-
-    ``trio.to_thread.run_sync`` passes a schedule point before it starts its thread. In the
-    launcher's process the fish, woken in the same step of the world, would then decide
-    first, and a large school's metrics would run beside the world's next physics, whose
-    compiled kernels wait for the core the metrics hold (1 000 fish: the whole tick
-    1.0–1.7 ms longer than with the metrics left out, `docs/benchmarks.md`).
-
-    Raises:
-        trio.Cancelled: the caller was cancelled before the thread started.
-    """
-    await trio.lowlevel.checkpoint_if_cancelled()  # a cancelled observer measures no more
-    token = trio.lowlevel.current_trio_token()
-    done = trio.Event()
-    result: list[outcome.Outcome[T]] = []
-
-    def deliver(value: outcome.Outcome[T]) -> None:
-        result.append(value)
-        # A Ctrl-C between the start and the wait can end the run first; then nobody waits.
-        with contextlib.suppress(trio.RunFinishedError):
-            token.run_sync_soon(done.set)
-
-    trio.lowlevel.start_thread_soon(function, deliver, name="fishswarm observer metrics")
-    with trio.CancelScope(shield=True):
-        await done.wait()
-    return result[0].unwrap()

@@ -40,6 +40,7 @@ from fishswarm.actors.inbox import Inbox
 from fishswarm.actors.intake import Intake
 from fishswarm.actors.perceptions import perception_messages
 from fishswarm.actors.roster import LostFish, Roster
+from fishswarm.actors.threads import in_thread_at_once
 from fishswarm.actors.tick_commands import TickCommands, among, values_at
 from fishswarm.behaviors.registry import differing_parts, rules_of, settings_digest, settings_parts
 from fishswarm.protocols.codec import MessageError, decode, encode
@@ -79,17 +80,12 @@ PULSE_PERIOD = 1.0
 OFFLOAD_AFTER = 0.25
 """A simulation step whose last run took longer than this (s) runs in a worker thread: worth
 it only when the world would otherwise be deaf for long (and under a test's MockClock, whose
-time jumps while a thread runs, never at small sizes)."""
+time jumps while a thread runs, never at small sizes). Shorter steps stay in the event loop:
+handing one over costs more than it frees, and at 1 000 fish and more it costs more still
+(:meth:`World._compute`)."""
 OFFLOAD_FISH = 200
-"""From this many fish on, a step's first run goes to a worker thread (the compiled kernels
-load then, for up to seconds), and later runs whenever the last took over OFFLOAD_LONG."""
-OFFLOAD_LONG = 0.03
-"""With OFFLOAD_FISH fish or more: a step whose last run took longer than this (s) runs in a
-worker thread, where the observer's work on the last snapshot (in this process) overlaps
-it. A shorter step stays in the event loop: handing it over would cost more than it frees
-(measured at 1000 fish, one worker: a tick 1–2 ms slower with every step handed over, the
-observer's decoding and the step's numpy then contend for the GIL and the two cores)."""
-
+"""From this many fish on, a step's first run goes to a thread of its own, which ends with it
+(the compiled kernels load then, for up to seconds)."""
 
 MISMATCH_NAMED = 10
 """Warnings a world gives, for each difference, of fish started with other settings that
@@ -400,11 +396,22 @@ class World:
         """Run one step of the simulation; in a worker thread when the last run took long
         enough that the world would otherwise hear nothing meanwhile."""
         name = step.__name__
-        many = self.sim.ids.size >= OFFLOAD_FISH
         last = self._step_times.get(name)
-        offload = many if last is None else last > (OFFLOAD_LONG if many else OFFLOAD_AFTER)
         started = time.perf_counter()
-        result = await trio.to_thread.run_sync(step) if offload else step()
+        if last is None and self.sim.ids.size >= OFFLOAD_FISH:
+            # The compiled kernels load now. In a thread that ends with the step: one kept
+            # in trio's cache would lead an OpenMP team of its own for the rest of the run,
+            # beside the event loop's, and with more OpenMP threads than cores every parallel
+            # loop of every tick waits for a sleeping worker (in_thread_at_once).
+            thread = f"fishswarm world {name}"
+            result = await in_thread_at_once(step, name=thread, passing=True)
+        elif last is not None and last > OFFLOAD_AFTER:
+            # A step this long (a school in a tank too small for it) keeps a thread of
+            # trio's, whose memory is then at hand for the next: a new thread's first step
+            # at 10 000 fish took 70–100 ms instead of 20, its heap's pages touched anew.
+            result = await trio.to_thread.run_sync(step)
+        else:
+            result = step()
         self._step_times[name] = took = time.perf_counter() - started
         if name in STEP_PHASES:
             self._phase_times[STEP_PHASES[name]].append(took)

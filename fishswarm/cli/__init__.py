@@ -13,6 +13,7 @@ from fishswarm.behaviors.registry import plugin_failures
 from fishswarm.cli.common import UserError
 from fishswarm.cli.parsers import build_parser, scenario_from
 from fishswarm.sim.allocator import tune_allocator
+from fishswarm.sim.openmp import tune_openmp
 from fishswarm.sim.scenario import ConfigError
 
 HANDLERS = {
@@ -50,6 +51,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"fishswarm {args.command}: warning: {failure}", file=sys.stderr)
     if args.command != "robot":  # a robot's small process keeps glibc's own settings
         tune_allocator()
+        tune_openmp()
     # Zenoh leaves a shared-memory file behind for each process that sent through it.
     release_shared_memory_at_exit()
     module, function = HANDLERS[args.command]

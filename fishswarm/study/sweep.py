@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from fishswarm.sim.allocator import tune_allocator
 from fishswarm.sim.engine import simulate_batch
+from fishswarm.sim.openmp import tune_openmp
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import Experiment, RunKey, RunOutcome
 
@@ -85,6 +86,7 @@ def _start_process() -> None:
     its freed arrays for the next run's."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     tune_allocator()
+    tune_openmp()
 
 
 def sweep_experiment(

@@ -4,7 +4,6 @@ wait for a tick."""
 from __future__ import annotations
 
 import json
-import threading
 from pathlib import Path
 from typing import Any
 
@@ -17,7 +16,7 @@ from mcap.reader import make_reader
 from fishswarm.actors import observer as observer_module
 from fishswarm.actors.bus import MemoryBus
 from fishswarm.actors.inbox import Inbox
-from fishswarm.actors.observer import Observer, _in_thread_at_once
+from fishswarm.actors.observer import Observer
 from fishswarm.actors.world import OFFLOAD_FISH
 from fishswarm.protocols.codec import encode
 from fishswarm.protocols.keys import KeySpace
@@ -636,60 +635,6 @@ def order(monkeypatch: pytest.MonkeyPatch) -> list[str]:
 
     monkeypatch.setattr(trio.lowlevel, "start_thread_soon", recorded)
     return happened
-
-
-def test_a_thread_started_at_once_starts_before_a_task_scheduled_with_it_runs(
-    order: list[str],
-) -> None:
-    # In the launcher's process a task scheduled with the observer is the fish, about to
-    # decide: trio.to_thread.run_sync passes a schedule point first, and the fish went first.
-    async def other() -> None:
-        order.append("other")
-
-    async def main() -> int:
-        async with trio.open_nursery() as nursery:
-            nursery.start_soon(other)
-            return await _in_thread_at_once(lambda: 7)
-
-    assert trio.run(main) == 7
-    assert order == ["thread", "other"]
-
-
-def test_a_thread_started_at_once_is_waited_for_when_cancelled_and_passes_on_errors() -> None:
-    release = threading.Event()
-    started: list[str] = []
-
-    def measure() -> float:
-        started.append("measure")
-        release.wait(10.0)  # bounded: the test releases it once the caller is cancelled
-        return 1.5
-
-    def fail() -> float:
-        raise ValueError("no distances for these positions")
-
-    async def main() -> tuple[bool, float | None, bool]:
-        # Cancelled before it starts: no thread, trio.Cancelled.
-        with trio.CancelScope() as before:
-            before.cancel()
-            await _in_thread_at_once(measure)
-        value = None
-        async with trio.open_nursery() as nursery:
-            with trio.CancelScope() as during:
-
-                async def cancel_then_release() -> None:
-                    await trio.testing.wait_all_tasks_blocked()
-                    during.cancel()
-                    await trio.testing.wait_all_tasks_blocked()
-                    release.set()
-
-                nursery.start_soon(cancel_then_release)
-                value = await _in_thread_at_once(measure)  # cancelled while it waits
-        with pytest.raises(ValueError, match="no distances"):
-            await _in_thread_at_once(fail)
-        return before.cancelled_caught, value, during.cancelled_caught
-
-    assert trio.run(main) == (True, 1.5, False)
-    assert started == ["measure"]
 
 
 def test_an_observer_starts_measuring_a_large_school_before_a_task_woken_with_it_runs(

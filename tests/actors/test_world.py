@@ -1448,10 +1448,10 @@ def test_a_step_runs_in_a_worker_thread_only_while_its_last_run_took_long(
     monkeypatch.setattr(world_module, "OFFLOAD_AFTER", 0.05)
     world = World(WorldSettings(Scenario(fish=3, duration=1.0)))
     durations = iter([0.0, 0.1, 0.0, 0.0])
-    threads: list[bool] = []
+    threads: list[threading.Thread] = []
 
     def step() -> None:
-        threads.append(threading.current_thread() is threading.main_thread())
+        threads.append(threading.current_thread())
         time.sleep(next(durations))
 
     async def main() -> None:
@@ -1461,7 +1461,43 @@ def test_a_step_runs_in_a_worker_thread_only_while_its_last_run_took_long(
     trio.run(main)
     # Runs 1 and 2 in the event loop (no run before; a quick one before), run 2 slow: run 3
     # goes to a worker thread; it was quick, so run 4 is back in the loop.
-    assert threads == [True, True, False, True]
+    loop = threading.main_thread()
+    assert [thread is loop for thread in threads] == [True, True, False, True]
+
+
+def test_a_large_schools_first_step_runs_in_a_thread_that_ends_with_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """From OFFLOAD_FISH fish on, the first run of a step (the compiled kernels load then)
+    goes to a thread of its own, gone with the step and the OpenMP team it led; later runs
+    stay in the event loop unless the last took long, and then go to one of trio's."""
+    import threading
+    import time
+
+    from fishswarm.actors import world as world_module
+
+    monkeypatch.setattr(world_module, "OFFLOAD_FISH", 3)
+    monkeypatch.setattr(world_module, "OFFLOAD_AFTER", 0.05)
+    world = World(WorldSettings(Scenario(fish=3, duration=1.0)))
+    world.sim.join([0, 1, 2])
+    durations = iter([0.0, 0.0, 0.1, 0.0, 0.0])
+    threads: list[threading.Thread] = []
+
+    def step() -> None:
+        threads.append(threading.current_thread())
+        time.sleep(next(durations))
+
+    async def main() -> None:
+        for _ in range(5):
+            await world._compute(step)
+
+    trio.run(main)
+    first, second, third, fourth, fifth = threads
+    first.join(timeout=10.0)
+    assert first.name == "fishswarm world step" and not first.is_alive()
+    loop = threading.main_thread()
+    assert second is loop and third is loop and fifth is loop
+    assert fourth is not loop and fourth.name.startswith("Trio thread")
 
 
 def test_the_worlds_statistics_say_where_its_ticks_went(monkeypatch: pytest.MonkeyPatch) -> None:
