@@ -48,7 +48,13 @@ SECURE_ENDPOINT = "tls/127.0.0.1:7447"
 
 class _Parser(argparse.ArgumentParser):
     """An argument parser that gives an endpoint not given on the command line its default:
-    this machine's, over TLS when the swarm is secured (``--secure``)."""
+    this machine's, over TLS when the swarm is secured (``--secure``), and takes no
+    abbreviated option: ``experiment --seed 1`` was read as ``--seeds 1`` and replaced a
+    study's five-seed table with a one-seed one, while ``run --seeds`` was refused."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def parse_known_args(  # type: ignore[override]
         self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None

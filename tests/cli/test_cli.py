@@ -227,6 +227,12 @@ def test_toml_scenario_with_cli_override(tmp_path: Path) -> None:
             "--robots?)",
         ),
         (
+            # Not read as the abbreviation of --seeds: it replaced a study's five-seed table.
+            ["experiment", "blindspot", "--seed", "1"],
+            "fishswarm experiment: error: unrecognized arguments: --seed 1 (did you mean --seeds?)",
+        ),
+        (["learn", "--generation", "3"], "unrecognized arguments: --generation 3 (did you mean"),
+        (
             ["run", "--behaviour", "aggregation"],
             "fishswarm run: error: unrecognized arguments: --behaviour aggregation (did you "
             "mean --behavior?)",
