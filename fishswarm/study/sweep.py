@@ -14,11 +14,12 @@ can still be written.
 from __future__ import annotations
 
 import concurrent.futures
+import logging
 import multiprocessing
 import os
 import signal
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,6 +29,8 @@ from fishswarm.sim.engine import simulate_batch
 from fishswarm.sim.openmp import tune_openmp
 from fishswarm.sim.scenario import Scenario
 from fishswarm.study.experiment import Experiment, RunKey, RunOutcome
+
+log = logging.getLogger(__name__)
 
 FloatArray = NDArray[np.float64]
 
@@ -146,8 +149,8 @@ def _run_in_processes(
     """Run the pairs in ``jobs`` spawned processes, handing each outcome to ``done``.
 
     The processes ignore Ctrl-C; on Ctrl-C here, or when a run fails, the runs not started
-    are cancelled, those in progress finish (each is bounded) and are handed over too, and
-    the interrupt or the run's error goes on up.
+    are cancelled, those in progress finish and are handed over too (a second Ctrl-C drops
+    them), no process is left behind, and the interrupt or the run's error goes on up.
     """
     context = multiprocessing.get_context("spawn")
     pool = concurrent.futures.ProcessPoolExecutor(
@@ -160,11 +163,64 @@ def _run_in_processes(
             handed.add(future)
             done(future.result())
     except BaseException:
-        pool.shutdown(wait=True, cancel_futures=True)
-        for future in futures:
-            if future in handed or future.cancelled() or future.exception() is not None:
-                continue
-            done(future.result())
+        _stop_runs(pool, [future for future in futures if future not in handed], done)
         raise
+    pool.shutdown(wait=True)
+
+
+STOP_GRACE = 2.0
+"""How long a sweep's process has to exit by itself once its runs are over, s; then it is
+terminated."""
+
+
+def _stop_runs(
+    pool: concurrent.futures.ProcessPoolExecutor,
+    waiting: list[concurrent.futures.Future[RunOutcome]],
+    done: Callable[[RunOutcome], None],
+) -> None:
+    """Stop a sweep: cancel the runs not handed to its processes, hand over those that were
+    as they finish (until a Ctrl-C drops them), and end the processes. (The executor hands
+    each process its run and one run more, queued.)
+
+    The processes are ended here, not by ``pool.shutdown(wait=True)``: after a Ctrl-C that
+    one waited, once in eight tries, for ever, on a process blocked writing its result to a
+    pipe nobody read any more.
+    """
+    # The private list of processes: the executor has no public way to end them.
+    processes = list((pool._processes or {}).values())
+    dropped = False
+    try:
+        under_way = [future for future in waiting if not future.cancel()]
+        unfinished = [future for future in under_way if not future.done()]
+        if unfinished:
+            log.warning(
+                "stopping: waiting for the %d run(s) handed to its processes to finish "
+                "(Ctrl-C drops them)",
+                len(unfinished),
+            )
+        for future in concurrent.futures.as_completed(under_way):
+            if future.exception() is None:
+                done(future.result())
+    except KeyboardInterrupt:
+        dropped = True
+        log.warning("stopping: dropped the run(s) handed to its processes")
     finally:
-        pool.shutdown(wait=True)
+        pool.shutdown(wait=False, cancel_futures=True)
+        _end_processes(processes, grace=0.0 if dropped else STOP_GRACE)
+
+
+def _end_processes(
+    processes: Sequence[multiprocessing.process.BaseProcess], *, grace: float
+) -> None:
+    """Wait ``grace`` s for the processes to exit, then terminate those that have not (they
+    ignore Ctrl-C, not SIGTERM)."""
+    deadline = time.monotonic() + grace
+    for process in processes:
+        process.join(max(0.0, deadline - time.monotonic()))
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+            process.join(STOP_GRACE)
+        if process.is_alive():
+            process.kill()
+            process.join(STOP_GRACE)

@@ -263,6 +263,81 @@ def test_a_failed_run_stops_the_sweep_and_returns_the_runs_that_finished(jobs: i
     assert all(outcome.seed == 1 for outcome in stop.value.outcomes)
 
 
+def slow_runs(scenario: Scenario) -> tuple[np.ndarray, ...]:
+    """A sweep's engine (in a spawned process) whose runs take three seconds each, and say
+    when they start with a file in the folder $FISHSWARM_TEST_STARTS."""
+    import os
+    import time
+    from pathlib import Path
+
+    from fishswarm.study.sweep import simulate_on_batch_engine
+
+    Path(os.environ["FISHSWARM_TEST_STARTS"], f"{scenario.blind_width:g}-{scenario.seed}").touch()
+    time.sleep(3.0)
+    return simulate_on_batch_engine(scenario)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("presses", [1, 2])
+def test_ctrl_c_in_a_sweep_over_processes_keeps_the_runs_handed_over_unless_pressed_again(
+    presses: int,
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """Ctrl-C once the two processes run their first runs: the runs not handed to them are
+    cancelled; the two under way and the one queued finish and are kept. A second Ctrl-C
+    drops them at once. Either way no process of the sweep is left (one once hung for
+    ever, blocked writing its result)."""
+    import multiprocessing
+    import os
+    import signal
+    import threading
+    import time
+
+    from fishswarm.study.sweep import SweepInterrupted, sweep_experiment
+
+    monkeypatch.setenv("FISHSWARM_TEST_STARTS", str(tmp_path))
+    experiment = find("blindspot").with_changes(seeds=2, duration=2.0)
+
+    presses_at: list[float] = []
+
+    def press_ctrl_c() -> None:
+        deadline = time.monotonic() + 60.0
+        while len(list(tmp_path.iterdir())) < 2 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        for _ in range(presses):
+            time.sleep(0.5)
+            presses_at.append(time.monotonic())
+            os.kill(os.getpid(), signal.SIGINT)
+
+    presser = threading.Thread(target=press_ctrl_c)
+    with caplog.at_level("WARNING", logger="fishswarm.study.sweep"):
+        presser.start()
+        with pytest.raises(SweepInterrupted) as stop:
+            sweep_experiment(experiment, engine=slow_runs, jobs=2)  # type: ignore[arg-type]
+        returned = time.monotonic()
+    presser.join(timeout=10.0)
+    # Gone from the system (a process object may still say "started": when two threads
+    # wait for one process, the one that did not reap it never learns its exit code).
+    left = [p.pid for p in multiprocessing.active_children() if Path(f"/proc/{p.pid}").exists()]
+    assert left == []
+    assert sorted(path.name for path in tmp_path.iterdir())[:2] == ["0-0", "0-1"]
+    said = [record.getMessage() for record in caplog.records]
+    assert said[0] == (
+        "stopping: waiting for the 3 run(s) handed to its processes to finish (Ctrl-C drops them)"
+    )
+    assert stop.value.total == 8
+    if presses == 1:
+        kept = [(o.value, o.seed) for o in stop.value.outcomes]
+        assert kept == [(0.0, 0), (0.0, 1), (0.05, 0)] and len(said) == 1
+    else:
+        assert stop.value.outcomes == []
+        assert said[1] == "stopping: dropped the run(s) handed to its processes"
+        # The runs under way had 2 s or more to go: the processes were ended at once.
+        assert returned - presses_at[-1] < 1.5
+
+
 @pytest.mark.parametrize(
     ("named", "controller"), [('controller = "homing"\n', "homing"), ("", "pid")]
 )
