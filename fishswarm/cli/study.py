@@ -394,6 +394,7 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
     """``fishswarm animate RECORDING --out FILE``."""
     from fishswarm.study.animation import (
         AnimationError,
+        AnimationInterrupted,
         AnimationUnavailable,
         frame_duration,
         resample,
@@ -448,6 +449,16 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
         raise UserError(str(error)) from None
     except AnimationError as error:
         raise ConfigError(str(error)) from None
+    except AnimationInterrupted as stop:
+        output.close()
+        held = (
+            f"{args.out} holds its first {stop.written} frames"
+            if stop.written and args.out.exists() and args.out.stat().st_size
+            else "nothing written"
+        )
+        print(f"fishswarm: interrupted at frame {stop.written} of {stop.total}; {held}",
+              file=sys.stderr)  # fmt: skip
+        return 130
     print(f"wrote {args.out} ({frames.t.size} frames)", file=sys.stderr)
     return 0
 

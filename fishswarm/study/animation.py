@@ -41,6 +41,16 @@ class AnimationUnavailable(AnimationError):
     """A package the animation needs is not installed (the message says which)."""
 
 
+class AnimationInterrupted(KeyboardInterrupt):
+    """Ctrl-C while the frames were written: the file holds those written (the GIF writer
+    and ffmpeg close it as they stop)."""
+
+    def __init__(self, written: int, total: int) -> None:
+        super().__init__(f"interrupted after {written} of {total} frames")
+        self.written = written
+        self.total = total
+
+
 @dataclass(frozen=True)
 class Frames:
     """The run resampled for animation.
@@ -156,6 +166,7 @@ def animate(
 
     Raises:
         AnimationError: unknown format, the viewer is not in the run, or a tool is missing.
+        AnimationInterrupted: Ctrl-C while the frames were written.
     """
     if out.suffix not in FORMATS:
         raise AnimationError(f"the output must end in {' or '.join(FORMATS)}, got {out.name}")
@@ -169,13 +180,30 @@ def animate(
         switches=switches,
     )  # fmt: skip
     count = frames.t.size
-    with writer.saving(figure, str(out), dpi=figure.dpi):
-        for frame in range(count):
-            draw(frame)
-            writer.grab_frame()
-            if on_frame is not None:
-                on_frame(frame + 1, count)
-    plt.close(figure)
+    written = 0
+    interrupted = False
+    try:
+        with writer.saving(figure, str(out), dpi=figure.dpi):
+            try:
+                for frame in range(count):
+                    draw(frame)
+                    writer.grab_frame()
+                    written = frame + 1
+                    if on_frame is not None:
+                        on_frame(written, count)
+            except KeyboardInterrupt:
+                interrupted = True
+                raise
+    except KeyboardInterrupt:
+        raise AnimationInterrupted(written, count) from None
+    except Exception:
+        # ffmpeg, in Ctrl-C's process group, has stopped too, and the writer, closing the
+        # file, fails on its exit status instead.
+        if interrupted:
+            raise AnimationInterrupted(written, count) from None
+        raise
+    finally:
+        plt.close(figure)
     return out
 
 

@@ -156,3 +156,28 @@ def test_the_fish_eye_view_sees_with_the_recorded_runs_vision_model() -> None:
     # neighbours are); the blind spot is the run's.
     assert vision == Vision(3.0, 0.25, 0.065, 0.0, manhattan=True)
     assert _vision_of({"observed": True}) == Vision()  # an observer's: a BlueBot's
+
+
+def test_ctrl_c_while_animating_says_what_the_file_holds(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    pytest.importorskip("matplotlib")
+    from fishswarm.study import animation
+
+    recording = _observed(tmp_path / "observed.mcap", ticks=20)
+    out = tmp_path / "fish.gif"
+    drawn = animation.animate
+
+    def interrupted_at_frame_six(*args: Any, on_frame: Any, **kwargs: Any) -> Any:
+        def count(done: int, total: int) -> None:
+            on_frame(done, total)
+            if done == 5:
+                raise KeyboardInterrupt
+
+        return drawn(*args, on_frame=count, **kwargs)
+
+    monkeypatch.setattr(animation, "animate", interrupted_at_frame_six)
+    assert main(["animate", str(recording), "--out", str(out), "--quiet"]) == 130
+    said = capsys.readouterr().err.strip().splitlines()
+    assert said[-1] == (f"fishswarm: interrupted at frame 5 of 96; {out} holds its first 5 frames")
+    assert out.read_bytes()[:6] in (b"GIF87a", b"GIF89a")

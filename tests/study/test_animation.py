@@ -158,3 +158,49 @@ def test_eye_view_by_hand() -> None:
     np.testing.assert_allclose(bearing[order], [0.0, 90.0], atol=1e-9)
     np.testing.assert_allclose(elevation[order], [45.0, 0.0], atol=1e-9)
     np.testing.assert_allclose(distance[order], [math.sqrt(2), 1.0])
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
+def test_ctrl_c_while_writing_frames_keeps_those_written(tmp_path: Any, suffix: str) -> None:
+    """Ctrl-C at the sixth frame: the file holds five, and the interrupt says so. For an
+    MP4, Ctrl-C stops ffmpeg too (its process group's signal), and the writer then failed
+    on ffmpeg's exit status: the same interrupt, not that error."""
+    import signal
+
+    pytest.importorskip("matplotlib")
+    if suffix == ".mp4":
+        pytest.importorskip("imageio_ffmpeg")
+    from matplotlib import animation as mpl_animation
+
+    from fishswarm.study.animation import AnimationInterrupted, animate
+
+    t = np.arange(0.0, 20.0)
+    position = np.tile([[[0.5, 0.5, 0.3], [1.2, 1.0, 0.8]]], (t.size, 1, 1))
+    frames = resample(t, position, np.zeros((t.size, 2)), np.array([7, 9]), step=1.0)
+    out = tmp_path / f"fish{suffix}"
+    writers: list[Any] = []
+    saving = mpl_animation.AbstractMovieWriter.saving
+
+    def interrupted(done: int, total: int) -> None:
+        if done == 5:
+            if suffix == ".mp4":  # ffmpeg hears Ctrl-C as the process does
+                writers[0]._proc.send_signal(signal.SIGINT)
+            raise KeyboardInterrupt
+
+    def recorded(writer: Any, *args: Any, **kwargs: Any) -> Any:
+        writers.append(writer)
+        return saving(writer, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(mpl_animation.AbstractMovieWriter, "saving", recorded)
+        with pytest.raises(AnimationInterrupted, match="interrupted after 5 of 20 frames") as stop:
+            animate(frames, tank=(1.78, 1.78, 1.17), vision=Vision(), viewer=7, out=out,
+                    on_frame=interrupted)  # fmt: skip
+    assert (stop.value.written, stop.value.total) == (5, 20)
+    assert out.stat().st_size > 0
+    if suffix == ".gif":
+        from PIL import Image
+
+        gif: Any
+        with Image.open(out) as gif:
+            assert gif.n_frames == 5
