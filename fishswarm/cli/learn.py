@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from typing import Any
 
 from fishswarm.cli.common import UserError, prepare_folder
@@ -146,19 +147,42 @@ def learn_command(args: argparse.Namespace, scenario: Scenario | None) -> int:
         )
     except LearningError as error:
         raise ConfigError(str(error)) from None
+    except KeyboardInterrupt:
+        output.close()
+        print(f"fishswarm: interrupted; {_kept(args.out, args.checkpoint_every)}", file=sys.stderr)
+        return 130
     if output.tty and not args.quiet:
         sys.stderr.write("\n")
     ideal, replica = summary["ideal"], summary["replica"]
     print(
         f"done: {summary['generations']} generations in {args.out}\n"
         f"  final spacing  ideal {ideal['final_spacing']:.1f}  replica "
-        f"{replica['final_spacing']:.1f}\n"
-        f"  final speed    ideal {ideal['final_speed']:.2f}  replica {replica['final_speed']:.2f}\n"
+        f"{replica['final_spacing']:.1f} units\n"
+        f"  final speed    ideal {ideal['final_speed']:.2f}  replica {replica['final_speed']:.2f}"
+        " units/s\n"
         f"  learned radii  {radii_text(summary['radii'])}\n"
         f"  {target_text(summary['target'])}",
         file=sys.stderr,
     )
     return 0
+
+
+def _kept(out: Path, every: int) -> str:
+    """What an interrupted learning run kept in ``out``, and how to go on: its last
+    checkpoint's generation; or nothing, before the first (then the folder it made empty
+    is removed)."""
+    from fishswarm.learning.checkpoint import checkpoint_progress
+    from fishswarm.learning.session import CHECKPOINT
+
+    done, _ = checkpoint_progress(out / CHECKPOINT)
+    if done:
+        return (
+            f"{out / CHECKPOINT} holds generation {done} (checkpoints every {every}): "
+            f"fishswarm learn --out {out} --resume goes on from there"
+        )
+    if out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
+    return f"nothing kept: interrupted before the first checkpoint (every {every} generations)"
 
 
 def radii_text(radii: dict[str, list[float]]) -> str:

@@ -340,3 +340,46 @@ def test_resuming_to_fewer_generations_than_done_is_refused_with_what_to_give(
         "go on, or leave --generations out to go on to 4"
     ) in capsys.readouterr().err
     assert checkpoint_generation(tmp_path / "checkpoint.npz") == 2  # nothing changed
+
+
+@pytest.mark.parametrize("stopped_at", [1, 3])
+def test_ctrl_c_says_what_a_learning_run_kept_and_how_to_go_on(
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    stopped_at: int,
+) -> None:
+    # It said only 'fishswarm: interrupted', and left an empty folder before the first
+    # checkpoint.
+    from fishswarm.cli import main
+    from fishswarm.learning import session
+
+    real = session.learn
+
+    def interrupted(*args: Any, on_generation: Any, **kwargs: Any) -> Any:
+        def progress(run: Any, record: dict[str, float], seconds: float) -> None:
+            on_generation(run, record, seconds)
+            if run.generation == stopped_at:
+                raise KeyboardInterrupt
+
+        return real(*args, on_generation=progress, **kwargs)
+
+    monkeypatch.setattr(session, "learn", interrupted)
+    out = tmp_path / "learned"
+    command = ["learn", "--models", "4", "--classifiers", "4", "--seed", "3", "--generations",
+               "6", "--checkpoint-every", "2", "--out", str(out), "--quiet"]  # fmt: skip
+    assert main(command) == 130
+    said = capsys.readouterr().err.strip().splitlines()[-1]
+    if stopped_at == 1:
+        assert said == (
+            "fishswarm: interrupted; nothing kept: interrupted before the first checkpoint "
+            "(every 2 generations)"
+        )
+        assert not out.exists()
+    else:
+        assert said == (
+            f"fishswarm: interrupted; {out / 'checkpoint.npz'} holds generation 2 (checkpoints "
+            f"every 2): fishswarm learn --out {out} --resume goes on from there"
+        )
+        monkeypatch.setattr(session, "learn", real)
+        assert main(["learn", "--out", str(out), "--resume", "--quiet"]) == 0  # as it says
