@@ -849,17 +849,20 @@ class Scenario:
                     f"got {as_written(given)}"
                 )
             values["study_code"] = tuple(given)
-        for point in ("tank", "landmark", "flow"):
+        # The tank's size and the landmark's place are lengths; the flow is a velocity.
+        for point, kind, unit in (
+            ("tank", "lengths", "m"), ("landmark", "lengths", "m"), ("flow", "speeds", "m/s"),
+        ):  # fmt: skip
             if point in values:
                 given = values[point]
                 if not isinstance(given, list | tuple) or len(given) != 3:
                     raise ConfigError(
-                        f"{source}: {point} must be a list of three lengths, got "
-                        f"{as_written(given)}"
+                        f"{source}: {point} must be a list of three {kind} (x, y, z, {unit}), "
+                        f"got {as_written(given)}"
                     )
                 if not all(_real(v) for v in given):
                     raise ConfigError(
-                        f"{source}: {point} must be a list of three numbers (m), got "
+                        f"{source}: {point} must be a list of three numbers ({unit}), got "
                         f"{as_written(given)}"
                     )
                 values[point] = tuple(float(v) for v in given)

@@ -307,15 +307,24 @@ class Experiment:
                 f"experiment {self.name}: fish must be whole numbers, got "
                 f"{', '.join(map(str, self.values))}"
             )
-        if not isinstance(self.seeds, int) or self.seeds < 1:
-            raise ConfigError(f"experiment {self.name}: seeds must be at least 1")
+        if not isinstance(self.seeds, int) or isinstance(self.seeds, bool) or self.seeds < 1:
+            raise ConfigError(
+                f"experiment {self.name}: seeds must be a whole number, 1 or more, got "
+                f"{as_written(self.seeds)}"
+            )
         names = [name for name, _ in self.groups]
         if len(set(names)) < len(names) or "" in names:
             raise ConfigError(f"experiment {self.name}: groups need distinct, non-empty names")
         unmet: list[tuple[str, str, str, Any]] = []
         for group in self.group_names:
             for value in self.values:
-                scenario = self.scenario_for(value, 0, group)  # each must be valid
+                try:
+                    scenario = self.scenario_for(value, 0, group)  # each must be valid
+                except ConfigError as error:
+                    where = f"group {group!r}, " if group else ""
+                    raise ConfigError(
+                        f"experiment {self.name}: {where}{self.parameter} = {value:g}: {error}"
+                    ) from None
                 if (condition := unmet_condition(self.parameter, scenario)) is not None:
                     unmet.append((group, *condition, getattr(scenario, condition[0])))
         # A group the sweep leaves alike is a control beside the others (formation-energy's
@@ -597,18 +606,21 @@ class Experiment:
             except (ConfigError, TypeError) as error:
                 raise ConfigError(f"{path}: group {group!r}: {error}") from None
         name = str(table["name"])
-        return cls(
-            name,
-            str(table.get("title", name)),
-            str(table["parameter"]),
-            str(table.get("label", table["parameter"])),
-            tuple(float(v) for v in values),
-            table.get("seeds", 5),
-            scenario,
-            dict(study_settings),
-            tuple((str(group), dict(settings)) for group, settings in groups.items()),
-            controller_named="controller" in scenario_table,
-        )
+        try:
+            return cls(
+                name,
+                str(table.get("title", name)),
+                str(table["parameter"]),
+                str(table.get("label", table["parameter"])),
+                tuple(float(v) for v in values),
+                table.get("seeds", 5),
+                scenario,
+                dict(study_settings),
+                tuple((str(group), dict(settings)) for group, settings in groups.items()),
+                controller_named="controller" in scenario_table,
+            )
+        except ConfigError as error:
+            raise ConfigError(f"{path}: {error}") from None
 
 
 def find(name_or_path: str) -> Experiment:

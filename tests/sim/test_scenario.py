@@ -160,7 +160,12 @@ def test_settings_a_scenario_file_would_ignore_are_refused(
             "tank = [1.78, 1.78, true]",
             r"tank must be a list of three numbers \(m\), got \[1.78, 1.78, true\]$",
         ),
-        ('flow = ["a", 0, 0]', r"flow must be a list of three numbers \(m\)"),
+        ('flow = ["a", 0, 0]', r"flow must be a list of three numbers \(m/s\)"),
+        (
+            "flow = [0.1, 0]",
+            r"flow must be a list of three speeds \(x, y, z, m/s\), got \[0.1, 0\]$",
+        ),
+        ("tank = [2, 2]", r"tank must be a list of three lengths \(x, y, z, m\), got \[2, 2\]$"),
         ('wake_saving = "0.3"', r'wake_saving must be a finite number, got "0.3"$'),
         ("sphere_radius = nan", "sphere_radius must be a finite number, got nan"),
         ("formation_heading_deg = inf", "formation_heading_deg must be a finite number"),

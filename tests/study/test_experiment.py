@@ -89,13 +89,19 @@ def test_unknown_experiment_lists_the_known_ones() -> None:
         ),
         ('[experiment]\nname = "x"\nparameter = "blind_width"\n', "needs values"),
         (
-            '[experiment]\nname = "x"\nparameter = "blind_width"\nvalues = [-1]\n',
-            "blind_width",
+            # The file, the experiment and the value, before what is wrong with it.
+            '[experiment]\nname = "x"\nparameter = "blind_width"\nvalues = [0.1, -1]\n',
+            r"bad.toml: experiment x: blind_width = -1: vision blind_width must be a finite "
+            "non-negative number, got -1.0",
         ),
         ('[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\nspeed = 3\n', "unknown"),
         (
             '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\nseeds = 0\n',
-            "experiment x: seeds must be at least 1",
+            "bad.toml: experiment x: seeds must be a whole number, 1 or more, got 0",
+        ),
+        (
+            '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2]\nseeds = "five"\n',
+            'bad.toml: experiment x: seeds must be a whole number, 1 or more, got "five"',
         ),
         (
             '[experiment]\nname = "x"\nparameter = "fish"\nvalues = [2.5, 3]\n',
