@@ -427,10 +427,15 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
     )
     vision = _vision_of(settings)
     output = ProgressLine()
+    started = time.perf_counter()
 
     def show(done: int, total: int) -> None:
         if not args.quiet and (done % 10 == 0 or done == total):
-            output.show(f"{bar(done, total)} frame {done}/{total}", last=done == total)
+            left = (time.perf_counter() - started) / done * (total - done)
+            output.show(
+                f"{bar(done, total)} frame {done}/{total}  ~{_duration_text(left)} left",
+                last=done == total,
+            )
 
     try:
         make_animation(
@@ -461,6 +466,15 @@ def animate(args: argparse.Namespace, scenario: Scenario | None) -> int:
         return 130
     print(f"wrote {args.out} ({frames.t.size} frames)", file=sys.stderr)
     return 0
+
+
+def _duration_text(seconds: float) -> str:
+    """``42 s``, ``3.5 min`` or ``1.2 h``: how long is left, at a glance."""
+    if seconds < 100:
+        return f"{seconds:.0f} s"
+    if seconds < 6000:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def _vision_of(settings: dict[str, Any]) -> Vision:

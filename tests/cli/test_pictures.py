@@ -181,3 +181,21 @@ def test_ctrl_c_while_animating_says_what_the_file_holds(
     said = capsys.readouterr().err.strip().splitlines()
     assert said[-1] == (f"fishswarm: interrupted at frame 5 of 96; {out} holds its first 5 frames")
     assert out.read_bytes()[:6] in (b"GIF87a", b"GIF89a")
+
+
+def test_animating_says_how_long_is_left(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A long run at the default speed drew thousands of frames, half an hour, saying only
+    # 'frame 10/9091'.
+    import re
+
+    from fishswarm.cli.study import _duration_text
+
+    pytest.importorskip("matplotlib")
+    recording = _observed(tmp_path / "observed.mcap")
+    assert main(["animate", str(recording), "--out", str(tmp_path / "fish.gif")]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert re.fullmatch(r"\[#+\.*\] frame 10/16  ~\d+ s left", lines[0]), lines
+    assert re.fullmatch(r"\[#{20}\] frame 16/16  ~0 s left", lines[-2]), lines
+    assert [_duration_text(s) for s in (42.4, 210.0, 7200.0)] == ["42 s", "3.5 min", "2.0 h"]
