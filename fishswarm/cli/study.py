@@ -171,6 +171,15 @@ def experiment(args: argparse.Namespace, scenario: Scenario | None) -> int:
     for warning in chosen.study_code_warnings():
         print(f"fishswarm experiment: warning: {warning}", file=sys.stderr)
     out = args.out or Path("runs/experiments") / _results_name(args.name, chosen.name)
+    earlier = out / "summary.json"
+    if earlier.is_file():
+        # Results are cheap to make again, so they are replaced, but not without a word.
+        print(
+            f"fishswarm experiment: note: replacing the results in {out} (of "
+            f"{time.strftime('%Y-%m-%d %H:%M', time.localtime(earlier.stat().st_mtime))}); "
+            "give --out to keep them",
+            file=sys.stderr,
+        )
     prepare_folder(out, "--out")
     total = len(chosen.runs())
     groups = f" for {' and '.join(chosen.group_names)}" if chosen.groups else ""

@@ -1255,6 +1255,26 @@ def test_an_experiment_interrupted_as_its_last_run_ends_says_all_runs_are_done(
     assert json.loads((out / "summary.json").read_text())["complete"] is True
 
 
+def test_an_experiment_run_again_says_it_replaces_the_earlier_results(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A run of the same experiment replaced the study's results without a word.
+    from fishswarm.cli import main
+
+    out = tmp_path / "b"
+    command = ["experiment", "blindspot", "--engine", "batch", "--jobs", "1", "--seeds", "1",
+               "--duration", "2", "--out", str(out), "--quiet"]  # fmt: skip
+    assert main(command) == 0
+    assert "replacing" not in capsys.readouterr().err
+    assert main(command) == 0
+    said = capsys.readouterr().err.splitlines()[0]
+    assert re.fullmatch(
+        rf"fishswarm experiment: note: replacing the results in {re.escape(str(out))} \(of "
+        r"\d{4}-\d\d-\d\d \d\d:\d\d\); give --out to keep them",
+        said,
+    ), said
+
+
 def test_a_map_larger_than_the_tank_or_places_closer_than_a_body_are_warned_of() -> None:
     from fishswarm.cli.swarm import map_warnings
 
