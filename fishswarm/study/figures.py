@@ -306,6 +306,29 @@ def _formation_panels(
         )  # fmt: skip
 
 
+CROWDED_GAPS = 10.0
+"""Swept values whose widest gap is this many times their narrowest or more are drawn on a
+scale linear near zero and logarithmic beyond (the study's blind spots, 0, 0.05, 0.25 and
+2.517 m: on a linear axis 0 and 0.05 wrote their labels over each other)."""
+
+
+def parameter_axis(ax: Any, values: Sequence[float]) -> None:
+    """Lay out an axis of swept ``values``: each value a tick labelled with it, drawn where
+    it is; values bunched near zero spread out on a symmetric-log scale, linear up to the
+    smallest value other than zero; many labels turned so that they do not overlap."""
+    ordered = sorted(set(values))
+    gaps = np.diff(ordered)
+    nonzero = [abs(v) for v in ordered if v != 0]
+    if len(ordered) > 2 and gaps.min() > 0 and gaps.max() >= CROWDED_GAPS * gaps.min() and nonzero:
+        ax.set_xscale("symlog", linthresh=min(nonzero), linscale=0.5)
+        ax.minorticks_off()
+    turned = len(ordered) > 3
+    ax.set_xticks(
+        ordered, [f"{v:g}" for v in ordered], rotation=40 if turned else 0,
+        ha="right" if turned else "center",
+    )  # fmt: skip
+
+
 def experiment_figures(
     experiment: Experiment,
     outcomes: list[RunOutcome],
@@ -352,11 +375,7 @@ def experiment_figures(
             ax.plot(values, expected, "--", color="red", linewidth=0.8, label=reference)
         if (summary.key == "radius" and expected is not None) or len(groups) > 1:
             ax.legend(fontsize=7)
-        # Values drawn where they are may crowd their labels: turned, they do not overlap.
-        ax.set_xticks(
-            values, [f"{v:g}" for v in values], rotation=40 if len(values) > 3 else 0,
-            ha="right" if len(values) > 3 else "center",
-        )  # fmt: skip
+        parameter_axis(ax, values)
         ax.set_xlabel(experiment.label)
         ax.set_title(summary.label, fontsize=9)
         ax.grid(alpha=0.3)

@@ -270,3 +270,33 @@ def test_the_switches_of_a_recorded_formation_are_where_the_told_shape_changes()
     scheduled = recording([None] * 4, switch_formation="column", switch_at=1.5)
     assert _switches_of(scheduled) == [(2.0, "column")]
     assert _switches_of(recording([None] * 3)) == []
+
+
+@pytest.mark.parametrize(
+    ("values", "scale"),
+    [
+        ((0.0, 0.05, 0.25, 2.517), "symlog"),  # the study's blind spots
+        ((0.0, 0.1, 0.2, 0.3, 0.4), "linear"),  # evenly spaced: where they are
+        ((0.25, 0.5), "linear"),
+    ],
+)
+def test_swept_values_label_their_axis_without_overlapping(
+    values: tuple[float, ...], scale: str
+) -> None:
+    # On a linear axis of 0 to 2.5 m the labels 0 and 0.05 were written over each other.
+    import matplotlib.pyplot as plt
+
+    from fishswarm.study.figures import parameter_axis
+
+    figure, ax = plt.subplots(figsize=(3.4, 2.6))
+    ax.plot(values, np.ones(len(values)), "o-")
+    parameter_axis(ax, values)
+    figure.canvas.draw()
+    renderer = figure.canvas.get_renderer()  # type: ignore[attr-defined]
+    labels = [label for label in ax.get_xticklabels() if label.get_text()]
+    assert ax.get_xscale() == scale
+    assert [label.get_text() for label in labels] == [f"{v:g}" for v in values]
+    boxes = [label.get_window_extent(renderer) for label in labels]
+    for left, right in zip(boxes, boxes[1:], strict=False):
+        assert left.x1 <= right.x0 + 0.5 or not left.overlaps(right), (left, right)
+    plt.close(figure)
