@@ -284,6 +284,8 @@ def test_swept_values_label_their_axis_without_overlapping(
     values: tuple[float, ...], scale: str
 ) -> None:
     # On a linear axis of 0 to 2.5 m the labels 0 and 0.05 were written over each other.
+    import itertools
+
     import matplotlib.pyplot as plt
 
     from fishswarm.study.figures import parameter_axis
@@ -297,6 +299,6 @@ def test_swept_values_label_their_axis_without_overlapping(
     assert ax.get_xscale() == scale
     assert [label.get_text() for label in labels] == [f"{v:g}" for v in values]
     boxes = [label.get_window_extent(renderer) for label in labels]
-    for left, right in zip(boxes, boxes[1:], strict=False):
+    for left, right in itertools.pairwise(boxes):
         assert left.x1 <= right.x0 + 0.5 or not left.overlaps(right), (left, right)
     plt.close(figure)
